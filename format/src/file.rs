@@ -1,0 +1,198 @@
+//! Opening baked scenes: memory-mapped or read into aligned memory, validated or
+//! trusted. All of the format crate's `unsafe` lives here.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use rkyv::rancor;
+use rkyv::util::AlignedVec;
+
+use crate::error::{Error, Result};
+use crate::header::{Header, ARCHIVE_ALIGN, HEADER_LEN};
+use crate::scene::{ArchivedBakedScene, BakeParams, BakeStats, Bounds};
+use crate::view::SceneView;
+
+#[cfg(target_endian = "big")]
+compile_error!("octrace files are little-endian and read zero-copy: big-endian targets are not supported");
+
+/// Where a scene's bytes live.
+enum Storage {
+    /// A read-only memory map of the whole file (header included).
+    Mapped(memmap2::Mmap),
+    /// The archive alone, copied into memory aligned for rkyv.
+    Owned(AlignedVec<ARCHIVE_ALIGN>),
+}
+
+/// An open baked scene: its header and its archive, mapped or in memory.
+///
+/// Obtain one with [`SceneFile::read`] (safe: reads into memory and validates
+/// everything), [`SceneFile::map`] (maps the file and validates everything),
+/// [`SceneFile::from_bytes`], or the trusted [`SceneFile::map_unchecked`], which checks
+/// the header alone and is meant for files this process or a trusted pipeline baked.
+pub struct SceneFile {
+    storage: Storage,
+    header: Header,
+}
+
+impl std::fmt::Debug for SceneFile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kind = match self.storage {
+            Storage::Mapped(_) => "mapped",
+            Storage::Owned(_) => "in memory",
+        };
+        f.debug_struct("SceneFile").field("storage", &kind).field("header", &self.header).finish()
+    }
+}
+
+impl SceneFile {
+    /// Reads the file into aligned memory and validates it completely: header,
+    /// checksum, archive structure and every semantic rule.
+    ///
+    /// This is the path for files that may change while open; see [`SceneFile::map`].
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be read, or any of the header and validation
+    /// errors.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        let mut head = Vec::with_capacity(HEADER_LEN);
+        (&mut file).take(HEADER_LEN as u64).read_to_end(&mut head).map_err(|e| Error::io(path, e))?;
+        let header = Header::decode(&head, len)?;
+        let payload_len = usize::try_from(header.payload_len)
+            .map_err(|_| Error::corrupt("archive larger than this machine's address space"))?;
+        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(payload_len);
+        payload.resize(payload_len, 0);
+        file.read_exact(&mut payload).map_err(|e| Error::io(path, e))?;
+        Self::validated(Storage::Owned(payload), header)
+    }
+
+    /// Validates a whole file held in memory (it is copied into aligned memory).
+    ///
+    /// # Errors
+    /// The header and validation errors.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        let header = Header::decode(bytes, bytes.len() as u64)?;
+        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(bytes.len() - HEADER_LEN);
+        payload.extend_from_slice(&bytes[HEADER_LEN..]);
+        Self::validated(Storage::Owned(payload), header)
+    }
+
+    /// Memory-maps the file and validates it completely.
+    ///
+    /// # Safety
+    /// The map is only sound while no one modifies or truncates the file: a change
+    /// under a live map can make the validated data invalid after the fact (or raise
+    /// SIGBUS on truncation). Call it on files that are not written while open — a bake
+    /// replaces its output by renaming a new file, which never changes an open map.
+    /// Use [`SceneFile::read`] for files that may change.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be opened or mapped, or the validation errors.
+    pub unsafe fn map(path: impl AsRef<Path>) -> Result<Self> {
+        let (map, header) = map_file(path.as_ref())?;
+        Self::validated(Storage::Mapped(map), header)
+    }
+
+    /// Memory-maps the file and checks its header only: the trusted fast path, whose
+    /// cost does not grow with the file.
+    ///
+    /// # Safety
+    /// Everything [`SceneFile::map`] requires, and the file must be a valid scene
+    /// written by this format version (baked by octrace, or validated earlier and not
+    /// changed since). Tracing a file that breaks the format's rules through this path
+    /// is undefined behaviour.
+    ///
+    /// # Errors
+    /// [`Error::Io`] and the header errors.
+    pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Self> {
+        let (map, header) = map_file(path.as_ref())?;
+        Ok(SceneFile { storage: Storage::Mapped(map), header })
+    }
+
+    fn validated(storage: Storage, header: Header) -> Result<Self> {
+        let file = SceneFile { storage, header };
+        let payload = file.payload();
+        let computed = xxhash_rust::xxh3::xxh3_64(payload);
+        if computed != header.payload_xxh3 {
+            return Err(Error::Checksum { section: "archive", stored: header.payload_xxh3, computed });
+        }
+        rkyv::access::<ArchivedBakedScene, rancor::Error>(payload)
+            .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
+        file.view().validate()?;
+        Ok(file)
+    }
+
+    /// The file's header.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The archive's bytes.
+    pub fn payload(&self) -> &[u8] {
+        match &self.storage {
+            Storage::Mapped(map) => &map[HEADER_LEN..],
+            Storage::Owned(bytes) => bytes,
+        }
+    }
+
+    /// Whether the bytes are a memory map (as opposed to a copy in memory).
+    pub fn is_mapped(&self) -> bool {
+        matches!(self.storage, Storage::Mapped(_))
+    }
+
+    /// The scene's arrays, borrowed.
+    pub fn view(&self) -> SceneView<'_> {
+        // SAFETY: every constructor either ran `rkyv::access` on these exact bytes
+        // (`validated`) or is an `unsafe fn` whose caller promised a valid file. The
+        // payload starts 16-byte aligned: a map starts on a page and the header is 64
+        // bytes; owned bytes are an `AlignedVec<16>`.
+        let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) };
+        view_of(archived)
+    }
+}
+
+fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    // SAFETY: the callers are `unsafe fn`s whose contract forbids changing the file
+    // while it is mapped; the map is read-only.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
+    let header = Header::decode(&map[..map.len().min(HEADER_LEN)], map.len() as u64)?;
+    Ok((map, header))
+}
+
+/// Builds a view with native-typed slices over an archive.
+fn view_of(a: &ArchivedBakedScene) -> SceneView<'_> {
+    let v3 = |x: &[rkyv::rend::f32_le; 3]| [x[0].to_native(), x[1].to_native(), x[2].to_native()];
+    SceneView {
+        params: BakeParams {
+            max_depth: a.params.max_depth.to_native(),
+            leaf_size: a.params.leaf_size.to_native(),
+            margin: a.params.margin.to_native(),
+            cube_level: a.params.cube_level.to_native(),
+        },
+        bounds: Bounds {
+            mesh_lo: v3(&a.bounds.mesh_lo),
+            mesh_hi: v3(&a.bounds.mesh_hi),
+            root_lo: v3(&a.bounds.root_lo),
+            root_size: a.bounds.root_size.to_native(),
+        },
+        stats: BakeStats {
+            input_triangles: a.stats.input_triangles.to_native(),
+            degenerate_triangles: a.stats.degenerate_triangles.to_native(),
+            leaves_before_balance: a.stats.leaves_before_balance.to_native(),
+        },
+        // The archive is little-endian and so is the target (checked at compile time),
+        // so rend's little-endian wrappers are the native values: a plain cast.
+        octree: bytemuck::cast_slice(a.octree.as_slice()),
+        tri_refs: bytemuck::cast_slice(a.tri_refs.as_slice()),
+        triangles: bytemuck::cast_slice(a.triangles.as_slice()),
+        triangle_ids: bytemuck::cast_slice(a.triangle_ids.as_slice()),
+        boxes: bytemuck::cast_slice(a.boxes.as_slice()),
+        cube_map: bytemuck::cast_slice(a.cube_map.as_slice()),
+        nodes: bytemuck::cast_slice(a.nodes.as_slice()),
+        root: a.root.to_native(),
+    }
+}

@@ -1,0 +1,288 @@
+//! Semantic validation: every address, offset and count in range, the point-location
+//! tree a real octree, every link on the leaf across the stated face, the cube map exact.
+//!
+//! rkyv's bytecheck has already proved the archive well-formed; this proves it means
+//! something a tracer can walk without reading out of bounds or looping.
+
+use crate::error::{Error, Result};
+use crate::layout::{
+    cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef,
+    BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL, TRIANGLE_FLOATS,
+};
+use crate::view::SceneView;
+
+/// An octree cell: its level and integer coordinates at that level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct CellKey {
+    /// Depth of the cell (the root is 0).
+    pub level: u32,
+    /// Coordinates in `0 .. 2^level` along x, y, z.
+    pub cell: [u32; 3],
+}
+
+impl CellKey {
+    /// Whether `self` contains `other` (or is it).
+    pub fn contains(&self, other: &CellKey) -> bool {
+        other.level >= self.level
+            && (0..3).all(|a| other.cell[a] >> (other.level - self.level) == self.cell[a])
+    }
+}
+
+/// What a walk of the point-location tree learns: the key of each leaf (by box index),
+/// the address of each leaf record, and the key of each internal node.
+#[derive(Debug, Default)]
+pub struct TreeIndex {
+    /// Key of each leaf, indexed by box index.
+    pub leaf_keys: Vec<CellKey>,
+    /// Word address of each leaf's record, indexed by box index.
+    pub leaf_addresses: Vec<u32>,
+    /// Key of each internal node, indexed by node index.
+    pub node_keys: Vec<CellKey>,
+}
+
+impl SceneView<'_> {
+    /// Checks every rule of the format (see the module docs of [`crate::validate`]).
+    ///
+    /// # Errors
+    /// [`Error::Corrupt`] naming the first broken rule.
+    pub fn validate(&self) -> Result<()> {
+        self.check_sizes()?;
+        let index = self.index_tree()?;
+        self.check_records(&index)?;
+        self.check_cube_map(&index)
+    }
+
+    fn check_sizes(&self) -> Result<()> {
+        let p = &self.params;
+        if p.max_depth > MAX_LEVEL || p.cube_level > p.max_depth {
+            return Err(Error::corrupt(format!(
+                "depth {} or cube level {} beyond the format's limit {MAX_LEVEL}",
+                p.max_depth, p.cube_level
+            )));
+        }
+        if !(p.margin.is_finite() && p.margin >= 0.0) {
+            return Err(Error::corrupt(format!("margin {} is not a finite non-negative number", p.margin)));
+        }
+        let b = &self.bounds;
+        let finite = b.root_lo.iter().chain(&b.mesh_lo).chain(&b.mesh_hi).all(|v| v.is_finite());
+        if !finite || !(b.root_size.is_finite() && b.root_size > 0.0) {
+            return Err(Error::corrupt("scene bounds are not finite"));
+        }
+        if self.triangles.len() % TRIANGLE_FLOATS != 0 || self.boxes.len() % BOX_FLOATS != 0 {
+            return Err(Error::corrupt("triangle or box array length is not a whole number of entries"));
+        }
+        if self.triangle_ids.len() != self.triangle_count() {
+            return Err(Error::corrupt("triangle-id map and triangle array differ in length"));
+        }
+        if self.nodes.len() % 8 != 0 {
+            return Err(Error::corrupt("node array length is not a multiple of 8"));
+        }
+        let res = 1usize << p.cube_level;
+        if self.cube_map.len() != 6 * res * res {
+            return Err(Error::corrupt(format!(
+                "cube map has {} texels, level {} needs {}",
+                self.cube_map.len(),
+                p.cube_level,
+                6 * res * res
+            )));
+        }
+        let tri_count = self.triangle_count() as u64;
+        if let Some(bad) = self.tri_refs.iter().find(|&&r| r as u64 >= tri_count) {
+            return Err(Error::corrupt(format!("triangle reference {bad} out of range")));
+        }
+        let stats = &self.stats;
+        if stats.input_triangles != tri_count + stats.degenerate_triangles {
+            return Err(Error::corrupt("triangle counts in the statistics do not add up"));
+        }
+        // Ids name distinct input triangles. Sorting a copy costs memory in proportion
+        // to the file, never to a count the file declares.
+        let mut ids = self.triangle_ids.to_vec();
+        ids.sort_unstable();
+        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+            return Err(Error::corrupt(format!("triangle id {} appears twice", w[0])));
+        }
+        if ids.last().is_some_and(|&id| id as u64 >= stats.input_triangles) {
+            return Err(Error::corrupt("a triangle id is beyond the input's count"));
+        }
+        Ok(())
+    }
+
+    /// Walks the point-location tree from the root, checking that it is a proper octree
+    /// whose leaves are exactly the records of the octree array, in box order.
+    ///
+    /// # Errors
+    /// [`Error::Corrupt`] if a reference is out of range, a node is reached twice, the
+    /// tree is deeper than the bake's depth, or a leaf's record or box disagrees.
+    pub fn index_tree(&self) -> Result<TreeIndex> {
+        let leaves = self.leaf_count();
+        let node_count = self.nodes.len() / 8;
+        let mut index = TreeIndex {
+            leaf_keys: vec![CellKey::default(); leaves],
+            leaf_addresses: vec![u32::MAX; leaves],
+            node_keys: vec![CellKey::default(); node_count],
+        };
+        let mut node_seen = vec![false; node_count];
+        let mut stack = vec![(self.root, CellKey::default())];
+        while let Some((word, key)) = stack.pop() {
+            if key.level > self.params.max_depth {
+                return Err(Error::corrupt("point-location tree deeper than the bake's depth"));
+            }
+            match NodeRef::decode(word) {
+                NodeRef::Internal(i) => {
+                    let i = i as usize;
+                    if i >= node_count || std::mem::replace(&mut node_seen[i], true) {
+                        return Err(Error::corrupt(format!("internal node {i} out of range or reached twice")));
+                    }
+                    index.node_keys[i] = key;
+                    for child in (0..8).rev() {
+                        let mut c = key;
+                        c.level += 1;
+                        for a in 0..3 {
+                            c.cell[a] = 2 * key.cell[a] + ((child >> a) & 1);
+                        }
+                        stack.push((self.nodes[8 * i + child as usize], c));
+                    }
+                }
+                NodeRef::Leaf(address) => self.index_leaf(address, key, &mut index)?,
+            }
+        }
+        if let Some(b) = index.leaf_addresses.iter().position(|&a| a == u32::MAX) {
+            return Err(Error::corrupt(format!("leaf {b} is not reachable from the root")));
+        }
+        if node_seen.iter().any(|s| !s) {
+            return Err(Error::corrupt("an internal node is not reachable from the root"));
+        }
+        Ok(index)
+    }
+
+    fn index_leaf(&self, address: u32, key: CellKey, index: &mut TreeIndex) -> Result<()> {
+        let rec = self
+            .leaf(address)
+            .ok_or_else(|| Error::corrupt(format!("leaf address {address} out of range")))?;
+        let b = rec.box_index as usize;
+        if b >= index.leaf_addresses.len() || index.leaf_addresses[b] != u32::MAX {
+            return Err(Error::corrupt(format!("box index {b} out of range or used twice")));
+        }
+        index.leaf_addresses[b] = address;
+        index.leaf_keys[b] = key;
+        let expect = cell_box(self.bounds.root_lo, self.bounds.root_size, key.level, key.cell);
+        if self.leaf_box(rec.box_index) != expect {
+            return Err(Error::corrupt(format!("box {b} is not the box of its cell {key:?}")));
+        }
+        Ok(())
+    }
+
+    fn check_records(&self, index: &TreeIndex) -> Result<()> {
+        // Records tile the octree array in box order, so an address is a record start
+        // exactly when it is some leaf's address.
+        let mut next = 0u64;
+        let mut is_start = vec![false; self.octree.len()];
+        for (b, &address) in index.leaf_addresses.iter().enumerate() {
+            if address as u64 != next {
+                return Err(Error::corrupt(format!("record {b} starts at {address}, expected {next}")));
+            }
+            let rec = self.leaf(address).expect("indexed leaves fit");
+            is_start[address as usize] = true;
+            next += (LEAF_HEADER_WORDS + rec.links.len()) as u64;
+            let end = rec.tri_offset as u64 + rec.tri_count as u64;
+            if end > self.tri_refs.len() as u64 {
+                return Err(Error::corrupt(format!("leaf {b}'s triangles end at {end}, past the references")));
+            }
+            if rec.ncount >> 24 != 0 {
+                return Err(Error::corrupt(format!("leaf {b} has stray bits in its neighbour counts")));
+            }
+        }
+        if next != self.octree.len() as u64 {
+            return Err(Error::corrupt("octree array has words after the last record"));
+        }
+        for (b, &address) in index.leaf_addresses.iter().enumerate() {
+            let rec = self.leaf(address).expect("indexed leaves fit");
+            let key = index.leaf_keys[b];
+            for face in 0..6 {
+                let links = rec.face_links(face);
+                let expected = expected_neighbours(key, face, links, |link| {
+                    let l = link as usize;
+                    (l < is_start.len() && is_start[l])
+                        .then(|| index.leaf_keys[self.octree[l + 2] as usize])
+                });
+                expected.map_err(|why| {
+                    Error::corrupt(format!("leaf {b} {key:?}, face {face}: {why}"))
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    fn check_cube_map(&self, index: &TreeIndex) -> Result<()> {
+        let level = self.params.cube_level;
+        let res = 1u32 << level;
+        for face in 0..6 {
+            let axis = face_axis(face);
+            let (u, v) = other_axes(axis);
+            for iv in 0..res {
+                for iu in 0..res {
+                    let mut cell = [0u32; 3];
+                    cell[axis] = if face_is_high(face) { res - 1 } else { 0 };
+                    cell[u] = iu;
+                    cell[v] = iv;
+                    let texel = CellKey { level, cell };
+                    let word = self.cube_map[texel_index(face, res as usize, iu as usize, iv as usize)];
+                    let ok = match NodeRef::decode(word) {
+                        NodeRef::Internal(i) => index.node_keys.get(i as usize) == Some(&texel),
+                        NodeRef::Leaf(a) => index
+                            .leaf_addresses
+                            .binary_search(&a)
+                            .is_ok_and(|b| index.leaf_keys[b].contains(&texel)),
+                    };
+                    if !ok {
+                        return Err(Error::corrupt(format!("cube-map texel {face}/{iu}/{iv} does not hold its cell")));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Checks the links of one face against the neighbour cells the geometry calls for.
+/// `key_of` gives the key of the leaf at a link, or `None` if the link is not a record.
+fn expected_neighbours(
+    key: CellKey,
+    face: usize,
+    links: &[u32],
+    key_of: impl Fn(u32) -> Option<CellKey>,
+) -> std::result::Result<(), String> {
+    let axis = face_axis(face);
+    let high = face_is_high(face);
+    let last = (1u32 << key.level) - 1;
+    let on_boundary = if high { key.cell[axis] == last } else { key.cell[axis] == 0 };
+    if on_boundary {
+        return if links.is_empty() { Ok(()) } else { Err("links across the root's boundary".into()) };
+    }
+    let mut across = key;
+    across.cell[axis] = if high { key.cell[axis] + 1 } else { key.cell[axis] - 1 };
+    let keys: Vec<CellKey> = links
+        .iter()
+        .map(|&l| key_of(l).ok_or_else(|| format!("link {l} is not a leaf record")))
+        .collect::<std::result::Result<_, _>>()?;
+    match keys.as_slice() {
+        [n] if n.level == key.level || n.level + 1 == key.level => {
+            if n.contains(&across) { Ok(()) } else { Err(format!("neighbour {n:?} is not across the face")) }
+        }
+        [_, _, _, _] => {
+            let (u, v) = other_axes(axis);
+            for (q, n) in keys.iter().enumerate() {
+                let mut want = CellKey { level: key.level + 1, cell: [0; 3] };
+                want.cell[axis] = if high { 2 * across.cell[axis] } else { 2 * across.cell[axis] + 1 };
+                want.cell[u] = 2 * key.cell[u] + (q as u32 & 1);
+                want.cell[v] = 2 * key.cell[v] + (q as u32 >> 1);
+                if *n != want {
+                    return Err(format!("quadrant {q} links to {n:?}, expected {want:?}"));
+                }
+            }
+            Ok(())
+        }
+        other => Err(format!("{} links, or a neighbour more than one level away", other.len())),
+    }
+}
+

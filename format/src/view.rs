@@ -1,0 +1,124 @@
+//! A borrowed, validated view of a baked scene's arrays: what the tracers read.
+
+use crate::layout::{
+    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT,
+    WORD_TRI_OFFSET,
+};
+use crate::scene::{BakeParams, BakeStats, Bounds};
+
+/// The arrays of a baked scene as plain slices, borrowed from a file or from a
+/// [`crate::BakedScene`].
+///
+/// A view obtained from [`crate::SceneFile`] or [`crate::BakedScene::view`] has passed
+/// [`SceneView::validate`] (or was declared trusted by the caller of an `_unchecked`
+/// function), so the tracers index its arrays without further checks beyond Rust's own
+/// bounds checks.
+#[derive(Clone, Debug)]
+pub struct SceneView<'a> {
+    /// How it was baked.
+    pub params: BakeParams,
+    /// Mesh box and root cube.
+    pub bounds: Bounds,
+    /// Bake-time counts.
+    pub stats: BakeStats,
+    /// Leaf records, see [`crate::layout`].
+    pub octree: &'a [u32],
+    /// Triangle references of the leaves.
+    pub tri_refs: &'a [u32],
+    /// Triangle vertices, nine `f32` a triangle.
+    pub triangles: &'a [f32],
+    /// Input index of each stored triangle.
+    pub triangle_ids: &'a [u32],
+    /// Leaf boxes, six `f32` a leaf.
+    pub boxes: &'a [f32],
+    /// The cube map.
+    pub cube_map: &'a [u32],
+    /// Point-location nodes, eight references each.
+    pub nodes: &'a [u32],
+    /// Root reference of the point-location tree.
+    pub root: u32,
+}
+
+/// One leaf record, decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LeafRecord<'a> {
+    /// Word address of the record.
+    pub address: u32,
+    /// Index into the triangle-reference array of the first reference.
+    pub tri_offset: u32,
+    /// Number of triangle references.
+    pub tri_count: u32,
+    /// Box index (the leaf's ordinal).
+    pub box_index: u32,
+    /// Packed neighbour counts.
+    pub ncount: u32,
+    /// The links, face 0's first.
+    pub links: &'a [u32],
+}
+
+impl LeafRecord<'_> {
+    /// The links across `face`.
+    pub fn face_links(&self, face: usize) -> &[u32] {
+        let start = crate::layout::links_before(self.ncount, face) as usize;
+        let n = neighbour_count(self.ncount, face) as usize;
+        &self.links[start..start + n]
+    }
+}
+
+impl<'a> SceneView<'a> {
+    /// Number of leaves.
+    pub fn leaf_count(&self) -> usize {
+        self.boxes.len() / crate::layout::BOX_FLOATS
+    }
+
+    /// Number of stored (non-degenerate) triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len() / TRIANGLE_FLOATS
+    }
+
+    /// Decodes the leaf record at `address`, or `None` if it does not fit in the array.
+    pub fn leaf(&self, address: u32) -> Option<LeafRecord<'a>> {
+        let a = address as usize;
+        let head = self.octree.get(a..a.checked_add(LEAF_HEADER_WORDS)?)?;
+        let ncount = head[WORD_NCOUNT];
+        let n = crate::layout::total_links(ncount) as usize;
+        let links = self
+            .octree
+            .get(a + LEAF_HEADER_WORDS..a + LEAF_HEADER_WORDS + n)?;
+        Some(LeafRecord {
+            address,
+            tri_offset: head[WORD_TRI_OFFSET],
+            tri_count: head[WORD_TRI_COUNT],
+            box_index: head[WORD_BOX],
+            ncount,
+            links,
+        })
+    }
+
+    /// Iterates over the leaf records in storage order.
+    pub fn leaves(&self) -> impl Iterator<Item = LeafRecord<'a>> + '_ {
+        let mut address = 0usize;
+        std::iter::from_fn(move || {
+            let rec = self.leaf(u32::try_from(address).ok()?)?;
+            address += LEAF_HEADER_WORDS + rec.links.len();
+            Some(rec)
+        })
+    }
+
+    /// The box of leaf `box_index`: `[lo.x, lo.y, lo.z, hi.x, hi.y, hi.z]`.
+    pub fn leaf_box(&self, box_index: u32) -> [f32; 6] {
+        let b = box_index as usize * crate::layout::BOX_FLOATS;
+        self.boxes[b..b + 6].try_into().expect("six floats")
+    }
+
+    /// The three vertices of stored triangle `index`.
+    pub fn triangle(&self, index: u32) -> [[f32; 3]; 3] {
+        let t = &self.triangles[index as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+        [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
+    }
+
+    /// Cube-map resolution along a face edge.
+    pub fn cube_resolution(&self) -> usize {
+        1usize << self.params.cube_level
+    }
+}
