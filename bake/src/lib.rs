@@ -1,1 +1,32 @@
+//! Bakes triangle meshes into octrace's constrained octree.
+//!
+//! [`Mesh::load`] reads OBJ and glTF 2.0 (optionally zstd-compressed); [`bake`] builds
+//! the 2:1-balanced, neighbour-linked octree of Portalez & Duguet, *Lancer de rayons
+//! dans un octree* (2016), and returns an [`octrace_format::BakedScene`] ready to write.
+//!
+//! # Example
+//! ```
+//! use octrace_bake::{bake, BuildParams, Mesh};
+//! // Two triangles making a unit square.
+//! let mesh = Mesh {
+//!     triangles: vec![
+//!         [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+//!         [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+//!     ],
+//!     warnings: vec![],
+//! };
+//! let scene = bake(&mesh, &BuildParams::auto())?;
+//! let dir = tempfile::tempdir()?;
+//! scene.write(dir.path().join("square.oct"), 0)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![forbid(unsafe_code)]
 
+mod error;
+pub mod mesh;
+pub mod octree;
+pub mod procedural;
+
+pub use error::{Error, Result};
+pub use mesh::{Mesh, MeshFormat};
+pub use octree::{bake, bake_with_progress, BakeStage, BuildParams};

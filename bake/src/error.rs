@@ -1,0 +1,94 @@
+//! The one error type of the bake crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while loading a mesh or baking it.
+///
+/// Mesh errors name the file and the element at fault, so a pipeline log says what to
+/// fix.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The file could not be read (or decompressed).
+    #[error("{path}: cannot read: {source}")]
+    Unreadable {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The file's extension is none of `.obj`, `.gltf`, `.glb` (optionally `.zst`).
+    #[error("{path}: unknown mesh format (expected .obj, .gltf or .glb, optionally .zst)")]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file does not parse.
+    #[error("{path}: {element}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Where in the file (a line, a mesh primitive, ...).
+        element: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A vertex coordinate is NaN or infinite.
+    #[error("{path}: {element}: coordinate {value} is not finite")]
+    NonFinite {
+        /// The file.
+        path: PathBuf,
+        /// The vertex, and the primitive or object it belongs to.
+        element: String,
+        /// The offending value.
+        value: f32,
+    },
+    /// A face or primitive refers to a vertex that does not exist.
+    #[error("{path}: {element}: vertex index {index} out of range ({count} vertices)")]
+    IndexOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// The face or primitive.
+        element: String,
+        /// The index found.
+        index: i64,
+        /// How many vertices there are.
+        count: usize,
+    },
+    /// The scene has primitives, but none made of triangles.
+    #[error("{path}: {element}: primitive mode {mode} is not supported (only triangles, strips and fans)")]
+    UnsupportedMode {
+        /// The file.
+        path: PathBuf,
+        /// The first unsupported primitive.
+        element: String,
+        /// The glTF mode's name.
+        mode: String,
+    },
+    /// The scene holds no triangle at all.
+    #[error("{path}: the scene holds no triangles")]
+    EmptyScene {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The mesh is too large for the format (more than 2^32 - 1 triangles).
+    #[error("{path}: {count} triangles exceed the format's limit of 2^32 - 1")]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Triangles found.
+        count: u64,
+    },
+    /// The scene is too large for `f32` coordinates.
+    #[error("scene extent {extent} is beyond f32's range")]
+    Extent {
+        /// The largest extent of the mesh's box.
+        extent: f64,
+    },
+    /// Writing the baked file failed.
+    #[error(transparent)]
+    Format(#[from] octrace_format::Error),
+}
+
+/// The bake crate's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,119 @@
+//! glTF 2.0 through the `gltf` crate: the default scene's mesh primitives, node
+//! transforms applied; triangle lists, strips and fans; other modes skipped.
+
+use std::path::Path;
+
+use glam::{DMat4, DVec3};
+use gltf::mesh::Mode;
+
+use super::{check_finite, Mesh};
+use crate::error::{Error, Result};
+
+pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
+    let parse_error = |element: &str, e: gltf::Error| Error::Parse {
+        path: path.into(),
+        element: element.into(),
+        message: e.to_string(),
+    };
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes).map_err(|e| parse_error("document", e))?;
+    let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| parse_error("buffers", e))?;
+    // The default scene, or scene 0 when the file names none.
+    let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
+        return Err(Error::EmptyScene { path: path.into() });
+    };
+    let mut loader = Loader { path, buffers: &buffers, mesh: Mesh::default(), skipped: None };
+    for node in scene.nodes() {
+        loader.node(&node, DMat4::IDENTITY, 0)?;
+    }
+    if loader.mesh.triangles.is_empty() {
+        if let Some((element, mode)) = loader.skipped {
+            return Err(Error::UnsupportedMode { path: path.into(), element, mode });
+        }
+    }
+    Ok(loader.mesh)
+}
+
+struct Loader<'a> {
+    path: &'a Path,
+    buffers: &'a [gltf::buffer::Data],
+    mesh: Mesh,
+    /// The first primitive skipped for its mode, for the error when nothing else is left.
+    skipped: Option<(String, String)>,
+}
+
+/// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
+const MAX_NODE_DEPTH: usize = 256;
+
+impl Loader<'_> {
+    fn node(&mut self, node: &gltf::Node<'_>, parent: DMat4, depth: usize) -> Result<()> {
+        if depth > MAX_NODE_DEPTH {
+            return Err(Error::Parse {
+                path: self.path.into(),
+                element: format!("node {}", node.index()),
+                message: format!("node hierarchy deeper than {MAX_NODE_DEPTH}"),
+            });
+        }
+        let local = node.transform().matrix().map(|c| c.map(f64::from));
+        let world = parent * DMat4::from_cols_array_2d(&local);
+        if let Some(mesh) = node.mesh() {
+            for prim in mesh.primitives() {
+                let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
+                self.primitive(&prim, &world, element)?;
+            }
+        }
+        for child in node.children() {
+            self.node(&child, world, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    fn primitive(&mut self, prim: &gltf::Primitive<'_>, world: &DMat4, element: String) -> Result<()> {
+        let mode = prim.mode();
+        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            let name = format!("{mode:?}");
+            self.mesh.warnings.push(format!("{}: {element}: skipped {name} primitive", self.path.display()));
+            self.skipped.get_or_insert((element, name));
+            return Ok(());
+        }
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let Some(positions) = reader.read_positions() else {
+            self.mesh.warnings.push(format!("{}: {element}: no POSITION, skipped", self.path.display()));
+            return Ok(());
+        };
+        let mut verts = Vec::with_capacity(positions.len());
+        for (i, p) in positions.enumerate() {
+            check_finite(p, self.path, || format!("{element}, vertex {i}"))?;
+            let w = world.transform_point3(DVec3::from(p.map(f64::from)));
+            let v = [w.x as f32, w.y as f32, w.z as f32];
+            check_finite(v, self.path, || format!("{element}, vertex {i} after the node transform"))?;
+            verts.push(v);
+        }
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(idx) => idx.into_u32().collect(),
+            None => (0..verts.len() as u32).collect(),
+        };
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= verts.len()) {
+            return Err(Error::IndexOutOfRange {
+                path: self.path.into(),
+                element,
+                index: bad as i64,
+                count: verts.len(),
+            });
+        }
+        let v = |i: u32| verts[i as usize];
+        let tris = &mut self.mesh.triangles;
+        match mode {
+            Mode::Triangles => tris.extend(indices.chunks_exact(3).map(|t| [v(t[0]), v(t[1]), v(t[2])])),
+            // Every other strip triangle swaps its first two corners to keep the winding.
+            Mode::TriangleStrip => tris.extend(indices.windows(3).enumerate().map(|(k, t)| {
+                if k % 2 == 0 { [v(t[0]), v(t[1]), v(t[2])] } else { [v(t[1]), v(t[0]), v(t[2])] }
+            })),
+            _ => {
+                if let Some((&first, rest)) = indices.split_first() {
+                    tris.extend(rest.windows(2).map(|t| [v(first), v(t[0]), v(t[1])]));
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,136 @@
+//! The adaptive octree: recursive subdivision with exact triangle/cell overlap.
+//!
+//! Portalez & Duguet 2016, section 2.2: split a cell while it is shallower than the
+//! depth limit and holds more than the leaf target; a triangle goes to every child it
+//! really overlaps (separating axes, [`super::overlap`]), not to every child its
+//! bounding box touches.
+
+use rayon::prelude::*;
+
+use super::overlap::{triangle_overlaps_box, Box3};
+use octrace_format::layout::grid_plane;
+
+/// A node of the tree under construction.
+#[derive(Debug)]
+pub(crate) enum Node {
+    /// A leaf and the indices of the triangles it overlaps, ascending.
+    Leaf(Vec<u32>),
+    /// Eight children, `child = x_high | y_high << 1 | z_high << 2`.
+    Internal(Box<[Node; 8]>),
+}
+
+/// A cell: level and integer coordinates at that level.
+pub(crate) type Cell = (u32, [u32; 3]);
+
+/// The child octant of `cell` that contains the level-`level` coordinates `at`.
+pub(crate) fn octant(level: u32, at: [u32; 3], depth: u32) -> usize {
+    let shift = depth - level - 1;
+    (0..3).map(|a| (((at[a] >> shift) & 1) as usize) << a).sum()
+}
+
+/// The children's cells.
+pub(crate) fn child_cell((level, c): Cell, child: usize) -> Cell {
+    (level + 1, [0, 1, 2].map(|a| 2 * c[a] + ((child >> a) & 1) as u32))
+}
+
+/// Geometry shared by the whole build.
+pub(crate) struct Builder<'a> {
+    /// Non-degenerate triangles, indexed by the build's triangle index.
+    pub triangles: &'a [[[f32; 3]; 3]],
+    /// Low corner of the root cube.
+    pub root_lo: [f32; 3],
+    /// Edge of the root cube.
+    pub root_size: f32,
+    /// Absolute enlargement of cells when assigning triangles.
+    pub margin: f64,
+    /// Depth limit.
+    pub max_depth: u32,
+    /// Leaf target.
+    pub leaf_size: usize,
+}
+
+/// Above this many triangles, a node's children are built in parallel.
+const PARALLEL_GRAIN: usize = 2048;
+
+impl Builder<'_> {
+    /// The cell's box as the file stores it (planes rounded to `f32`), enlarged by the
+    /// margin.
+    pub(crate) fn cell_box(&self, (level, c): Cell) -> Box3 {
+        let plane = |a: usize, i: u32| grid_plane(self.root_lo[a], self.root_size, level, i) as f64;
+        Box3 {
+            lo: [0, 1, 2].map(|a| plane(a, c[a]) - self.margin),
+            hi: [0, 1, 2].map(|a| plane(a, c[a] + 1) + self.margin),
+        }
+    }
+
+    /// Builds the subtree of `cell` from the triangles that overlap it.
+    pub(crate) fn build(&self, cell: Cell, tris: Vec<u32>) -> Node {
+        if cell.0 >= self.max_depth || tris.len() <= self.leaf_size {
+            return Node::Leaf(tris);
+        }
+        let parts = self.split(cell, &tris);
+        drop(tris);
+        let children: Vec<Node> = if parts.iter().map(Vec::len).sum::<usize>() > PARALLEL_GRAIN {
+            parts.into_par_iter().enumerate().map(|(i, p)| self.build(child_cell(cell, i), p)).collect()
+        } else {
+            parts.into_iter().enumerate().map(|(i, p)| self.build(child_cell(cell, i), p)).collect()
+        };
+        Node::Internal(Box::new(children.try_into().expect("eight children")))
+    }
+
+    /// Distributes a cell's triangles to its eight children, exactly.
+    pub(crate) fn split(&self, cell: Cell, tris: &[u32]) -> [Vec<u32>; 8] {
+        let boxes: [Box3; 8] = std::array::from_fn(|i| self.cell_box(child_cell(cell, i)));
+        let mut parts: [Vec<u32>; 8] = Default::default();
+        for &t in tris {
+            let tri = &self.triangles[t as usize];
+            let bb = Box3::of_triangle(tri);
+            for (child, b) in boxes.iter().enumerate() {
+                // A triangle inside the child's box overlaps it; one that only pokes
+                // into it needs the full test.
+                if b.touches(&bb) && (b.contains_box(&bb) || triangle_overlaps_box(tri, b)) {
+                    parts[child].push(t);
+                }
+            }
+        }
+        parts
+    }
+
+}
+
+impl Node {
+    /// Number of leaves.
+    pub(crate) fn leaf_count(&self) -> usize {
+        match self {
+            Node::Leaf(_) => 1,
+            Node::Internal(c) => c.iter().map(Node::leaf_count).sum(),
+        }
+    }
+
+    /// Calls `f` on every leaf, depth first, children in octant order.
+    pub(crate) fn for_each_leaf<'a>(&'a self, cell: Cell, f: &mut impl FnMut(Cell, &'a [u32])) {
+        match self {
+            Node::Leaf(t) => f(cell, t),
+            Node::Internal(c) => {
+                for (i, child) in c.iter().enumerate() {
+                    child.for_each_leaf(child_cell(cell, i), f);
+                }
+            }
+        }
+    }
+
+    /// The level of the leaf that contains cell `(level, at)`, or `level` if the cell
+    /// is inside the tree's internal nodes.
+    pub(crate) fn leaf_level_at(&self, (level, at): Cell) -> u32 {
+        let mut node = self;
+        let mut depth = 0;
+        while depth < level {
+            match node {
+                Node::Leaf(_) => return depth,
+                Node::Internal(c) => node = &c[octant(depth, at, level)],
+            }
+            depth += 1;
+        }
+        level
+    }
+}

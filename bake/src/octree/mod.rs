@@ -1,0 +1,178 @@
+//! The constrained octree of Portalez & Duguet, *Lancer de rayons dans un octree*
+//! (2016): build, 2:1 balance, face links, cube map, point location.
+
+mod balance;
+mod build;
+mod flatten;
+pub mod overlap;
+mod params;
+
+#[cfg(test)]
+mod tests;
+
+pub use params::{BuildParams, ResolvedParams, AUTO_DEPTH_LIMIT, DEFAULT_LEAF_SIZE, DEFAULT_MARGIN};
+
+use octrace_format::{BakeParams, BakeStats, BakedScene, Bounds};
+
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use build::{Builder, Node};
+use flatten::FlatTree;
+
+/// The stages of a bake, reported in order to a progress callback.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BakeStage {
+    /// Sorting out degenerate triangles and bounds.
+    Prepare,
+    /// Recursive subdivision.
+    Build,
+    /// The 2:1 constraint.
+    Balance,
+    /// Face links, cube map, arrays.
+    Link,
+}
+
+impl BakeStage {
+    /// A short human name.
+    pub fn name(self) -> &'static str {
+        match self {
+            BakeStage::Prepare => "preparing",
+            BakeStage::Build => "subdividing",
+            BakeStage::Balance => "balancing 2:1",
+            BakeStage::Link => "linking neighbours",
+        }
+    }
+}
+
+/// Whether a triangle has zero area: its edge cross product is exactly zero. Products
+/// of `f32` values are exact in `f64`, so this is exact collinearity up to the single
+/// rounding of each difference.
+pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
+    let d = |i: usize, a: usize| t[i][a] as f64 - t[0][a] as f64;
+    let (e1, e2) = ([d(1, 0), d(1, 1), d(1, 2)], [d(2, 0), d(2, 1), d(2, 2)]);
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    n == [0.0; 3]
+}
+
+/// The root cube: a power-of-two edge at least the mesh's largest extent, centred on
+/// the mesh, its low corner rounded down to `f32`; doubled until it holds the mesh.
+///
+/// # Errors
+/// [`Error::Extent`] when the cube's edge is beyond `f32`'s range.
+pub fn root_cube(lo: [f32; 3], hi: [f32; 3]) -> Result<([f32; 3], f32)> {
+    let extent = (0..3).map(|a| hi[a] as f64 - lo[a] as f64).fold(0.0, f64::max);
+    let mut size = if extent > 0.0 { extent.log2().ceil().exp2() } else { 1.0 };
+    loop {
+        if !((size as f32).is_finite()) {
+            return Err(Error::Extent { extent });
+        }
+        let root_lo = [0, 1, 2].map(|a| {
+            let exact = 0.5 * (lo[a] as f64 + hi[a] as f64) - 0.5 * size;
+            let r = exact as f32;
+            if r as f64 > exact { r.next_down() } else { r }
+        });
+        if (0..3).all(|a| root_lo[a] <= lo[a] && root_lo[a] as f64 + size >= hi[a] as f64) {
+            return Ok((root_lo, size as f32));
+        }
+        size *= 2.0;
+    }
+}
+
+/// The cube map's level: texels about one per six leaves, so its size stays in
+/// proportion to the octree (`6 * 4^k` texels), never deeper than the tree.
+pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
+    let k = ((leaves as f64 / 6.0).max(1.0).log2() / 2.0).floor() as u32;
+    k.min(max_depth)
+}
+
+/// Bakes a mesh into a scene, reporting stages to `progress`.
+///
+/// Runs on the current rayon pool; the result does not depend on its thread count.
+///
+/// # Errors
+/// [`Error::NonFinite`] for a NaN or infinite coordinate, [`Error::EmptyScene`] for
+/// no triangles, [`Error::Extent`] for a scene beyond `f32`'s range.
+///
+/// # Example
+/// ```
+/// use octrace_bake::{bake, BuildParams, Mesh};
+/// let mesh = Mesh { triangles: vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]], warnings: vec![] };
+/// let scene = bake(&mesh, &BuildParams::auto())?;
+/// assert_eq!(scene.triangle_ids, vec![0]);
+/// scene.view().validate()?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn bake(mesh: &Mesh, params: &BuildParams) -> Result<BakedScene> {
+    bake_with_progress(mesh, params, &|_| {})
+}
+
+/// [`bake`], calling `progress` as each stage starts.
+///
+/// # Errors
+/// As [`bake`].
+pub fn bake_with_progress(mesh: &Mesh, params: &BuildParams, progress: &(dyn Fn(BakeStage) + Sync)) -> Result<BakedScene> {
+    progress(BakeStage::Prepare);
+    let name = std::path::Path::new("mesh");
+    if mesh.triangles.is_empty() {
+        return Err(Error::EmptyScene { path: name.into() });
+    }
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        for v in t {
+            crate::mesh::check_finite(*v, name, || format!("triangle {i}"))?;
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+    }
+    let ids: Vec<u32> = (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
+    let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
+    let (root_lo, root_size) = root_cube(lo, hi)?;
+    let resolved = params.resolve(kept.len());
+    let builder = Builder {
+        triangles: &kept,
+        root_lo,
+        root_size,
+        margin: resolved.margin as f64 * root_size as f64,
+        max_depth: resolved.max_depth,
+        leaf_size: resolved.leaf_size as usize,
+    };
+
+    progress(BakeStage::Build);
+    let mut root: Node = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
+    let leaves_before_balance = root.leaf_count() as u64;
+
+    progress(BakeStage::Balance);
+    balance::balance(&mut root, &builder);
+
+    progress(BakeStage::Link);
+    let flat = FlatTree::new(root);
+    let cube = cube_level(flat.leaf_cells.len(), resolved.max_depth);
+    let arrays = flatten::arrays(&flat, kept.len(), root_lo, root_size, cube);
+    debug_assert_eq!(arrays.tri_order.len(), kept.len(), "every triangle lies in some leaf");
+    let triangles = arrays.tri_order.iter().flat_map(|&t| kept[t as usize].concat()).collect();
+    let triangle_ids = arrays.tri_order.iter().map(|&t| ids[t as usize]).collect();
+    Ok(BakedScene {
+        params: BakeParams {
+            max_depth: resolved.max_depth,
+            leaf_size: resolved.leaf_size,
+            margin: resolved.margin,
+            cube_level: cube,
+        },
+        bounds: Bounds { mesh_lo: lo, mesh_hi: hi, root_lo, root_size },
+        stats: BakeStats {
+            input_triangles: mesh.triangles.len() as u64,
+            degenerate_triangles: (mesh.triangles.len() - kept.len()) as u64,
+            leaves_before_balance,
+        },
+        octree: arrays.octree,
+        tri_refs: arrays.tri_refs,
+        triangles,
+        triangle_ids,
+        boxes: arrays.boxes,
+        cube_map: arrays.cube_map,
+        nodes: arrays.nodes,
+        root: arrays.root,
+    })
+}

@@ -1,0 +1,196 @@
+//! Properties of the baked octree that must fail loudly if they break.
+
+use std::collections::{HashMap, HashSet};
+
+use octrace_format::layout::{face_axis, face_is_high, opposite_face};
+use octrace_format::validate::CellKey;
+use octrace_format::{BakedScene, SceneFile};
+
+use super::overlap::{triangle_overlaps_box, Box3};
+use super::{bake, BuildParams};
+use crate::mesh::Mesh;
+use crate::procedural;
+
+fn params(depth: u32, leaf: u32) -> BuildParams {
+    BuildParams { max_depth: Some(depth), leaf_size: Some(leaf), ..BuildParams::auto() }
+}
+
+fn meshes() -> Vec<(&'static str, Mesh)> {
+    let mut both = procedural::sphere([0.0; 3], 1.0, 12, 16);
+    both.triangles.extend(procedural::soup(3, 200, 2.0, 0.3).triangles);
+    vec![
+        ("sphere", procedural::sphere([0.3, -0.2, 0.1], 2.0, 24, 32)),
+        ("torus", procedural::torus([0.0; 3], 1.0, 0.3, 24, 12)),
+        ("cube", procedural::cube([-1.0, -1.0, -1.0], [1.0, 2.0, 0.5], 6)),
+        ("grid", procedural::grid(16, 4.0)),
+        ("fan", procedural::fan(64, 1.0)),
+        ("soup", procedural::soup(1, 500, 10.0, 1.0)),
+        ("sphere+soup", both),
+    ]
+}
+
+fn leaf_keys(scene: &BakedScene) -> (Vec<CellKey>, Vec<u32>) {
+    let index = scene.view().index_tree().expect("valid tree");
+    (index.leaf_keys, index.leaf_addresses)
+}
+
+/// For each leaf, the level of the leaf across each face at the same level or coarser.
+fn assert_balanced(name: &str, scene: &BakedScene) {
+    let (keys, _) = leaf_keys(scene);
+    let set: HashSet<(u32, [u32; 3])> = keys.iter().map(|k| (k.level, k.cell)).collect();
+    for k in &keys {
+        for face in 0..6 {
+            let axis = face_axis(face);
+            let mut across = k.cell;
+            if face_is_high(face) {
+                if across[axis] + 1 == 1 << k.level {
+                    continue;
+                }
+                across[axis] += 1;
+            } else {
+                if across[axis] == 0 {
+                    continue;
+                }
+                across[axis] -= 1;
+            }
+            // The leaf holding `across`, if it is at this level or coarser.
+            if let Some(up) = (0..=k.level).find(|&up| set.contains(&(k.level - up, across.map(|c| c >> up)))) {
+                assert!(up <= 1, "{name}: leaf {k:?} face {face} borders a leaf {up} levels coarser");
+            }
+        }
+    }
+}
+
+#[test]
+fn balance_no_two_face_adjacent_leaves_differ_by_more_than_one_level() {
+    for (name, mesh) in meshes() {
+        for depth in [3, 5, 7] {
+            let scene = bake(&mesh, &params(depth, 2)).unwrap();
+            assert_balanced(name, &scene);
+            assert!(scene.leaf_count() as u64 >= scene.stats.leaves_before_balance);
+        }
+    }
+}
+
+#[test]
+fn balance_check_catches_an_unbalanced_tree() {
+    // Two tiny triangles at a generic interior point forces deep leaves beside big ones
+    // (refinement towards a root corner would be balanced by itself); two more tiny
+    // triangles at opposite corners fix the bounds.
+    let tiny = |p: f32| [[p, p, p], [p + 0.001, p, p], [p, p + 0.001, p]];
+    let mesh = Mesh { triangles: vec![tiny(0.0), tiny(0.3), tiny(0.3004), tiny(0.999)], warnings: vec![] };
+    let scene = bake(&mesh, &params(8, 1)).unwrap();
+    assert!(scene.leaf_count() as u64 > scene.stats.leaves_before_balance, "balancing added no leaf");
+    assert_balanced("corner", &scene);
+}
+
+#[test]
+fn links_are_symmetric_and_land_across_the_stated_face() {
+    for (name, mesh) in meshes() {
+        let scene = bake(&mesh, &params(6, 3)).unwrap();
+        let view = scene.view();
+        view.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (keys, addresses) = leaf_keys(&scene);
+        let by_address: HashMap<u32, usize> = addresses.iter().enumerate().map(|(b, &a)| (a, b)).collect();
+        for (b, &address) in addresses.iter().enumerate() {
+            let rec = view.leaf(address).unwrap();
+            for face in 0..6 {
+                for &link in rec.face_links(face) {
+                    let other = view.leaf(link).unwrap();
+                    assert!(
+                        other.face_links(opposite_face(face)).contains(&address),
+                        "{name}: leaf {:?} -> {:?} across face {face} is not linked back",
+                        keys[b],
+                        keys[by_address[&link]]
+                    );
+                    // Across the face: the boxes touch on the face's plane.
+                    let (mine, theirs) = (view.leaf_box(rec.box_index), view.leaf_box(other.box_index));
+                    let axis = face_axis(face);
+                    let plane = if face_is_high(face) { (mine[axis + 3], theirs[axis]) } else { (mine[axis], theirs[axis + 3]) };
+                    assert_eq!(plane.0, plane.1, "{name}: link across face {face} does not share the plane");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn each_triangle_is_in_exactly_the_leaves_it_overlaps() {
+    for (name, mesh) in meshes() {
+        let scene = bake(&mesh, &params(5, 4)).unwrap();
+        let view = scene.view();
+        let margin = scene.params.margin as f64 * scene.bounds.root_size as f64;
+        for rec in view.leaves() {
+            let b = view.leaf_box(rec.box_index);
+            let cell = Box3 {
+                lo: [0, 1, 2].map(|a| b[a] as f64 - margin),
+                hi: [0, 1, 2].map(|a| b[a + 3] as f64 + margin),
+            };
+            let refs = &view.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
+            let got: HashSet<u32> = refs.iter().copied().collect();
+            assert_eq!(got.len(), refs.len(), "{name}: a triangle listed twice in one leaf");
+            let brute: HashSet<u32> =
+                (0..view.triangle_count() as u32).filter(|&t| triangle_overlaps_box(&view.triangle(t), &cell)).collect();
+            assert_eq!(got, brute, "{name}: leaf {} references differ from brute force", rec.box_index);
+        }
+    }
+}
+
+#[test]
+fn triangle_ids_name_the_input_triangles_and_skip_degenerate_ones() {
+    let mut mesh = procedural::sphere([0.0; 3], 1.0, 6, 8);
+    mesh.triangles.insert(3, [[0.0; 3], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]]); // collinear
+    mesh.triangles.insert(7, [[0.5; 3]; 3]); // a point
+    let scene = bake(&mesh, &params(4, 2)).unwrap();
+    assert_eq!(scene.stats.degenerate_triangles, 2);
+    assert_eq!(scene.stats.input_triangles, mesh.triangles.len() as u64);
+    let view = scene.view();
+    for (stored, &id) in scene.triangle_ids.iter().enumerate() {
+        assert_ne!(id, 3);
+        assert_ne!(id, 7);
+        let t = view.triangle(stored as u32);
+        assert_eq!(t, mesh.triangles[id as usize], "stored triangle {stored} is not input {id}");
+    }
+}
+
+#[test]
+fn bake_write_open_gives_back_the_arrays() {
+    for (name, mesh) in meshes() {
+        let scene = bake(&mesh, &BuildParams::auto()).unwrap();
+        let bytes = scene.to_file_bytes(1234).unwrap();
+        let file = SceneFile::from_bytes(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(file.header().bake_time_us, 1234);
+        let v = file.view();
+        let w = scene.view();
+        assert_eq!(v.octree, w.octree);
+        assert_eq!(v.tri_refs, w.tri_refs);
+        assert_eq!(v.triangles, w.triangles);
+        assert_eq!(v.triangle_ids, w.triangle_ids);
+        assert_eq!(v.boxes, w.boxes);
+        assert_eq!(v.cube_map, w.cube_map);
+        assert_eq!(v.nodes, w.nodes);
+        assert_eq!((v.root, v.params, v.bounds, v.stats), (w.root, w.params, w.bounds, w.stats));
+    }
+}
+
+#[test]
+fn one_thread_and_two_threads_give_byte_identical_files() {
+    let mesh = procedural::soup(9, 20_000, 10.0, 0.5);
+    let bake_on = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| bake(&mesh, &BuildParams::auto()).unwrap().to_file_bytes(0).unwrap())
+    };
+    let (one, two) = (bake_on(1), bake_on(2));
+    assert!(one == two, "files differ between 1 and 2 threads");
+}
+
+#[test]
+fn the_root_cube_holds_the_mesh_and_has_a_power_of_two_edge() {
+    for (lo, hi) in [([0.0f32; 3], [1.0f32; 3]), ([1e7, -3.0, 0.5], [1e7 + 1.0, -2.5, 0.75]), ([-1e-5; 3], [1e-5; 3]), ([2.0; 3], [2.0; 3])] {
+        let (root_lo, size) = super::root_cube(lo, hi).unwrap();
+        assert_eq!(size.log2().fract(), 0.0, "{size}");
+        for a in 0..3 {
+            assert!(root_lo[a] <= lo[a] && (root_lo[a] as f64 + size as f64) >= hi[a] as f64);
+        }
+    }
+}

@@ -1,0 +1,142 @@
+//! Procedural meshes for tests, benchmarks and demos: spheres, boxes, tori, grids,
+//! fans and random soups, all closed where the name says so.
+
+use crate::mesh::Mesh;
+
+fn mesh(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
+    Mesh { triangles, warnings: Vec::new() }
+}
+
+/// A closed UV sphere with `stacks x slices` quads (poles as fans).
+pub fn sphere(center: [f32; 3], radius: f32, stacks: u32, slices: u32) -> Mesh {
+    let (stacks, slices) = (stacks.max(2), slices.max(3));
+    let point = |i: u32, j: u32| {
+        let theta = std::f64::consts::PI * i as f64 / stacks as f64;
+        let phi = std::f64::consts::TAU * (j % slices) as f64 / slices as f64;
+        let r = radius as f64;
+        [
+            center[0] + (r * theta.sin() * phi.cos()) as f32,
+            center[1] + (r * theta.cos()) as f32,
+            center[2] + (r * theta.sin() * phi.sin()) as f32,
+        ]
+    };
+    let mut tris = Vec::new();
+    for i in 0..stacks {
+        for j in 0..slices {
+            let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
+            if i > 0 {
+                tris.push([a, b, d]);
+            }
+            if i + 1 < stacks {
+                tris.push([d, b, c]);
+            }
+        }
+    }
+    mesh(tris)
+}
+
+/// A closed torus around the y axis.
+pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -> Mesh {
+    let point = |i: u32, j: u32| {
+        let u = std::f64::consts::TAU * (i % rings) as f64 / rings as f64;
+        let v = std::f64::consts::TAU * (j % sides) as f64 / sides as f64;
+        let r = major as f64 + minor as f64 * v.cos();
+        [center[0] + (r * u.cos()) as f32, center[1] + (minor as f64 * v.sin()) as f32, center[2] + (r * u.sin()) as f32]
+    };
+    let mut tris = Vec::new();
+    for i in 0..rings {
+        for j in 0..sides {
+            let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
+            tris.push([a, b, c]);
+            tris.push([a, c, d]);
+        }
+    }
+    mesh(tris)
+}
+
+/// A closed axis-aligned box, each face split into `n x n` quads.
+pub fn cube(lo: [f32; 3], hi: [f32; 3], n: u32) -> Mesh {
+    let n = n.max(1);
+    let mut tris = Vec::new();
+    for axis in 0..3 {
+        let (u, v) = octrace_format::layout::other_axes(axis);
+        for side in [lo[axis], hi[axis]] {
+            for i in 0..n {
+                for j in 0..n {
+                    let at = |di: u32, dj: u32| {
+                        let mut p = [0.0f32; 3];
+                        p[axis] = side;
+                        p[u] = lo[u] + (hi[u] - lo[u]) * (i + di) as f32 / n as f32;
+                        p[v] = lo[v] + (hi[v] - lo[v]) * (j + dj) as f32 / n as f32;
+                        p
+                    };
+                    tris.push([at(0, 0), at(1, 0), at(1, 1)]);
+                    tris.push([at(0, 0), at(1, 1), at(0, 1)]);
+                }
+            }
+        }
+    }
+    mesh(tris)
+}
+
+/// A flat `n x n` grid of quads in the plane `z = 0`, over `[0, size]^2`.
+pub fn grid(n: u32, size: f32) -> Mesh {
+    let n = n.max(1);
+    let p = |i: u32, j: u32| [size * i as f32 / n as f32, size * j as f32 / n as f32, 0.0];
+    let mut tris = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+        }
+    }
+    mesh(tris)
+}
+
+/// A fan of `n` thin triangles around the origin in the plane `y = 0`.
+pub fn fan(n: u32, radius: f32) -> Mesh {
+    let n = n.max(1);
+    let rim = |k: u32| {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        [(radius as f64 * a.cos()) as f32, 0.0, (radius as f64 * a.sin()) as f32]
+    };
+    mesh((0..n).map(|k| [[0.0; 3], rim(k), rim(k + 1)]).collect())
+}
+
+/// `n` random triangles in `[0, scale]^3`, each with edges up to `size`, from `seed`.
+pub fn soup(seed: u64, n: usize, scale: f32, size: f32) -> Mesh {
+    let mut rng = SplitMix(seed);
+    let tris = (0..n)
+        .map(|_| {
+            let a = [0; 3].map(|_| rng.unit() * scale);
+            let mut t = [a; 3];
+            for v in &mut t[1..] {
+                for (c, base) in v.iter_mut().zip(a) {
+                    *c = base + (rng.unit() - 0.5) * size;
+                }
+            }
+            t
+        })
+        .collect();
+    mesh(tris)
+}
+
+/// A tiny deterministic generator (SplitMix64) for procedural meshes.
+#[derive(Clone, Debug)]
+pub struct SplitMix(pub u64);
+
+impl SplitMix {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
