@@ -176,13 +176,11 @@ impl SceneView<'_> {
         // Records tile the octree array in box order, so an address is a record start
         // exactly when it is some leaf's address.
         let mut next = 0u64;
-        let mut is_start = vec![false; self.octree.len()];
         for (b, &address) in index.leaf_addresses.iter().enumerate() {
             if address as u64 != next {
                 return Err(Error::corrupt(format!("record {b} starts at {address}, expected {next}")));
             }
             let rec = self.leaf(address).expect("indexed leaves fit");
-            is_start[address as usize] = true;
             next += (LEAF_HEADER_WORDS + rec.links.len()) as u64;
             let end = rec.tri_offset as u64 + rec.tri_count as u64;
             if end > self.tri_refs.len() as u64 {
@@ -200,10 +198,11 @@ impl SceneView<'_> {
             let key = index.leaf_keys[b];
             for face in 0..6 {
                 let links = rec.face_links(face);
+                // A link is a record start exactly when the box index it would hold
+                // names a leaf whose record starts there.
                 let expected = expected_neighbours(key, face, links, |link| {
-                    let l = link as usize;
-                    (l < is_start.len() && is_start[l])
-                        .then(|| index.leaf_keys[self.octree[l + 2] as usize])
+                    let b = *self.octree.get(link as usize + crate::layout::WORD_BOX)? as usize;
+                    (index.leaf_addresses.get(b) == Some(&link)).then(|| index.leaf_keys[b])
                 });
                 expected.map_err(|why| {
                     Error::corrupt(format!("leaf {b} {key:?}, face {face}: {why}"))
@@ -261,11 +260,14 @@ fn expected_neighbours(
     }
     let mut across = key;
     across.cell[axis] = if high { key.cell[axis] + 1 } else { key.cell[axis] - 1 };
-    let keys: Vec<CellKey> = links
-        .iter()
-        .map(|&l| key_of(l).ok_or_else(|| format!("link {l} is not a leaf record")))
-        .collect::<std::result::Result<_, _>>()?;
-    match keys.as_slice() {
+    let mut keys = [CellKey::default(); 4];
+    if links.len() > 4 {
+        return Err(format!("{} links", links.len()));
+    }
+    for (k, &l) in keys.iter_mut().zip(links) {
+        *k = key_of(l).ok_or_else(|| format!("link {l} is not a leaf record"))?;
+    }
+    match &keys[..links.len()] {
         [n] if n.level == key.level || n.level + 1 == key.level => {
             if n.contains(&across) { Ok(()) } else { Err(format!("neighbour {n:?} is not across the face")) }
         }

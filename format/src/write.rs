@@ -4,9 +4,10 @@ use std::io::Write;
 use std::path::Path;
 
 use rkyv::rancor;
+use rkyv::util::AlignedVec;
 
 use crate::error::{Error, Result};
-use crate::header::{Header, RKYV_SETTINGS, VERSION};
+use crate::header::{Header, ARCHIVE_ALIGN, RKYV_SETTINGS, VERSION};
 use crate::scene::BakedScene;
 
 impl BakedScene {
@@ -19,7 +20,26 @@ impl BakedScene {
     /// # Errors
     /// [`Error::Corrupt`] if rkyv cannot serialize the scene (arrays beyond 4 GiB).
     pub fn to_file_bytes(&self, bake_time_us: u64) -> Result<Vec<u8>> {
-        let payload = rkyv::to_bytes::<rancor::Error>(self)
+        let (header, payload) = self.archive(bake_time_us)?;
+        let mut out = Vec::with_capacity(crate::header::HEADER_LEN + payload.len());
+        out.extend_from_slice(&header.encode());
+        out.extend_from_slice(&payload);
+        Ok(out)
+    }
+
+    /// The archive and the header that describes it.
+    fn archive(&self, bake_time_us: u64) -> Result<(Header, AlignedVec<ARCHIVE_ALIGN>)> {
+        // Sized up front: growing a buffer of a hundred megabytes by doubling costs more
+        // than the serialization itself.
+        let arrays = self.octree.len()
+            + self.tri_refs.len()
+            + self.triangles.len()
+            + self.triangle_ids.len()
+            + self.boxes.len()
+            + self.cube_map.len()
+            + self.nodes.len();
+        let buffer = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(4 * arrays + 1024);
+        let payload = rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, buffer)
             .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
         let header = Header {
             version: VERSION,
@@ -29,10 +49,7 @@ impl BakedScene {
             payload_xxh3: xxhash_rust::xxh3::xxh3_64(&payload),
             bake_time_us,
         };
-        let mut out = Vec::with_capacity(crate::header::HEADER_LEN + payload.len());
-        out.extend_from_slice(&header.encode());
-        out.extend_from_slice(&payload);
-        Ok(out)
+        Ok((header, payload))
     }
 
     /// Writes the scene to `path` atomically: into a temporary file beside it, flushed
@@ -42,17 +59,18 @@ impl BakedScene {
     /// # Errors
     /// [`Error::Io`] naming the path on any failure (the temporary file is removed).
     pub fn write(&self, path: impl AsRef<Path>, bake_time_us: u64) -> Result<u64> {
-        let bytes = self.to_file_bytes(bake_time_us)?;
-        write_atomically(path.as_ref(), &bytes)?;
-        Ok(bytes.len() as u64)
+        let (header, payload) = self.archive(bake_time_us)?;
+        write_atomically(path.as_ref(), &[&header.encode(), &payload])?;
+        Ok((crate::header::HEADER_LEN + payload.len()) as u64)
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same directory and a rename.
+/// Writes `parts`, one after the other, to `path` through a temporary file in the same
+/// directory, `fsync`, and a rename: readers see the old file or the whole new one.
 ///
 /// # Errors
 /// [`Error::Io`] naming `path`.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -63,7 +81,9 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
+    for part in parts {
+        tmp.write_all(part).map_err(io)?;
+    }
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())

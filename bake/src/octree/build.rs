@@ -79,23 +79,38 @@ impl Builder<'_> {
     }
 
     /// Distributes a cell's triangles to its eight children, exactly.
+    ///
+    /// Per axis, the triangle's bounding box tells which halves it can touch. A
+    /// triangle inside the cell that crosses at most one mid-plane overlaps every
+    /// child its box touches (it is connected), so the separating-axis test runs only
+    /// for triangles crossing two or three mid-planes or poking out of the cell.
     pub(crate) fn split(&self, cell: Cell, tris: &[u32]) -> [Vec<u32>; 8] {
-        let boxes: [Box3; 8] = std::array::from_fn(|i| self.cell_box(child_cell(cell, i)));
+        let (level, c) = cell;
+        let plane = |a: usize, i: u32| grid_plane(self.root_lo[a], self.root_size, level + 1, i) as f64;
+        let m = self.margin;
+        let lo = [0, 1, 2].map(|a| plane(a, 2 * c[a]) - m);
+        let mid = [0, 1, 2].map(|a| plane(a, 2 * c[a] + 1));
+        let hi = [0, 1, 2].map(|a| plane(a, 2 * c[a] + 2) + m);
         let mut parts: [Vec<u32>; 8] = Default::default();
         for &t in tris {
             let tri = &self.triangles[t as usize];
             let bb = Box3::of_triangle(tri);
-            for (child, b) in boxes.iter().enumerate() {
-                // A triangle inside the child's box overlaps it; one that only pokes
-                // into it needs the full test.
-                if b.touches(&bb) && (b.contains_box(&bb) || triangle_overlaps_box(tri, b)) {
+            let inside = (0..3).all(|a| lo[a] <= bb.lo[a] && bb.hi[a] <= hi[a]);
+            // Bit 0: touches the low half; bit 1: the high half.
+            let halves = [0, 1, 2].map(|a| (bb.lo[a] <= mid[a] + m) as usize | ((bb.hi[a] >= mid[a] - m) as usize) << 1);
+            let crossing = halves.iter().filter(|&&h| h == 3).count();
+            let exact = !inside || crossing >= 2;
+            for child in 0..8 {
+                if (0..3).any(|a| halves[a] >> ((child >> a) & 1) & 1 == 0) {
+                    continue;
+                }
+                if !exact || triangle_overlaps_box(tri, &self.cell_box(child_cell(cell, child))) {
                     parts[child].push(t);
                 }
             }
         }
         parts
     }
-
 }
 
 impl Node {

@@ -5,7 +5,8 @@
 use rayon::prelude::*;
 
 use octrace_format::layout::{
-    cell_box, face_axis, face_is_high, other_axes, pack_counts, texel_index, NodeRef, LEAF_HEADER_WORDS,
+    cell_box, face_axis, face_is_high, other_axes, pack_counts, texel_index, total_links, NodeRef,
+    LEAF_HEADER_WORDS,
 };
 
 use super::build::{child_cell, octant, Cell, Node};
@@ -20,28 +21,37 @@ pub(crate) struct FlatTree {
     pub leaf_cells: Vec<Cell>,
     /// Triangles of each leaf (build indices).
     pub leaf_tris: Vec<Vec<u32>>,
+    /// Internal node holding each leaf (`u32::MAX` for a root leaf).
+    pub leaf_parent: Vec<u32>,
 }
 
 impl FlatTree {
     /// Flattens `root` depth first, children in octant order (Morton order for leaves).
     pub(crate) fn new(root: Node) -> FlatTree {
-        let mut flat = FlatTree { nodes: Vec::new(), root: NodeRef::Leaf(0), leaf_cells: Vec::new(), leaf_tris: Vec::new() };
-        flat.root = flat.push(root, (0, [0; 3]));
+        let mut flat = FlatTree {
+            nodes: Vec::new(),
+            root: NodeRef::Leaf(0),
+            leaf_cells: Vec::new(),
+            leaf_tris: Vec::new(),
+            leaf_parent: Vec::new(),
+        };
+        flat.root = flat.push(root, (0, [0; 3]), u32::MAX);
         flat
     }
 
-    fn push(&mut self, node: Node, cell: Cell) -> NodeRef {
+    fn push(&mut self, node: Node, cell: Cell, parent: u32) -> NodeRef {
         match node {
             Node::Leaf(tris) => {
                 self.leaf_cells.push(cell);
                 self.leaf_tris.push(tris);
+                self.leaf_parent.push(parent);
                 NodeRef::Leaf(self.leaf_cells.len() as u32 - 1)
             }
             Node::Internal(children) => {
                 let index = self.nodes.len();
                 self.nodes.push([NodeRef::Leaf(0); 8]);
                 for (i, child) in children.into_iter().enumerate() {
-                    self.nodes[index][i] = self.push(child, child_cell(cell, i));
+                    self.nodes[index][i] = self.push(child, child_cell(cell, i), index as u32);
                 }
                 NodeRef::Internal(index as u32)
             }
@@ -59,33 +69,45 @@ impl FlatTree {
         r
     }
 
-    /// The neighbour ordinals of leaf `(level, c)` across `face`: none on the root's
-    /// boundary, one leaf of the same level or the next coarser, or four finer leaves
-    /// in quadrant order (see `octrace_format::layout`).
-    pub(crate) fn neighbours(&self, (level, c): Cell, face: usize) -> Vec<u32> {
+    /// Appends the neighbour ordinals of leaf `ordinal` across `face` to `out` and
+    /// returns how many: none on the root's boundary, one leaf of the same level or
+    /// the next coarser, or four finer leaves in quadrant order (see
+    /// `octrace_format::layout`).
+    pub(crate) fn push_neighbours(&self, ordinal: usize, face: usize, out: &mut Vec<u32>) -> u32 {
+        let (level, c) = self.leaf_cells[ordinal];
         let axis = face_axis(face);
         let high = face_is_high(face);
         let last = (1u32 << level) - 1;
         if (high && c[axis] == last) || (!high && c[axis] == 0) {
-            return Vec::new();
+            return 0;
         }
         let mut across = c;
         across[axis] = if high { c[axis] + 1 } else { c[axis] - 1 };
-        match self.locate((level, across)) {
-            NodeRef::Leaf(o) => vec![o],
+        // Inside the parent, the cell across is a sibling: no descent from the root.
+        let sibling = (c[axis] & 1 == 0) == high;
+        let found = if sibling {
+            let me: usize = (0..3).map(|a| ((c[a] & 1) as usize) << a).sum();
+            self.nodes[self.leaf_parent[ordinal] as usize][me ^ (1 << axis)]
+        } else {
+            self.locate((level, across))
+        };
+        match found {
+            NodeRef::Leaf(o) => {
+                out.push(o);
+                1
+            }
             NodeRef::Internal(i) => {
                 let (u, v) = other_axes(axis);
                 // The children of the cell across that touch our face: on its near side.
                 let near = if high { 0 } else { 1 };
-                (0..4)
-                    .map(|q| {
-                        let child = near << axis | (q & 1) << u | (q >> 1) << v;
-                        match self.nodes[i as usize][child] {
-                            NodeRef::Leaf(o) => o,
-                            NodeRef::Internal(_) => panic!("2:1 balance broken at {:?} face {face}", (level, c)),
-                        }
-                    })
-                    .collect()
+                for q in 0..4 {
+                    let child = near << axis | (q & 1) << u | (q >> 1) << v;
+                    match self.nodes[i as usize][child] {
+                        NodeRef::Leaf(o) => out.push(o),
+                        NodeRef::Internal(_) => panic!("2:1 balance broken at {:?} face {face}", (level, c)),
+                    }
+                }
+                4
             }
         }
     }
@@ -106,17 +128,33 @@ pub(crate) struct Arrays {
 /// Lays the flat tree out as the file's arrays.
 pub(crate) fn arrays(flat: &FlatTree, triangle_count: usize, root_lo: [f32; 3], root_size: f32, cube_level: u32) -> Arrays {
     let leaves = flat.leaf_cells.len();
-    // Links by ordinal first; addresses are known once every record's length is.
-    let links: Vec<[Vec<u32>; 6]> = flat
-        .leaf_cells
-        .par_iter()
-        .map(|&cell| std::array::from_fn(|face| flat.neighbours(cell, face)))
+    // Records with links by ordinal first, in chunks (one allocation each): `nCount`
+    // then the links. Addresses are known once every record's length is.
+    const CHUNK: usize = 4096;
+    let chunks: Vec<Vec<u32>> = (0..leaves.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let range = k * CHUNK..((k + 1) * CHUNK).min(leaves);
+            let mut out = Vec::with_capacity(range.len() * 9);
+            for ordinal in range {
+                let at = out.len();
+                out.push(0);
+                let counts = std::array::from_fn(|face| flat.push_neighbours(ordinal, face, &mut out));
+                out[at] = pack_counts(counts);
+            }
+            out
+        })
         .collect();
     let mut address = Vec::with_capacity(leaves);
     let mut next = 0u32;
-    for l in &links {
-        address.push(next);
-        next += (LEAF_HEADER_WORDS + l.iter().map(Vec::len).sum::<usize>()) as u32;
+    for chunk in &chunks {
+        let mut i = 0;
+        while i < chunk.len() {
+            let links = total_links(chunk[i]) as usize;
+            address.push(next);
+            next += (LEAF_HEADER_WORDS + links) as u32;
+            i += 1 + links;
+        }
     }
     // Triangles are stored in the order the leaves first use them, so a leaf's
     // triangles sit near each other and near its neighbours'.
@@ -125,10 +163,13 @@ pub(crate) fn arrays(flat: &FlatTree, triangle_count: usize, root_lo: [f32; 3], 
     let mut tri_refs = Vec::with_capacity(flat.leaf_tris.iter().map(Vec::len).sum());
     let mut octree = Vec::with_capacity(next as usize);
     let mut boxes = Vec::with_capacity(6 * leaves);
-    for (ordinal, (tris, face_links)) in flat.leaf_tris.iter().zip(&links).enumerate() {
-        octree.extend([tris.len() as u32, tri_refs.len() as u32, ordinal as u32]);
-        octree.push(pack_counts(face_links.clone().map(|l| l.len() as u32)));
-        octree.extend(face_links.iter().flatten().map(|&o| address[o as usize]));
+    let mut records = chunks.iter().flat_map(|c| c.iter().copied());
+    for (ordinal, tris) in flat.leaf_tris.iter().enumerate() {
+        let ncount = records.next().expect("one record a leaf");
+        octree.extend([tris.len() as u32, tri_refs.len() as u32, ordinal as u32, ncount]);
+        for _ in 0..total_links(ncount) {
+            octree.push(address[records.next().expect("links") as usize]);
+        }
         for &t in tris {
             if new_index[t as usize] == u32::MAX {
                 new_index[t as usize] = tri_order.len() as u32;
