@@ -1,1 +1,33 @@
+//! Traces rays through octrace baked scenes.
+//!
+//! Open a `.oct` file with [`Scene::open`] (validated, in memory) or [`Scene::map`]
+//! (validated, memory-mapped), then ask [`Scene::intersect`] for the nearest hit or
+//! [`Scene::occluded`] for any hit, one ray at a time or over slices on all cores.
+//! The walk is the one of Portalez & Duguet, *Lancer de rayons dans un octree* (2016):
+//! cube-map entry, exit face from Plücker signs, neighbour from two more signs.
+//! [`reference::Reference`] is the `f64` brute-force oracle the tests compare with.
+//!
+//! # Example
+//! ```
+//! use glam::Vec3;
+//! use octrace_runtime::{Ray, Scene};
+//! let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
+//! let baked = octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto())?;
+//! let scene = Scene::from_baked(baked)?;
+//! let hit = scene.intersect(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)).expect("hits the sphere");
+//! assert!((hit.t - 4.0).abs() < 0.01);
+//! assert!(!scene.occluded(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::X)));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![deny(missing_docs)]
 
+pub mod cpu;
+mod error;
+mod ray;
+pub mod reference;
+mod scene;
+
+pub use cpu::{Tracer, WalkStats};
+pub use error::{Error, Result};
+pub use ray::{Hit, Ray};
+pub use scene::Scene;

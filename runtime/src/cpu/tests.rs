@@ -1,0 +1,95 @@
+//! The octree walk agrees with the f64 brute-force oracle, ray for ray.
+
+use glam::Vec3;
+use proptest::prelude::*;
+
+use crate::reference::Reference;
+use crate::{Ray, Scene};
+use octrace_bake::{bake, procedural, BuildParams, Mesh};
+
+/// Whether a tracer's answer agrees with the oracle's: the same triangle, or a hit at
+/// the same distance (two triangles tie there: shared edges, stacked copies).
+pub(crate) fn agrees(got: Option<(f32, u32)>, want: Option<(f64, u32)>) -> bool {
+    match (got, want) {
+        (None, None) => true,
+        (Some((t, id)), Some((rt, rid))) => id == rid || (t as f64 - rt).abs() <= 1e-5 * rt.abs().max(1e-30),
+        _ => false,
+    }
+}
+
+fn scene_of(mesh: &Mesh, params: BuildParams) -> (Scene, Reference) {
+    let baked = bake(mesh, &params).unwrap();
+    let oracle = Reference::new(mesh.triangles.clone(), (0..mesh.triangles.len() as u32).collect());
+    (Scene::from_baked(baked).unwrap(), oracle)
+}
+
+/// Random rays: origins in a box twice the scene's (inside and outside), uniform
+/// directions.
+fn random_rays(seed: u64, n: usize, lo: Vec3, hi: Vec3) -> Vec<Ray> {
+    let mut rng = procedural::SplitMix(seed);
+    let (c, e) = ((lo + hi) * 0.5, hi - lo);
+    (0..n)
+        .map(|_| {
+            let o = c + (Vec3::new(rng.unit(), rng.unit(), rng.unit()) - 0.5) * 2.0 * e;
+            let z = 1.0 - 2.0 * rng.unit();
+            let phi = std::f32::consts::TAU * rng.unit();
+            let s = (1.0 - z * z).max(0.0).sqrt();
+            Ray::new(o, Vec3::new(s * phi.cos(), s * phi.sin(), z))
+        })
+        .collect()
+}
+
+fn check(name: &str, mesh: &Mesh, params: BuildParams, rays: &[Ray]) {
+    let (scene, oracle) = scene_of(mesh, params);
+    let tracer = scene.tracer();
+    let mut wrong = Vec::new();
+    for r in rays {
+        let got = tracer.intersect(r).map(|h| (h.t, h.triangle));
+        let want = oracle.intersect(r).map(|h| (h.t, h.triangle));
+        if !agrees(got, want) {
+            wrong.push((r, got, want));
+        }
+        assert_eq!(tracer.occluded(r), oracle.occluded(r), "{name}: occluded {r:?}");
+    }
+    assert!(wrong.is_empty(), "{name}: {} of {} rays disagree, first: {:?}", wrong.len(), rays.len(), wrong[0]);
+}
+
+fn bounds(mesh: &Mesh) -> (Vec3, Vec3) {
+    let pts = mesh.triangles.iter().flatten().map(|&p| Vec3::from(p));
+    pts.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)))
+}
+
+#[test]
+fn procedural_meshes_agree_with_the_oracle() {
+    let meshes = [
+        ("sphere", procedural::sphere([0.1, 0.2, -0.3], 1.5, 20, 28)),
+        ("torus", procedural::torus([0.0; 3], 1.0, 0.35, 30, 14)),
+        ("cube", procedural::cube([-1.0, -0.5, -2.0], [1.0, 0.5, 2.0], 5)),
+        ("grid", procedural::grid(12, 3.0)),
+        ("fan", procedural::fan(48, 1.0)),
+        ("soup", procedural::soup(5, 3000, 8.0, 0.8)),
+    ];
+    for (name, mesh) in &meshes {
+        let (lo, hi) = bounds(mesh);
+        let rays = random_rays(17, 4000, lo, hi);
+        for (depth, leaf) in [(2, 4), (5, 2), (8, 1)] {
+            let p = BuildParams { max_depth: Some(depth), leaf_size: Some(leaf), ..BuildParams::auto() };
+            check(&format!("{name} d{depth} l{leaf}"), mesh, p, &rays);
+        }
+        check(name, mesh, BuildParams::auto(), &rays);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Random soups of random size, random rays from inside and outside.
+    #[test]
+    fn random_soups_agree_with_the_oracle(seed in any::<u64>(), n in 1usize..400, size in 0.01f32..3.0, depth in 1u32..9, leaf in 1u32..12) {
+        let mesh = procedural::soup(seed, n, 4.0, size);
+        let (lo, hi) = bounds(&mesh);
+        let rays = random_rays(seed ^ 0xABCD, 300, lo, hi);
+        let p = BuildParams { max_depth: Some(depth), leaf_size: Some(leaf), ..BuildParams::auto() };
+        check("soup", &mesh, p, &rays);
+    }
+}

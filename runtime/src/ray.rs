@@ -1,0 +1,61 @@
+//! Rays and hits.
+
+use glam::Vec3;
+
+/// A ray: points `origin + t * dir` for `t` in `[tmin, tmax]`.
+///
+/// The layout is the 32-byte record of `octrace trace`'s ray files:
+/// `ox oy oz tmin dx dy dz tmax`, little-endian `f32`, so a file of rays can be
+/// cast to `&[Ray]` with `bytemuck`. `dir` need not be normalised; `t` is measured in
+/// units of `dir`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Smallest accepted distance.
+    pub tmin: f32,
+    /// Direction.
+    pub dir: Vec3,
+    /// Largest accepted distance.
+    pub tmax: f32,
+}
+
+const _: () = assert!(std::mem::size_of::<Ray>() == 32);
+
+impl Ray {
+    /// A ray over `[0, +inf)`.
+    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray { origin, tmin: 0.0, dir, tmax: f32::INFINITY }
+    }
+
+    /// A segment over `[tmin, tmax]`.
+    pub fn segment(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Ray {
+        Ray { origin, tmin, dir, tmax }
+    }
+
+    /// Whether the ray can hit anything: finite origin and direction, a non-zero
+    /// direction, and `tmin <= tmax` with neither NaN. Any other ray is a defined miss.
+    pub fn is_traceable(&self) -> bool {
+        self.origin.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && self.tmin <= self.tmax
+            && !self.tmin.is_nan()
+    }
+}
+
+/// The nearest hit of a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray, in units of its direction.
+    pub t: f32,
+    /// The hit triangle's index in the input mesh.
+    pub triangle: u32,
+    /// Barycentric coordinate of the second vertex.
+    pub u: f32,
+    /// Barycentric coordinate of the third vertex.
+    pub v: f32,
+    /// The leaf (box index) the hit was found in.
+    pub leaf: u32,
+}

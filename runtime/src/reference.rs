@@ -1,0 +1,105 @@
+//! The oracle: a brute-force tracer in `f64` over every triangle.
+//!
+//! Tests and `octrace verify` compare the octree tracer against it ray for ray. It is
+//! slow on purpose (every triangle, every ray) and as accurate as the input allows:
+//! the `f32` vertices and ray are widened to `f64` exactly, and Möller-Trumbore runs
+//! in `f64`, whose rounding is some 2^29 times finer than the tracer's.
+
+use glam::DVec3;
+
+use crate::ray::Ray;
+
+/// A hit of the reference tracer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReferenceHit {
+    /// Distance along the ray.
+    pub t: f64,
+    /// Input index of the triangle.
+    pub triangle: u32,
+}
+
+/// Brute-force `f64` tracer over a triangle list.
+///
+/// # Example
+/// ```
+/// use glam::Vec3;
+/// use octrace_runtime::{reference::Reference, Ray};
+/// let tris = [[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]];
+/// let oracle = Reference::new(tris.to_vec(), vec![7]);
+/// let hit = oracle.intersect(&Ray::new(Vec3::new(0.2, 0.2, 0.0), Vec3::Z)).unwrap();
+/// assert_eq!((hit.t, hit.triangle), (1.0, 7));
+/// ```
+#[derive(Clone, Debug)]
+pub struct Reference {
+    triangles: Vec<[DVec3; 3]>,
+    ids: Vec<u32>,
+}
+
+impl Reference {
+    /// An oracle over `triangles`, whose input indices are `ids`.
+    pub fn new(triangles: Vec<[[f32; 3]; 3]>, ids: Vec<u32>) -> Reference {
+        assert_eq!(triangles.len(), ids.len(), "one id a triangle");
+        let triangles = triangles.iter().map(|t| t.map(|v| DVec3::from(v.map(f64::from)))).collect();
+        Reference { triangles, ids }
+    }
+
+    /// An oracle over the triangles stored in a scene.
+    pub fn from_view(view: &octrace_format::SceneView<'_>) -> Reference {
+        let tris = (0..view.triangle_count() as u32).map(|t| view.triangle(t)).collect();
+        Reference::new(tris, view.triangle_ids.to_vec())
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Whether there are no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// The nearest hit in `[tmin, tmax]`; ties go to the lower input index.
+    pub fn intersect(&self, ray: &Ray) -> Option<ReferenceHit> {
+        self.hits(ray).min_by(|a, b| a.t.total_cmp(&b.t).then(a.triangle.cmp(&b.triangle)))
+    }
+
+    /// Whether any triangle is hit in `[tmin, tmax]`.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.hits(ray).next().is_some()
+    }
+
+    /// Every hit in `[tmin, tmax]`, in storage order.
+    pub fn hits<'s>(&'s self, ray: &Ray) -> impl Iterator<Item = ReferenceHit> + 's {
+        let ok = ray.is_traceable();
+        let o = ray.origin.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let (tmin, tmax) = (ray.tmin as f64, ray.tmax as f64);
+        self.triangles.iter().zip(&self.ids).filter(move |_| ok).filter_map(move |(t, &id)| {
+            let hit = intersect_f64(o, d, t)?;
+            (hit >= tmin && hit <= tmax).then_some(ReferenceHit { t: hit, triangle: id })
+        })
+    }
+}
+
+/// Möller-Trumbore in `f64`; edges inclusive; `None` for a ray in the plane.
+pub fn intersect_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
+    let e1 = t[1] - t[0];
+    let e2 = t[2] - t[0];
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 {
+        return None;
+    }
+    let s = o - t[0];
+    let u = s.dot(p) / det;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    Some(e2.dot(q) / det)
+}

@@ -1,0 +1,135 @@
+//! A baked scene ready to trace: a thin layer over the format crate's file.
+
+use std::path::Path;
+
+use octrace_format::{BakedScene, SceneFile, SceneView};
+
+use crate::cpu::Tracer;
+use crate::error::Result;
+use crate::ray::{Hit, Ray};
+
+enum Source {
+    File(SceneFile),
+    Baked(Box<BakedScene>),
+}
+
+/// A baked scene, from a file or from memory.
+///
+/// # Memory maps and files that change
+/// [`Scene::open`] reads the file into memory and validates it: safe whatever happens
+/// to the file afterwards. [`Scene::map`] memory-maps it instead (no copy, pages
+/// loaded on demand) and is `unsafe` because the map is only sound while nobody
+/// modifies or truncates the file: a change shows through the map after validation,
+/// and a truncation makes reads past the new end raise `SIGBUS`. `octrace bake`
+/// replaces files by renaming a new one over the old, which never changes an open
+/// map; use [`Scene::open`] for files that other programs may rewrite in place.
+pub struct Scene {
+    source: Source,
+}
+
+impl std::fmt::Debug for Scene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.view();
+        f.debug_struct("Scene").field("leaves", &v.leaf_count()).field("triangles", &v.triangle_count()).finish()
+    }
+}
+
+impl Scene {
+    /// Reads and validates a `.oct` file into memory.
+    ///
+    /// # Errors
+    /// The format crate's errors: I/O, bad magic, unsupported version, checksum,
+    /// corrupt contents.
+    pub fn open(path: impl AsRef<Path>) -> Result<Scene> {
+        Ok(Scene { source: Source::File(SceneFile::read(path)?) })
+    }
+
+    /// Memory-maps and validates a `.oct` file.
+    ///
+    /// # Safety
+    /// The file must not be modified or truncated while the scene is alive; see the
+    /// type's docs.
+    ///
+    /// # Errors
+    /// As [`Scene::open`].
+    pub unsafe fn map(path: impl AsRef<Path>) -> Result<Scene> {
+        // SAFETY: forwarded to our caller.
+        Ok(Scene { source: Source::File(unsafe { SceneFile::map(path)? }) })
+    }
+
+    /// Memory-maps a `.oct` file checking its header only: microseconds whatever the
+    /// size. The trusted path, for files this pipeline baked.
+    ///
+    /// # Safety
+    /// As [`Scene::map`], and the file must be a valid scene of this format version
+    /// (see `octrace_format::SceneFile::map_unchecked`).
+    ///
+    /// # Errors
+    /// I/O and header errors.
+    pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Scene> {
+        // SAFETY: forwarded to our caller.
+        Ok(Scene { source: Source::File(unsafe { SceneFile::map_unchecked(path)? }) })
+    }
+
+    /// Validates a whole file held in memory.
+    ///
+    /// # Errors
+    /// As [`Scene::open`].
+    pub fn from_bytes(bytes: &[u8]) -> Result<Scene> {
+        Ok(Scene { source: Source::File(SceneFile::from_bytes(bytes)?) })
+    }
+
+    /// Wraps a scene baked in this process (it is validated first).
+    ///
+    /// # Errors
+    /// [`crate::Error::Format`] if the scene breaks the format's rules.
+    pub fn from_baked(scene: BakedScene) -> Result<Scene> {
+        scene.view().validate()?;
+        Ok(Scene { source: Source::Baked(Box::new(scene)) })
+    }
+
+    /// The scene's arrays.
+    pub fn view(&self) -> SceneView<'_> {
+        match &self.source {
+            Source::File(f) => f.view(),
+            Source::Baked(b) => b.view(),
+        }
+    }
+
+    /// The file behind the scene, when it came from one.
+    pub fn file(&self) -> Option<&SceneFile> {
+        match &self.source {
+            Source::File(f) => Some(f),
+            Source::Baked(_) => None,
+        }
+    }
+
+    /// A CPU tracer over the scene; build one per batch of rays.
+    pub fn tracer(&self) -> Tracer<'_> {
+        Tracer::new(self.view())
+    }
+
+    /// The nearest hit of `ray` in `[tmin, tmax]`.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.tracer().intersect(ray)
+    }
+
+    /// Whether anything lies on `ray` in `[tmin, tmax]`.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.tracer().occluded(ray)
+    }
+
+    /// Nearest hits of many rays, on all cores.
+    pub fn intersect_all(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
+        let mut out = vec![None; rays.len()];
+        self.tracer().par_intersect_batch(rays, &mut out);
+        out
+    }
+
+    /// Occlusion of many rays, on all cores.
+    pub fn occluded_all(&self, rays: &[Ray]) -> Vec<bool> {
+        let mut out = vec![false; rays.len()];
+        self.tracer().par_occluded_batch(rays, &mut out);
+        out
+    }
+}
