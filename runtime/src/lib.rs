@@ -24,6 +24,7 @@
 pub mod cpu;
 mod error;
 mod ray;
+pub mod raysets;
 pub mod reference;
 mod scene;
 

@@ -1,1 +1,35 @@
+//! Helpers shared by the integration tests: the bunny the repository carries, baked
+//! once per test binary.
 
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use octrace_bake::{bake, BuildParams, Mesh};
+use octrace_runtime::Scene;
+
+/// The repository's root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ is in the repo").to_path_buf()
+}
+
+/// The zstd-compressed bunny the repository carries.
+pub fn bunny_path() -> PathBuf {
+    repo_root().join("assets/bunny.obj.zst")
+}
+
+/// The bunny mesh, loaded once.
+pub fn bunny_mesh() -> &'static Mesh {
+    static MESH: OnceLock<Mesh> = OnceLock::new();
+    MESH.get_or_init(|| Mesh::load(bunny_path()).expect("the repository's bunny loads"))
+}
+
+/// The bunny baked with the default parameters, once.
+pub fn bunny_scene() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| Scene::from_baked(bake(bunny_mesh(), &BuildParams::auto()).expect("bunny bakes")).expect("valid"))
+}
+
+/// A test data file under `tests/data`.
+pub fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+}

@@ -1,0 +1,4 @@
+//! octrace's integration tests, one module per area.
+
+mod bunny;
+mod raysets;
