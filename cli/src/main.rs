@@ -1,1 +1,90 @@
-fn main(){}
+//! `octrace`: bake triangle meshes into octrace's constrained octree, inspect the
+//! baked files, trace rays through them, render and benchmark them.
+#![deny(unsafe_code)]
+
+mod cmd;
+mod open;
+mod output;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Bake triangle meshes into a neighbour-linked octree file, and trace rays through it.
+///
+/// A typical pipeline bakes once and traces many times:
+///
+///   octrace bake scene.glb -o scene.oct
+///   octrace inspect scene.oct
+///   octrace render scene.oct -o scene.png
+///
+/// `octrace demo` does all of it on the bunny this build carries.
+#[derive(Parser, Debug)]
+#[command(name = "octrace", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Bake a mesh (OBJ, glTF, GLB; optionally .zst) into an .oct file.
+    ///
+    /// The file is written to a temporary name beside OUT and renamed when complete:
+    /// an interrupted bake never leaves a partial OUT. The same input and options give
+    /// the same archive whatever the thread count (add --reproducible for identical
+    /// files: the bake time is then not recorded).
+    Bake(cmd::bake::Args),
+    /// Print a baked file's statistics: counts, depth histogram, neighbours and
+    /// triangles per leaf, bytes per array, bake parameters.
+    Inspect(cmd::inspect::Args),
+    /// Trace a file of rays and write the hits (formats in --help).
+    Trace(cmd::trace::Args),
+    /// Render a baked scene to PNG.
+    Render(cmd::render::Args),
+    /// Measure Mrays/s on the standard ray sets (shared/bench/RAYS.md), against obvhs.
+    Bench(cmd::bench::Args),
+    /// Bake the bunny this build carries, inspect it, render demo.png, measure it.
+    Demo(cmd::demo::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Bake(a) => cmd::bake::run(a),
+        Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Trace(a) => cmd::trace::run(a),
+        Command::Render(a) => cmd::render::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        // A closed pipe (`octrace inspect x.oct | head`) is not a failure.
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("octrace: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe))
+}
+
+/// Runs `f` on a rayon pool of `threads` threads (all cores when `None`).
+pub(crate) fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> anyhow::Result<T> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        b = b.num_threads(n);
+    }
+    Ok(b.build()?.install(f))
+}
+
+/// Paths given on the command line, for messages.
+pub(crate) fn show(p: &std::path::Path) -> String {
+    p.display().to_string()
+}
+

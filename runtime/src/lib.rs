@@ -26,6 +26,7 @@ mod error;
 mod ray;
 pub mod raysets;
 pub mod reference;
+pub mod render;
 mod scene;
 
 pub use cpu::{Tracer, WalkStats};

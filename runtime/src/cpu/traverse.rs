@@ -90,6 +90,12 @@ impl<'a> Tracer<'a> {
         self.walk::<true>(ray, &mut WalkStats::default()).is_some()
     }
 
+    /// Some hit in `[tmin, tmax]` (not necessarily the nearest): the occluder that
+    /// [`Tracer::occluded`] found.
+    pub fn occluder(&self, ray: &Ray) -> Option<Hit> {
+        self.walk::<true>(ray, &mut WalkStats::default())
+    }
+
     /// [`Tracer::intersect`], counting what the walk did.
     pub fn intersect_with_stats(&self, ray: &Ray) -> (Option<Hit>, WalkStats) {
         let mut stats = WalkStats::default();

@@ -1,0 +1,114 @@
+//! `octrace bake`.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use octrace_bake::{bake_with_progress, BakeStage, BuildParams, Mesh};
+use octrace_format::BakedScene;
+
+use crate::output::{mb, thousands};
+
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// Mesh to bake: .obj, .gltf or .glb, optionally compressed as .zst.
+    pub input: PathBuf,
+    /// The .oct file to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Deepest octree level (root = 0). Default: ceil(log4(triangles / leaf size)) + 2.
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Split a cell while it holds more triangles than this.
+    #[arg(long, default_value_t = octrace_bake::octree::DEFAULT_LEAF_SIZE)]
+    pub leaf_size: u32,
+    /// Enlarge cells by this fraction of the root edge when assigning triangles.
+    #[arg(long, default_value_t = octrace_bake::octree::DEFAULT_MARGIN)]
+    pub margin: f32,
+    /// Threads to bake with (default: all cores). The output does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Do not record the bake time, so that identical inputs give identical files.
+    #[arg(long)]
+    pub reproducible: bool,
+}
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let params = BuildParams { max_depth: args.max_depth, leaf_size: Some(args.leaf_size), margin: args.margin };
+    anyhow::ensure!(args.margin.is_finite() && args.margin >= 0.0, "--margin must be a finite number >= 0");
+    let progress = Progress::new();
+    progress.stage("loading");
+    let started = Instant::now();
+    let mesh = Mesh::load(&args.input)?;
+    for w in &mesh.warnings {
+        progress.warn(w);
+    }
+    let (scene, bake_time) = crate::with_threads(args.threads, || bake_mesh(&mesh, &params, &progress))??;
+    progress.stage("writing");
+    let bytes = scene.write(&args.output, if args.reproducible { 0 } else { bake_time.as_micros() as u64 })?;
+    progress.finish();
+    crate::out!(
+        "baked {}: {} triangles ({} degenerate) -> {} leaves, depth {}, {} in {:.2} s (bake {:.2} s) -> {}",
+        crate::show(&args.input),
+        thousands(scene.stats.input_triangles),
+        thousands(scene.stats.degenerate_triangles),
+        thousands(scene.leaf_count() as u64),
+        scene.params.max_depth,
+        mb(bytes),
+        started.elapsed().as_secs_f64(),
+        bake_time.as_secs_f64(),
+        crate::show(&args.output),
+    );
+    Ok(())
+}
+
+/// Bakes with stage reports, returning the scene and the bake's wall time.
+pub(crate) fn bake_mesh(mesh: &Mesh, params: &BuildParams, progress: &Progress) -> anyhow::Result<(BakedScene, Duration)> {
+    let t = Instant::now();
+    let scene = bake_with_progress(mesh, params, &|s: BakeStage| progress.stage(s.name())).context("bake failed")?;
+    Ok((scene, t.elapsed()))
+}
+
+/// A spinner with the current stage on a terminal; silent otherwise.
+pub(crate) struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    pub(crate) fn new() -> Progress {
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let bar = indicatif::ProgressBar::new_spinner();
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} {elapsed:>3} {msg}").expect("valid template"),
+            );
+            bar.enable_steady_tick(Duration::from_millis(100));
+            bar
+        });
+        Progress { bar }
+    }
+
+    pub(crate) fn stage(&self, name: &str) {
+        if let Some(b) = &self.bar {
+            b.set_message(name.to_string());
+        }
+    }
+
+    pub(crate) fn warn(&self, msg: &str) {
+        match &self.bar {
+            Some(b) => b.println(format!("warning: {msg}")),
+            None => eprintln!("warning: {msg}"),
+        }
+    }
+
+    pub(crate) fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// Whether a path names a baked scene rather than a mesh.
+pub(crate) fn is_scene(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oct"))
+}

@@ -1,0 +1,333 @@
+//! `octrace bench`: Mrays/s on the standard ray sets, against obvhs in the same run.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use octrace_runtime::raysets::{self, Frame};
+use octrace_runtime::{Hit, Ray, Scene, Tracer};
+use serde_json::json;
+
+use crate::output::{mb, thousands};
+
+/// Measure tracing speed on the standard ray sets of shared/bench/RAYS.md.
+///
+/// The input is a baked .oct or a mesh (baked first, and the bake timed). Each figure
+/// is the median (with min and max) of --runs timed runs of tracing alone, single
+/// threaded and on all threads, with a checksum (rays that hit, sum of hit distances).
+/// obvhs's CWBVH, built on the same triangles, traces the same rays in the same runs,
+/// interleaved, and the ratio octrace / obvhs is printed.
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// A .oct scene, or a mesh to bake first.
+    pub input: PathBuf,
+    /// Which ray set.
+    #[arg(long, value_enum, default_value_t = SetChoice::All)]
+    pub set: SetChoice,
+    /// Threads for the all-threads figures (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Timed runs per figure (at least 5).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Skip the obvhs comparison.
+    #[arg(long)]
+    pub no_peer: bool,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum SetChoice {
+    Primary,
+    Incoherent,
+    Shadow,
+    All,
+}
+
+/// Median, min and max of a set of Mrays/s figures.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub(crate) struct Spread {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(mut v: Vec<f64>) -> Spread {
+        v.sort_by(f64::total_cmp);
+        Spread { median: v[v.len() / 2], min: v[0], max: v[v.len() - 1] }
+    }
+}
+
+/// A scene ready to bench, with how long it took to get it.
+pub(crate) struct Loaded {
+    pub scene: Scene,
+    pub bake: Option<Duration>,
+    pub open_validated: Duration,
+    pub open_trusted: Duration,
+    pub bytes: u64,
+    _dir: Option<tempfile::TempDir>,
+}
+
+pub(crate) fn load(input: &Path) -> anyhow::Result<Loaded> {
+    let (path, bake, dir) = if super::bake::is_scene(input) {
+        (input.to_path_buf(), None, None)
+    } else {
+        let mesh = octrace_bake::Mesh::load(input)?;
+        let progress = super::bake::Progress::new();
+        let (scene, time) = super::bake::bake_mesh(&mesh, &octrace_bake::BuildParams::auto(), &progress)?;
+        progress.finish();
+        let dir = tempfile::tempdir()?;
+        let path = dir.path().join("bench.oct");
+        scene.write(&path, time.as_micros() as u64)?;
+        (path, Some(time), Some(dir))
+    };
+    let t = Instant::now();
+    let scene = crate::open::open_scene(&path)?;
+    let open_validated = t.elapsed();
+    let t = Instant::now();
+    // Validated just above: the header-only open is sound, and what apps that trust
+    // their pipeline pay.
+    drop(crate::open::map_scene(&path, crate::open::Trust::HeaderOnly)?);
+    let open_trusted = t.elapsed();
+    let bytes = std::fs::metadata(&path)?.len();
+    Ok(Loaded { scene, bake, open_validated, open_trusted, bytes, _dir: dir })
+}
+
+struct SetResult {
+    name: &'static str,
+    rays: usize,
+    single: Spread,
+    all: Spread,
+    hits: usize,
+    sum_t: f64,
+    peer: Option<(Spread, usize, f64)>,
+}
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.runs >= 5, "--runs must be at least 5 (medians of fewer are noise)");
+    let loaded = load(&args.input)?;
+    let view = loaded.scene.view();
+    let frame = Frame::from_bounds(view.bounds.mesh_lo, view.bounds.mesh_hi);
+    let tracer = loaded.scene.tracer();
+    let threads = crate::with_threads(args.threads, rayon::current_num_threads)?;
+    #[cfg(feature = "obvhs")]
+    let peer = (!args.no_peer).then(|| peer::Peer::build(&view));
+    #[cfg(not(feature = "obvhs"))]
+    let peer: Option<()> = None;
+    let mut results = Vec::new();
+    let want = |s: SetChoice| args.set == s || args.set == SetChoice::All;
+    let primary = raysets::primary(&frame);
+    if want(SetChoice::Primary) {
+        results.push(measure("primary", &primary, false, &tracer, peer.as_ref(), &args)?);
+    }
+    if want(SetChoice::Incoherent) {
+        let rays = raysets::incoherent(&frame, 1_000_000);
+        results.push(measure("incoherent", &rays, false, &tracer, peer.as_ref(), &args)?);
+    }
+    if want(SetChoice::Shadow) {
+        let mut hits = vec![None; primary.len()];
+        tracer.intersect_batch(&primary, &mut hits);
+        let stored = stored_index(&view);
+        let rays = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(stored[h.triangle as usize]))));
+        results.push(measure("shadow", &rays, true, &tracer, peer.as_ref(), &args)?);
+    }
+    #[cfg(feature = "obvhs")]
+    let peer_build = peer.as_ref().map(|p| p.build_time);
+    #[cfg(not(feature = "obvhs"))]
+    let peer_build: Option<Duration> = None;
+    report(&args, &loaded, threads, &results, peer_build)
+}
+
+/// Input triangle id -> index in the stored triangle array.
+fn stored_index(view: &octrace_format::SceneView<'_>) -> Vec<u32> {
+    let mut stored = vec![u32::MAX; view.stats.input_triangles as usize];
+    for (i, &id) in view.triangle_ids.iter().enumerate() {
+        stored[id as usize] = i as u32;
+    }
+    stored
+}
+
+#[cfg(feature = "obvhs")]
+type PeerRef<'a> = Option<&'a peer::Peer>;
+#[cfg(not(feature = "obvhs"))]
+type PeerRef<'a> = Option<&'a ()>;
+
+fn measure(
+    name: &'static str,
+    rays: &[Ray],
+    occlusion: bool,
+    tracer: &Tracer<'_>,
+    peer: PeerRef<'_>,
+    args: &Args,
+) -> anyhow::Result<SetResult> {
+    let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
+    let mut occluded = vec![false; rays.len()];
+    let (mut single, mut all, mut peer_runs) = (Vec::new(), Vec::new(), Vec::new());
+    let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+    let mut peer_sum = (0usize, 0.0f64);
+    for _ in 0..args.runs {
+        // Interleaved: octrace single, peer single, octrace all threads.
+        let t = Instant::now();
+        if occlusion {
+            tracer.occluded_batch(rays, &mut occluded);
+        } else {
+            tracer.intersect_batch(rays, &mut hits);
+        }
+        single.push(mrays(t.elapsed()));
+        #[cfg(feature = "obvhs")]
+        if let Some(p) = peer {
+            let t = Instant::now();
+            peer_sum = p.trace(rays, occlusion);
+            peer_runs.push(mrays(t.elapsed()));
+        }
+        #[cfg(not(feature = "obvhs"))]
+        let _ = (peer, &mut peer_runs, &mut peer_sum);
+        let d = crate::with_threads(args.threads, || {
+            let t = Instant::now();
+            if occlusion {
+                tracer.par_occluded_batch(rays, &mut occluded);
+            } else {
+                tracer.par_intersect_batch(rays, &mut hits);
+            }
+            t.elapsed()
+        })?;
+        all.push(mrays(d));
+    }
+    let (n, sum_t) = if occlusion {
+        (occluded.iter().filter(|&&o| o).count(), 0.0)
+    } else {
+        (hits.iter().flatten().count(), hits.iter().flatten().map(|h| h.t as f64).sum())
+    };
+    Ok(SetResult {
+        name,
+        rays: rays.len(),
+        single: Spread::of(single),
+        all: Spread::of(all),
+        hits: n,
+        sum_t,
+        peer: (!peer_runs.is_empty()).then(|| (Spread::of(peer_runs), peer_sum.0, peer_sum.1)),
+    })
+}
+
+fn report(args: &Args, l: &Loaded, threads: usize, results: &[SetResult], peer_build: Option<Duration>) -> anyhow::Result<()> {
+    let secs = |d: Duration| d.as_secs_f64();
+    if args.json {
+        let sets: Vec<_> = results
+            .iter()
+            .map(|r| {
+                json!({
+                    "set": r.name, "rays": r.rays,
+                    "mrays_single": r.single, "mrays_all_threads": r.all,
+                    "hits": r.hits, "sum_t": r.sum_t,
+                    "obvhs_cwbvh_single": r.peer.map(|p| json!({ "mrays": p.0, "hits": p.1, "sum_t": p.2 })),
+                    "ratio_single": r.peer.map(|p| r.single.median / p.0.median),
+                })
+            })
+            .collect();
+        crate::out!(
+            "{}",
+            serde_json::to_string_pretty(&json!({
+                "input": crate::show(&args.input), "threads": threads, "runs": args.runs,
+                "bake_s": l.bake.map(secs), "open_validated_s": secs(l.open_validated),
+                "open_trusted_s": secs(l.open_trusted), "bytes": l.bytes,
+                "obvhs_build_s": peer_build.map(secs), "sets": sets,
+            }))?
+        );
+        return Ok(());
+    }
+    crate::out!(
+        "{}: {}{}, open {:.1} ms validated / {:.3} ms header only; {} threads, median (min-max) of {} runs",
+        crate::show(&args.input),
+        mb(l.bytes),
+        l.bake.map_or(String::new(), |b| format!(", baked in {:.2} s", b.as_secs_f64())),
+        l.open_validated.as_secs_f64() * 1e3,
+        l.open_trusted.as_secs_f64() * 1e3,
+        threads,
+        args.runs
+    );
+    if let Some(b) = peer_build {
+        crate::out!("obvhs CWBVH (medium build) built in {:.2} s", b.as_secs_f64());
+    }
+    crate::out!("{:<11} {:>9} {:>22} {:>22} {:>22} {:>7}  checksum", "set", "rays", "octrace 1 thread", "octrace all threads", "obvhs 1 thread", "ratio");
+    let fmt = |s: &Spread| format!("{:.2} ({:.2}-{:.2})", s.median, s.min, s.max);
+    for r in results {
+        let peer = r.peer.map_or("-".into(), |p| fmt(&p.0));
+        let ratio = r.peer.map_or("-".into(), |p| format!("{:.2}x", r.single.median / p.0.median));
+        let check = if r.name == "shadow" {
+            format!("{} occluded", thousands(r.hits as u64))
+        } else {
+            format!("{} hits, sum t {:.2}", thousands(r.hits as u64), r.sum_t)
+        };
+        let peer_check = r.peer.map_or(String::new(), |p| format!(" (obvhs {})", thousands(p.1 as u64)));
+        crate::out!(
+            "{:<11} {:>9} {:>22} {:>22} {:>22} {:>7}  {}{}",
+            r.name,
+            thousands(r.rays as u64),
+            fmt(&r.single),
+            fmt(&r.all),
+            peer,
+            ratio,
+            check,
+            peer_check
+        );
+    }
+    Ok(())
+}
+
+#[cfg(feature = "obvhs")]
+mod peer {
+    //! obvhs's CWBVH on the scene's triangles, the bench's comparison peer.
+    use std::time::{Duration, Instant};
+
+    use glam::Vec3A;
+    use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+    use obvhs::cwbvh::CwBvh;
+    use obvhs::ray::{Ray as ORay, RayHit};
+    use obvhs::triangle::Triangle;
+    use obvhs::BvhBuildParams;
+    use octrace_runtime::Ray;
+
+    pub(crate) struct Peer {
+        bvh: CwBvh,
+        /// Triangles in the BVH's primitive order, so a leaf reads them in sequence.
+        tris: Vec<Triangle>,
+        pub build_time: Duration,
+    }
+
+    impl Peer {
+        pub(crate) fn build(view: &octrace_format::SceneView<'_>) -> Peer {
+            let tris: Vec<Triangle> = (0..view.triangle_count() as u32)
+                .map(|t| {
+                    let [a, b, c] = view.triangle(t).map(Vec3A::from);
+                    Triangle { v0: a, v1: b, v2: c }
+                })
+                .collect();
+            let t = Instant::now();
+            let mut core = Duration::ZERO;
+            let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut core);
+            let build_time = t.elapsed();
+            let tris = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
+            Peer { bvh, tris, build_time }
+        }
+
+        /// Traces a batch on this thread; returns (hits or occluded, sum of t).
+        pub(crate) fn trace(&self, rays: &[Ray], occlusion: bool) -> (usize, f64) {
+            let (mut n, mut sum) = (0, 0.0);
+            for r in rays {
+                let ray = ORay::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
+                if occlusion {
+                    n += !self.bvh.ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray)) as usize;
+                } else {
+                    let mut hit = RayHit::none();
+                    if self.bvh.ray_traverse(ray, &mut hit, |ray, id| self.tris[id].intersect(ray)) {
+                        n += 1;
+                        sum += hit.t as f64;
+                    }
+                }
+            }
+            (n, sum)
+        }
+    }
+}

@@ -1,0 +1,154 @@
+//! `octrace inspect`.
+
+use std::path::PathBuf;
+
+use octrace_format::stats::SceneStatistics;
+use octrace_format::SceneView;
+use serde_json::json;
+
+use crate::output::{mb, thousands};
+
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// The .oct file.
+    pub file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let scene = crate::open::open_scene(&args.file)?;
+    let file = scene.file().expect("opened from a file");
+    let report = Report::new(&scene.view(), file.header(), std::fs::metadata(&args.file)?.len())?;
+    if args.json {
+        crate::out!("{}", serde_json::to_string_pretty(&report.json())?);
+    } else {
+        crate::out!("{}", report.text(&crate::show(&args.file)));
+    }
+    Ok(())
+}
+
+/// Everything `inspect` prints.
+pub(crate) struct Report<'a> {
+    view: SceneView<'a>,
+    stats: SceneStatistics,
+    version: octrace_format::Version,
+    bake_time_us: u64,
+    file_bytes: u64,
+}
+
+impl<'a> Report<'a> {
+    pub(crate) fn new(view: &SceneView<'a>, header: &octrace_format::Header, file_bytes: u64) -> anyhow::Result<Self> {
+        Ok(Report {
+            stats: SceneStatistics::compute(view)?,
+            view: view.clone(),
+            version: header.version,
+            bake_time_us: header.bake_time_us,
+            file_bytes,
+        })
+    }
+
+    fn balance_growth(&self) -> f64 {
+        100.0 * (self.stats.leaves as f64 / self.view.stats.leaves_before_balance.max(1) as f64 - 1.0)
+    }
+
+    fn bake_time(&self) -> String {
+        match self.bake_time_us {
+            0 => "not recorded (reproducible file)".into(),
+            us => format!("{:.3} s", us as f64 / 1e6),
+        }
+    }
+
+    pub(crate) fn text(&self, name: &str) -> String {
+        let (s, v) = (&self.stats, &self.view);
+        let b = &s.bytes;
+        let res = v.cube_resolution();
+        let histogram: Vec<String> = s
+            .depth_histogram
+            .iter()
+            .enumerate()
+            .filter(|(_, &n)| n > 0)
+            .map(|(level, &n)| format!("{level}:{}", thousands(n)))
+            .collect();
+        let lines = [
+            format!("{name}: octrace scene, format {}, {}", self.version, mb(self.file_bytes)),
+            format!(
+                "triangles          {} stored, {} degenerate left out, {} in the input",
+                thousands(s.triangles),
+                thousands(v.stats.degenerate_triangles),
+                thousands(v.stats.input_triangles)
+            ),
+            format!(
+                "leaves             {} ({} before 2:1 balance, +{:.1} %; {} empty)",
+                thousands(s.leaves),
+                thousands(v.stats.leaves_before_balance),
+                self.balance_growth(),
+                thousands(s.empty_leaves)
+            ),
+            format!("depth histogram    {}", histogram.join("  ")),
+            format!(
+                "triangles / leaf   mean {:.2} over non-empty leaves, max {}, {} references",
+                s.triangles_per_leaf_mean,
+                s.triangles_per_leaf_max,
+                thousands(s.triangle_references)
+            ),
+            format!("neighbours / leaf  mean {:.2}", s.neighbours_per_leaf_mean),
+            format!("cube map           {res} x {res} texels a face, level {}", v.params.cube_level),
+            format!(
+                "bytes              octree {}, triangles {}, boxes {}, cube map {}, point location {}; total {}",
+                mb(b.octree),
+                mb(b.triangles),
+                mb(b.boxes),
+                mb(b.cube_map),
+                mb(b.point_location),
+                mb(b.total())
+            ),
+            format!(
+                "bake               max depth {}, leaf size {}, margin {:e} of the root edge; time {}",
+                v.params.max_depth,
+                v.params.leaf_size,
+                v.params.margin,
+                self.bake_time()
+            ),
+            format!(
+                "bounds             mesh {:?} .. {:?}; root cube at {:?}, edge {}",
+                v.bounds.mesh_lo, v.bounds.mesh_hi, v.bounds.root_lo, v.bounds.root_size
+            ),
+        ];
+        lines.join("\n")
+    }
+
+    pub(crate) fn json(&self) -> serde_json::Value {
+        let (s, v) = (&self.stats, &self.view);
+        let b = &s.bytes;
+        json!({
+            "format_version": self.version.to_string(),
+            "file_bytes": self.file_bytes,
+            "triangles": s.triangles,
+            "degenerate_triangles": v.stats.degenerate_triangles,
+            "input_triangles": v.stats.input_triangles,
+            "leaves": s.leaves,
+            "leaves_before_balance": v.stats.leaves_before_balance,
+            "empty_leaves": s.empty_leaves,
+            "depth_histogram": s.depth_histogram,
+            "triangle_references": s.triangle_references,
+            "triangles_per_leaf": { "mean": s.triangles_per_leaf_mean, "max": s.triangles_per_leaf_max },
+            "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
+            "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
+            "bytes": {
+                "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
+                "cube_map": b.cube_map, "point_location": b.point_location, "total": b.total(),
+            },
+            "bake": {
+                "max_depth": v.params.max_depth, "leaf_size": v.params.leaf_size,
+                "margin": v.params.margin,
+                "time_s": (self.bake_time_us > 0).then(|| self.bake_time_us as f64 / 1e6),
+            },
+            "bounds": {
+                "mesh_lo": v.bounds.mesh_lo, "mesh_hi": v.bounds.mesh_hi,
+                "root_lo": v.bounds.root_lo, "root_size": v.bounds.root_size,
+            },
+        })
+    }
+}

@@ -1,0 +1,8 @@
+//! One module per subcommand.
+
+pub(crate) mod bake;
+pub(crate) mod bench;
+pub(crate) mod demo;
+pub(crate) mod inspect;
+pub(crate) mod render;
+pub(crate) mod trace;

@@ -1,0 +1,79 @@
+//! `octrace trace`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use octrace_runtime::{Hit, Ray};
+
+use crate::output::thousands;
+
+/// Trace a file of rays through a scene and write one hit record per ray.
+///
+/// RAYS.bin: little-endian, no header, 32 bytes a ray, f32 `ox oy oz tmin dx dy dz
+/// tmax`. HITS.bin: 8 bytes a ray, in ray order, f32 `t` then u32 triangle id (its
+/// index in the input mesh); a miss is `t = tmax`, id `0xFFFFFFFF`. With --occluded
+/// the id is that of some occluding triangle, not necessarily the nearest.
+#[derive(clap::Args, Debug)]
+#[command(verbatim_doc_comment)]
+pub(crate) struct Args {
+    /// The .oct scene.
+    pub scene: PathBuf,
+    /// Input rays (32 bytes each).
+    #[arg(long)]
+    pub rays: PathBuf,
+    /// Output hits (8 bytes each).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Answer occlusion (any hit) instead of the nearest hit.
+    #[arg(long)]
+    pub occluded: bool,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// The id written for a miss.
+pub(crate) const MISS: u32 = u32::MAX;
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let scene = crate::open::open_scene(&args.scene)?;
+    let bytes = std::fs::read(&args.rays).with_context(|| format!("cannot read {}", args.rays.display()))?;
+    anyhow::ensure!(
+        bytes.len() % 32 == 0,
+        "{}: {} bytes is not a whole number of 32-byte rays",
+        args.rays.display(),
+        bytes.len()
+    );
+    let rays: Vec<Ray> = bytemuck::pod_collect_to_vec(&bytes);
+    let tracer = scene.tracer();
+    let (hits, seconds) = crate::with_threads(args.threads, || {
+        let t = Instant::now();
+        let hits: Vec<Option<Hit>> = if args.occluded {
+            use rayon::prelude::*;
+            rays.par_iter().map(|r| tracer.occluder(r)).collect()
+        } else {
+            let mut out = vec![None; rays.len()];
+            tracer.par_intersect_batch(&rays, &mut out);
+            out
+        };
+        (hits, t.elapsed().as_secs_f64())
+    })?;
+    let mut out = Vec::with_capacity(8 * rays.len());
+    for (r, h) in rays.iter().zip(&hits) {
+        let (t, id) = h.map_or((r.tmax, MISS), |h| (h.t, h.triangle));
+        out.extend_from_slice(&t.to_le_bytes());
+        out.extend_from_slice(&id.to_le_bytes());
+    }
+    octrace_format::write_atomically(&args.out, &[&out])?;
+    let n = hits.iter().flatten().count();
+    crate::out!(
+        "{} rays, {} {}, {:.2} Mrays/s (tracing only, {} threads)",
+        thousands(rays.len() as u64),
+        thousands(n as u64),
+        if args.occluded { "occluded" } else { "hits" },
+        rays.len() as f64 / seconds.max(1e-9) / 1e6,
+        args.threads.unwrap_or_else(rayon::current_num_threads)
+    );
+    Ok(())
+}

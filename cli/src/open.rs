@@ -1,0 +1,41 @@
+//! Opening baked scenes: the CLI's one use of `unsafe`.
+
+use std::path::Path;
+
+use anyhow::Context;
+use octrace_runtime::Scene;
+
+/// Memory-maps and fully validates a scene.
+pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
+    map_scene(path, Trust::Validate)
+}
+
+/// How much of a file to check when opening it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Trust {
+    /// Header, checksum, archive structure and every semantic rule.
+    Validate,
+    /// The header only: for a file this very command just baked and validated.
+    HeaderOnly,
+}
+
+/// Memory-maps a scene.
+///
+/// Mapping is `unsafe` because the map is only sound while the file does not change.
+/// The CLI maps files for the duration of one command; octrace itself never writes a
+/// file in place (bakes rename a finished file over the old one, which leaves an
+/// existing map intact), and a user who truncates an input while a command reads it
+/// gets the same SIGBUS as with any tool that maps files (ripgrep, for one). In
+/// exchange, opening costs no copy of a file that can be hundreds of megabytes.
+/// `Trust::HeaderOnly` additionally relies on the file being valid: callers use it
+/// only on files they baked and validated in the same process.
+#[allow(unsafe_code)]
+pub(crate) fn map_scene(path: &Path, trust: Trust) -> anyhow::Result<Scene> {
+    // SAFETY: see above; the file is not modified by this process while mapped, and
+    // header-only opens are used only on files validated earlier in this process.
+    let scene = match trust {
+        Trust::Validate => unsafe { Scene::map(path) },
+        Trust::HeaderOnly => unsafe { Scene::map_unchecked(path) },
+    };
+    scene.with_context(|| format!("cannot open scene {}", path.display()))
+}

@@ -1,0 +1,204 @@
+//! Images of a scene: flat shading, normals, or the number of leaves each ray
+//! visited (the paper's Figure 6), written as PNG.
+
+use std::path::Path;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::raysets::Camera;
+use crate::scene::Scene;
+
+/// What a pixel shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RenderMode {
+    /// Grey, lit by a headlight (`|n . d|`).
+    Shaded,
+    /// The geometric normal facing the camera, as colour.
+    Normals,
+    /// Leaves visited by the pixel's ray, on a colour scale with a legend.
+    Cells,
+}
+
+/// An 8-bit RGB image.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pixels, row by row from the top, `r g b` each.
+    pub rgb: Vec<u8>,
+}
+
+impl Image {
+    /// Writes the image as PNG.
+    ///
+    /// # Errors
+    /// [`Error::Image`] naming the path.
+    pub fn write_png(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let err = |e: &dyn std::fmt::Display| Error::Image { path: path.into(), message: e.to_string() };
+        let mut bytes = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut bytes, self.width, self.height);
+            enc.set_color(png::ColorType::Rgb);
+            enc.set_depth(png::BitDepth::Eight);
+            let mut w = enc.write_header().map_err(|e| err(&e))?;
+            w.write_image_data(&self.rgb).map_err(|e| err(&e))?;
+        }
+        octrace_format::write_atomically(path, &[&bytes]).map_err(|e| err(&e))
+    }
+
+    /// Mean absolute difference per channel, in `[0, 255]`, or `None` if the sizes differ.
+    pub fn mean_abs_diff(&self, other: &Image) -> Option<f64> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return None;
+        }
+        let sum: u64 = self.rgb.iter().zip(&other.rgb).map(|(&a, &b)| a.abs_diff(b) as u64).sum();
+        Some(sum as f64 / self.rgb.len().max(1) as f64)
+    }
+}
+
+/// What a render counted.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Primary rays traced.
+    pub rays: u64,
+    /// Rays that hit.
+    pub hits: u64,
+    /// Most leaves one ray visited.
+    pub max_leaves: u32,
+    /// Mean leaves visited a ray.
+    pub mean_leaves: f64,
+}
+
+/// Renders `scene` through `camera` on all cores.
+pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, RenderStats) {
+    let tracer = scene.tracer();
+    let view = scene.view();
+    let (w, h) = (camera.width, camera.height);
+    // Input triangle id -> stored triangle, for normals.
+    let mut stored = vec![u32::MAX; view.stats.input_triangles as usize];
+    for (i, &id) in view.triangle_ids.iter().enumerate() {
+        stored[id as usize] = i as u32;
+    }
+    let pixels: Vec<(Option<Vec3>, Vec3, u32)> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let ray = camera.ray(i % w, i / w);
+            let (hit, stats) = tracer.intersect_with_stats(&ray);
+            let normal = hit.map(|hit| {
+                let t = view.triangle(stored[hit.triangle as usize]).map(Vec3::from);
+                let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+                if n.dot(ray.dir) > 0.0 { -n } else { n }
+            });
+            (normal, ray.dir.normalize(), stats.leaves)
+        })
+        .collect();
+    let max_leaves = pixels.iter().map(|p| p.2).max().unwrap_or(0);
+    let stats = RenderStats {
+        rays: pixels.len() as u64,
+        hits: pixels.iter().filter(|p| p.0.is_some()).count() as u64,
+        max_leaves,
+        mean_leaves: pixels.iter().map(|p| p.2 as f64).sum::<f64>() / pixels.len().max(1) as f64,
+    };
+    let mut rgb = Vec::with_capacity(pixels.len() * 3);
+    for (normal, dir, leaves) in &pixels {
+        let c = match (mode, normal) {
+            (RenderMode::Shaded, Some(n)) => Vec3::splat(0.1 + 0.85 * n.dot(-*dir).abs()),
+            (RenderMode::Normals, Some(n)) => *n * 0.5 + 0.5,
+            (RenderMode::Cells, _) => heat(*leaves as f32 / max_leaves.max(1) as f32),
+            (_, None) => Vec3::new(0.08, 0.08, 0.1),
+        };
+        rgb.extend(c.to_array().map(|x| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8));
+    }
+    let mut image = Image { width: w, height: h, rgb };
+    if mode == RenderMode::Cells {
+        draw_legend(&mut image, max_leaves);
+    }
+    (image, stats)
+}
+
+/// A perceptual-ish colour scale from dark blue through green to yellow.
+fn heat(x: f32) -> Vec3 {
+    let stops = [
+        Vec3::new(0.05, 0.03, 0.25),
+        Vec3::new(0.15, 0.35, 0.6),
+        Vec3::new(0.15, 0.65, 0.45),
+        Vec3::new(0.7, 0.85, 0.2),
+        Vec3::new(1.0, 0.95, 0.6),
+    ];
+    let x = x.clamp(0.0, 1.0) * (stops.len() - 1) as f32;
+    let i = (x as usize).min(stops.len() - 2);
+    stops[i].lerp(stops[i + 1], x - i as f32)
+}
+
+/// A colour bar along the bottom with "0" at its left end and the maximum at its right.
+fn draw_legend(img: &mut Image, max: u32) {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let bar_h = (h / 40).max(4);
+    let scale = (h / 160).max(1);
+    let label_h = 5 * scale + 4;
+    if h < bar_h + label_h + 4 || w < 32 {
+        return;
+    }
+    let (x0, x1) = (w / 20, w - w / 20);
+    let y1 = h - 2 - label_h;
+    let y0 = y1 - bar_h;
+    let mut put = |x: usize, y: usize, c: Vec3| {
+        let p = 3 * (y * w + x);
+        img.rgb[p..p + 3].copy_from_slice(&c.to_array().map(|v| (v.clamp(0.0, 1.0) * 255.0) as u8));
+    };
+    for x in x0..x1 {
+        let c = heat((x - x0) as f32 / (x1 - x0 - 1) as f32);
+        for y in y0..y1 {
+            put(x, y, c);
+        }
+    }
+    let text_y = y1 + 2;
+    draw_text(img, "0", x0, text_y, scale);
+    let label = format!("{max} leaves");
+    let width = label.len() * 4 * scale;
+    draw_text(img, &label, x1.saturating_sub(width), text_y, scale);
+}
+
+/// Draws digits, spaces and the letters of "leaves" in a 3x5 bitmap font.
+fn draw_text(img: &mut Image, text: &str, x: usize, y: usize, scale: usize) {
+    for (k, ch) in text.chars().enumerate() {
+        let glyph: [u8; 5] = match ch {
+            '0' => [7, 5, 5, 5, 7],
+            '1' => [2, 6, 2, 2, 7],
+            '2' => [7, 1, 7, 4, 7],
+            '3' => [7, 1, 7, 1, 7],
+            '4' => [5, 5, 7, 1, 1],
+            '5' => [7, 4, 7, 1, 7],
+            '6' => [7, 4, 7, 5, 7],
+            '7' => [7, 1, 1, 1, 1],
+            '8' => [7, 5, 7, 5, 7],
+            '9' => [7, 5, 7, 1, 7],
+            'l' => [4, 4, 4, 4, 6],
+            'e' => [0, 7, 7, 4, 7],
+            'a' => [0, 7, 1, 7, 7],
+            'v' => [0, 5, 5, 5, 2],
+            's' => [0, 7, 6, 1, 7],
+            _ => [0; 5],
+        };
+        for (row, bits) in glyph.iter().enumerate() {
+            for col in 0..3 {
+                if bits >> (2 - col) & 1 == 1 {
+                    for dy in 0..scale {
+                        for dx in 0..scale {
+                            let (px, py) = (x + (4 * k + col) * scale + dx, y + row * scale + dy);
+                            if px < img.width as usize && py < img.height as usize {
+                                let p = 3 * (py * img.width as usize + px);
+                                img.rgb[p..p + 3].copy_from_slice(&[235, 235, 235]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
