@@ -1,41 +1,48 @@
-//! Times loading and baking a mesh: `cargo run --release -p octrace-bake --example time_bake -- MESH`.
-fn main() {
-    let path = std::env::args().nth(1).expect("usage: time_bake MESH");
-    let t = std::time::Instant::now();
-    let mesh = octrace_bake::Mesh::load(&path).unwrap();
-    let load = t.elapsed();
-    let t = std::time::Instant::now();
-    let stage_start = std::sync::Mutex::new((std::time::Instant::now(), None::<octrace_bake::BakeStage>));
-    let leaf: Option<u32> = std::env::var("LEAF").ok().map(|s| s.parse().unwrap()); let depth: Option<u32> = std::env::var("DEPTH").ok().map(|s| s.parse().unwrap());
-    let scene = octrace_bake::bake_with_progress(&mesh, &octrace_bake::BuildParams { leaf_size: leaf, max_depth: depth, ..octrace_bake::BuildParams::auto() }, &|s| {
-        let mut g = stage_start.lock().unwrap();
-        if let Some(prev) = g.1 { eprintln!("  {:?}: {:?}", prev, g.0.elapsed()); }
-        *g = (std::time::Instant::now(), Some(s));
-    }).unwrap();
-    { let g = stage_start.lock().unwrap(); eprintln!("  {:?}: {:?}", g.1.unwrap(), g.0.elapsed()); }
-    let bake = t.elapsed();
-    let t = std::time::Instant::now();
-    let b = scene.to_file_bytes(0).unwrap(); eprintln!("to_file_bytes {:?}", t.elapsed());
-    let t2 = std::time::Instant::now(); std::fs::write("/tmp/nosync.oct", &b).unwrap(); eprintln!("plain write {:?}", t2.elapsed());
-    let t = std::time::Instant::now();
-    let bytes = scene.write("/tmp/time_bake.oct", 0).unwrap();
-    let write = t.elapsed();
-    let t = std::time::Instant::now();
-    let f = octrace_format::SceneFile::read("/tmp/time_bake.oct").unwrap();
-    let open = t.elapsed();
-    let t = std::time::Instant::now();
-    let f2 = unsafe { octrace_format::SceneFile::map("/tmp/time_bake.oct") }.unwrap();
-    let mopen = t.elapsed();
-    let t = std::time::Instant::now();
-    let f3 = unsafe { octrace_format::SceneFile::map_unchecked("/tmp/time_bake.oct") }.unwrap();
-    let topen = t.elapsed();
-    let s = octrace_format::stats::SceneStatistics::compute(&f.view()).unwrap();
-    println!("load {load:?} bake {bake:?} write {write:?} read {open:?} map {mopen:?} trusted {topen:?} bytes {bytes} leaves {} before {} params {:?}", s.leaves, scene.stats.leaves_before_balance, scene.params);
-    println!("{s:#?}");
-    let v = f3.view();
-    let t = std::time::Instant::now(); let idx = v.index_tree().unwrap(); eprintln!("index_tree {:?}", t.elapsed());
-    let t = std::time::Instant::now(); v.validate().unwrap(); eprintln!("validate {:?}", t.elapsed());
-    let t = std::time::Instant::now(); let h = xxhash_rust_free(f3.payload()); eprintln!("sum-ish {:?} {h}", t.elapsed());
-    drop((f2, idx));
+//! Times each stage of loading and baking a mesh, writing it and reading it back
+//! validated:
+//! `cargo run --release -p octrace-bake --example time_bake -- MESH [LEAF_SIZE [MAX_DEPTH]]`.
+use std::sync::Mutex;
+use std::time::Instant;
+
+use octrace_bake::{bake_with_progress, BakeStage, BuildParams, Mesh};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let path = args.next().ok_or("usage: time_bake MESH [LEAF_SIZE [MAX_DEPTH]]")?;
+    let leaf_size = args.next().map(|s| s.parse()).transpose()?;
+    let max_depth = args.next().map(|s| s.parse()).transpose()?;
+    let t = Instant::now();
+    let mesh = Mesh::load(&path)?;
+    println!("load      {:>8.1} ms", t.elapsed().as_secs_f64() * 1e3);
+    let params = BuildParams { leaf_size, max_depth, ..BuildParams::auto() };
+    let stage: Mutex<Option<(BakeStage, Instant)>> = Mutex::new(None);
+    let report = |next: Option<BakeStage>| {
+        let mut s = stage.lock().expect("not poisoned");
+        if let Some((prev, since)) = s.take() {
+            println!("{:<9} {:>8.1} ms", format!("{prev:?}").to_lowercase(), since.elapsed().as_secs_f64() * 1e3);
+        }
+        *s = next.map(|n| (n, Instant::now()));
+    };
+    let t = Instant::now();
+    let scene = bake_with_progress(&mesh, &params, &|s| report(Some(s)))?;
+    report(None);
+    println!("bake      {:>8.1} ms", t.elapsed().as_secs_f64() * 1e3);
+    let dir = std::env::temp_dir().join("octrace-time-bake.oct");
+    let t = Instant::now();
+    let bytes = scene.write(&dir, 0)?;
+    println!("write     {:>8.1} ms ({bytes} bytes)", t.elapsed().as_secs_f64() * 1e3);
+    let t = Instant::now();
+    let file = octrace_format::SceneFile::read(&dir)?;
+    println!("read      {:>8.1} ms (validated, into memory)", t.elapsed().as_secs_f64() * 1e3);
+    let t = Instant::now();
+    file.view().validate()?;
+    println!("validate  {:>8.1} ms (semantic rules alone)", t.elapsed().as_secs_f64() * 1e3);
+    println!(
+        "leaves {} ({} before balance), {:?}",
+        scene.leaf_count(),
+        scene.stats.leaves_before_balance,
+        scene.params
+    );
+    std::fs::remove_file(dir)?;
+    Ok(())
 }
-fn xxhash_rust_free(b: &[u8]) -> u64 { b.iter().step_by(64).map(|&x| x as u64).sum() }

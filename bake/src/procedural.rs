@@ -41,7 +41,11 @@ pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -
         let u = std::f64::consts::TAU * (i % rings) as f64 / rings as f64;
         let v = std::f64::consts::TAU * (j % sides) as f64 / sides as f64;
         let r = major as f64 + minor as f64 * v.cos();
-        [center[0] + (r * u.cos()) as f32, center[1] + (minor as f64 * v.sin()) as f32, center[2] + (r * u.sin()) as f32]
+        [
+            center[0] + (r * u.cos()) as f32,
+            center[1] + (minor as f64 * v.sin()) as f32,
+            center[2] + (r * u.sin()) as f32,
+        ]
     };
     let mut tris = Vec::new();
     for i in 0..rings {

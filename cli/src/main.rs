@@ -40,6 +40,8 @@ enum Command {
     Inspect(cmd::inspect::Args),
     /// Trace a file of rays and write the hits (formats in --help).
     Trace(cmd::trace::Args),
+    /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
+    Rays(cmd::rays::Args),
     /// Render a baked scene to PNG.
     Render(cmd::render::Args),
     /// Measure Mrays/s on the standard ray sets (shared/bench/RAYS.md), against obvhs.
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Bake(a) => cmd::bake::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Trace(a) => cmd::trace::run(a),
+        Command::Rays(a) => cmd::rays::run(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Demo(a) => cmd::demo::run(a),
@@ -87,4 +90,3 @@ pub(crate) fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> 
 pub(crate) fn show(p: &std::path::Path) -> String {
     p.display().to_string()
 }
-

@@ -31,10 +31,11 @@ pub(crate) enum Trust {
 /// only on files they baked and validated in the same process.
 #[allow(unsafe_code)]
 pub(crate) fn map_scene(path: &Path, trust: Trust) -> anyhow::Result<Scene> {
-    // SAFETY: see above; the file is not modified by this process while mapped, and
-    // header-only opens are used only on files validated earlier in this process.
     let scene = match trust {
+        // SAFETY: see above; the file is not modified by this process while mapped.
         Trust::Validate => unsafe { Scene::map(path) },
+        // SAFETY: as above, and header-only opens are used only on files validated
+        // earlier in this process.
         Trust::HeaderOnly => unsafe { Scene::map_unchecked(path) },
     };
     scene.with_context(|| format!("cannot open scene {}", path.display()))

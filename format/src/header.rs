@@ -76,15 +76,9 @@ impl Header {
         if bytes.len() < 12 {
             return Err(truncated("header", HEADER_LEN, bytes.len()));
         }
-        let version = Version {
-            major: u16_at(bytes, 8),
-            minor: u16_at(bytes, 10),
-        };
+        let version = Version { major: u16_at(bytes, 8), minor: u16_at(bytes, 10) };
         if version.major != VERSION.major || version.minor > VERSION.minor {
-            return Err(Error::UnsupportedVersion {
-                found: version,
-                supported: VERSION,
-            });
+            return Err(Error::UnsupportedVersion { found: version, supported: VERSION });
         }
         if bytes.len() < HEADER_LEN {
             return Err(truncated("header", HEADER_LEN, bytes.len()));
@@ -92,11 +86,7 @@ impl Header {
         let stored = u64_at(bytes, 56);
         let computed = xxhash_rust::xxh3::xxh3_64(&bytes[..56]);
         if stored != computed {
-            return Err(Error::Checksum {
-                section: "header",
-                stored,
-                computed,
-            });
+            return Err(Error::Checksum { section: "header", stored, computed });
         }
         let header = Header {
             version,
@@ -125,28 +115,17 @@ impl Header {
         }
         let needed = (HEADER_LEN as u64).saturating_add(self.payload_len);
         if needed > file_len {
-            return Err(Error::Truncated {
-                what: "archive",
-                needed,
-                available: file_len,
-            });
+            return Err(Error::Truncated { what: "archive", needed, available: file_len });
         }
         if needed < file_len {
-            return Err(Error::corrupt(format!(
-                "{} bytes after the archive",
-                file_len - needed
-            )));
+            return Err(Error::corrupt(format!("{} bytes after the archive", file_len - needed)));
         }
         Ok(())
     }
 }
 
 fn truncated(what: &'static str, needed: usize, available: usize) -> Error {
-    Error::Truncated {
-        what,
-        needed: needed as u64,
-        available: available as u64,
-    }
+    Error::Truncated { what, needed: needed as u64, available: available as u64 }
 }
 
 fn u16_at(b: &[u8], at: usize) -> u16 {

@@ -102,10 +102,7 @@ pub const fn total_links(ncount: u32) -> u32 {
 
 /// Packs six neighbour counts into an `nCount` word.
 pub fn pack_counts(counts: [u32; 6]) -> u32 {
-    counts
-        .iter()
-        .enumerate()
-        .fold(0, |acc, (f, &c)| acc | (c & 0xF) << (4 * f))
+    counts.iter().enumerate().fold(0, |acc, (f, &c)| acc | (c & 0xF) << (4 * f))
 }
 
 /// A reference held by the point-location tree and the cube map.

@@ -6,8 +6,8 @@
 
 use crate::error::{Error, Result};
 use crate::layout::{
-    cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef,
-    BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL, TRIANGLE_FLOATS,
+    cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef, BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL,
+    TRIANGLE_FLOATS,
 };
 use crate::view::SceneView;
 
@@ -23,8 +23,7 @@ pub struct CellKey {
 impl CellKey {
     /// Whether `self` contains `other` (or is it).
     pub fn contains(&self, other: &CellKey) -> bool {
-        other.level >= self.level
-            && (0..3).all(|a| other.cell[a] >> (other.level - self.level) == self.cell[a])
+        other.level >= self.level && (0..3).all(|a| other.cell[a] >> (other.level - self.level) == self.cell[a])
     }
 }
 
@@ -65,16 +64,16 @@ impl SceneView<'_> {
         }
         let b = &self.bounds;
         let finite = b.root_lo.iter().chain(&b.mesh_lo).chain(&b.mesh_hi).all(|v| v.is_finite());
-        if !finite || !(b.root_size.is_finite() && b.root_size > 0.0) {
+        if !(finite && b.root_size.is_finite() && b.root_size > 0.0) {
             return Err(Error::corrupt("scene bounds are not finite"));
         }
-        if self.triangles.len() % TRIANGLE_FLOATS != 0 || self.boxes.len() % BOX_FLOATS != 0 {
+        if !self.triangles.len().is_multiple_of(TRIANGLE_FLOATS) || !self.boxes.len().is_multiple_of(BOX_FLOATS) {
             return Err(Error::corrupt("triangle or box array length is not a whole number of entries"));
         }
         if self.triangle_ids.len() != self.triangle_count() {
             return Err(Error::corrupt("triangle-id map and triangle array differ in length"));
         }
-        if self.nodes.len() % 8 != 0 {
+        if !self.nodes.len().is_multiple_of(8) {
             return Err(Error::corrupt("node array length is not a multiple of 8"));
         }
         let res = 1usize << p.cube_level;
@@ -156,9 +155,7 @@ impl SceneView<'_> {
     }
 
     fn index_leaf(&self, address: u32, key: CellKey, index: &mut TreeIndex) -> Result<()> {
-        let rec = self
-            .leaf(address)
-            .ok_or_else(|| Error::corrupt(format!("leaf address {address} out of range")))?;
+        let rec = self.leaf(address).ok_or_else(|| Error::corrupt(format!("leaf address {address} out of range")))?;
         let b = rec.box_index as usize;
         if b >= index.leaf_addresses.len() || index.leaf_addresses[b] != u32::MAX {
             return Err(Error::corrupt(format!("box index {b} out of range or used twice")));
@@ -204,9 +201,7 @@ impl SceneView<'_> {
                     let b = *self.octree.get(link as usize + crate::layout::WORD_BOX)? as usize;
                     (index.leaf_addresses.get(b) == Some(&link)).then(|| index.leaf_keys[b])
                 });
-                expected.map_err(|why| {
-                    Error::corrupt(format!("leaf {b} {key:?}, face {face}: {why}"))
-                })?;
+                expected.map_err(|why| Error::corrupt(format!("leaf {b} {key:?}, face {face}: {why}")))?;
             }
         }
         Ok(())
@@ -228,10 +223,9 @@ impl SceneView<'_> {
                     let word = self.cube_map[texel_index(face, res as usize, iu as usize, iv as usize)];
                     let ok = match NodeRef::decode(word) {
                         NodeRef::Internal(i) => index.node_keys.get(i as usize) == Some(&texel),
-                        NodeRef::Leaf(a) => index
-                            .leaf_addresses
-                            .binary_search(&a)
-                            .is_ok_and(|b| index.leaf_keys[b].contains(&texel)),
+                        NodeRef::Leaf(a) => {
+                            index.leaf_addresses.binary_search(&a).is_ok_and(|b| index.leaf_keys[b].contains(&texel))
+                        }
                     };
                     if !ok {
                         return Err(Error::corrupt(format!("cube-map texel {face}/{iu}/{iv} does not hold its cell")));
@@ -269,7 +263,11 @@ fn expected_neighbours(
     }
     match &keys[..links.len()] {
         [n] if n.level == key.level || n.level + 1 == key.level => {
-            if n.contains(&across) { Ok(()) } else { Err(format!("neighbour {n:?} is not across the face")) }
+            if n.contains(&across) {
+                Ok(())
+            } else {
+                Err(format!("neighbour {n:?} is not across the face"))
+            }
         }
         [_, _, _, _] => {
             let (u, v) = other_axes(axis);
@@ -287,4 +285,3 @@ fn expected_neighbours(
         other => Err(format!("{} links, or a neighbour more than one level away", other.len())),
     }
 }
-

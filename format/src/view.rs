@@ -1,8 +1,7 @@
 //! A borrowed, validated view of a baked scene's arrays: what the tracers read.
 
 use crate::layout::{
-    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT,
-    WORD_TRI_OFFSET,
+    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT, WORD_TRI_OFFSET,
 };
 use crate::scene::{BakeParams, BakeStats, Bounds};
 
@@ -82,9 +81,7 @@ impl<'a> SceneView<'a> {
         let head = self.octree.get(a..a.checked_add(LEAF_HEADER_WORDS)?)?;
         let ncount = head[WORD_NCOUNT];
         let n = crate::layout::total_links(ncount) as usize;
-        let links = self
-            .octree
-            .get(a + LEAF_HEADER_WORDS..a + LEAF_HEADER_WORDS + n)?;
+        let links = self.octree.get(a + LEAF_HEADER_WORDS..a + LEAF_HEADER_WORDS + n)?;
         Some(LeafRecord {
             address,
             tri_offset: head[WORD_TRI_OFFSET],

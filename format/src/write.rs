@@ -76,13 +76,17 @@ pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
         _ => Path::new("."),
     };
     let io = |e: std::io::Error| Error::io(path, e);
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".octrace-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(io)?;
+    let mut tmp = tempfile::Builder::new().prefix(".octrace-").suffix(".tmp").tempfile_in(dir).map_err(io)?;
     for part in parts {
         tmp.write_all(part).map_err(io)?;
+    }
+    // A temporary file is private (0600); the result gets the target's permissions
+    // when it replaces a file, else the usual 0644.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(path).map(|m| m.permissions().mode()).unwrap_or(0o644);
+        tmp.as_file().set_permissions(std::fs::Permissions::from_mode(mode)).map_err(io)?;
     }
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;

@@ -92,7 +92,11 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
             let normal = hit.map(|hit| {
                 let t = view.triangle(stored[hit.triangle as usize]).map(Vec3::from);
                 let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
-                if n.dot(ray.dir) > 0.0 { -n } else { n }
+                if n.dot(ray.dir) > 0.0 {
+                    -n
+                } else {
+                    n
+                }
             });
             (normal, ray.dir.normalize(), stats.leaves)
         })
@@ -178,7 +182,7 @@ fn draw_text(img: &mut Image, text: &str, x: usize, y: usize, scale: usize) {
             '7' => [7, 1, 1, 1, 1],
             '8' => [7, 5, 7, 5, 7],
             '9' => [7, 5, 7, 1, 7],
-            'l' => [4, 4, 4, 4, 6],
+            'l' => [6, 2, 2, 2, 7],
             'e' => [0, 7, 7, 4, 7],
             'a' => [0, 7, 1, 7, 7],
             'v' => [0, 5, 5, 5, 2],

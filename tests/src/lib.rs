@@ -26,7 +26,9 @@ pub fn bunny_mesh() -> &'static Mesh {
 /// The bunny baked with the default parameters, once.
 pub fn bunny_scene() -> &'static Scene {
     static SCENE: OnceLock<Scene> = OnceLock::new();
-    SCENE.get_or_init(|| Scene::from_baked(bake(bunny_mesh(), &BuildParams::auto()).expect("bunny bakes")).expect("valid"))
+    SCENE.get_or_init(|| {
+        Scene::from_baked(bake(bunny_mesh(), &BuildParams::auto()).expect("bunny bakes")).expect("valid")
+    })
 }
 
 /// A test data file under `tests/data`.

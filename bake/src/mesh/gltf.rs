@@ -106,7 +106,11 @@ impl Loader<'_> {
             Mode::Triangles => tris.extend(indices.chunks_exact(3).map(|t| [v(t[0]), v(t[1]), v(t[2])])),
             // Every other strip triangle swaps its first two corners to keep the winding.
             Mode::TriangleStrip => tris.extend(indices.windows(3).enumerate().map(|(k, t)| {
-                if k % 2 == 0 { [v(t[0]), v(t[1]), v(t[2])] } else { [v(t[1]), v(t[0]), v(t[2])] }
+                if k % 2 == 0 {
+                    [v(t[0]), v(t[1]), v(t[2])]
+                } else {
+                    [v(t[1]), v(t[0]), v(t[2])]
+                }
             })),
             _ => {
                 if let Some((&first, rest)) = indices.split_first() {

@@ -60,8 +60,7 @@ impl Mesh {
     /// ```
     pub fn load(path: impl AsRef<Path>) -> Result<Mesh> {
         let path = path.as_ref();
-        let (format, zst) =
-            MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
+        let (format, zst) = MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
         let raw = std::fs::read(path).map_err(unreadable)?;
         let bytes = if zst { zstd::stream::decode_all(raw.as_slice()).map_err(unreadable)? } else { raw };

@@ -6,17 +6,11 @@ use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
 pub(super) fn parse(bytes: &[u8], path: &Path) -> Result<Mesh> {
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-        ..Default::default()
-    };
+    let options = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
     // Materials are not needed for geometry; a missing .mtl must not fail the bake.
     let no_materials = |_: &Path| Err(tobj::LoadError::OpenFileFailed);
-    let (models, _) = tobj::load_obj_buf(&mut { bytes }, &options, no_materials)
-        .map_err(|e| obj_error(e, bytes, path))?;
+    let (models, _) =
+        tobj::load_obj_buf(&mut { bytes }, &options, no_materials).map_err(|e| obj_error(e, bytes, path))?;
     let mut mesh = Mesh::default();
     let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
     mesh.triangles.reserve(total);

@@ -19,10 +19,8 @@ pub(crate) fn balance(root: &mut Node, builder: &Builder<'_>) {
         let coarse = level - 1;
         // The level-(l-1) cells across the faces of the level-l leaves, where they are
         // not the leaf's own parent.
-        let mut targets: Vec<[u32; 3]> = by_level[level as usize]
-            .par_iter()
-            .flat_map_iter(|&c| faces_needing(level, c))
-            .collect();
+        let mut targets: Vec<[u32; 3]> =
+            by_level[level as usize].par_iter().flat_map_iter(|&c| faces_needing(level, c)).collect();
         targets.par_sort_unstable();
         targets.dedup();
         let shallow: Vec<[u32; 3]> = {

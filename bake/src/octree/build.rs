@@ -97,7 +97,8 @@ impl Builder<'_> {
             let bb = Box3::of_triangle(tri);
             let inside = (0..3).all(|a| lo[a] <= bb.lo[a] && bb.hi[a] <= hi[a]);
             // Bit 0: touches the low half; bit 1: the high half.
-            let halves = [0, 1, 2].map(|a| (bb.lo[a] <= mid[a] + m) as usize | ((bb.hi[a] >= mid[a] - m) as usize) << 1);
+            let halves =
+                [0, 1, 2].map(|a| (bb.lo[a] <= mid[a] + m) as usize | ((bb.hi[a] >= mid[a] - m) as usize) << 1);
             let crossing = halves.iter().filter(|&&h| h == 3).count();
             let exact = !inside || crossing >= 2;
             for child in 0..8 {

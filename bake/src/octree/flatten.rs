@@ -5,8 +5,7 @@
 use rayon::prelude::*;
 
 use octrace_format::layout::{
-    cell_box, face_axis, face_is_high, other_axes, pack_counts, texel_index, total_links, NodeRef,
-    LEAF_HEADER_WORDS,
+    cell_box, face_axis, face_is_high, other_axes, pack_counts, texel_index, total_links, NodeRef, LEAF_HEADER_WORDS,
 };
 
 use super::build::{child_cell, octant, Cell, Node};
@@ -126,7 +125,13 @@ pub(crate) struct Arrays {
 }
 
 /// Lays the flat tree out as the file's arrays.
-pub(crate) fn arrays(flat: &FlatTree, triangle_count: usize, root_lo: [f32; 3], root_size: f32, cube_level: u32) -> Arrays {
+pub(crate) fn arrays(
+    flat: &FlatTree,
+    triangle_count: usize,
+    root_lo: [f32; 3],
+    root_size: f32,
+    cube_level: u32,
+) -> Arrays {
     let leaves = flat.leaf_cells.len();
     // Records with links by ordinal first, in chunks (one allocation each): `nCount`
     // then the links. Addresses are known once every record's length is.

@@ -69,7 +69,11 @@ pub fn root_cube(lo: [f32; 3], hi: [f32; 3]) -> Result<([f32; 3], f32)> {
         let root_lo = [0, 1, 2].map(|a| {
             let exact = 0.5 * (lo[a] as f64 + hi[a] as f64) - 0.5 * size;
             let r = exact as f32;
-            if r as f64 > exact { r.next_down() } else { r }
+            if r as f64 > exact {
+                r.next_down()
+            } else {
+                r
+            }
         });
         if (0..3).all(|a| root_lo[a] <= lo[a] && root_lo[a] as f64 + size >= hi[a] as f64) {
             return Ok((root_lo, size as f32));
@@ -110,7 +114,11 @@ pub fn bake(mesh: &Mesh, params: &BuildParams) -> Result<BakedScene> {
 ///
 /// # Errors
 /// As [`bake`].
-pub fn bake_with_progress(mesh: &Mesh, params: &BuildParams, progress: &(dyn Fn(BakeStage) + Sync)) -> Result<BakedScene> {
+pub fn bake_with_progress(
+    mesh: &Mesh,
+    params: &BuildParams,
+    progress: &(dyn Fn(BakeStage) + Sync),
+) -> Result<BakedScene> {
     progress(BakeStage::Prepare);
     let name = std::path::Path::new("mesh");
     if mesh.triangles.is_empty() {
@@ -126,7 +134,8 @@ pub fn bake_with_progress(mesh: &Mesh, params: &BuildParams, progress: &(dyn Fn(
             }
         }
     }
-    let ids: Vec<u32> = (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
+    let ids: Vec<u32> =
+        (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
     let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
     let (root_lo, root_size) = root_cube(lo, hi)?;
     let resolved = params.resolve(kept.len());

@@ -67,11 +67,7 @@ impl BuildParams {
             let levels = (ratio.log2() / 2.0).ceil() as u32 + 2;
             levels.clamp(1, AUTO_DEPTH_LIMIT)
         });
-        ResolvedParams {
-            max_depth: max_depth.min(octrace_format::layout::MAX_LEVEL),
-            leaf_size,
-            margin: self.margin,
-        }
+        ResolvedParams { max_depth: max_depth.min(octrace_format::layout::MAX_LEVEL), leaf_size, margin: self.margin }
     }
 }
 

@@ -106,7 +106,11 @@ fn links_are_symmetric_and_land_across_the_stated_face() {
                     // Across the face: the boxes touch on the face's plane.
                     let (mine, theirs) = (view.leaf_box(rec.box_index), view.leaf_box(other.box_index));
                     let axis = face_axis(face);
-                    let plane = if face_is_high(face) { (mine[axis + 3], theirs[axis]) } else { (mine[axis], theirs[axis + 3]) };
+                    let plane = if face_is_high(face) {
+                        (mine[axis + 3], theirs[axis])
+                    } else {
+                        (mine[axis], theirs[axis + 3])
+                    };
                     assert_eq!(plane.0, plane.1, "{name}: link across face {face} does not share the plane");
                 }
             }
@@ -122,15 +126,14 @@ fn each_triangle_is_in_exactly_the_leaves_it_overlaps() {
         let margin = scene.params.margin as f64 * scene.bounds.root_size as f64;
         for rec in view.leaves() {
             let b = view.leaf_box(rec.box_index);
-            let cell = Box3 {
-                lo: [0, 1, 2].map(|a| b[a] as f64 - margin),
-                hi: [0, 1, 2].map(|a| b[a + 3] as f64 + margin),
-            };
+            let cell =
+                Box3 { lo: [0, 1, 2].map(|a| b[a] as f64 - margin), hi: [0, 1, 2].map(|a| b[a + 3] as f64 + margin) };
             let refs = &view.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
             let got: HashSet<u32> = refs.iter().copied().collect();
             assert_eq!(got.len(), refs.len(), "{name}: a triangle listed twice in one leaf");
-            let brute: HashSet<u32> =
-                (0..view.triangle_count() as u32).filter(|&t| triangle_overlaps_box(&view.triangle(t), &cell)).collect();
+            let brute: HashSet<u32> = (0..view.triangle_count() as u32)
+                .filter(|&t| triangle_overlaps_box(&view.triangle(t), &cell))
+                .collect();
             assert_eq!(got, brute, "{name}: leaf {} references differ from brute force", rec.box_index);
         }
     }
@@ -186,7 +189,12 @@ fn one_thread_and_two_threads_give_byte_identical_files() {
 
 #[test]
 fn the_root_cube_holds_the_mesh_and_has_a_power_of_two_edge() {
-    for (lo, hi) in [([0.0f32; 3], [1.0f32; 3]), ([1e7, -3.0, 0.5], [1e7 + 1.0, -2.5, 0.75]), ([-1e-5; 3], [1e-5; 3]), ([2.0; 3], [2.0; 3])] {
+    for (lo, hi) in [
+        ([0.0f32; 3], [1.0f32; 3]),
+        ([1e7, -3.0, 0.5], [1e7 + 1.0, -2.5, 0.75]),
+        ([-1e-5; 3], [1e-5; 3]),
+        ([2.0; 3], [2.0; 3]),
+    ] {
         let (root_lo, size) = super::root_cube(lo, hi).unwrap();
         assert_eq!(size.log2().fract(), 0.0, "{size}");
         for a in 0..3 {

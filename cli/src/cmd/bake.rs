@@ -64,7 +64,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Bakes with stage reports, returning the scene and the bake's wall time.
-pub(crate) fn bake_mesh(mesh: &Mesh, params: &BuildParams, progress: &Progress) -> anyhow::Result<(BakedScene, Duration)> {
+pub(crate) fn bake_mesh(
+    mesh: &Mesh,
+    params: &BuildParams,
+    progress: &Progress,
+) -> anyhow::Result<(BakedScene, Duration)> {
     let t = Instant::now();
     let scene = bake_with_progress(mesh, params, &|s: BakeStage| progress.stage(s.name())).context("bake failed")?;
     Ok((scene, t.elapsed()))

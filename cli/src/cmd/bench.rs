@@ -211,7 +211,13 @@ fn measure(
     })
 }
 
-fn report(args: &Args, l: &Loaded, threads: usize, results: &[SetResult], peer_build: Option<Duration>) -> anyhow::Result<()> {
+fn report(
+    args: &Args,
+    l: &Loaded,
+    threads: usize,
+    results: &[SetResult],
+    peer_build: Option<Duration>,
+) -> anyhow::Result<()> {
     let secs = |d: Duration| d.as_secs_f64();
     if args.json {
         let sets: Vec<_> = results
@@ -250,7 +256,15 @@ fn report(args: &Args, l: &Loaded, threads: usize, results: &[SetResult], peer_b
     if let Some(b) = peer_build {
         crate::out!("obvhs CWBVH (medium build) built in {:.2} s", b.as_secs_f64());
     }
-    crate::out!("{:<11} {:>9} {:>22} {:>22} {:>22} {:>7}  checksum", "set", "rays", "octrace 1 thread", "octrace all threads", "obvhs 1 thread", "ratio");
+    crate::out!(
+        "{:<11} {:>9} {:>22} {:>22} {:>22} {:>7}  checksum",
+        "set",
+        "rays",
+        "octrace 1 thread",
+        "octrace all threads",
+        "obvhs 1 thread",
+        "ratio"
+    );
     let fmt = |s: &Spread| format!("{:.2} ({:.2}-{:.2})", s.median, s.min, s.max);
     for r in results {
         let peer = r.peer.map_or("-".into(), |p| fmt(&p.0));

@@ -4,5 +4,6 @@ pub(crate) mod bake;
 pub(crate) mod bench;
 pub(crate) mod demo;
 pub(crate) mod inspect;
+pub(crate) mod rays;
 pub(crate) mod render;
 pub(crate) mod trace;

@@ -44,7 +44,8 @@ pub(crate) enum Mode {
 }
 
 fn parse_vec3(s: &str) -> Result<DVec3, String> {
-    let v: Vec<f64> = s.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
+    let v: Vec<f64> =
+        s.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
     match v.as_slice() {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(*x, *y, *z)),
         _ => Err(format!("expected three finite numbers x,y,z, got '{s}'")),
@@ -88,7 +89,13 @@ fn camera(scene: &Scene, args: &Args) -> Camera {
         (None, None) if args.fov == 45.0 => Camera::standard_sized(&frame, args.width, args.height),
         _ => {
             let standard = Camera::standard(&frame);
-            Camera::look_at(args.eye.unwrap_or(standard.eye), args.target.unwrap_or(frame.c), args.fov, args.width, args.height)
+            Camera::look_at(
+                args.eye.unwrap_or(standard.eye),
+                args.target.unwrap_or(frame.c),
+                args.fov,
+                args.width,
+                args.height,
+            )
         }
     }
 }

@@ -50,7 +50,9 @@ pub fn exit_code(a: [f32; 3], d: [f32; 3]) -> usize {
 /// The octant of a direction: sign bits.
 #[inline(always)]
 pub fn octant(d: [f32; 3]) -> usize {
-    (d[0].is_sign_negative() as usize) | (d[1].is_sign_negative() as usize) << 1 | (d[2].is_sign_negative() as usize) << 2
+    (d[0].is_sign_negative() as usize)
+        | (d[1].is_sign_negative() as usize) << 1
+        | (d[2].is_sign_negative() as usize) << 2
 }
 
 #[cfg(test)]
@@ -61,7 +63,11 @@ mod tests {
     fn slab_exit(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> usize {
         let t = [0, 1, 2].map(|a| {
             let c = if d[a].is_sign_negative() { lo[a] } else { hi[a] };
-            if d[a] == 0.0 { f64::INFINITY } else { (c as f64 - o[a] as f64) / d[a] as f64 }
+            if d[a] == 0.0 {
+                f64::INFINITY
+            } else {
+                (c as f64 - o[a] as f64) / d[a] as f64
+            }
         });
         let axis = (0..3).min_by(|&i, &j| t[i].total_cmp(&t[j])).unwrap();
         2 * axis + !d[axis].is_sign_negative() as usize

@@ -1,0 +1,40 @@
+//! `octrace rays`: the standard ray sets as files, for `octrace trace` and other tools.
+
+use std::path::PathBuf;
+
+use octrace_runtime::raysets::{self, Frame};
+
+use crate::output::thousands;
+
+/// Write a standard ray set of shared/bench/RAYS.md for a scene, in the 32-byte
+/// format `octrace trace` reads (f32 `ox oy oz tmin dx dy dz tmax`, little-endian).
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// The .oct scene whose frame the rays are made for.
+    pub scene: PathBuf,
+    /// primary (1024 x 1024 camera rays) or incoherent (1,000,000 random rays).
+    #[arg(long, value_enum, default_value_t = Set::Primary)]
+    pub set: Set,
+    /// The file to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub(crate) enum Set {
+    Primary,
+    Incoherent,
+}
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let scene = crate::open::open_scene(&args.scene)?;
+    let b = scene.view().bounds;
+    let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
+    let rays = match args.set {
+        Set::Primary => raysets::primary(&frame),
+        Set::Incoherent => raysets::incoherent(&frame, 1_000_000),
+    };
+    octrace_format::write_atomically(&args.output, &[bytemuck::cast_slice(&rays)])?;
+    crate::out!("wrote {} {:?} rays to {}", thousands(rays.len() as u64), args.set, crate::show(&args.output));
+    Ok(())
+}
