@@ -1,4 +1,6 @@
 //! octrace's integration tests, one module per area.
 
 mod bunny;
+mod format;
+mod mesh;
 mod raysets;

@@ -1,0 +1,194 @@
+//! Mesh input: the real glTF samples (shared/gltf, copied to tests/data/gltf), OBJ, and
+//! every kind of bad input giving its named error.
+
+use std::path::Path;
+
+use octrace_bake::{Error, Mesh};
+use octrace_tests::data;
+
+fn gltf(name: &str) -> Mesh {
+    Mesh::load(data(&format!("gltf/{name}"))).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn bounds(m: &Mesh) -> ([f32; 3], [f32; 3]) {
+    let mut b = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for v in m.triangles.iter().flatten() {
+        for a in 0..3 {
+            b.0[a] = b.0[a].min(v[a]);
+            b.1[a] = b.1[a].max(v[a]);
+        }
+    }
+    b
+}
+
+#[test]
+fn gltf_samples_give_the_documented_triangle_counts() {
+    for (name, count) in [
+        ("Box.gltf", 12),
+        ("BoxVertexColors.gltf", 12),
+        ("AnimatedTriangle.gltf", 1),
+        ("TriangleWithoutIndices.gltf", 1),
+        ("SimpleSparseAccessor.gltf", 12),
+        ("MultipleScenes.gltf", 2), // scene 1 is the default
+        ("SimpleMeshes.gltf", 2),   // one mesh, two nodes
+        ("MeshPrimitiveModes.gltf", 16),
+    ] {
+        assert_eq!(gltf(name).triangles.len(), count, "{name}");
+    }
+}
+
+#[test]
+fn node_transforms_are_applied() {
+    // The second instance is the first moved by the node's translation [1, 0, 0].
+    let m = gltf("SimpleMeshes.gltf");
+    for (a, b) in m.triangles[0].iter().zip(&m.triangles[1]) {
+        assert_eq!([a[0] + 1.0, a[1], a[2]], *b);
+    }
+    // Box: a -90 degree rotation about x turns the stored z-up cube y-up; it stays
+    // the unit cube around the origin.
+    let (lo, hi) = bounds(&gltf("Box.gltf"));
+    for a in 0..3 {
+        assert!((lo[a] + 0.5).abs() < 1e-6 && (hi[a] - 0.5).abs() < 1e-6, "{lo:?} {hi:?}");
+    }
+}
+
+#[test]
+fn sparse_accessors_are_applied() {
+    // The declared max [6, 4, 0] only holds after the sparse substitution.
+    let (_, hi) = bounds(&gltf("SimpleSparseAccessor.gltf"));
+    assert_eq!(hi, [6.0, 4.0, 0.0]);
+}
+
+#[test]
+fn non_triangle_primitives_are_skipped_with_a_warning() {
+    let m = gltf("MeshPrimitiveModes.gltf");
+    assert_eq!(m.warnings.len(), 4, "{:?}", m.warnings);
+    for mode in ["Points", "Lines", "LineLoop", "LineStrip"] {
+        assert!(m.warnings.iter().any(|w| w.contains(mode)), "no warning for {mode}: {:?}", m.warnings);
+    }
+}
+
+#[test]
+fn glb_and_zstd_load_the_same_triangles() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = std::fs::read(data("gltf/Box.gltf")).unwrap();
+    // A GLB container with the embedded-buffer JSON as its only chunk.
+    let mut chunk = json.clone();
+    while chunk.len() % 4 != 0 {
+        chunk.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(12 + 8 + chunk.len() as u32).to_le_bytes());
+    glb.extend_from_slice(&(chunk.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&chunk);
+    std::fs::write(dir.path().join("box.glb"), &glb).unwrap();
+    let zst = zstd_compress(&json);
+    std::fs::write(dir.path().join("box.gltf.zst"), zst).unwrap();
+    let reference = gltf("Box.gltf").triangles;
+    assert_eq!(Mesh::load(dir.path().join("box.glb")).unwrap().triangles, reference);
+    assert_eq!(Mesh::load(dir.path().join("box.gltf.zst")).unwrap().triangles, reference);
+}
+
+fn zstd_compress(bytes: &[u8]) -> Vec<u8> {
+    octrace_tests::zstd_compress(bytes)
+}
+
+fn obj(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn obj_faces_are_fan_triangulated_in_file_order_across_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = obj(
+        dir.path(),
+        "quad.obj",
+        "o first\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\no second\nv 0 0 1\nv 1 0 1\nv 0 1 1\nf 5 6 7\n",
+    );
+    let m = Mesh::load(&p).unwrap();
+    assert_eq!(
+        m.triangles,
+        vec![
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
+        ]
+    );
+}
+
+#[test]
+fn bad_meshes_give_named_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let nan = obj(d, "nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n");
+    let err = Mesh::load(&nan).unwrap_err();
+    assert!(matches!(err, Error::NonFinite { .. }), "{err}");
+    assert!(err.to_string().contains("nan.obj") && err.to_string().contains("triangle 0"), "{err}");
+
+    let inf = obj(d, "inf.obj", "v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n");
+    assert!(matches!(Mesh::load(&inf), Err(Error::NonFinite { .. })));
+
+    let range = obj(d, "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n");
+    let err = Mesh::load(&range).unwrap_err();
+    assert!(matches!(err, Error::IndexOutOfRange { index: 9, count: 3, .. }), "{err}");
+    assert!(err.to_string().contains("line 5"), "{err}");
+
+    let empty = obj(d, "empty.obj", "# nothing\nv 0 0 0\n");
+    assert!(matches!(Mesh::load(&empty), Err(Error::EmptyScene { .. })));
+
+    let missing = d.join("missing.obj");
+    let err = Mesh::load(&missing).unwrap_err();
+    assert!(matches!(err, Error::Unreadable { .. }) && err.to_string().contains("missing.obj"), "{err}");
+
+    let unknown = obj(d, "mesh.stl", "solid");
+    assert!(matches!(Mesh::load(&unknown), Err(Error::UnknownFormat { .. })));
+
+    let garbage = obj(d, "garbage.gltf", "{ not json");
+    assert!(matches!(Mesh::load(&garbage), Err(Error::Parse { .. })));
+}
+
+/// A minimal embedded glTF: one primitive over `positions` with u16 `indices`.
+fn tiny_gltf(positions: &[[f32; 3]], indices: &[u16], mode: u32) -> String {
+    let mut buf: Vec<u8> = positions.iter().flatten().flat_map(|c| c.to_le_bytes()).collect();
+    let index_offset = buf.len();
+    buf.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    let b64 = octrace_tests::base64(&buf);
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1,"mode":{mode}}}]}}],
+        "buffers":[{{"byteLength":{len},"uri":"data:application/octet-stream;base64,{b64}"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":{pl}}},{{"buffer":0,"byteOffset":{index_offset},"byteLength":{il}}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":{n},"type":"VEC3","min":[-10,-10,-10],"max":[10,10,10]}},
+                     {{"bufferView":1,"componentType":5123,"count":{ni},"type":"SCALAR"}}]}}"#,
+        len = buf.len(),
+        pl = index_offset,
+        il = indices.len() * 2,
+        n = positions.len(),
+        ni = indices.len(),
+    )
+}
+
+#[test]
+fn bad_gltf_gives_named_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let ok = obj(dir.path(), "ok.gltf", &tiny_gltf(&tri, &[0, 1, 2], 4));
+    assert_eq!(Mesh::load(&ok).unwrap().triangles.len(), 1);
+
+    let range = obj(dir.path(), "range.gltf", &tiny_gltf(&tri, &[0, 1, 7], 4));
+    let err = Mesh::load(&range).unwrap_err();
+    assert!(matches!(err, Error::IndexOutOfRange { index: 7, .. }), "{err}");
+    assert!(err.to_string().contains("primitive 0"), "{err}");
+
+    let nan = obj(dir.path(), "nan.gltf", &tiny_gltf(&[[0.0, f32::NAN, 0.0], tri[1], tri[2]], &[0, 1, 2], 4));
+    let err = Mesh::load(&nan).unwrap_err();
+    assert!(matches!(err, Error::NonFinite { .. }) && err.to_string().contains("vertex 0"), "{err}");
+
+    let points = obj(dir.path(), "points.gltf", &tiny_gltf(&tri, &[0, 1, 2], 0));
+    assert!(matches!(Mesh::load(&points), Err(Error::UnsupportedMode { .. })));
+}
