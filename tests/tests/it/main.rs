@@ -4,3 +4,4 @@ mod bunny;
 mod format;
 mod mesh;
 mod raysets;
+mod render;

@@ -1,0 +1,149 @@
+//! The `octrace` binary, run in temporary directories.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn octrace(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_octrace")).args(args).current_dir(dir).output().expect("octrace runs")
+}
+
+fn ok(dir: &Path, args: &[&str]) -> String {
+    let out = octrace(dir, args);
+    assert!(out.status.success(), "octrace {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).expect("utf-8 output")
+}
+
+/// A closed unit cube, 12 triangles, as OBJ, with one degenerate face appended.
+const CUBE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 7 3\nf 4 8 7\nf 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\nf 1 2 2\n";
+
+#[test]
+fn bake_then_inspect_prints_exactly_this() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    let out = ok(
+        dir.path(),
+        &["bake", "cube.obj", "-o", "cube.oct", "--max-depth", "3", "--leaf-size", "2", "--reproducible"],
+    );
+    assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
+    let text = ok(dir.path(), &["inspect", "cube.oct"]);
+    let expected = "\
+cube.oct: octrace scene, format 1.0, 0.0 MB
+triangles          12 stored, 1 degenerate left out, 13 in the input
+leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
+depth histogram    2:38  3:208
+triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
+neighbours / leaf  mean 5.46
+cube map           4 x 4 texels a face, level 2
+bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB; total 0.0 MB
+bake               max depth 3, leaf size 2, margin 9.536743e-7 of the root edge; time not recorded (reproducible file)
+bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0.0, 0.0], edge 1
+";
+    assert_eq!(text, expected);
+    let json: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct", "--json"])).unwrap();
+    assert_eq!(json["leaves"], 246);
+    assert_eq!(json["degenerate_triangles"], 1);
+    assert_eq!(json["bake"]["time_s"], serde_json::Value::Null);
+}
+
+#[test]
+fn bakes_are_identical_whatever_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj.zst");
+    let b = bunny.to_str().unwrap();
+    ok(dir.path(), &["bake", b, "-o", "one.oct", "--threads", "1", "--reproducible"]);
+    ok(dir.path(), &["bake", b, "-o", "two.oct", "--threads", "2", "--reproducible"]);
+    let (one, two) =
+        (std::fs::read(dir.path().join("one.oct")).unwrap(), std::fs::read(dir.path().join("two.oct")).unwrap());
+    assert!(one == two, "1-thread and 2-thread bakes differ");
+}
+
+#[test]
+fn trace_writes_one_record_per_ray_in_ray_order() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    // Ray 0 hits the z = 0 face (triangles 0 or 1) at t = 1; ray 1 misses; ray 2 is a
+    // segment that stops short; ray 3 has a NaN direction (a defined miss).
+    let rays: [[f32; 8]; 4] = [
+        [0.25, 0.5, -1.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY],
+        [5.0, 5.0, 5.0, 0.0, 1.0, 0.0, 0.0, f32::INFINITY],
+        [0.5, 0.5, -1.0, 0.0, 0.0, 0.0, 1.0, 0.5],
+        [0.5, 0.5, 0.5, 0.0, f32::NAN, 0.0, 1.0, 9.0],
+    ];
+    let bytes: Vec<u8> = rays.iter().flatten().flat_map(|f| f.to_le_bytes()).collect();
+    std::fs::write(dir.path().join("rays.bin"), bytes).unwrap();
+    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "hits.bin"]);
+    assert!(out.starts_with("4 rays, 1 hits"), "{out}");
+    let hits = std::fs::read(dir.path().join("hits.bin")).unwrap();
+    assert_eq!(hits.len(), 32);
+    let rec = |i: usize| {
+        let t = f32::from_le_bytes(hits[8 * i..8 * i + 4].try_into().unwrap());
+        let id = u32::from_le_bytes(hits[8 * i + 4..8 * i + 8].try_into().unwrap());
+        (t, id)
+    };
+    assert!(rec(0).0 == 1.0 && rec(0).1 <= 1, "{:?}", rec(0));
+    assert_eq!(rec(1), (f32::INFINITY, u32::MAX));
+    assert_eq!(rec(2), (0.5, u32::MAX));
+    assert_eq!(rec(3), (9.0, u32::MAX));
+    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "occ.bin", "--occluded"]);
+    assert!(out.starts_with("4 rays, 1 occluded"), "{out}");
+}
+
+#[test]
+fn errors_name_the_problem_and_exit_non_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 5\n").unwrap();
+    std::fs::write(dir.path().join("notoct.oct"), "hello").unwrap();
+    std::fs::write(dir.path().join("rays.bin"), [0u8; 33]).unwrap();
+    for (args, needle) in [
+        (vec!["bake", "bad.obj", "-o", "bad.oct"], "vertex index 5 out of range"),
+        (vec!["bake", "missing.obj", "-o", "x.oct"], "missing.obj"),
+        (vec!["inspect", "notoct.oct"], "not an octrace scene"),
+        (vec!["inspect", "nothing.oct"], "nothing.oct"),
+    ] {
+        let out = octrace(dir.path(), &args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    assert!(!dir.path().join("bad.oct").exists(), "a failed bake left a file");
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    let out = octrace(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "h.bin"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("32-byte"), "{out:?}");
+}
+
+#[test]
+fn a_closed_pipe_is_not_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_octrace"))
+        .args(["inspect", "cube.oct"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // the reader goes away before octrace writes
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn render_writes_a_png_of_the_requested_size() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    for mode in ["shaded", "normals", "cells"] {
+        let out =
+            ok(dir.path(), &["render", "cube.oct", "-o", "c.png", "--width", "96", "--height", "64", "--mode", mode]);
+        assert!(out.contains("96 x 64"), "{out}");
+        let png = std::fs::read(dir.path().join("c.png")).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+        assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 96);
+    }
+    let out = octrace(dir.path(), &["render", "cube.oct", "-o", "c.png", "--eye", "1,2"]);
+    assert!(!out.status.success());
+}
