@@ -21,8 +21,11 @@
 //! In the octree array, a leaf is `tCount | tOffset | boxIndex | nCount | links...`
 //! (the paper's equation 3). `tOffset` indexes the triangle-reference array,
 //! `boxIndex` the box array (and is the leaf's ordinal), and `nCount` packs the six
-//! neighbour counts, face `f` in bits `4f .. 4f + 4`, each 0, 1 or 4. The links follow,
-//! face 0's first; a link is the word address of the neighbour's record.
+//! neighbour counts, face `f` in bits `4f .. 4f + 4`, each 0, 1 or 4, and in bit
+//! `24 + f` whether the single neighbour across `f` is one level coarser (clear when it
+//! is the same size). With that bit a walk knows every leaf's cell, and so its box,
+//! without loading it. The links follow, face 0's first; a link is the word address of
+//! the neighbour's record.
 //!
 //! # Node references
 //! The point-location tree and the cube map hold [`NodeRef`]s: a leaf's word address,
@@ -77,6 +80,15 @@ pub const fn other_axes(axis: usize) -> (usize, usize) {
     }
 }
 
+/// First bit of the "coarser neighbour" flags in `nCount`.
+pub const COARSER_SHIFT: u32 = 24;
+
+/// Whether the single neighbour across `face` is one level coarser.
+#[inline]
+pub const fn neighbour_is_coarser(ncount: u32, face: usize) -> bool {
+    (ncount >> (COARSER_SHIFT as usize + face)) & 1 == 1
+}
+
 /// The neighbour count of `face` in a packed `nCount` word.
 #[inline]
 pub const fn neighbour_count(ncount: u32, face: usize) -> u32 {
@@ -100,9 +112,10 @@ pub const fn total_links(ncount: u32) -> u32 {
     links_before(ncount & 0x00FF_FFFF, 6)
 }
 
-/// Packs six neighbour counts into an `nCount` word.
-pub fn pack_counts(counts: [u32; 6]) -> u32 {
-    counts.iter().enumerate().fold(0, |acc, (f, &c)| acc | (c & 0xF) << (4 * f))
+/// Packs six neighbour counts and the six "coarser neighbour" flags into an `nCount`
+/// word.
+pub fn pack_counts(counts: [u32; 6], coarser: [bool; 6]) -> u32 {
+    (0..6).fold(0, |acc, f| acc | (counts[f] & 0xF) << (4 * f) | (coarser[f] as u32) << (COARSER_SHIFT as usize + f))
 }
 
 /// A reference held by the point-location tree and the cube map.
@@ -173,7 +186,7 @@ mod tests {
                 *slot = [0, 1, 4][(c % 3) as usize];
                 c /= 3;
             }
-            let packed = pack_counts(counts);
+            let packed = pack_counts(counts, [false, true, false, true, true, false]);
             for f in 0..6 {
                 assert_eq!(neighbour_count(packed, f), counts[f]);
                 let expect: u32 = counts[..f].iter().sum();

@@ -55,7 +55,7 @@ pub mod testing {
             params: BakeParams { max_depth: 0, leaf_size: 8, margin: 0.0, cube_level: 0 },
             bounds: Bounds { mesh_lo: [0.0; 3], mesh_hi: [1.0, 1.0, 0.0], root_lo, root_size: 1.0 },
             stats: BakeStats { input_triangles: 1, degenerate_triangles: 0, leaves_before_balance: 1 },
-            octree: vec![1, 0, 0, pack_counts([0; 6])],
+            octree: vec![1, 0, 0, pack_counts([0; 6], [false; 6])],
             tri_refs: vec![0],
             triangles: vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
             triangle_ids: vec![0],

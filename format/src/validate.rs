@@ -67,6 +67,11 @@ impl SceneView<'_> {
         if !(finite && b.root_size.is_finite() && b.root_size > 0.0) {
             return Err(Error::corrupt("scene bounds are not finite"));
         }
+        // A power-of-two edge makes every cell size exact, so a tracer that recomputes
+        // a box from its cell gets the stored box bit for bit.
+        if b.root_size.to_bits() & 0x007F_FFFF != 0 || !b.root_size.is_normal() {
+            return Err(Error::corrupt(format!("root edge {} is not a power of two", b.root_size)));
+        }
         if !self.triangles.len().is_multiple_of(TRIANGLE_FLOATS) || !self.boxes.len().is_multiple_of(BOX_FLOATS) {
             return Err(Error::corrupt("triangle or box array length is not a whole number of entries"));
         }
@@ -183,7 +188,7 @@ impl SceneView<'_> {
             if end > self.tri_refs.len() as u64 {
                 return Err(Error::corrupt(format!("leaf {b}'s triangles end at {end}, past the references")));
             }
-            if rec.ncount >> 24 != 0 {
+            if rec.ncount >> (crate::layout::COARSER_SHIFT + 6) != 0 {
                 return Err(Error::corrupt(format!("leaf {b} has stray bits in its neighbour counts")));
             }
         }
@@ -197,7 +202,8 @@ impl SceneView<'_> {
                 let links = rec.face_links(face);
                 // A link is a record start exactly when the box index it would hold
                 // names a leaf whose record starts there.
-                let expected = expected_neighbours(key, face, links, |link| {
+                let coarser = crate::layout::neighbour_is_coarser(rec.ncount, face);
+                let expected = expected_neighbours(key, face, links, coarser, |link| {
                     let b = *self.octree.get(link as usize + crate::layout::WORD_BOX)? as usize;
                     (index.leaf_addresses.get(b) == Some(&link)).then(|| index.leaf_keys[b])
                 });
@@ -243,8 +249,12 @@ fn expected_neighbours(
     key: CellKey,
     face: usize,
     links: &[u32],
+    coarser: bool,
     key_of: impl Fn(u32) -> Option<CellKey>,
 ) -> std::result::Result<(), String> {
+    if coarser && links.len() != 1 {
+        return Err("the coarser-neighbour flag is set on a face without one neighbour".into());
+    }
     let axis = face_axis(face);
     let high = face_is_high(face);
     let last = (1u32 << key.level) - 1;
@@ -263,10 +273,12 @@ fn expected_neighbours(
     }
     match &keys[..links.len()] {
         [n] if n.level == key.level || n.level + 1 == key.level => {
-            if n.contains(&across) {
-                Ok(())
-            } else {
+            if !n.contains(&across) {
                 Err(format!("neighbour {n:?} is not across the face"))
+            } else if coarser != (n.level < key.level) {
+                Err(format!("the coarser-neighbour flag says {coarser} for neighbour {n:?}"))
+            } else {
+                Ok(())
             }
         }
         [_, _, _, _] => {

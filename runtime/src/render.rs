@@ -72,6 +72,8 @@ pub struct RenderStats {
     pub max_leaves: u32,
     /// Mean leaves visited a ray.
     pub mean_leaves: f64,
+    /// Mean triangle tests a ray.
+    pub mean_triangle_tests: f64,
 }
 
 /// Renders `scene` through `camera` on all cores.
@@ -84,7 +86,7 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
     for (i, &id) in view.triangle_ids.iter().enumerate() {
         stored[id as usize] = i as u32;
     }
-    let pixels: Vec<(Option<Vec3>, Vec3, u32)> = (0..w * h)
+    let pixels: Vec<(Option<Vec3>, Vec3, u32, u32)> = (0..w * h)
         .into_par_iter()
         .map(|i| {
             let ray = camera.ray(i % w, i / w);
@@ -98,7 +100,7 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
                     n
                 }
             });
-            (normal, ray.dir.normalize(), stats.leaves)
+            (normal, ray.dir.normalize(), stats.leaves, stats.triangle_tests)
         })
         .collect();
     let max_leaves = pixels.iter().map(|p| p.2).max().unwrap_or(0);
@@ -107,9 +109,10 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
         hits: pixels.iter().filter(|p| p.0.is_some()).count() as u64,
         max_leaves,
         mean_leaves: pixels.iter().map(|p| p.2 as f64).sum::<f64>() / pixels.len().max(1) as f64,
+        mean_triangle_tests: pixels.iter().map(|p| p.3 as f64).sum::<f64>() / pixels.len().max(1) as f64,
     };
     let mut rgb = Vec::with_capacity(pixels.len() * 3);
-    for (normal, dir, leaves) in &pixels {
+    for (normal, dir, leaves, _) in &pixels {
         let c = match (mode, normal) {
             (RenderMode::Shaded, Some(n)) => Vec3::splat(0.1 + 0.85 * n.dot(-*dir).abs()),
             (RenderMode::Normals, Some(n)) => *n * 0.5 + 0.5,

@@ -69,16 +69,16 @@ impl FlatTree {
     }
 
     /// Appends the neighbour ordinals of leaf `ordinal` across `face` to `out` and
-    /// returns how many: none on the root's boundary, one leaf of the same level or
-    /// the next coarser, or four finer leaves in quadrant order (see
-    /// `octrace_format::layout`).
-    pub(crate) fn push_neighbours(&self, ordinal: usize, face: usize, out: &mut Vec<u32>) -> u32 {
+    /// returns how many, and whether a single neighbour is one level coarser: none on
+    /// the root's boundary, one leaf of the same level or the next coarser, or four
+    /// finer leaves in quadrant order (see `octrace_format::layout`).
+    pub(crate) fn push_neighbours(&self, ordinal: usize, face: usize, out: &mut Vec<u32>) -> (u32, bool) {
         let (level, c) = self.leaf_cells[ordinal];
         let axis = face_axis(face);
         let high = face_is_high(face);
         let last = (1u32 << level) - 1;
         if (high && c[axis] == last) || (!high && c[axis] == 0) {
-            return 0;
+            return (0, false);
         }
         let mut across = c;
         across[axis] = if high { c[axis] + 1 } else { c[axis] - 1 };
@@ -93,7 +93,7 @@ impl FlatTree {
         match found {
             NodeRef::Leaf(o) => {
                 out.push(o);
-                1
+                (1, self.leaf_cells[o as usize].0 < level)
             }
             NodeRef::Internal(i) => {
                 let (u, v) = other_axes(axis);
@@ -106,7 +106,7 @@ impl FlatTree {
                         NodeRef::Internal(_) => panic!("2:1 balance broken at {:?} face {face}", (level, c)),
                     }
                 }
-                4
+                (4, false)
             }
         }
     }
@@ -144,8 +144,8 @@ pub(crate) fn arrays(
             for ordinal in range {
                 let at = out.len();
                 out.push(0);
-                let counts = std::array::from_fn(|face| flat.push_neighbours(ordinal, face, &mut out));
-                out[at] = pack_counts(counts);
+                let found: [(u32, bool); 6] = std::array::from_fn(|face| flat.push_neighbours(ordinal, face, &mut out));
+                out[at] = pack_counts(found.map(|f| f.0), found.map(|f| f.1));
             }
             out
         })

@@ -67,7 +67,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let secs = t.elapsed().as_secs_f64();
     image.write_png(&args.output)?;
     crate::out!(
-        "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves a ray (max {}), {:.3} s -> {}",
+        "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
         crate::show(&args.scene),
         args.width,
         args.height,
@@ -75,6 +75,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         stats.hits,
         stats.rays,
         stats.mean_leaves,
+        stats.mean_triangle_tests,
         stats.max_leaves,
         secs,
         crate::show(&args.output)

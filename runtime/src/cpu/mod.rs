@@ -1,6 +1,7 @@
 //! CPU tracing: the scalar octree walk (the always-compiled reference
 //! implementation) and batch forms over slices of rays.
 
+mod simd;
 pub mod tables;
 mod traverse;
 mod triangle;
@@ -15,12 +16,66 @@ use crate::ray::{Hit, Ray};
 /// task, small enough to balance two cores on uneven rays.
 const CHUNK: usize = 1024;
 
+/// The walk state and step of the batch calls: SSE2 where the build has it.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+use simd::sse2::{begin as to_walk, step_safe as step, SseWalk as Walk};
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+use scalar_batch::{step, to_walk, Walk};
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+mod scalar_batch {
+    pub(super) use super::traverse::RayWalk as Walk;
+    use super::{Tracer, WalkStats};
+    pub(super) fn to_walk(_: &Tracer<'_>, w: &Walk) -> Walk {
+        w.clone()
+    }
+    #[inline(always)]
+    pub(super) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut Walk, s: &mut WalkStats) -> bool {
+        t.step::<ANY>(w, s)
+    }
+}
+
+/// Rays in flight at once in the batch calls. A walk is a chain of dependent loads
+/// (each leaf's record gives the next address), so one ray leaves the core waiting on
+/// memory; stepping several rays in turn lets their loads overlap.
+const IN_FLIGHT: usize = 8;
+
 impl Tracer<'_> {
-    /// Nearest hits of a batch, on this thread.
+    /// Nearest hits of a batch, on this thread (several rays in flight, interleaved).
     pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        for (r, o) in rays.iter().zip(out) {
-            *o = self.intersect(r);
+        self.interleaved::<false>(rays, |i, h| out[i] = h);
+    }
+
+    /// Walks `rays` with up to [`IN_FLIGHT`] in progress, one step each in turn;
+    /// `done(i, answer)` receives each ray's answer.
+    fn interleaved<const ANY: bool>(&self, rays: &[Ray], mut done: impl FnMut(usize, Option<Hit>)) {
+        let mut stats = WalkStats::default();
+        let mut next = 0;
+        // The next ray that needs a walk; rays that cannot hit are answered at once.
+        let mut start = |done: &mut dyn FnMut(usize, Option<Hit>)| {
+            while next < rays.len() {
+                let i = next;
+                next += 1;
+                match self.begin(&rays[i]) {
+                    Some(w) => return Some((i, to_walk(self, &w))),
+                    None => done(i, None),
+                }
+            }
+            None
+        };
+        let mut slots: [Option<(usize, Walk)>; IN_FLIGHT] = std::array::from_fn(|_| start(&mut done));
+        let mut active = slots.iter().filter(|s| s.is_some()).count();
+        while active > 0 {
+            for slot in slots.iter_mut() {
+                let Some((i, w)) = slot else { continue };
+                if step::<ANY>(self, w, &mut stats) {
+                    done(*i, w.best);
+                    *slot = start(&mut done);
+                    active -= slot.is_none() as usize;
+                }
+            }
         }
     }
 
@@ -30,12 +85,10 @@ impl Tracer<'_> {
         rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.intersect_batch(r, o));
     }
 
-    /// Occlusion of a batch, on this thread.
+    /// Occlusion of a batch, on this thread (several rays in flight, interleaved).
     pub fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        for (r, o) in rays.iter().zip(out) {
-            *o = self.occluded(r);
-        }
+        self.interleaved::<true>(rays, |i, h| out[i] = h.is_some());
     }
 
     /// Occlusion of a batch, on all threads of the current rayon pool.

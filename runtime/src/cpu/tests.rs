@@ -80,6 +80,30 @@ fn procedural_meshes_agree_with_the_oracle() {
     }
 }
 
+/// The SIMD step (where the build has one) gives the scalar step's answers bit for
+/// bit: the same operations in the same order.
+#[test]
+fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
+    let mut mesh = procedural::soup(21, 4000, 6.0, 0.6);
+    mesh.triangles.extend(procedural::torus([3.0; 3], 2.0, 0.5, 40, 20).triangles);
+    let (lo, hi) = bounds(&mesh);
+    let rays = random_rays(5, 20_000, lo, hi);
+    for params in [BuildParams::auto(), BuildParams { max_depth: Some(7), leaf_size: Some(2), ..BuildParams::auto() }] {
+        let (scene, _) = scene_of(&mesh, params);
+        let t = scene.tracer();
+        let mut batch = vec![None; rays.len()];
+        t.intersect_batch(&rays, &mut batch);
+        let mut occluded = vec![false; rays.len()];
+        t.occluded_batch(&rays, &mut occluded);
+        for (i, r) in rays.iter().enumerate() {
+            let scalar = t.intersect_scalar(r);
+            assert_eq!(t.intersect(r), scalar, "ray {r:?}");
+            assert_eq!(batch[i], scalar, "batch, ray {r:?}");
+            assert_eq!(occluded[i], t.occluded_scalar(r), "occluded, ray {r:?}");
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 

@@ -10,7 +10,7 @@
 //!   cube map, which holds a leaf or the node to descend from;
 //! * a walk is bounded by [`Tracer::max_steps`] whatever the file holds.
 
-use octrace_format::layout::{links_before, NodeRef, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+use octrace_format::layout::{links_before, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 use octrace_format::SceneView;
 
 use super::tables::{exit_code, octant, EXIT_FACE, OTHER_AXES};
@@ -25,6 +25,8 @@ pub struct Tracer<'a> {
     root_hi: [f32; 3],
     /// `2^max_depth / root_size`: world to finest-grid coordinates.
     grid_scale: f64,
+    /// Cell edge at each level, `root_size / 2^level` (exact: the edge is a power of two).
+    sizes: [f32; 32],
     max_depth: u32,
     max_steps: u32,
 }
@@ -38,17 +40,61 @@ pub struct WalkStats {
     pub triangle_tests: u32,
 }
 
-/// A prepared ray: what every step needs, computed once.
-struct Walk {
+/// One ray's walk in progress: what every step needs, computed once, and where the
+/// walk is. Batch calls keep several in flight so that their memory loads overlap.
+#[derive(Clone, Debug)]
+pub(crate) struct RayWalk {
     o: [f32; 3],
     d: [f32; 3],
-    /// Index into a box `[lo.xyz, hi.xyz]` of the exit corner's coordinate per axis.
-    corner: [usize; 3],
+    inv: [f32; 3],
+    /// 1 where the exit corner is on the cell's high side (direction not negative).
+    high: [u32; 3],
     /// Exit-face row of the ray's octant.
     exits: &'static [u8; 8],
-    /// Direction component is negative (sign bit), per axis.
-    negative: [bool; 3],
-    inv: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+    /// The current leaf: record address, level and cell.
+    address: u32,
+    level: u32,
+    cell: [u32; 3],
+    /// The nearest hit so far (possibly beyond the current leaf) and its distance.
+    pub(crate) best: Option<Hit>,
+    t_best: f32,
+    steps: u32,
+}
+
+#[allow(dead_code)] // some accessors serve only the SIMD steps
+impl RayWalk {
+    pub(crate) fn o(&self) -> [f32; 3] {
+        self.o
+    }
+    pub(crate) fn d(&self) -> [f32; 3] {
+        self.d
+    }
+    pub(crate) fn inv(&self) -> [f32; 3] {
+        self.inv
+    }
+    pub(crate) fn high(&self) -> [u32; 3] {
+        self.high
+    }
+    pub(crate) fn exits(&self) -> &'static [u8; 8] {
+        self.exits
+    }
+    pub(crate) fn tmin(&self) -> f32 {
+        self.tmin
+    }
+    pub(crate) fn tmax(&self) -> f32 {
+        self.tmax
+    }
+    pub(crate) fn address(&self) -> u32 {
+        self.address
+    }
+    pub(crate) fn level(&self) -> u32 {
+        self.level
+    }
+    pub(crate) fn cell(&self) -> [u32; 3] {
+        self.cell
+    }
 }
 
 impl<'a> Tracer<'a> {
@@ -61,6 +107,7 @@ impl<'a> Tracer<'a> {
             root_lo: [root_box[0], root_box[1], root_box[2]],
             root_hi: [root_box[3], root_box[4], root_box[5]],
             grid_scale: (1u64 << max_depth) as f64 / b.root_size as f64,
+            sizes: std::array::from_fn(|l| (b.root_size as f64 / (1u64 << l) as f64) as f32),
             max_depth,
             // A line crosses at most 3 * 2^depth planes of the finest grid, and each
             // step crosses one (or sits on an edge or corner and crosses one at no
@@ -85,6 +132,21 @@ impl<'a> Tracer<'a> {
         self.walk::<false>(ray, &mut WalkStats::default())
     }
 
+    /// [`Tracer::intersect`] on the portable scalar step, whatever SIMD the build
+    /// has: the reference the SIMD steps are tested against.
+    pub fn intersect_scalar(&self, ray: &Ray) -> Option<Hit> {
+        let mut w = self.begin(ray)?;
+        while !self.step::<false>(&mut w, &mut WalkStats::default()) {}
+        w.best
+    }
+
+    /// [`Tracer::occluded`] on the portable scalar step.
+    pub fn occluded_scalar(&self, ray: &Ray) -> bool {
+        let Some(mut w) = self.begin(ray) else { return false };
+        while !self.step::<true>(&mut w, &mut WalkStats::default()) {}
+        w.best.is_some()
+    }
+
     /// Whether anything is hit in `[tmin, tmax]`; stops at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.walk::<true>(ray, &mut WalkStats::default()).is_some()
@@ -102,8 +164,35 @@ impl<'a> Tracer<'a> {
         (self.walk::<false>(ray, &mut stats), stats)
     }
 
-    /// Any hit for `ANY`, else the nearest.
+    /// Any hit for `ANY`, else the nearest: on the SIMD step where the build has one.
     fn walk<const ANY: bool>(&self, ray: &Ray, stats: &mut WalkStats) -> Option<Hit> {
+        let w = self.begin(ray)?;
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        return super::simd::sse2::walk::<ANY>(self, &w, stats);
+        #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+        {
+            let mut w = w;
+            while !self.step::<ANY>(&mut w, stats) {}
+            w.best
+        }
+    }
+
+    /// The root cube's low corner.
+    pub(crate) fn root_lo(&self) -> [f32; 3] {
+        self.root_lo
+    }
+
+    /// The edge of a cell at `level` (masked into the table: a hostile level cannot
+    /// index out of bounds).
+    #[inline(always)]
+    pub(crate) fn cell_size(&self, level: u32) -> f32 {
+        self.sizes[level as usize & 31]
+    }
+
+    /// Prepares a ray's walk: clips it to the root cube and finds its first leaf, or
+    /// returns `None` for a ray that cannot hit (no memory touched).
+    #[inline(always)]
+    pub(crate) fn begin(&self, ray: &Ray) -> Option<RayWalk> {
         if !ray.is_traceable() {
             return None;
         }
@@ -112,73 +201,133 @@ impl<'a> Tracer<'a> {
         let (t_enter, t_leave, entry_axis) = self.clip_to_root(o, d)?;
         let t_start = t_enter.max(ray.tmin);
         if t_start > t_leave.min(ray.tmax) {
-            return None; // misses the root cube within [tmin, tmax]: no memory touched
+            return None; // misses the root cube within [tmin, tmax]
         }
-        let mut address = if t_enter > ray.tmin {
+        // The entry leaf, and its cell: with the cell, every box along the walk is
+        // computed rather than loaded (the paper's own suggestion, section 6).
+        let (address, level, cell) = if t_enter > ray.tmin {
             self.enter_through_cube_map(o, d, t_enter, entry_axis)
         } else {
-            self.locate(point_at(o, d, t_start))
+            self.locate_cell(point_at(o, d, t_start))
         };
-        let oct = octant(d);
-        let w = Walk {
+        Some(RayWalk {
             o,
             d,
-            corner: [0, 1, 2].map(|a| if d[a].is_sign_negative() { a } else { a + 3 }),
-            exits: &EXIT_FACE[oct],
-            negative: [d[0].is_sign_negative(), d[1].is_sign_negative(), d[2].is_sign_negative()],
-            inv: d.map(|c| 1.0 / c),
-        };
-        let tri_ray = TriRay { o, d };
+            inv: [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]],
+            high: [!d[0].is_sign_negative() as u32, !d[1].is_sign_negative() as u32, !d[2].is_sign_negative() as u32],
+            exits: &EXIT_FACE[octant(d)],
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+            address,
+            level,
+            cell,
+            best: None,
+            t_best: ray.tmax,
+            steps: 0,
+        })
+    }
+
+    /// Visits the walk's current leaf and moves to the next; returns whether the walk
+    /// is over (its answer is then in `w.best`).
+    #[inline(always)]
+    pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut WalkStats) -> bool {
         let v = &self.view;
-        let mut best: Option<Hit> = None;
-        let mut t_best = ray.tmax;
-        for _ in 0..self.max_steps {
-            stats.leaves += 1;
-            let a = address as usize;
-            let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
-            let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
-            // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-            let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
-            stats.triangle_tests += count;
-            for &tri in refs {
-                let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-                if let Some((t, u, vv)) = intersect(&tri_ray, data, ray.tmin, t_best) {
-                    t_best = t;
-                    best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
-                    if ANY {
-                        return best;
-                    }
+        let lo = self.root_lo;
+        stats.leaves += 1;
+        w.steps += 1;
+        if w.steps > self.max_steps {
+            debug_assert!(false, "walk exceeded {} steps: {w:?}", self.max_steps);
+            return true;
+        }
+        let a = w.address as usize;
+        let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
+        let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
+        // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
+        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
+        stats.triangle_tests += count;
+        let tri_ray = TriRay { o: w.o, d: w.d };
+        for &tri in refs {
+            let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+            if let Some((t, u, vv)) = intersect(&tri_ray, data, w.tmin, w.t_best) {
+                w.t_best = t;
+                w.best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
+                if ANY {
+                    return true;
                 }
             }
-            // 2. The exit face, from the signs of three Plücker products.
-            let bx = &v.boxes[box_index as usize * 6..][..6];
-            let off = [0, 1, 2].map(|k| bx[w.corner[k]] - w.o[k]);
-            let face = w.exits[exit_code(off, w.d)] as usize;
-            let axis = face >> 1;
-            // 3. A candidate inside this leaf is the nearest: nothing after the exit
-            //    can be nearer. Past tmax, nothing more can count.
-            let t_exit = off[axis] * w.inv[axis];
-            if best.is_some_and(|h| h.t <= t_exit) || t_exit >= ray.tmax {
-                return best;
-            }
-            // 4. The neighbour across the face: none at the root's boundary, else one,
-            //    or one of four picked by the sides of the face's median lines.
-            let n = (ncount >> (4 * face)) & 0xF;
-            if n == 0 {
-                return best;
-            }
-            let [u, vv] = OTHER_AXES[axis];
-            let side = |k: usize| {
-                let mid = 0.5 * (bx[k] + bx[k + 3]);
-                let p = off[axis] * w.d[k] - (mid - w.o[k]) * w.d[axis];
-                ((p > 0.0) ^ w.negative[axis]) as u32
-            };
-            let quadrant = side(u) | side(vv) << 1;
-            let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
-            address = v.octree[link];
         }
-        debug_assert!(false, "walk exceeded {} steps: ray {ray:?}", self.max_steps);
-        best
+        // 2. The exit corner from the cell (the same bits as the stored box: an
+        //    integer times a power of two is exact, and one rounding follows), then
+        //    the exit face from the signs of three Plücker products.
+        let (cell, level) = (w.cell, w.level);
+        let size = self.sizes[level as usize & 31];
+        let corner = |k: usize| (lo[k] + (cell[k] + w.high[k]) as f32 * size) - w.o[k];
+        // (Closures called three times: `[0, 1, 2].map` is not inlined in this loop.)
+        let off = [corner(0), corner(1), corner(2)];
+        debug_assert!(
+            v.boxes
+                .get(box_index as usize * 6..box_index as usize * 6 + 6)
+                .is_none_or(|b| (0..3).all(|k| b[k + 3 * w.high[k] as usize] - w.o[k] == off[k])),
+            "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
+        );
+        let face = w.exits[exit_code(off, w.d)] as usize;
+        let axis = face >> 1;
+        // Every per-axis quantity below is computed on all three lanes with fixed
+        // indices; only the exit axis's offset, direction and inverse are picked.
+        // (Indexing local arrays by `axis` sends them through the stack.)
+        let pick = |x: [f32; 3]| {
+            if axis == 0 {
+                x[0]
+            } else if axis == 1 {
+                x[1]
+            } else {
+                x[2]
+            }
+        };
+        let (off_a, d_a) = (pick(off), pick(w.d));
+        // 3. A candidate inside this leaf is the nearest: nothing after the exit can
+        //    be nearer. Past tmax, nothing more can count.
+        let t_exit = off_a * pick(w.inv);
+        if w.best.is_some_and(|h| h.t <= t_exit) || t_exit >= w.tmax {
+            return true;
+        }
+        // 4. The neighbour across the face: none at the root's boundary, else one, or
+        //    one of four picked by the sides of the face's median lines (the Plücker
+        //    products with the lines through the face's centre).
+        let n = (ncount >> (4 * face)) & 0xF;
+        if n == 0 {
+            return true;
+        }
+        let half = 0.5 * size;
+        let negative_a = face & 1 == 0;
+        let side = |k: usize| {
+            let mid = lo[k] + (2 * cell[k] + 1) as f32 * half;
+            let p = off_a * w.d[k] - (mid - w.o[k]) * d_a;
+            ((p > 0.0) ^ negative_a) as u32
+        };
+        let sides = [side(0), side(1), side(2)];
+        // The quadrant: the side bits of the two other axes, in increasing order.
+        let side_bits = sides[0] | sides[1] << 1 | sides[2] << 2;
+        let quadrant = (side_bits & ((1 << axis) - 1)) | ((side_bits >> (axis + 1)) << axis);
+        let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
+        w.address = v.octree[link];
+        // 5. The neighbour's cell: across the face at this level, then one level finer
+        //    (four neighbours: the quadrant's child on our side), the same, or one
+        //    coarser (the flag in nCount), without a branch:
+        //    cell' = ((across << 1) | child bits) >> (1 - d).
+        let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
+        let finer = n >> 2;
+        let shift = 1 + coarser - finer;
+        let up = (face as u32 & 1) * 2; // 0 to go down the axis, 2 to go up
+        let next = |k: usize| {
+            let on_axis = k == axis;
+            let across = if on_axis { cell[k].wrapping_add(up).wrapping_sub(1) } else { cell[k] };
+            let bit = if on_axis { negative_a as u32 } else { sides[k] };
+            ((across << 1) | bit) >> shift
+        };
+        w.cell = [next(0), next(1), next(2)];
+        w.level = (level + finer).wrapping_sub(coarser);
+        false
     }
 
     /// The ray's parameter interval inside the root cube and the axis it enters by,
@@ -208,21 +357,32 @@ impl<'a> Tracer<'a> {
     /// Finest-grid coordinates of a point, clamped into the root.
     fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
         let last = ((1u64 << self.max_depth) - 1) as f64;
-        // NaN clamps to 0 through `as`; rounding can only move a point to a
-        // neighbouring cell, which the bake margin covers.
-        [0, 1, 2].map(|a| (((p[a] as f64 - self.root_lo[a] as f64) * self.grid_scale).floor().clamp(0.0, last)) as u32)
+        // Clamped to [0, last] first, so truncation is the floor; NaN clamps to 0.
+        // Rounding can only move a point to a neighbouring cell, which the bake
+        // margin covers.
+        let q = |a: usize| ((p[a] as f64 - self.root_lo[a] as f64) * self.grid_scale).max(0.0).min(last) as u32;
+        [q(0), q(1), q(2)]
     }
 
     /// The address of the leaf holding point `p` (clamped into the root).
     pub fn locate(&self, p: [f32; 3]) -> u32 {
+        self.locate_cell(p).0
+    }
+
+    /// The leaf holding point `p`: its address, level and cell.
+    fn locate_cell(&self, p: [f32; 3]) -> (u32, u32, [u32; 3]) {
         self.descend(self.view.root, 0, self.grid_coords(p))
     }
 
-    /// Descends from `word` (a node at `level`) to the leaf holding grid cell `q`.
-    fn descend(&self, mut word: u32, mut level: u32, q: [u32; 3]) -> u32 {
+    /// Descends from `word` (a node at `level`) to the leaf holding finest-grid cell
+    /// `q`: its address, level and cell.
+    fn descend(&self, mut word: u32, mut level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
         loop {
             match NodeRef::decode(word) {
-                NodeRef::Leaf(address) => return address,
+                NodeRef::Leaf(address) => {
+                    let shift = self.max_depth - level;
+                    return (address, level, q.map(|c| c >> shift));
+                }
                 NodeRef::Internal(i) => {
                     let shift = self.max_depth - level - 1;
                     let child = (q[0] >> shift & 1) | (q[1] >> shift & 1) << 1 | (q[2] >> shift & 1) << 2;
@@ -233,9 +393,9 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// The leaf a ray from outside enters first: the cube-map texel under its entry
-    /// point holds that leaf, or the node to descend from.
-    fn enter_through_cube_map(&self, o: [f32; 3], d: [f32; 3], t: f32, axis: usize) -> u32 {
+    /// The leaf a ray from outside enters first (address, level, cell): the cube-map
+    /// texel under its entry point holds that leaf, or the node to descend from.
+    fn enter_through_cube_map(&self, o: [f32; 3], d: [f32; 3], t: f32, axis: usize) -> (u32, u32, [u32; 3]) {
         let mut q = self.grid_coords(point_at(o, d, t));
         let high = d[axis] < 0.0;
         q[axis] = if high { (1u32 << self.max_depth) - 1 } else { 0 };
@@ -245,7 +405,22 @@ impl<'a> Tracer<'a> {
         let [u, v] = OTHER_AXES[axis];
         let shift = self.max_depth - level;
         let texel = (face * res + (q[v] >> shift) as usize) * res + (q[u] >> shift) as usize;
-        self.descend(self.view.cube_map[texel], level, q)
+        let word = self.view.cube_map[texel];
+        match NodeRef::decode(word) {
+            NodeRef::Internal(_) => self.descend(word, level, q),
+            // The texel's leaf may be coarser than the texel: its level is read off its
+            // box, whose edge is the root's divided by a power of two.
+            NodeRef::Leaf(address) => {
+                let b = self.view.octree[address as usize + 2] as usize * 6;
+                let edge = self.view.boxes[b + 3] as f64 - self.view.boxes[b] as f64;
+                // Edges are the root's over powers of two: compare binary exponents
+                // (rounding of the planes moves an edge by far less than a factor 2).
+                let ratio = self.view.bounds.root_size as f64 / edge * std::f64::consts::SQRT_2;
+                let leaf_level = (((ratio.to_bits() >> 52) & 0x7FF) as i64 - 1023).clamp(0, level as i64) as u32;
+                let shift = self.max_depth - leaf_level;
+                (address, leaf_level, [q[0] >> shift, q[1] >> shift, q[2] >> shift])
+            }
+        }
     }
 }
 

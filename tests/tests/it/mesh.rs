@@ -74,7 +74,7 @@ fn glb_and_zstd_load_the_same_triangles() {
     let json = std::fs::read(data("gltf/Box.gltf")).unwrap();
     // A GLB container with the embedded-buffer JSON as its only chunk.
     let mut chunk = json.clone();
-    while chunk.len() % 4 != 0 {
+    while !chunk.len().is_multiple_of(4) {
         chunk.push(b' ');
     }
     let mut glb = Vec::new();

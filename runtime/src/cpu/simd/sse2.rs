@@ -1,0 +1,225 @@
+//! The octree step on SSE2 (every x86-64 processor): the per-axis arithmetic of a
+//! step — exit corner, Plücker exit code, median-line sides, next cell — on three
+//! lanes at once. Same operations and order as the scalar step, so the same bits.
+
+use std::arch::x86_64::*;
+
+use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+
+use crate::cpu::traverse::{RayWalk, Tracer, WalkStats};
+use crate::ray::Hit;
+
+/// A walk in progress, in SSE registers' layout (lane 3 unused, zero).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SseWalk {
+    o: __m128,
+    d: __m128,
+    /// `d` rotated to `(y, z, x)`, for the three Plücker products in one go.
+    d_yzx: __m128,
+    /// 1.0 where the exit corner is on the cell's high side.
+    high: __m128,
+    /// The root cube's low corner.
+    lo: __m128,
+    /// The current cell (integers).
+    cell: __m128i,
+    /// Scalar inverse direction, for the exit distance along the chosen axis.
+    inv_s: [f32; 3],
+    exits: &'static [u8; 8],
+    tmin: f32,
+    tmax: f32,
+    address: u32,
+    level: u32,
+    /// The nearest hit so far and its distance.
+    pub(crate) best: Option<Hit>,
+    t_best: f32,
+    steps: u32,
+}
+
+impl SseWalk {
+    /// The SSE form of a scalar walk's starting state.
+    #[target_feature(enable = "sse2")]
+    pub(crate) fn from_scalar(w: &RayWalk, root_lo: [f32; 3]) -> SseWalk {
+        let v3 = |a: [f32; 3]| _mm_setr_ps(a[0], a[1], a[2], 0.0);
+        let (o, d) = (w.o(), w.d());
+        SseWalk {
+            o: v3(o),
+            d: v3(d),
+            d_yzx: _mm_setr_ps(d[1], d[2], d[0], 0.0),
+            high: v3(w.high().map(|h| h as f32)),
+            lo: v3(root_lo),
+            cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
+            inv_s: w.inv(),
+            exits: w.exits(),
+            tmin: w.tmin(),
+            tmax: w.tmax(),
+            address: w.address(),
+            level: w.level(),
+            best: None,
+            t_best: w.tmax(),
+            steps: 0,
+        }
+    }
+}
+
+/// `a x b` on three lanes: `a.yzx * b.zxy - a.zxy * b.yzx`.
+#[target_feature(enable = "sse2")]
+#[inline]
+fn cross(a: __m128, b: __m128) -> __m128 {
+    let a_yzx = _mm_shuffle_ps::<0b11_00_10_01>(a, a);
+    let b_yzx = _mm_shuffle_ps::<0b11_00_10_01>(b, b);
+    let c = _mm_sub_ps(_mm_mul_ps(a, b_yzx), _mm_mul_ps(a_yzx, b));
+    _mm_shuffle_ps::<0b11_00_10_01>(c, c)
+}
+
+/// `a . b` of three lanes (lane 3 must be zero in one of them), in the scalar order
+/// `(x + y) + z`.
+#[target_feature(enable = "sse2")]
+#[inline]
+fn dot(a: __m128, b: __m128) -> f32 {
+    let m = _mm_mul_ps(a, b);
+    let y = _mm_shuffle_ps::<0b01_01_01_01>(m, m);
+    let z = _mm_movehl_ps(m, m);
+    _mm_cvtss_f32(_mm_add_ss(_mm_add_ss(m, y), z))
+}
+
+/// Möller-Trumbore on three lanes: the scalar `triangle::intersect`, same operations.
+#[target_feature(enable = "sse2")]
+#[inline]
+fn intersect_sse(o: __m128, d: __m128, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let t: &[f32; 9] = t.try_into().ok()?;
+    let v0 = _mm_setr_ps(t[0], t[1], t[2], 0.0);
+    let e1 = _mm_sub_ps(_mm_setr_ps(t[3], t[4], t[5], 0.0), v0);
+    let e2 = _mm_sub_ps(_mm_setr_ps(t[6], t[7], t[8], 0.0), v0);
+    let p = cross(d, e2);
+    let det = dot(e1, p);
+    if det == 0.0 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = _mm_sub_ps(o, v0);
+    let u = dot(s, p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = cross(s, e1);
+    let v = dot(d, q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let dist = dot(e2, q) * inv;
+    (dist >= tmin && dist <= tmax).then_some((dist, u, v))
+}
+
+/// The lanes equal to `axis`, all ones.
+#[target_feature(enable = "sse2")]
+fn axis_mask(axis: usize) -> __m128i {
+    _mm_cmpeq_epi32(_mm_set1_epi32(axis as i32), _mm_setr_epi32(0, 1, 2, 3))
+}
+
+/// Lane `axis` of `v` in every lane (the others are masked to zero and summed away).
+#[target_feature(enable = "sse2")]
+fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
+    let m = _mm_and_ps(v, _mm_castsi128_ps(mask));
+    let s = _mm_add_ps(m, _mm_shuffle_ps::<0b10_11_00_01>(m, m));
+    _mm_add_ps(s, _mm_shuffle_ps::<0b01_00_11_10>(s, s))
+}
+
+/// Visits the walk's current leaf and moves to the next; returns whether the walk is
+/// over (its answer is then in `w.best`). The scalar `Tracer::step` documents each
+/// stage; this is the same computation, three lanes at a time.
+#[target_feature(enable = "sse2")]
+#[inline]
+pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut WalkStats) -> bool {
+    let v = t.view();
+    stats.leaves += 1;
+    w.steps += 1;
+    if w.steps > t.max_steps() {
+        debug_assert!(false, "walk exceeded {} steps", t.max_steps());
+        return true;
+    }
+    let a = w.address as usize;
+    let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
+    let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
+    // 1. Triangles.
+    let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
+    stats.triangle_tests += count;
+    for &tri in refs {
+        let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+        if let Some((th, u, vv)) = intersect_sse(w.o, w.d, data, w.tmin, w.t_best) {
+            w.t_best = th;
+            w.best = Some(Hit { t: th, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
+            if ANY {
+                return true;
+            }
+        }
+    }
+    // 2. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
+    let size = _mm_set1_ps(t.cell_size(w.level));
+    let lo = w.lo;
+    let cellf = _mm_cvtepi32_ps(w.cell);
+    let off = _mm_sub_ps(_mm_add_ps(_mm_mul_ps(_mm_add_ps(cellf, w.high), size), lo), w.o);
+    let off_yzx = _mm_shuffle_ps::<0b11_00_10_01>(off, off);
+    let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
+    let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
+    let face = w.exits[code] as usize;
+    let axis = face >> 1;
+    let mask = axis_mask(axis);
+    let off_a = broadcast_lane(off, mask);
+    // 3. Stop when the best hit is inside this leaf, or past tmax.
+    let t_exit = _mm_cvtss_f32(off_a) * w.inv_s[axis];
+    if (w.best.is_some() && w.t_best <= t_exit) || t_exit >= w.tmax {
+        return true;
+    }
+    // 4. The neighbour.
+    let n = (ncount >> (4 * face)) & 0xF;
+    if n == 0 {
+        return true;
+    }
+    let d_a = broadcast_lane(w.d, mask);
+    let half = _mm_mul_ps(_mm_set1_ps(0.5), size);
+    let mid = _mm_add_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(cellf, cellf), _mm_set1_ps(1.0)), half), lo);
+    let ps = _mm_sub_ps(_mm_mul_ps(off_a, w.d), _mm_mul_ps(_mm_sub_ps(mid, w.o), d_a));
+    let negative_a = face & 1 == 0;
+    let sides = ((_mm_movemask_ps(_mm_cmpgt_ps(ps, _mm_setzero_ps())) as u32) ^ if negative_a { 7 } else { 0 }) & 7;
+    let quadrant = (sides & ((1 << axis) - 1)) | ((sides >> (axis + 1)) << axis);
+    let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
+    w.address = v.octree[link];
+    // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
+    let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
+    let finer = n >> 2;
+    let up = if negative_a { -1 } else { 1 };
+    let across = _mm_add_epi32(w.cell, _mm_and_si128(mask, _mm_set1_epi32(up)));
+    let child_bits = (sides & !(1 << axis)) | ((negative_a as u32) << axis);
+    let lane_bits = _mm_setr_epi32(1, 2, 4, 8);
+    let bits =
+        _mm_srli_epi32::<31>(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(child_bits as i32), lane_bits), lane_bits));
+    let shifted = _mm_or_si128(_mm_slli_epi32::<1>(across), bits);
+    w.cell = _mm_srl_epi32(shifted, _mm_cvtsi32_si128((1 + coarser - finer) as i32));
+    w.level = (w.level + finer).wrapping_sub(coarser);
+    false
+}
+
+/// Walks one ray to its end.
+pub(crate) fn walk<const ANY: bool>(t: &Tracer<'_>, start: &RayWalk, stats: &mut WalkStats) -> Option<Hit> {
+    // SAFETY: SSE2 is enabled at compile time for this module
+    // (`cfg(target_feature = "sse2")` in `simd/mod.rs`), so the target-feature
+    // functions run on a processor that has it.
+    unsafe {
+        let mut w = SseWalk::from_scalar(start, t.root_lo());
+        while !step::<ANY>(t, &mut w, stats) {}
+        w.best
+    }
+}
+
+/// Starts a walk in SSE form.
+pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
+    // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
+    unsafe { SseWalk::from_scalar(start, t.root_lo()) }
+}
+
+/// One step in SSE form.
+#[inline(always)]
+pub(crate) fn step_safe<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut WalkStats) -> bool {
+    // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
+    unsafe { step::<ANY>(t, w, stats) }
+}
