@@ -46,11 +46,41 @@ impl SceneView<'_> {
     /// [`Error::Corrupt`] naming the first broken rule.
     pub fn validate(&self) -> Result<()> {
         self.check_sizes()?;
-        let index = self.index_tree()?;
-        self.check_records(&index)?;
-        self.check_cube_map(&index)
+        let leaves = self.leaf_count();
+        if leaves < PARALLEL_LEAVES {
+            self.check_triangle_ids()?;
+            let index = self.index_tree()?;
+            self.check_records(&index)?;
+            self.check_links(&index, 0..leaves)?;
+            return self.check_cube_map(&index);
+        }
+        // A large file: the independent checks run side by side on two threads.
+        std::thread::scope(|s| {
+            let ids = s.spawn(|| self.check_triangle_ids());
+            let index = &self.index_tree()?;
+            self.check_records(index)?;
+            std::thread::scope(|s| {
+                let half = leaves / 2;
+                let upper = s.spawn(move || self.check_links(index, half..leaves));
+                self.check_links(index, 0..half)?;
+                self.check_cube_map(index)?;
+                join(upper)
+            })?;
+            join(ids)
+        })
     }
+}
 
+/// Leaves from which validation runs on two threads (below, a thread costs more than
+/// it saves).
+const PARALLEL_LEAVES: usize = 1 << 16;
+
+/// A checking thread's result (a panic there is a bug, and goes on here).
+fn join(handle: std::thread::ScopedJoinHandle<'_, Result<()>>) -> Result<()> {
+    handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+}
+
+impl SceneView<'_> {
     fn check_sizes(&self) -> Result<()> {
         let p = &self.params;
         if p.max_depth > MAX_LEVEL || p.cube_level > p.max_depth {
@@ -98,6 +128,11 @@ impl SceneView<'_> {
         if stats.input_triangles != tri_count + stats.degenerate_triangles {
             return Err(Error::corrupt("triangle counts in the statistics do not add up"));
         }
+        Ok(())
+    }
+
+    fn check_triangle_ids(&self) -> Result<()> {
+        let stats = &self.stats;
         // Ids name distinct input triangles. Sorting a copy costs memory in proportion
         // to the file, never to a count the file declares.
         let mut ids = self.triangle_ids.to_vec();
@@ -195,7 +230,13 @@ impl SceneView<'_> {
         if next != self.octree.len() as u64 {
             return Err(Error::corrupt("octree array has words after the last record"));
         }
-        for (b, &address) in index.leaf_addresses.iter().enumerate() {
+        Ok(())
+    }
+
+    /// Checks the links of leaves `range` (box indices).
+    fn check_links(&self, index: &TreeIndex, range: std::ops::Range<usize>) -> Result<()> {
+        for b in range {
+            let address = index.leaf_addresses[b];
             let rec = self.leaf(address).expect("indexed leaves fit");
             let key = index.leaf_keys[b];
             for face in 0..6 {

@@ -1,13 +1,15 @@
 //! Writing baked scenes: archive, header, and an atomic replace of the target.
 
-use std::io::Write;
+use std::io::{Seek, Write};
+
 use std::path::Path;
+use xxhash_rust::xxh3::Xxh3;
 
 use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
 use crate::error::{Error, Result};
-use crate::header::{Header, ARCHIVE_ALIGN, RKYV_SETTINGS, VERSION};
+use crate::header::{Header, ARCHIVE_ALIGN, HEADER_LEN, RKYV_SETTINGS, VERSION};
 use crate::scene::BakedScene;
 
 impl BakedScene {
@@ -56,30 +58,77 @@ impl BakedScene {
     /// to disk, then renamed over `path`. An interrupted write never leaves a partial
     /// file under `path`. Returns the bytes written.
     ///
+    /// The archive is streamed to the file as rkyv produces it, hashed on the way, and
+    /// the header written last: no in-memory copy of a file that can be hundreds of
+    /// megabytes (on a fresh machine, zeroing the pages of such a copy costs more than
+    /// writing it).
+    ///
     /// # Errors
     /// [`Error::Io`] naming the path on any failure (the temporary file is removed).
     pub fn write(&self, path: impl AsRef<Path>, bake_time_us: u64) -> Result<u64> {
-        let (header, payload) = self.archive(bake_time_us)?;
-        write_atomically(path.as_ref(), &[&header.encode(), &payload])?;
-        Ok((crate::header::HEADER_LEN + payload.len()) as u64)
+        let path = path.as_ref();
+        let io = |e: std::io::Error| Error::io(path, e);
+        let mut tmp = temporary_beside(path)?;
+        let file = tmp.as_file_mut();
+        file.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
+        let mut sink = HashingWriter {
+            inner: std::io::BufWriter::with_capacity(1 << 20, &mut *file),
+            hasher: Xxh3::new(),
+            len: 0,
+        };
+        rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
+            .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
+        sink.inner.flush().map_err(io)?;
+        let (payload_len, payload_xxh3) = (sink.len, sink.hasher.digest());
+        drop(sink);
+        let header = Header {
+            version: VERSION,
+            flags: 0,
+            rkyv_settings: RKYV_SETTINGS,
+            payload_len,
+            payload_xxh3,
+            bake_time_us,
+        };
+        file.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
+        file.write_all(&header.encode()).map_err(io)?;
+        finish(tmp, path)?;
+        Ok(HEADER_LEN as u64 + payload_len)
     }
 }
 
-/// Writes `parts`, one after the other, to `path` through a temporary file in the same
-/// directory, `fsync`, and a rename: readers see the old file or the whole new one.
-///
-/// # Errors
-/// [`Error::Io`] naming `path`.
-pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
+/// Passes writes through and hashes them.
+struct HashingWriter<W> {
+    inner: W,
+    hasher: Xxh3,
+    len: u64,
+}
+
+impl<W: Write> Write for HashingWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.hasher.update(&buf[..n]);
+        self.len += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// A temporary file in `path`'s directory, removed unless [`finish`]ed.
+fn temporary_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
+    tempfile::Builder::new().prefix(".octrace-").suffix(".tmp").tempfile_in(dir).map_err(|e| Error::io(path, e))
+}
+
+/// Gives the temporary file `path`'s permissions (or 0644), flushes it to disk and
+/// renames it over `path`.
+fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
     let io = |e: std::io::Error| Error::io(path, e);
-    let mut tmp = tempfile::Builder::new().prefix(".octrace-").suffix(".tmp").tempfile_in(dir).map_err(io)?;
-    for part in parts {
-        tmp.write_all(part).map_err(io)?;
-    }
     // A temporary file is private (0600); the result gets the target's permissions
     // when it replaces a file, else the usual 0644.
     #[cfg(unix)]
@@ -91,4 +140,17 @@ pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+/// Writes `parts`, one after the other, to `path` through a temporary file in the same
+/// directory, `fsync`, and a rename: readers see the old file or the whole new one.
+///
+/// # Errors
+/// [`Error::Io`] naming `path`.
+pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
+    let mut tmp = temporary_beside(path)?;
+    for part in parts {
+        tmp.write_all(part).map_err(|e| Error::io(path, e))?;
+    }
+    finish(tmp, path)
 }

@@ -19,14 +19,18 @@ pub(crate) fn balance(root: &mut Node, builder: &Builder<'_>) {
         let coarse = level - 1;
         // The level-(l-1) cells across the faces of the level-l leaves, where they are
         // not the leaf's own parent.
-        let mut targets: Vec<[u32; 3]> =
-            by_level[level as usize].par_iter().flat_map_iter(|&c| faces_needing(level, c)).collect();
-        targets.par_sort_unstable();
-        targets.dedup();
-        let shallow: Vec<[u32; 3]> = {
+        // Only the few that sit in a leaf too coarse are kept, then sorted (so the
+        // splits happen in the same order whatever the thread count).
+        let mut shallow: Vec<[u32; 3]> = {
             let root = &*root;
-            targets.into_par_iter().filter(|&t| root.leaf_level_at((coarse, t)) < coarse).collect()
+            by_level[level as usize]
+                .par_iter()
+                .flat_map_iter(|&c| faces_needing(level, c))
+                .filter(|&t| root.leaf_level_at((coarse, t)) < coarse)
+                .collect()
         };
+        shallow.par_sort_unstable();
+        shallow.dedup();
         for t in shallow {
             refine_to(root, builder, (coarse, t), &mut by_level);
         }

@@ -138,3 +138,22 @@ fn a_cube_map_texel_that_does_not_hold_its_cell_is_rejected() {
     });
     assert!(matches!(err, Error::Corrupt(ref m) if m.contains("cube-map")), "{err}");
 }
+
+#[test]
+fn large_files_are_validated_on_two_threads_with_the_same_verdicts() {
+    let mesh = procedural::soup(4, 40_000, 10.0, 0.3);
+    let params = BuildParams { max_depth: Some(8), leaf_size: Some(1), ..BuildParams::auto() };
+    let good = bake(&mesh, &params).unwrap();
+    assert!(good.leaf_count() > 70_000, "only {} leaves: the two-thread path is not reached", good.leaf_count());
+    open(&good.to_file_bytes(0).unwrap()).unwrap();
+    // A broken link in the second half of the leaves (checked by the second thread).
+    let mut bad = good.clone();
+    let address = bad.view().leaves().filter(|r| !r.links.is_empty()).last().unwrap().address;
+    bad.octree[address as usize + LEAF_HEADER_WORDS] = address;
+    assert!(matches!(open(&bad.to_file_bytes(0).unwrap()), Err(Error::Corrupt(_))));
+    // And a wrong cube-map texel (checked beside the links).
+    let mut bad = good.clone();
+    let last = bad.view().leaves().last().unwrap().address;
+    bad.cube_map[0] = NodeRef::Leaf(last).encode();
+    assert!(matches!(open(&bad.to_file_bytes(0).unwrap()), Err(Error::Corrupt(_))));
+}
