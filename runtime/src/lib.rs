@@ -29,7 +29,7 @@ pub mod reference;
 pub mod render;
 mod scene;
 
-pub use cpu::{Tracer, WalkStats};
+pub use cpu::{Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};
 pub use scene::Scene;

@@ -5,8 +5,9 @@ mod simd;
 pub mod tables;
 mod traverse;
 mod triangle;
+pub mod watertight;
 
-pub use traverse::{Tracer, WalkStats};
+pub use traverse::{Tracer, TriangleTest, WalkStats};
 
 use rayon::prelude::*;
 

@@ -14,7 +14,8 @@ use octrace_format::layout::{links_before, NodeRef, COARSER_SHIFT, LEAF_HEADER_W
 use octrace_format::SceneView;
 
 use super::tables::{exit_code, octant, EXIT_FACE, OTHER_AXES};
-use super::triangle::{intersect, TriRay};
+pub(crate) use super::triangle::{intersect, TriRay};
+use super::watertight::Shear;
 use crate::ray::{Hit, Ray};
 
 /// Traces rays through one scene. Cheap to build (no allocation): make one per batch.
@@ -29,6 +30,19 @@ pub struct Tracer<'a> {
     sizes: [f32; 32],
     max_depth: u32,
     max_steps: u32,
+    test: TriangleTest,
+}
+
+/// The ray/triangle test a tracer uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TriangleTest {
+    /// Woop, Benthin & Wald's watertight test: no ray passes between triangles that
+    /// share an edge (the default).
+    #[default]
+    Watertight,
+    /// Möller & Trumbore: a little cheaper; a ray through a shared edge can, rarely,
+    /// miss both triangles.
+    MollerTrumbore,
 }
 
 /// What a walk did, for the cells view and for statistics.
@@ -57,6 +71,8 @@ pub(crate) struct RayWalk {
     address: u32,
     level: u32,
     cell: [u32; 3],
+    /// The ray's shear for the watertight test.
+    shear: Shear,
     /// The nearest hit so far (possibly beyond the current leaf) and its distance.
     pub(crate) best: Option<Hit>,
     t_best: f32,
@@ -95,6 +111,9 @@ impl RayWalk {
     pub(crate) fn cell(&self) -> [u32; 3] {
         self.cell
     }
+    pub(crate) fn shear(&self) -> Shear {
+        self.shear
+    }
 }
 
 impl<'a> Tracer<'a> {
@@ -114,6 +133,34 @@ impl<'a> Tracer<'a> {
             // distance, at most twice more): 3x that, plus slack for tiny trees.
             max_steps: 9 * (1u32 << max_depth) + 64,
             view,
+            test: TriangleTest::default(),
+        }
+    }
+
+    /// The same tracer with another triangle test.
+    pub fn with_triangle_test(mut self, test: TriangleTest) -> Self {
+        self.test = test;
+        self
+    }
+
+    /// The triangle test in use.
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.test
+    }
+
+    /// Tests one triangle (nine floats) with the tracer's triangle test.
+    #[inline(always)]
+    pub(crate) fn hit_triangle(
+        &self,
+        shear: &Shear,
+        tri: &TriRay,
+        t: &[f32],
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
+        match self.test {
+            TriangleTest::Watertight => shear.intersect(t, tmin, tmax),
+            TriangleTest::MollerTrumbore => intersect(tri, t, tmin, tmax),
         }
     }
 
@@ -216,6 +263,7 @@ impl<'a> Tracer<'a> {
             inv: [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]],
             high: [!d[0].is_sign_negative() as u32, !d[1].is_sign_negative() as u32, !d[2].is_sign_negative() as u32],
             exits: &EXIT_FACE[octant(d)],
+            shear: Shear::new(o, d),
             tmin: ray.tmin,
             tmax: ray.tmax,
             address,
@@ -248,7 +296,7 @@ impl<'a> Tracer<'a> {
         let tri_ray = TriRay { o: w.o, d: w.d };
         for &tri in refs {
             let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-            if let Some((t, u, vv)) = intersect(&tri_ray, data, w.tmin, w.t_best) {
+            if let Some((t, u, vv)) = self.hit_triangle(&w.shear, &tri_ray, data, w.tmin, w.t_best) {
                 w.t_best = t;
                 w.best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
                 if ANY {

@@ -6,7 +6,8 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
-use crate::cpu::traverse::{RayWalk, Tracer, WalkStats};
+use crate::cpu::traverse::{RayWalk, Tracer, TriangleTest, WalkStats};
+use crate::cpu::watertight::Shear;
 use crate::ray::Hit;
 
 /// A walk in progress, in SSE registers' layout (lane 3 unused, zero).
@@ -24,6 +25,8 @@ pub(crate) struct SseWalk {
     cell: __m128i,
     /// Scalar inverse direction, for the exit distance along the chosen axis.
     inv_s: [f32; 3],
+    /// The ray's shear for the watertight test.
+    shear: Shear,
     exits: &'static [u8; 8],
     tmin: f32,
     tmax: f32,
@@ -49,6 +52,7 @@ impl SseWalk {
             lo: v3(root_lo),
             cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
             inv_s: w.inv(),
+            shear: w.shear(),
             exits: w.exits(),
             tmin: w.tmin(),
             tmax: w.tmax(),
@@ -145,7 +149,11 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
     stats.triangle_tests += count;
     for &tri in refs {
         let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-        if let Some((th, u, vv)) = intersect_sse(w.o, w.d, data, w.tmin, w.t_best) {
+        let hit = match t.triangle_test() {
+            TriangleTest::Watertight => w.shear.intersect(data, w.tmin, w.t_best),
+            TriangleTest::MollerTrumbore => intersect_sse(w.o, w.d, data, w.tmin, w.t_best),
+        };
+        if let Some((th, u, vv)) = hit {
             w.t_best = th;
             w.best = Some(Hit { t: th, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
             if ANY {
