@@ -11,6 +11,12 @@ fn mesh(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
 pub fn sphere(center: [f32; 3], radius: f32, stacks: u32, slices: u32) -> Mesh {
     let (stacks, slices) = (stacks.max(2), slices.max(3));
     let point = |i: u32, j: u32| {
+        // The poles are one exact point each (sin(pi) is not 0 in floating point, and a
+        // pole per slice would leave slits around the axis: the mesh would not be closed).
+        if i == 0 || i == stacks {
+            let y = if i == 0 { radius } else { -radius };
+            return [center[0], center[1] + y, center[2]];
+        }
         let theta = std::f64::consts::PI * i as f64 / stacks as f64;
         let phi = std::f64::consts::TAU * (j % slices) as f64 / slices as f64;
         let r = radius as f64;

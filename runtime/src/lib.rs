@@ -28,6 +28,7 @@ pub mod raysets;
 pub mod reference;
 pub mod render;
 mod scene;
+pub mod spawn;
 
 pub use cpu::{Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};

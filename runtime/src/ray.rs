@@ -58,4 +58,6 @@ pub struct Hit {
     pub v: f32,
     /// The leaf (box index) the hit was found in.
     pub leaf: u32,
+    /// The triangle's index in the scene's triangle array (`SceneView::triangle`).
+    pub prim: u32,
 }

@@ -16,6 +16,10 @@ pub struct ReferenceHit {
     pub t: f64,
     /// Input index of the triangle.
     pub triangle: u32,
+    /// Barycentric coordinates of the second and third vertices.
+    pub u: f64,
+    /// See `u`.
+    pub v: f64,
 }
 
 /// Brute-force `f64` tracer over a triangle list.
@@ -76,14 +80,14 @@ impl Reference {
         let d = ray.dir.as_dvec3();
         let (tmin, tmax) = (ray.tmin as f64, ray.tmax as f64);
         self.triangles.iter().zip(&self.ids).filter(move |_| ok).filter_map(move |(t, &id)| {
-            let hit = intersect_f64(o, d, t)?;
-            (hit >= tmin && hit <= tmax).then_some(ReferenceHit { t: hit, triangle: id })
+            let (hit, u, v) = intersect_f64(o, d, t)?;
+            (hit >= tmin && hit <= tmax).then_some(ReferenceHit { t: hit, triangle: id, u, v })
         })
     }
 }
 
-/// Möller-Trumbore in `f64`; edges inclusive; `None` for a ray in the plane.
-pub fn intersect_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
+/// Möller-Trumbore in `f64`, `(t, u, v)`; edges inclusive; `None` for a ray in the plane.
+pub fn intersect_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<(f64, f64, f64)> {
     let e1 = t[1] - t[0];
     let e2 = t[2] - t[0];
     let p = d.cross(e2);
@@ -101,5 +105,5 @@ pub fn intersect_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
     if v < 0.0 || u + v > 1.0 {
         return None;
     }
-    Some(e2.dot(q) / det)
+    Some((e2.dot(q) / det, u, v))
 }

@@ -82,6 +82,24 @@ pub fn root_cube(lo: [f32; 3], hi: [f32; 3]) -> Result<([f32; 3], f32)> {
     }
 }
 
+/// Spacings of `f32` a cell must span at least: `MIN_CELL_ULPS` times the spacing of the
+/// scene's largest coordinate. Narrower cells would have planes that round together
+/// (zero-width boxes), and the walk's exit tests would compare nothing.
+pub const MIN_CELL_ULPS: f64 = 4.0;
+
+/// The deepest level whose cells still span [`MIN_CELL_ULPS`] spacings of the largest
+/// coordinate of the root cube: it limits the depth of scenes far from the origin
+/// (a unit object at 1e6 gets 3 levels, one at 1e7 a single leaf) and nothing else.
+pub fn precision_depth(root_lo: [f32; 3], root_size: f32) -> u32 {
+    let magnitude =
+        (0..3).map(|a| (root_lo[a] as f64).abs().max((root_lo[a] as f64 + root_size as f64).abs())).fold(0.0, f64::max);
+    let spacing = magnitude * f64::from(f32::EPSILON); // an upper bound of the ulp there
+    if spacing == 0.0 {
+        return octrace_format::layout::MAX_LEVEL;
+    }
+    (root_size as f64 / (MIN_CELL_ULPS * spacing)).log2().floor().max(0.0) as u32
+}
+
 /// The cube map's level: texels about one per six leaves, so its size stays in
 /// proportion to the octree (`6 * 4^k` texels), never deeper than the tree.
 pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
@@ -138,7 +156,8 @@ pub fn bake_with_progress(
         (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
     let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
     let (root_lo, root_size) = root_cube(lo, hi)?;
-    let resolved = params.resolve(kept.len());
+    let mut resolved = params.resolve(kept.len());
+    resolved.max_depth = resolved.max_depth.min(precision_depth(root_lo, root_size));
     let builder = Builder {
         triangles: &kept,
         root_lo,

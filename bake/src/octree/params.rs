@@ -25,7 +25,9 @@ pub const AUTO_DEPTH_LIMIT: u32 = 16;
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuildParams {
-    /// Deepest level (root = 0); automatic when `None`.
+    /// Deepest level (root = 0); automatic when `None`. Either way the bake stops
+    /// where cells would be narrower than a few `f32` spacings of the scene's
+    /// coordinates (see `octree::precision_depth`).
     pub max_depth: Option<u32>,
     /// Leaf target; [`DEFAULT_LEAF_SIZE`] when `None`.
     pub leaf_size: Option<u32>,

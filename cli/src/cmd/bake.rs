@@ -18,6 +18,8 @@ pub(crate) struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Deepest octree level (root = 0). Default: ceil(log4(triangles / leaf size)) + 2.
+    /// Scenes far from the origin are limited further, so that cells stay wider than
+    /// four f32 spacings of their coordinates.
     #[arg(long)]
     pub max_depth: Option<u32>,
     /// Split a cell while it holds more triangles than this.

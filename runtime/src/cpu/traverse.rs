@@ -298,7 +298,7 @@ impl<'a> Tracer<'a> {
             let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
             if let Some((t, u, vv)) = self.hit_triangle(&w.shear, &tri_ray, data, w.tmin, w.t_best) {
                 w.t_best = t;
-                w.best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
+                w.best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
                 if ANY {
                     return true;
                 }
@@ -318,7 +318,10 @@ impl<'a> Tracer<'a> {
                 .is_none_or(|b| (0..3).all(|k| b[k + 3 * w.high[k] as usize] - w.o[k] == off[k])),
             "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
         );
-        let face = w.exits[exit_code(off, w.d)] as usize;
+        let mut face = w.exits[exit_code(off, w.d)] as usize;
+        if w.d[face >> 1] == 0.0 {
+            face = exit_along_moving_axes(off, w.d, w.inv);
+        }
         let axis = face >> 1;
         // Every per-axis quantity below is computed on all three lanes with fixed
         // indices; only the exit axis's offset, direction and inverse are picked.
@@ -470,6 +473,25 @@ impl<'a> Tracer<'a> {
             }
         }
     }
+}
+
+/// The exit face when the table chose an axis the ray does not move along. That
+/// happens only when the ray lies exactly in a cell face plane of such an axis: the
+/// products are then zero and say nothing. The nearest exit among the axes the ray
+/// moves along is the answer (ties to the lowest axis). Rare: off the hot path.
+#[cold]
+#[inline(never)]
+pub(crate) fn exit_along_moving_axes(off: [f32; 3], d: [f32; 3], inv: [f32; 3]) -> usize {
+    let mut best = (f32::INFINITY, 0);
+    for a in 0..3 {
+        if d[a] != 0.0 {
+            let t = off[a] * inv[a];
+            if t < best.0 || best.0 == f32::INFINITY {
+                best = (t, a);
+            }
+        }
+    }
+    2 * best.1 + !d[best.1].is_sign_negative() as usize
 }
 
 #[inline(always)]

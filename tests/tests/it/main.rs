@@ -2,6 +2,7 @@
 
 mod bunny;
 mod format;
+mod hard_cases;
 mod mesh;
 mod raysets;
 mod render;

@@ -6,7 +6,7 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
-use crate::cpu::traverse::{RayWalk, Tracer, TriangleTest, WalkStats};
+use crate::cpu::traverse::{exit_along_moving_axes, RayWalk, Tracer, TriangleTest, WalkStats};
 use crate::cpu::watertight::Shear;
 use crate::ray::Hit;
 
@@ -23,7 +23,8 @@ pub(crate) struct SseWalk {
     lo: __m128,
     /// The current cell (integers).
     cell: __m128i,
-    /// Scalar inverse direction, for the exit distance along the chosen axis.
+    /// Scalar direction and inverse, for the exit distance along the chosen axis.
+    d_s: [f32; 3],
     inv_s: [f32; 3],
     /// The ray's shear for the watertight test.
     shear: Shear,
@@ -51,6 +52,7 @@ impl SseWalk {
             high: v3(w.high().map(|h| h as f32)),
             lo: v3(root_lo),
             cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
+            d_s: d,
             inv_s: w.inv(),
             shear: w.shear(),
             exits: w.exits(),
@@ -155,7 +157,7 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
         };
         if let Some((th, u, vv)) = hit {
             w.t_best = th;
-            w.best = Some(Hit { t: th, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index });
+            w.best = Some(Hit { t: th, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
             if ANY {
                 return true;
             }
@@ -169,7 +171,11 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
     let off_yzx = _mm_shuffle_ps::<0b11_00_10_01>(off, off);
     let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
     let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
-    let face = w.exits[code] as usize;
+    let mut face = w.exits[code] as usize;
+    if w.d_s[face >> 1] == 0.0 {
+        let off_s: [f32; 4] = bytemuck::cast(off);
+        face = exit_along_moving_axes([off_s[0], off_s[1], off_s[2]], w.d_s, w.inv_s);
+    }
     let axis = face >> 1;
     let mask = axis_mask(axis);
     let off_a = broadcast_lane(off, mask);

@@ -1,0 +1,423 @@
+//! The named hard cases: each test says why its rays or triangles are hard, and checks
+//! the octree against the f64 brute-force oracle (or against what a closed mesh
+//! guarantees).
+
+use glam::Vec3;
+use octrace_bake::{bake, procedural, BuildParams, Mesh};
+use octrace_runtime::reference::Reference;
+use octrace_runtime::{Hit, Ray, Scene};
+
+fn scene(mesh: &Mesh, depth: Option<u32>, leaf: u32) -> Scene {
+    let p = BuildParams { max_depth: depth, leaf_size: Some(leaf), ..BuildParams::auto() };
+    Scene::from_baked(bake(mesh, &p).unwrap()).unwrap()
+}
+
+fn oracle(mesh: &Mesh) -> Reference {
+    Reference::new(mesh.triangles.clone(), (0..mesh.triangles.len() as u32).collect())
+}
+
+/// Same triangle, or the same distance within 1e-5 t (two triangles tie there), or
+/// both miss.
+fn agree(got: Option<Hit>, want: Option<(f64, u32)>) -> bool {
+    match (got, want) {
+        (None, None) => true,
+        (Some(h), Some((t, id))) => h.triangle == id || (h.t as f64 - t).abs() <= 1e-5 * t.abs().max(1e-30),
+        _ => false,
+    }
+}
+
+/// Every ray agrees with the oracle, nearest hit and occlusion.
+///
+/// A ray that starts on a triangle (within the rounding of its coordinates) has a hit
+/// at distance zero that the tracer, like pbrt, does not count: there the oracle's
+/// nearest hit beyond `delta`, a few `f32` spacings of the ray's coordinates, is an
+/// equally right answer.
+fn all_agree(name: &str, scene: &Scene, oracle: &Reference, rays: &[Ray]) {
+    let tracer = scene.tracer();
+    let mut bad = Vec::new();
+    for r in rays {
+        let want = oracle.intersect(r).map(|h| (h.t, h.triangle));
+        let got = tracer.intersect(r);
+        let delta = 8.0 * f32::EPSILON * r.origin.abs().max_element().max(1e-30) / r.dir.length();
+        let near_zero = want.is_some_and(|(t, _)| t.abs() <= delta as f64);
+        let beyond = || {
+            let later = Ray { tmin: delta, ..*r };
+            (oracle.intersect(&later).map(|h| (h.t, h.triangle)), oracle.occluded(&later))
+        };
+        let got_near_zero = got.is_some_and(|h| h.t <= delta);
+        // A hit within rounding of a triangle's boundary is a tie: the f64 oracle is not
+        // watertight there, and a ray grazing an edge may be in or out by an ulp.
+        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= 1e-5;
+        let boundary = got.is_some_and(|h| on_edge(h.u as f64, h.v as f64))
+            || oracle.intersect(r).is_some_and(|h| on_edge(h.u, h.v));
+        let nearest_ok = agree(got, want) || boundary || (near_zero && (got_near_zero || agree(got, beyond().0)));
+        let occluded_ok = tracer.occluded(r) == oracle.occluded(r) || near_zero || boundary;
+        if !nearest_ok || !occluded_ok {
+            bad.push(format!("{r:?}: octree {got:?}, oracle {want:?}"));
+        }
+    }
+    assert!(bad.is_empty(), "{name}: {} of {} rays disagree; first: {}", bad.len(), rays.len(), bad[0]);
+}
+
+fn test_scene() -> Mesh {
+    let mut m = procedural::sphere([0.0; 3], 1.0, 24, 32);
+    m.triangles.extend(procedural::cube([0.5, -1.5, -0.25], [1.5, -0.5, 0.75], 4).triangles);
+    m.triangles.extend(procedural::torus([-0.5, 0.8, 0.3], 0.8, 0.2, 24, 12).triangles);
+    m
+}
+
+/// Hard because zero direction components make `1/d` infinite and the slab test's
+/// `0 * inf` undefined, and the exit-face choice must never pick an axis the ray does
+/// not move along; `-0.0` has its sign bit set and picks the other exit corner.
+#[test]
+fn axis_parallel_rays_one_and_two_zero_components_every_axis_and_sign() {
+    let mesh = test_scene();
+    let (s, o) = (scene(&mesh, Some(6), 2), oracle(&mesh));
+    let mut rays = Vec::new();
+    for axis in 0..3 {
+        for sign in [1.0f32, -1.0] {
+            for zero in [0.0f32, -0.0] {
+                for i in 0..24 {
+                    for j in 0..24 {
+                        let (u, v) = (-1.6 + 3.2 * i as f32 / 23.0, -1.6 + 3.2 * j as f32 / 23.0);
+                        let mut d = [zero; 3];
+                        d[axis] = sign;
+                        let mut org = [0.0f32; 3];
+                        org[axis] = -3.0 * sign;
+                        org[(axis + 1) % 3] = u;
+                        org[(axis + 2) % 3] = v;
+                        rays.push(Ray::new(Vec3::from(org), Vec3::from(d)));
+                        // One zero component: diagonal in a coordinate plane, from inside too.
+                        let mut d2 = d;
+                        d2[(axis + 1) % 3] = 0.5 * sign;
+                        rays.push(Ray::new(Vec3::from(org), Vec3::from(d2)));
+                        rays.push(Ray::new(Vec3::new(u * 0.5, v * 0.5, 0.1), Vec3::from(d2)));
+                    }
+                }
+            }
+        }
+    }
+    all_agree("axis-parallel", &s, &o, &rays);
+}
+
+/// The octree's own grid planes, edges and corners of every leaf: rays lying exactly in
+/// a cell face plane, running along cell edges, or passing through cell corners, where
+/// the exit test ties and a walk could skip a cell; leaves next to a coarser neighbour
+/// cover the 2:1 level change.
+#[test]
+fn rays_in_cell_faces_along_cell_edges_and_through_cell_corners() {
+    let mesh = test_scene();
+    for depth in [3, 5, 7] {
+        let s = scene(&mesh, Some(depth), 1);
+        let o = oracle(&mesh);
+        let view = s.view();
+        let mut rays = Vec::new();
+        for (k, rec) in view.leaves().enumerate().filter(|(k, _)| k % 7 == 0) {
+            let b = view.leaf_box(rec.box_index);
+            let (lo, hi) = (Vec3::new(b[0], b[1], b[2]), Vec3::new(b[3], b[4], b[5]));
+            let corner = Vec3::new(if k % 2 == 0 { lo.x } else { hi.x }, if k % 3 == 0 { lo.y } else { hi.y }, lo.z);
+            // In the face plane x = lo.x, crossing the cell diagonally.
+            rays.push(Ray::new(Vec3::new(lo.x, lo.y - 1.0, lo.z - 0.5), Vec3::new(0.0, 1.0, 0.5)));
+            // Along a cell edge (x = lo.x, y = lo.y), both ways.
+            rays.push(Ray::new(Vec3::new(lo.x, lo.y, -4.0), Vec3::Z));
+            rays.push(Ray::new(Vec3::new(lo.x, lo.y, 4.0), -Vec3::Z));
+            // Through the corner, with power-of-two directions so origin and corner are
+            // exactly on one line.
+            for d in [Vec3::new(1.0, 1.0, 1.0), Vec3::new(-0.5, 1.0, 0.25), Vec3::new(1.0, -1.0, 0.0)] {
+                rays.push(Ray::new(corner - 4.0 * d, d));
+            }
+            // Through the middle of a face towards a coarser neighbour (2:1 change).
+            for face in 0..6 {
+                if octrace_format::layout::neighbour_is_coarser(rec.ncount, face) {
+                    let mid = (lo + hi) * 0.5;
+                    let mut d = Vec3::ZERO;
+                    d[face / 2] = if face % 2 == 1 { 1.0 } else { -1.0 };
+                    rays.push(Ray::new(Vec3::new(lo.x, mid.y, mid.z) - 3.0 * d, d));
+                    rays.push(Ray::new(lo - 3.0 * (d + Vec3::new(0.0, 0.5, 0.25)), d + Vec3::new(0.0, 0.5, 0.25)));
+                }
+            }
+        }
+        assert!(rays.len() > 100);
+        all_agree(&format!("grid rays, depth {depth}"), &s, &o, &rays);
+    }
+}
+
+/// Origins exactly on leaf faces and on the root cube's faces, edges and corners, inside
+/// and outside: point location must pick a leaf the ray really starts in (or next to),
+/// and the cube-map entry must handle a ray that starts on the boundary.
+#[test]
+fn origins_on_cell_faces_and_on_the_root_boundary() {
+    let mesh = test_scene();
+    let s = scene(&mesh, Some(6), 2);
+    let o = oracle(&mesh);
+    let view = s.view();
+    let (rlo, size) = (Vec3::from(view.bounds.root_lo), view.bounds.root_size);
+    let rhi = rlo + Vec3::splat(size);
+    let dirs = [Vec3::new(0.3, 0.2, 0.9), Vec3::new(-0.7, 0.1, -0.2), Vec3::new(0.0, -1.0, 0.4), Vec3::X, -Vec3::Y];
+    let mut origins = Vec::new();
+    for rec in view.leaves().step_by(5) {
+        let b = view.leaf_box(rec.box_index);
+        origins.push(Vec3::new(b[0], (b[1] + b[4]) * 0.5, (b[2] + b[5]) * 0.5)); // on a face
+        origins.push(Vec3::new(b[0], b[1], (b[2] + b[5]) * 0.5)); // on an edge
+        origins.push(Vec3::new(b[3], b[4], b[5])); // on a corner
+    }
+    for cx in [rlo.x, (rlo.x + rhi.x) * 0.5, rhi.x] {
+        for cy in [rlo.y, (rlo.y + rhi.y) * 0.5, rhi.y] {
+            for cz in [rlo.z, (rlo.z + rhi.z) * 0.5, rhi.z] {
+                origins.push(Vec3::new(cx, cy, cz)); // root corners, edges, faces, centre
+            }
+        }
+    }
+    let rays: Vec<Ray> =
+        origins.iter().flat_map(|&p| dirs.iter().flat_map(move |&d| [Ray::new(p, d), Ray::new(p, -d)])).collect();
+    all_agree("origins on faces", &s, &o, &rays);
+}
+
+/// Rays from inside a closed mesh must hit it: a walk that skips a leaf, or a triangle
+/// test that lets a ray slip through a shared edge, leaks. Rays aimed exactly at
+/// vertices and edge midpoints are where edges and leaf boundaries tie.
+fn assert_no_leaks(
+    name: &str,
+    mesh: &Mesh,
+    inside: impl Fn(&mut procedural::SplitMix) -> Vec3,
+    random_rays: usize,
+) -> usize {
+    let s = scene(mesh, None, 8);
+    let mut rng = procedural::SplitMix(7);
+    let mut rays = Vec::with_capacity(random_rays + 4 * mesh.triangles.len());
+    for _ in 0..random_rays {
+        let z = 1.0 - 2.0 * rng.unit();
+        let phi = std::f32::consts::TAU * rng.unit();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        rays.push(Ray::new(inside(&mut rng), Vec3::new(r * phi.cos(), r * phi.sin(), z)));
+    }
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(Vec3::from);
+        let o = inside(&mut rng);
+        for target in [a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5] {
+            rays.push(Ray::new(o, target - o));
+        }
+    }
+    let hits = s.intersect_all(&rays);
+    let leaks: Vec<&Ray> = rays.iter().zip(&hits).filter(|(_, h)| h.is_none()).map(|(r, _)| r).collect();
+    assert!(leaks.is_empty(), "{name}: {} of {} rays leaked, first {:?}", leaks.len(), rays.len(), leaks[0]);
+    rays.len()
+}
+
+/// See [`assert_no_leaks`]: a million rays a mesh, plus every vertex and edge midpoint.
+#[test]
+fn closed_meshes_do_not_leak() {
+    let n = 1_000_000;
+    let sphere = procedural::sphere([0.1, -0.2, 0.3], 1.0, 48, 64);
+    let count = assert_no_leaks(
+        "sphere",
+        &sphere,
+        |r| Vec3::new(0.1, -0.2, 0.3) + (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * 1.0,
+        n,
+    );
+    assert!(count >= n);
+    let torus = procedural::torus([0.0; 3], 1.0, 0.3, 64, 32);
+    assert_no_leaks(
+        "torus",
+        &torus,
+        |r| {
+            let a = std::f32::consts::TAU * r.unit();
+            Vec3::new(a.cos(), 0.0, a.sin()) * (1.0 + 0.2 * (r.unit() - 0.5)) + Vec3::Y * 0.2 * (r.unit() - 0.5)
+        },
+        n,
+    );
+    let cube = procedural::cube([-1.0, -0.5, -2.0], [1.0, 0.5, 2.0], 8);
+    assert_no_leaks(
+        "box",
+        &cube,
+        |r| Vec3::new(r.unit() * 1.9 - 0.95, r.unit() * 0.9 - 0.45, r.unit() * 3.9 - 1.95),
+        n,
+    );
+    let blob = blob();
+    assert_no_leaks("blob", &blob, |r| (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * 0.8, n);
+}
+
+/// A closed, bumpy, bunny-like blob: a sphere displaced radially by smooth waves.
+fn blob() -> Mesh {
+    let mut m = procedural::sphere([0.0; 3], 1.0, 64, 96);
+    for t in &mut m.triangles {
+        for v in t.iter_mut() {
+            let p = Vec3::from(*v);
+            let bump = 1.0 + 0.25 * (3.0 * p.x).sin() * (2.0 * p.y).cos() + 0.1 * (7.0 * p.z).sin();
+            *v = (p * bump).to_array();
+        }
+    }
+    m
+}
+
+/// Rays nearly parallel to a triangle, or nearly in a cell face plane: the determinant
+/// and the exit products are tiny and their signs fragile.
+#[test]
+fn grazing_rays() {
+    let mesh = procedural::grid(16, 2.0);
+    let s = scene(&mesh, Some(7), 2);
+    let o = oracle(&mesh);
+    let view = s.view();
+    let mut rays = Vec::new();
+    for k in 0..400 {
+        let x = 0.005 * k as f32;
+        for eps in [1e-3f32, 1e-5, 1e-7, -1e-7, -1e-5] {
+            rays.push(Ray::new(Vec3::new(-0.5, x, 1e-3), Vec3::new(1.0, 0.01, -eps)));
+            rays.push(Ray::new(Vec3::new(x, -0.5, eps), Vec3::new(0.02, 1.0, -eps * 0.5)));
+        }
+    }
+    for rec in view.leaves().step_by(9) {
+        let b = view.leaf_box(rec.box_index);
+        for eps in [1e-6f32, -1e-6] {
+            rays.push(Ray::new(Vec3::new(b[0] + eps, -1.0, 0.3), Vec3::new(eps, 1.0, -0.2)));
+        }
+    }
+    all_agree("grazing", &s, &o, &rays);
+}
+
+/// Far from the origin and at extreme scales, `f32` spacing is coarse (1.0 at 1e7) or
+/// tiny: cell planes, the cube-map entry and the exit products must stay consistent.
+#[test]
+fn far_and_wide_same_answers_as_the_reference() {
+    let base = test_scene();
+    for (shift, scale) in [(1e5f32, 1.0f32), (1e6, 1.0), (1e7, 1.0), (0.0, 1e-4), (0.0, 1e6), (3e6, 50.0)] {
+        let mut m = base.clone();
+        for v in m.triangles.iter_mut().flatten() {
+            *v = v.map(|c| c * scale + shift);
+        }
+        let s = scene(&m, None, 4);
+        let o = oracle(&m);
+        let mut rng = procedural::SplitMix(11);
+        let rays: Vec<Ray> = (0..3000)
+            .map(|_| {
+                let origin =
+                    Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 6.0 * scale + Vec3::splat(shift);
+                let target =
+                    Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 2.0 * scale + Vec3::splat(shift);
+                Ray::new(origin, target - origin)
+            })
+            .collect();
+        all_agree(&format!("shift {shift:e} scale {scale:e}"), &s, &o, &rays);
+    }
+}
+
+/// Collinear triangles, repeated vertices, slivers, stacks of coplanar copies, a
+/// triangle lying exactly in cell faces and one spanning the whole root: degenerate
+/// ones must be skipped, ties must resolve to a triangle at the right distance.
+#[test]
+fn degenerate_and_awkward_triangles() {
+    let mut m = procedural::sphere([0.5, 0.5, 0.5], 0.3, 12, 16);
+    m.triangles.push([[0.0, 0.0, 0.0], [0.5, 0.5, 0.5], [1.0, 1.0, 1.0]]); // collinear
+    m.triangles.push([[0.2, 0.3, 0.4], [0.2, 0.3, 0.4], [0.9, 0.1, 0.2]]); // repeated vertex
+    m.triangles.push([[0.0, 0.1, 0.9], [1.0, 0.1000001, 0.9], [0.5, 0.1, 0.9000001]]); // sliver
+    for _ in 0..4 {
+        m.triangles.push([[0.1, 0.8, 0.1], [0.9, 0.8, 0.1], [0.1, 0.8, 0.9]]); // coplanar stack
+    }
+    m.triangles.push([[0.5, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, 0.0, 1.0]]); // in the cell faces x = 0.5
+    m.triangles.push([[-0.1, -0.1, 0.25], [2.0, -0.1, 0.25], [-0.1, 2.0, 0.25]]); // spans the root
+    let s = scene(&m, Some(6), 2);
+    assert_eq!(s.view().stats.degenerate_triangles, 2);
+    let o = oracle(&m);
+    let mut rng = procedural::SplitMix(3);
+    let rays: Vec<Ray> = (0..20_000)
+        .map(|_| {
+            let origin = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 3.0 - 1.0;
+            let target = Vec3::new(rng.unit(), rng.unit(), rng.unit());
+            Ray::new(origin, target - origin)
+        })
+        .collect();
+    all_agree("awkward triangles", &s, &o, &rays);
+}
+
+/// A ray spawned from a hit must not hit its own triangle again at the origin: the
+/// hit point is off by its rounding error, and the offset (`runtime::spawn`) must cover
+/// it on every mesh, in every direction leaving the surface.
+#[test]
+fn secondary_rays_do_not_hit_their_own_surface() {
+    for (name, mesh) in [("blob", blob()), ("bunny", octrace_tests::bunny_mesh().clone())] {
+        let s = scene(&mesh, None, 8);
+        let view = s.view();
+        let b = view.bounds;
+        let c = (Vec3::from(b.mesh_lo) + Vec3::from(b.mesh_hi)) * 0.5;
+        let r = (Vec3::from(b.mesh_hi) - Vec3::from(b.mesh_lo)).length();
+        let mut rng = procedural::SplitMix(5);
+        let mut self_hits = 0;
+        let mut spawned = 0;
+        for _ in 0..20_000 {
+            let dir = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).normalize();
+            let Some(hit) = s.intersect(&Ray::new(c - dir * 2.0 * r, dir)) else { continue };
+            let tri = view.triangle(hit.prim);
+            let n =
+                (Vec3::from(tri[1]) - Vec3::from(tri[0])).cross(Vec3::from(tri[2]) - Vec3::from(tri[0])).normalize();
+            let n = if n.dot(dir) > 0.0 { -n } else { n };
+            // Reflection, and a random direction into the outer hemisphere.
+            let mut out = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+            if out.dot(n) < 0.0 {
+                out = -out;
+            }
+            for d in [dir - 2.0 * dir.dot(n) * n, out] {
+                let ray = octrace_runtime::spawn::spawn(&tri, &hit, d, f32::INFINITY);
+                spawned += 1;
+                if s.intersect(&ray).is_some_and(|h| h.prim == hit.prim) {
+                    self_hits += 1;
+                }
+            }
+        }
+        assert!(spawned > 10_000, "{name}: {spawned}");
+        assert_eq!(self_hits, 0, "{name}: {self_hits} of {spawned} secondary rays hit their own triangle");
+    }
+}
+
+/// NaN and infinite components, `tmin > tmax`, NaN bounds and a zero direction have
+/// no meaningful hit: each is a defined miss, in every call, without a panic or a hang.
+#[test]
+fn nan_inf_inverted_and_zero_rays_are_defined_misses() {
+    let s = scene(&test_scene(), None, 4);
+    let nan = f32::NAN;
+    let inf = f32::INFINITY;
+    let bad = [
+        Ray::new(Vec3::new(nan, 0.0, 0.0), Vec3::Z),
+        Ray::new(Vec3::ZERO, Vec3::new(0.0, nan, 1.0)),
+        Ray::new(Vec3::new(inf, 0.0, 0.0), -Vec3::X),
+        Ray::new(Vec3::ZERO, Vec3::new(inf, 0.0, 0.0)),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::ZERO),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, 0.0, -0.0)),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 3.0, 2.0),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, nan, 10.0),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, nan),
+    ];
+    let t = s.tracer();
+    for r in &bad {
+        assert_eq!(t.intersect(r), None, "{r:?}");
+        assert!(!t.occluded(r), "{r:?}");
+    }
+    assert!(s.intersect_all(&bad).iter().all(Option::is_none));
+    assert!(s.occluded_all(&bad).iter().all(|o| !o));
+    // A huge but finite tmax and a ray that only starts beyond the scene are fine too.
+    assert!(t.intersect(&Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, f32::MAX)).is_some());
+    assert!(t.intersect(&Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 100.0, inf)).is_none());
+}
+
+/// Termination: a walk visits at most `Tracer::max_steps` leaves (9 * 2^depth + 64,
+/// see `runtime/src/cpu/traverse.rs`); debug builds assert it, release builds stop
+/// there. Long walks through the deepest trees stay well inside the bound.
+#[test]
+fn walks_stay_within_the_proven_step_bound() {
+    for depth in [1, 4, 8, 10] {
+        let mesh = procedural::soup(8, 3000, 10.0, 0.05);
+        let s = scene(&mesh, Some(depth), 1);
+        let t = s.tracer();
+        let bound = t.max_steps();
+        let mut rng = procedural::SplitMix(depth as u64);
+        let mut most = 0;
+        for _ in 0..5000 {
+            let o = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 10.0;
+            let d = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+            // Misses walk the whole root: the longest walks.
+            let (_, stats) = t.intersect_with_stats(&Ray::segment(o, d, 0.0, f32::INFINITY));
+            most = most.max(stats.leaves);
+        }
+        assert!(most <= bound, "depth {depth}: {most} steps > bound {bound}");
+        assert!(most > 0);
+    }
+}
