@@ -44,6 +44,10 @@ enum Command {
     Rays(cmd::rays::Args),
     /// Render a baked scene to PNG.
     Render(cmd::render::Args),
+    /// Check a file's invariants and compare the tracer with the f64 oracle.
+    Verify(cmd::verify::Args),
+    /// Count rays leaking out of closed meshes (every one should hit).
+    Soak(cmd::soak::Args),
     /// Measure Mrays/s on the standard ray sets (shared/bench/RAYS.md), against obvhs.
     Bench(cmd::bench::Args),
     /// Bake the bunny this build carries, inspect it, render demo.png, measure it.
@@ -59,6 +63,8 @@ fn main() -> ExitCode {
         Command::Rays(a) => cmd::rays::run(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Verify(a) => cmd::verify::run(a),
+        Command::Soak(a) => cmd::soak::run(a),
         Command::Demo(a) => cmd::demo::run(a),
     };
     match result {

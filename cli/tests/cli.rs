@@ -147,3 +147,32 @@ fn render_writes_a_png_of_the_requested_size() {
     let out = octrace(dir.path(), &["render", "cube.oct", "-o", "c.png", "--eye", "1,2"]);
     assert!(!out.status.success());
 }
+
+#[test]
+fn verify_checks_a_file_against_the_oracle() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    let out = ok(dir.path(), &["verify", "cube.oct", "--rays", "3000"]);
+    assert!(out.contains("every invariant") && out.contains(" 0 mismatches"), "{out}");
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(dir.path(), &["verify", "cube.oct", "--rays", "500", "--json"])).unwrap();
+    assert_eq!(json["rays"], 500);
+    assert_eq!(json["mismatches"].as_array().unwrap().len(), 0);
+    // A corrupt file fails the invariants.
+    let mut bytes = std::fs::read(dir.path().join("cube.oct")).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at] ^= 1;
+    std::fs::write(dir.path().join("bad.oct"), bytes).unwrap();
+    assert!(!octrace(dir.path(), &["verify", "bad.oct"]).status.success());
+}
+
+#[test]
+fn soak_counts_no_leaks_with_the_watertight_test() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ok(dir.path(), &["soak", "--rays", "20000"]);
+    for mesh in ["sphere", "torus", "box", "blob"] {
+        let line = out.lines().find(|l| l.starts_with(mesh)).unwrap_or_else(|| panic!("{out}"));
+        assert!(line.contains(" 0 leaks"), "{line}");
+    }
+}

@@ -107,3 +107,48 @@ pub fn intersect_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<(f64, f64, f6
     }
     Some((e2.dot(q) / det, u, v))
 }
+
+/// How an answer compares with the oracle's, for one ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Agreement {
+    /// The same triangle, or a triangle at the same distance (within `1e-5 t`: two
+    /// triangles tie there), or both miss.
+    Same,
+    /// Different, but within rounding: the ray starts on a triangle (a hit at distance
+    /// zero is not counted by the tracer, as in pbrt), or the hit lies within `1e-5` of
+    /// a triangle's boundary in barycentric terms (the `f64` oracle is not watertight
+    /// there, and a ray grazing an edge may be in or out by an ulp).
+    Tie,
+    /// A wrong answer.
+    Different,
+}
+
+impl Reference {
+    /// Compares a tracer's nearest hit `got` (distance, input triangle id, and
+    /// barycentrics `u`, `v`) for `ray` with the oracle's; see [`Agreement`].
+    pub fn compare(&self, ray: &Ray, got: Option<(f32, u32, f32, f32)>) -> Agreement {
+        let want = self.intersect(ray);
+        let same = |want: Option<ReferenceHit>| match (got, want) {
+            (None, None) => true,
+            (Some((t, id, _, _)), Some(w)) => id == w.triangle || (t as f64 - w.t).abs() <= 1e-5 * w.t.abs().max(1e-30),
+            _ => false,
+        };
+        if same(want) {
+            return Agreement::Same;
+        }
+        // Distances below a few f32 spacings of the origin's coordinates are zero.
+        let delta = 8.0 * f32::EPSILON * ray.origin.abs().max_element().max(1e-30) / ray.dir.length();
+        let near_zero = want.is_some_and(|w| w.t.abs() <= delta as f64);
+        if near_zero {
+            let later = Ray { tmin: delta, ..*ray };
+            if got.is_some_and(|g| g.0 <= delta) || same(self.intersect(&later)) {
+                return Agreement::Tie;
+            }
+        }
+        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= 1e-5;
+        if got.is_some_and(|g| on_edge(g.2 as f64, g.3 as f64)) || want.is_some_and(|w| on_edge(w.u, w.v)) {
+            return Agreement::Tie;
+        }
+        Agreement::Different
+    }
+}

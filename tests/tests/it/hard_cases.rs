@@ -4,8 +4,8 @@
 
 use glam::Vec3;
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
-use octrace_runtime::reference::Reference;
-use octrace_runtime::{Hit, Ray, Scene};
+use octrace_runtime::reference::{Agreement, Reference};
+use octrace_runtime::{Ray, Scene};
 
 fn scene(mesh: &Mesh, depth: Option<u32>, leaf: u32) -> Scene {
     let p = BuildParams { max_depth: depth, leaf_size: Some(leaf), ..BuildParams::auto() };
@@ -16,44 +16,17 @@ fn oracle(mesh: &Mesh) -> Reference {
     Reference::new(mesh.triangles.clone(), (0..mesh.triangles.len() as u32).collect())
 }
 
-/// Same triangle, or the same distance within 1e-5 t (two triangles tie there), or
-/// both miss.
-fn agree(got: Option<Hit>, want: Option<(f64, u32)>) -> bool {
-    match (got, want) {
-        (None, None) => true,
-        (Some(h), Some((t, id))) => h.triangle == id || (h.t as f64 - t).abs() <= 1e-5 * t.abs().max(1e-30),
-        _ => false,
-    }
-}
-
-/// Every ray agrees with the oracle, nearest hit and occlusion.
-///
-/// A ray that starts on a triangle (within the rounding of its coordinates) has a hit
-/// at distance zero that the tracer, like pbrt, does not count: there the oracle's
-/// nearest hit beyond `delta`, a few `f32` spacings of the ray's coordinates, is an
-/// equally right answer.
+/// Every ray agrees with the oracle (see `reference::Agreement`: the same answer, or
+/// a tie within rounding), nearest hit and occlusion.
 fn all_agree(name: &str, scene: &Scene, oracle: &Reference, rays: &[Ray]) {
     let tracer = scene.tracer();
     let mut bad = Vec::new();
     for r in rays {
-        let want = oracle.intersect(r).map(|h| (h.t, h.triangle));
         let got = tracer.intersect(r);
-        let delta = 8.0 * f32::EPSILON * r.origin.abs().max_element().max(1e-30) / r.dir.length();
-        let near_zero = want.is_some_and(|(t, _)| t.abs() <= delta as f64);
-        let beyond = || {
-            let later = Ray { tmin: delta, ..*r };
-            (oracle.intersect(&later).map(|h| (h.t, h.triangle)), oracle.occluded(&later))
-        };
-        let got_near_zero = got.is_some_and(|h| h.t <= delta);
-        // A hit within rounding of a triangle's boundary is a tie: the f64 oracle is not
-        // watertight there, and a ray grazing an edge may be in or out by an ulp.
-        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= 1e-5;
-        let boundary = got.is_some_and(|h| on_edge(h.u as f64, h.v as f64))
-            || oracle.intersect(r).is_some_and(|h| on_edge(h.u, h.v));
-        let nearest_ok = agree(got, want) || boundary || (near_zero && (got_near_zero || agree(got, beyond().0)));
-        let occluded_ok = tracer.occluded(r) == oracle.occluded(r) || near_zero || boundary;
-        if !nearest_ok || !occluded_ok {
-            bad.push(format!("{r:?}: octree {got:?}, oracle {want:?}"));
+        let verdict = oracle.compare(r, got.map(|h| (h.t, h.triangle, h.u, h.v)));
+        let occlusion_differs = tracer.occluded(r) != oracle.occluded(r);
+        if verdict == Agreement::Different || (occlusion_differs && verdict == Agreement::Same) {
+            bad.push(format!("{r:?}: octree {got:?}, oracle {:?}", oracle.intersect(r)));
         }
     }
     assert!(bad.is_empty(), "{name}: {} of {} rays disagree; first: {}", bad.len(), rays.len(), bad[0]);
@@ -175,79 +148,26 @@ fn origins_on_cell_faces_and_on_the_root_boundary() {
 
 /// Rays from inside a closed mesh must hit it: a walk that skips a leaf, or a triangle
 /// test that lets a ray slip through a shared edge, leaks. Rays aimed exactly at
-/// vertices and edge midpoints are where edges and leaf boundaries tie.
-fn assert_no_leaks(
-    name: &str,
-    mesh: &Mesh,
-    inside: impl Fn(&mut procedural::SplitMix) -> Vec3,
-    random_rays: usize,
-) -> usize {
-    let s = scene(mesh, None, 8);
-    let mut rng = procedural::SplitMix(7);
-    let mut rays = Vec::with_capacity(random_rays + 4 * mesh.triangles.len());
-    for _ in 0..random_rays {
-        let z = 1.0 - 2.0 * rng.unit();
-        let phi = std::f32::consts::TAU * rng.unit();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        rays.push(Ray::new(inside(&mut rng), Vec3::new(r * phi.cos(), r * phi.sin(), z)));
-    }
-    for t in &mesh.triangles {
-        let [a, b, c] = t.map(Vec3::from);
-        let o = inside(&mut rng);
-        for target in [a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5] {
-            rays.push(Ray::new(o, target - o));
-        }
-    }
-    let hits = s.intersect_all(&rays);
-    let leaks: Vec<&Ray> = rays.iter().zip(&hits).filter(|(_, h)| h.is_none()).map(|(r, _)| r).collect();
-    assert!(leaks.is_empty(), "{name}: {} of {} rays leaked, first {:?}", leaks.len(), rays.len(), leaks[0]);
-    rays.len()
-}
-
-/// See [`assert_no_leaks`]: a million rays a mesh, plus every vertex and edge midpoint.
+/// vertices and edge midpoints are where edges and leaf boundaries tie. A million rays a
+/// mesh, plus every vertex and edge midpoint (`octrace soak` runs more).
 #[test]
 fn closed_meshes_do_not_leak() {
-    let n = 1_000_000;
-    let sphere = procedural::sphere([0.1, -0.2, 0.3], 1.0, 48, 64);
-    let count = assert_no_leaks(
-        "sphere",
-        &sphere,
-        |r| Vec3::new(0.1, -0.2, 0.3) + (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * 1.0,
-        n,
-    );
-    assert!(count >= n);
-    let torus = procedural::torus([0.0; 3], 1.0, 0.3, 64, 32);
-    assert_no_leaks(
-        "torus",
-        &torus,
-        |r| {
-            let a = std::f32::consts::TAU * r.unit();
-            Vec3::new(a.cos(), 0.0, a.sin()) * (1.0 + 0.2 * (r.unit() - 0.5)) + Vec3::Y * 0.2 * (r.unit() - 0.5)
-        },
-        n,
-    );
-    let cube = procedural::cube([-1.0, -0.5, -2.0], [1.0, 0.5, 2.0], 8);
-    assert_no_leaks(
-        "box",
-        &cube,
-        |r| Vec3::new(r.unit() * 1.9 - 0.95, r.unit() * 0.9 - 0.45, r.unit() * 3.9 - 1.95),
-        n,
-    );
-    let blob = blob();
-    assert_no_leaks("blob", &blob, |r| (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * 0.8, n);
-}
-
-/// A closed, bumpy, bunny-like blob: a sphere displaced radially by smooth waves.
-fn blob() -> Mesh {
-    let mut m = procedural::sphere([0.0; 3], 1.0, 64, 96);
-    for t in &mut m.triangles {
-        for v in t.iter_mut() {
-            let p = Vec3::from(*v);
-            let bump = 1.0 + 0.25 * (3.0 * p.x).sin() * (2.0 * p.y).cos() + 0.1 * (7.0 * p.z).sin();
-            *v = (p * bump).to_array();
-        }
+    for solid in procedural::closed_solids() {
+        let s = scene(&solid.mesh, None, 8);
+        let rays: Vec<Ray> =
+            solid.leak_rays(1_000_000, 7).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect();
+        let hits = s.intersect_all(&rays);
+        let leaks: Vec<&Ray> = rays.iter().zip(&hits).filter(|(_, h)| h.is_none()).map(|(r, _)| r).collect();
+        assert!(
+            leaks.is_empty(),
+            "{}: {} of {} rays leaked, first {:?}",
+            solid.name,
+            leaks.len(),
+            rays.len(),
+            leaks[0]
+        );
+        assert!(rays.len() >= 1_000_000);
     }
-    m
 }
 
 /// Rays nearly parallel to a triangle, or nearly in a cell face plane: the determinant
@@ -334,7 +254,7 @@ fn degenerate_and_awkward_triangles() {
 /// it on every mesh, in every direction leaving the surface.
 #[test]
 fn secondary_rays_do_not_hit_their_own_surface() {
-    for (name, mesh) in [("blob", blob()), ("bunny", octrace_tests::bunny_mesh().clone())] {
+    for (name, mesh) in [("blob", procedural::blob(64, 96)), ("bunny", octrace_tests::bunny_mesh().clone())] {
         let s = scene(&mesh, None, 8);
         let view = s.view();
         let b = view.bounds;
@@ -419,5 +339,39 @@ fn walks_stay_within_the_proven_step_bound() {
         }
         assert!(most <= bound, "depth {depth}: {most} steps > bound {bound}");
         assert!(most > 0);
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 40, ..Default::default() })]
+
+    /// Random soups at random scales (1e-4 .. 1e6) and offsets (up to 1e7, either
+    /// sign), random rays from inside and outside: the octree agrees with the oracle.
+    #[test]
+    fn random_scenes_at_every_magnitude_agree_with_the_oracle(
+        seed in proptest::prelude::any::<u64>(),
+        scale_exp in -4.0f32..6.0,
+        offset_exp in 0.0f32..7.0,
+        offset_sign in proptest::prelude::any::<bool>(),
+        n in 1usize..300,
+        leaf in 1u32..10,
+    ) {
+        let scale = 10f32.powf(scale_exp);
+        let offset = if offset_sign { -1.0 } else { 1.0 } * 10f32.powf(offset_exp);
+        let mut m = procedural::soup(seed, n, 4.0, 1.0);
+        for v in m.triangles.iter_mut().flatten() {
+            *v = v.map(|c| c * scale + offset);
+        }
+        let s = scene(&m, None, leaf);
+        let o = oracle(&m);
+        let mut rng = procedural::SplitMix(seed ^ 0x5EED);
+        let rays: Vec<Ray> = (0..200)
+            .map(|_| {
+                let from = (Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 8.0 - 2.0) * scale + Vec3::splat(offset);
+                let to = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 4.0 * scale + Vec3::splat(offset);
+                Ray::new(from, to - from)
+            })
+            .collect();
+        all_agree(&format!("seed {seed} scale {scale:e} offset {offset:e}"), &s, &o, &rays);
     }
 }
