@@ -123,6 +123,15 @@ pub enum Agreement {
     Different,
 }
 
+/// Two hits this close in distance (relative) are a tie between triangles.
+pub const TIE_RELATIVE_T: f64 = 1e-5;
+/// A hit this close to a triangle's boundary (smallest barycentric coordinate) is on
+/// its edge, within the rounding of an `f32` test.
+pub const EDGE_BARYCENTRIC: f64 = 1e-5;
+/// Distances below this many `f32` spacings of the origin's largest coordinate are
+/// zero: the origin lies on the triangle within rounding.
+pub const ZERO_T_SPACINGS: f32 = 8.0;
+
 impl Reference {
     /// Compares a tracer's nearest hit `got` (distance, input triangle id, and
     /// barycentrics `u`, `v`) for `ray` with the oracle's; see [`Agreement`].
@@ -130,14 +139,16 @@ impl Reference {
         let want = self.intersect(ray);
         let same = |want: Option<ReferenceHit>| match (got, want) {
             (None, None) => true,
-            (Some((t, id, _, _)), Some(w)) => id == w.triangle || (t as f64 - w.t).abs() <= 1e-5 * w.t.abs().max(1e-30),
+            (Some((t, id, _, _)), Some(w)) => {
+                id == w.triangle || (t as f64 - w.t).abs() <= TIE_RELATIVE_T * w.t.abs().max(1e-30)
+            }
             _ => false,
         };
         if same(want) {
             return Agreement::Same;
         }
         // Distances below a few f32 spacings of the origin's coordinates are zero.
-        let delta = 8.0 * f32::EPSILON * ray.origin.abs().max_element().max(1e-30) / ray.dir.length();
+        let delta = ZERO_T_SPACINGS * f32::EPSILON * ray.origin.abs().max_element().max(1e-30) / ray.dir.length();
         let near_zero = want.is_some_and(|w| w.t.abs() <= delta as f64);
         if near_zero {
             let later = Ray { tmin: delta, ..*ray };
@@ -145,7 +156,7 @@ impl Reference {
                 return Agreement::Tie;
             }
         }
-        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= 1e-5;
+        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= EDGE_BARYCENTRIC;
         if got.is_some_and(|g| on_edge(g.2 as f64, g.3 as f64)) || want.is_some_and(|w| on_edge(w.u, w.v)) {
             return Agreement::Tie;
         }

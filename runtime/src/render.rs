@@ -81,18 +81,13 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
     let tracer = scene.tracer();
     let view = scene.view();
     let (w, h) = (camera.width, camera.height);
-    // Input triangle id -> stored triangle, for normals.
-    let mut stored = vec![u32::MAX; view.stats.input_triangles as usize];
-    for (i, &id) in view.triangle_ids.iter().enumerate() {
-        stored[id as usize] = i as u32;
-    }
     let pixels: Vec<(Option<Vec3>, Vec3, u32, u32)> = (0..w * h)
         .into_par_iter()
         .map(|i| {
             let ray = camera.ray(i % w, i / w);
             let (hit, stats) = tracer.intersect_with_stats(&ray);
             let normal = hit.map(|hit| {
-                let t = view.triangle(stored[hit.triangle as usize]).map(Vec3::from);
+                let t = view.triangle(hit.prim).map(Vec3::from);
                 let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
                 if n.dot(ray.dir) > 0.0 {
                     -n

@@ -11,6 +11,13 @@ pub const DEFAULT_LEAF_SIZE: u32 = 16;
 /// 2^-20 of the root edge is about eight `f32` ulps of a coordinate the size of the
 /// scene, well above the rounding of an entry point, and far below the finest cell
 /// (2^-11 of the root at the dragon's depth).
+///
+/// Measured (`cargo run --release -p octrace-runtime --example margin_sweep`): from 0 to
+/// 2^-16 no margin changed anything observable (0 leaks in 2.1 million rays from inside
+/// closed meshes, 0 oracle mismatches in 42,500 rays through cell corners, along cell
+/// edges and at random), because the walk computes every plane exactly; 2^-20 costs
+/// 0.07 % more triangle references and no measurable speed, and is kept as insurance
+/// for entry points rounded into a neighbouring cell.
 pub const DEFAULT_MARGIN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Deepest level the automatic formula picks.

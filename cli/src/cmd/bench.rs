@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use octrace_runtime::raysets::{self, Frame};
-use octrace_runtime::{Hit, Ray, Scene, Tracer};
+use octrace_runtime::{Hit, Ray, Scene, Tracer, TriangleTest};
 use serde_json::json;
 
 use crate::output::{mb, thousands};
@@ -32,6 +32,10 @@ pub(crate) struct Args {
     /// Skip the obvhs comparison.
     #[arg(long)]
     pub no_peer: bool,
+    /// Trace with the Möller-Trumbore triangle test instead of the watertight one
+    /// (to measure what watertightness costs).
+    #[arg(long)]
+    pub moller_trumbore: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -110,7 +114,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let loaded = load(&args.input)?;
     let view = loaded.scene.view();
     let frame = Frame::from_bounds(view.bounds.mesh_lo, view.bounds.mesh_hi);
-    let tracer = loaded.scene.tracer();
+    let test = if args.moller_trumbore { TriangleTest::MollerTrumbore } else { TriangleTest::Watertight };
+    let tracer = loaded.scene.tracer().with_triangle_test(test);
     let threads = crate::with_threads(args.threads, rayon::current_num_threads)?;
     #[cfg(feature = "obvhs")]
     let peer = (!args.no_peer).then(|| peer::Peer::build(&view));
@@ -129,8 +134,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if want(SetChoice::Shadow) {
         let mut hits = vec![None; primary.len()];
         tracer.intersect_batch(&primary, &mut hits);
-        let stored = stored_index(&view);
-        let rays = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(stored[h.triangle as usize]))));
+        let rays = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))));
         results.push(measure("shadow", &rays, true, &tracer, peer.as_ref(), &args)?);
     }
     #[cfg(feature = "obvhs")]
@@ -138,15 +142,6 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(not(feature = "obvhs"))]
     let peer_build: Option<Duration> = None;
     report(&args, &loaded, threads, &results, peer_build)
-}
-
-/// Input triangle id -> index in the stored triangle array.
-fn stored_index(view: &octrace_format::SceneView<'_>) -> Vec<u32> {
-    let mut stored = vec![u32::MAX; view.stats.input_triangles as usize];
-    for (i, &id) in view.triangle_ids.iter().enumerate() {
-        stored[id as usize] = i as u32;
-    }
-    stored
 }
 
 #[cfg(feature = "obvhs")]
@@ -236,6 +231,7 @@ fn report(
             "{}",
             serde_json::to_string_pretty(&json!({
                 "input": crate::show(&args.input), "threads": threads, "runs": args.runs,
+                "triangle_test": if args.moller_trumbore { "moller-trumbore" } else { "watertight" },
                 "bake_s": l.bake.map(secs), "open_validated_s": secs(l.open_validated),
                 "open_trusted_s": secs(l.open_trusted), "bytes": l.bytes,
                 "obvhs_build_s": peer_build.map(secs), "sets": sets,
@@ -244,12 +240,13 @@ fn report(
         return Ok(());
     }
     crate::out!(
-        "{}: {}{}, open {:.1} ms validated / {:.3} ms header only; {} threads, median (min-max) of {} runs",
+        "{}: {}{}, open {:.1} ms validated / {:.3} ms header only; {} triangle test; {} threads, median (min-max) of {} runs",
         crate::show(&args.input),
         mb(l.bytes),
         l.bake.map_or(String::new(), |b| format!(", baked in {:.2} s", b.as_secs_f64())),
         l.open_validated.as_secs_f64() * 1e3,
         l.open_trusted.as_secs_f64() * 1e3,
+        if args.moller_trumbore { "Möller-Trumbore" } else { "watertight" },
         threads,
         args.runs
     );

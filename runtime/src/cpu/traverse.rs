@@ -9,6 +9,19 @@
 //!   found by descending the point-location tree; rays from outside enter through the
 //!   cube map, which holds a leaf or the node to descend from;
 //! * a walk is bounded by [`Tracer::max_steps`] whatever the file holds.
+//!
+//! # Termination
+//! In exact arithmetic each leaf the walk visits either holds a piece of the ray of
+//! positive length, and these pieces follow each other along the ray, or is crossed
+//! at a single point where the ray passes through an edge or a corner. A line meets at
+//! most `3 * 2^depth + 1` cells of the finest grid, so at most that many leaves hold a
+//! piece of positive length; between two of them the ray passes at most one corner,
+//! where at most two leaves (of the up to eight around it) are crossed at a point. So a
+//! walk visits at most `3 * (3 * 2^depth + 1)` leaves; [`Tracer::max_steps`] adds a
+//! margin for rounding (`9 * 2^depth + 64`). The loop stops there in every build, so no
+//! file, trusted or not, makes a walk loop forever; debug builds assert that no walk
+//! ever reaches the bound (the hard-case suite and the soak check it on millions of
+//! rays).
 
 use octrace_format::layout::{links_before, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 use octrace_format::SceneView;

@@ -71,9 +71,8 @@ fn incoherent_agrees_with_the_oracle_and_the_published_checksum() {
 fn shadow_agrees_with_the_oracle_and_the_published_checksum() {
     let f = frame();
     let scene = bunny_scene();
-    let mesh = bunny_mesh();
     let hits = scene.intersect_all(&raysets::primary(&f));
-    let rays = raysets::shadow(&f, |i| hits[i].map(|h| (h.t, mesh.triangles[h.triangle as usize])));
+    let rays = raysets::shadow(&f, |i| hits[i].map(|h| (h.t, scene.view().triangle(h.prim))));
     let oracle = oracle();
     for r in rays.iter().step_by(211) {
         assert_eq!(scene.occluded(r), oracle.occluded(r), "shadow ray {r:?}");

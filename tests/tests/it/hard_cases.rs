@@ -375,3 +375,37 @@ proptest::proptest! {
         all_agree(&format!("seed {seed} scale {scale:e} offset {offset:e}"), &s, &o, &rays);
     }
 }
+
+/// Regression, found by the cell-edge rays: a ray running along a cell edge with two
+/// `-0.0` direction components lay in the exit plane of both axes it does not move
+/// along; every Plücker product was zero and the walk stepped sideways along x until it
+/// left the scene.
+#[test]
+fn regression_ray_along_a_cell_edge_with_negative_zero_components() {
+    let s = scene(&test_scene(), Some(3), 1);
+    let o = oracle(&test_scene());
+    let r = Ray::new(Vec3::new(-0.5, -0.75, 4.0), Vec3::new(-0.0, -0.0, -1.0));
+    let want = o.intersect(&r).expect("the oracle hits");
+    let got = s.intersect(&r).expect("the octree hits too");
+    assert!((got.t as f64 - want.t).abs() <= 1e-5 * want.t, "{got:?} vs {want:?}");
+}
+
+/// Regression, found by the far-and-wide case: at 1e6 a depth-7 bake of a unit-sized
+/// scene had cells of 0.03 where f32 spacing is 0.0625; their planes rounded together
+/// into zero-width boxes and this ray (d_y = 0) walked past its triangle.
+#[test]
+fn regression_zero_width_cells_far_from_the_origin() {
+    let mut m = test_scene();
+    for v in m.triangles.iter_mut().flatten() {
+        *v = v.map(|c| c + 1e6);
+    }
+    let s = scene(&m, None, 4);
+    assert!(
+        s.view().params.max_depth
+            <= octrace_bake::octree::precision_depth(s.view().bounds.root_lo, s.view().bounds.root_size)
+    );
+    let r = Ray::new(Vec3::new(999997.5, 1000000.06, 999997.7), Vec3::new(2.3125, 0.0, 3.25));
+    let want = oracle(&m).intersect(&r).expect("the oracle hits triangle 706");
+    assert_eq!(want.triangle, 706);
+    assert!(s.intersect(&r).is_some(), "the octree misses the triangle the oracle hits");
+}
