@@ -92,6 +92,14 @@ pub(crate) struct RayWalk {
     steps: u32,
 }
 
+/// The parts of a walk's state that [`Tracer::visit_leaf`] updates.
+pub(crate) struct LeafVisit<'w> {
+    pub steps: &'w mut u32,
+    pub tmin: f32,
+    pub t_best: &'w mut f32,
+    pub best: &'w mut Option<Hit>,
+}
+
 #[allow(dead_code)] // some accessors serve only the SIMD steps
 impl RayWalk {
     pub(crate) fn o(&self) -> [f32; 3] {
@@ -288,35 +296,58 @@ impl<'a> Tracer<'a> {
         })
     }
 
+    /// The start of every step, scalar or SIMD: counts it against the bound, reads
+    /// the leaf record at `address` and tests the leaf's triangles with `test`, keeping
+    /// the nearest hit in `[tmin, t_best]`. Returns the record's box index and `nCount`,
+    /// or `None` when the walk is over (the step bound, or any hit for `ANY`).
+    #[inline(always)]
+    pub(crate) fn visit_leaf<const ANY: bool>(
+        &self,
+        address: u32,
+        walk: &mut LeafVisit<'_>,
+        stats: &mut WalkStats,
+        test: impl Fn(&[f32], f32, f32) -> Option<(f32, f32, f32)>,
+    ) -> Option<(u32, u32)> {
+        let v = &self.view;
+        stats.leaves += 1;
+        *walk.steps += 1;
+        if *walk.steps > self.max_steps {
+            debug_assert!(false, "walk exceeded {} steps", self.max_steps);
+            return None;
+        }
+        let a = address as usize;
+        let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
+        let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
+        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
+        stats.triangle_tests += count;
+        for &tri in refs {
+            let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+            if let Some((t, u, vv)) = test(data, walk.tmin, *walk.t_best) {
+                *walk.t_best = t;
+                *walk.best =
+                    Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
+                if ANY {
+                    return None;
+                }
+            }
+        }
+        Some((box_index, ncount))
+    }
+
     /// Visits the walk's current leaf and moves to the next; returns whether the walk
     /// is over (its answer is then in `w.best`).
     #[inline(always)]
     pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut WalkStats) -> bool {
         let v = &self.view;
         let lo = self.root_lo;
-        stats.leaves += 1;
-        w.steps += 1;
-        if w.steps > self.max_steps {
-            debug_assert!(false, "walk exceeded {} steps: {w:?}", self.max_steps);
-            return true;
-        }
         let a = w.address as usize;
-        let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
-        let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
-        stats.triangle_tests += count;
-        let tri_ray = TriRay { o: w.o, d: w.d };
-        for &tri in refs {
-            let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-            if let Some((t, u, vv)) = self.hit_triangle(&w.shear, &tri_ray, data, w.tmin, w.t_best) {
-                w.t_best = t;
-                w.best = Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
-                if ANY {
-                    return true;
-                }
-            }
-        }
+        let (shear, tri_ray) = (w.shear, TriRay { o: w.o, d: w.d });
+        let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
+        let test = |t: &[f32], tmin: f32, tmax: f32| self.hit_triangle(&shear, &tri_ray, t, tmin, tmax);
+        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut visit, stats, test) else {
+            return true;
+        };
         // 2. The exit corner from the cell (the same bits as the stored box: an
         //    integer times a power of two is exact, and one rounding follows), then
         //    the exit face from the signs of three Plücker products.

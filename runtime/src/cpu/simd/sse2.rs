@@ -4,9 +4,9 @@
 
 use std::arch::x86_64::*;
 
-use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
-use crate::cpu::traverse::{exit_along_moving_axes, RayWalk, Tracer, TriangleTest, WalkStats};
+use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer, TriangleTest, WalkStats};
 use crate::cpu::watertight::Shear;
 use crate::ray::Hit;
 
@@ -137,32 +137,20 @@ fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
 #[inline]
 pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut WalkStats) -> bool {
     let v = t.view();
-    stats.leaves += 1;
-    w.steps += 1;
-    if w.steps > t.max_steps() {
-        debug_assert!(false, "walk exceeded {} steps", t.max_steps());
-        return true;
-    }
     let a = w.address as usize;
-    let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
-    let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
     // 1. Triangles.
-    let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
-    stats.triangle_tests += count;
-    for &tri in refs {
-        let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-        let hit = match t.triangle_test() {
-            TriangleTest::Watertight => w.shear.intersect(data, w.tmin, w.t_best),
-            TriangleTest::MollerTrumbore => intersect_sse(w.o, w.d, data, w.tmin, w.t_best),
-        };
-        if let Some((th, u, vv)) = hit {
-            w.t_best = th;
-            w.best = Some(Hit { t: th, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
-            if ANY {
-                return true;
-            }
+    let (shear, o, d, watertight) = (w.shear, w.o, w.d, t.triangle_test() == TriangleTest::Watertight);
+    let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
+    let test = |tri: &[f32], tmin: f32, tmax: f32| {
+        if watertight {
+            shear.intersect(tri, tmin, tmax)
+        } else {
+            intersect_sse(o, d, tri, tmin, tmax)
         }
-    }
+    };
+    let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, test) else {
+        return true;
+    };
     // 2. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
     let size = _mm_set1_ps(t.cell_size(w.level));
     let lo = w.lo;
