@@ -409,3 +409,17 @@ fn regression_zero_width_cells_far_from_the_origin() {
     assert_eq!(want.triangle, 706);
     assert!(s.intersect(&r).is_some(), "the octree misses the triangle the oracle hits");
 }
+
+/// Regression, found by the cell-edge rays: the procedural sphere computed each pole
+/// once per slice from `sin(pi) != 0`, leaving slits 1e-16 wide around the axis; a ray
+/// along the axis went through. The poles are now one exact point each, and the mesh
+/// is closed.
+#[test]
+fn regression_sphere_poles_are_closed() {
+    let mesh = procedural::sphere([0.0; 3], 1.0, 24, 32);
+    let s = scene(&mesh, Some(5), 1);
+    for (o, d) in [(Vec3::new(0.0, -4.0, 0.0), Vec3::Y), (Vec3::new(0.0, 4.0, 0.0), -Vec3::Y), (Vec3::ZERO, Vec3::Y)] {
+        let hit = s.intersect(&Ray::new(o, d)).unwrap_or_else(|| panic!("a ray along the axis from {o} passed a pole"));
+        assert!((hit.t - if o == Vec3::ZERO { 1.0 } else { 3.0 }).abs() < 1e-6, "{hit:?}");
+    }
+}
