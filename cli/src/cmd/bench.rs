@@ -193,7 +193,8 @@ fn measure(
     let (n, sum_t) = if occlusion {
         (occluded.iter().filter(|&&o| o).count(), 0.0)
     } else {
-        (hits.iter().flatten().count(), hits.iter().flatten().map(|h| h.t as f64).sum())
+        // `+ 0.0`: an empty sum is -0.0.
+        (hits.iter().flatten().count(), hits.iter().flatten().map(|h| h.t as f64).sum::<f64>() + 0.0)
     };
     Ok(SetResult {
         name,
@@ -223,7 +224,7 @@ fn report(
                     "mrays_single": r.single, "mrays_all_threads": r.all,
                     "hits": r.hits, "sum_t": r.sum_t,
                     "obvhs_cwbvh_single": r.peer.map(|p| json!({ "mrays": p.0, "hits": p.1, "sum_t": p.2 })),
-                    "ratio_single": r.peer.map(|p| r.single.median / p.0.median),
+                    "ratio_single": r.peer.filter(|_| r.rays > 0).map(|p| r.single.median / p.0.median),
                 })
             })
             .collect();
@@ -265,7 +266,10 @@ fn report(
     let fmt = |s: &Spread| format!("{:.2} ({:.2}-{:.2})", s.median, s.min, s.max);
     for r in results {
         let peer = r.peer.map_or("-".into(), |p| fmt(&p.0));
-        let ratio = r.peer.map_or("-".into(), |p| format!("{:.2}x", r.single.median / p.0.median));
+        let ratio = match r.peer {
+            Some(p) if r.rays > 0 => format!("{:.2}x", r.single.median / p.0.median),
+            _ => "-".into(),
+        };
         let check = if r.name == "shadow" {
             format!("{} occluded", thousands(r.hits as u64))
         } else {
