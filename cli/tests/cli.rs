@@ -176,3 +176,21 @@ fn soak_counts_no_leaks_with_the_watertight_test() {
         assert!(line.contains(" 0 leaks"), "{line}");
     }
 }
+
+#[test]
+fn compressed_bakes_open_and_inspect_shows_both_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    let out = ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct.zst", "--compress", "--reproducible"]);
+    assert!(out.contains("zstd:"), "{out}");
+    let text = ok(dir.path(), &["inspect", "cube.oct.zst"]);
+    assert!(text.lines().next().unwrap().contains("zstd-compressed"), "{text}");
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct.zst", "--json"])).unwrap();
+    assert!(json["bytes_on_disk"].as_u64().unwrap() < json["file_bytes"].as_u64().unwrap());
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct", "--reproducible"]);
+    let raw: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct", "--json"])).unwrap();
+    assert_eq!(raw["file_bytes"], json["file_bytes"]);
+    assert_eq!(raw["bytes_on_disk"], raw["file_bytes"]);
+    assert!(ok(dir.path(), &["verify", "cube.oct.zst", "--rays", "300"]).contains(" 0 mismatches"));
+}

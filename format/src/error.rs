@@ -52,6 +52,12 @@ pub enum Error {
         /// The checksum of the bytes read.
         computed: u64,
     },
+    /// The file is a zstd-compressed scene, which can be read but not memory-mapped.
+    #[error("{path}: a zstd-compressed scene cannot be memory-mapped; read it (SceneFile::read) instead")]
+    Compressed {
+        /// The file.
+        path: PathBuf,
+    },
     /// The contents break a rule of the format (an address out of range, a link to a
     /// cell that is not adjacent, ...).
     #[error("corrupt scene: {0}")]

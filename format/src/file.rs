@@ -58,6 +58,9 @@ impl SceneFile {
         let path = path.as_ref();
         let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if is_compressed(&mut file).map_err(|e| Error::io(path, e))? {
+            return Self::read_compressed(file, len, path);
+        }
         let mut head = Vec::with_capacity(HEADER_LEN);
         (&mut file).take(HEADER_LEN as u64).read_to_end(&mut head).map_err(|e| Error::io(path, e))?;
         let header = Header::decode(&head, len)?;
@@ -66,6 +69,50 @@ impl SceneFile {
         let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(payload_len);
         payload.resize(payload_len, 0);
         file.read_exact(&mut payload).map_err(|e| Error::io(path, e))?;
+        Self::validated(Storage::Owned(payload), header)
+    }
+
+    /// Reads a zstd-compressed scene: the header first, then exactly the archive it
+    /// declares, decompressed into aligned memory. A declared archive more than
+    /// [`MAX_COMPRESSION_RATIO`] times the compressed file is refused before anything
+    /// is allocated.
+    fn read_compressed(file: File, compressed_len: u64, path: &Path) -> Result<Self> {
+        let io = |e: std::io::Error| Error::io(path, e);
+        let mut stream = zstd::stream::read::Decoder::new(file).map_err(io)?;
+        let mut head = Vec::with_capacity(HEADER_LEN);
+        (&mut stream).take(HEADER_LEN as u64).read_to_end(&mut head).map_err(io)?;
+        if head.len() < HEADER_LEN {
+            return Err(Error::Truncated { what: "header", needed: HEADER_LEN as u64, available: head.len() as u64 });
+        }
+        let header = Header::decode_stream(&head)?;
+        let bound = compressed_len.saturating_mul(MAX_COMPRESSION_RATIO);
+        if header.payload_len > bound {
+            return Err(Error::corrupt(format!(
+                "the archive declares {} bytes, more than {MAX_COMPRESSION_RATIO} times the compressed file",
+                header.payload_len
+            )));
+        }
+        let payload_len = usize::try_from(header.payload_len)
+            .map_err(|_| Error::corrupt("archive larger than this machine's address space"))?;
+        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(payload_len);
+        payload.resize(payload_len, 0);
+        let mut filled = 0;
+        while filled < payload_len {
+            match stream.read(&mut payload[filled..]).map_err(io)? {
+                0 => break,
+                n => filled += n,
+            }
+        }
+        if filled < payload_len {
+            return Err(Error::Truncated {
+                what: "compressed archive",
+                needed: header.payload_len,
+                available: filled as u64,
+            });
+        }
+        if stream.read(&mut [0u8; 1]).map_err(io)? != 0 {
+            return Err(Error::corrupt("bytes after the archive in the compressed stream"));
+        }
         Self::validated(Storage::Owned(payload), header)
     }
 
@@ -154,8 +201,27 @@ impl SceneFile {
     }
 }
 
+/// The most a compressed scene may expand: its archive's declared length is checked
+/// against this many times the compressed file before memory is allocated for it.
+pub const MAX_COMPRESSION_RATIO: u64 = 1024;
+
+/// The four bytes every zstd frame starts with.
+pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
+
+/// Whether the file starts with a zstd frame (the read position is put back).
+fn is_compressed(file: &mut File) -> std::io::Result<bool> {
+    use std::io::Seek;
+    let mut magic = [0u8; 4];
+    let n = file.read(&mut magic)?;
+    file.seek(std::io::SeekFrom::Start(0))?;
+    Ok(n == 4 && magic == ZSTD_MAGIC)
+}
+
 fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    if is_compressed(&mut file).map_err(|e| Error::io(path, e))? {
+        return Err(Error::Compressed { path: path.into() });
+    }
     // SAFETY: the callers are `unsafe fn`s whose contract forbids changing the file
     // while it is mapped; the map is read-only.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;

@@ -64,6 +64,19 @@ impl Header {
     /// [`Error::Truncated`], [`Error::BadMagic`], [`Error::UnsupportedVersion`],
     /// [`Error::Checksum`] or [`Error::Corrupt`], in that order of checking.
     pub fn decode(bytes: &[u8], file_len: u64) -> Result<Self> {
+        Self::decode_with(bytes, Some(file_len))
+    }
+
+    /// Decodes a header whose file length is not known yet (the start of a
+    /// decompressed stream): every check of [`Header::decode`] but the length ones.
+    ///
+    /// # Errors
+    /// As [`Header::decode`], without [`Error::Truncated`] for the archive.
+    pub fn decode_stream(bytes: &[u8]) -> Result<Self> {
+        Self::decode_with(bytes, None)
+    }
+
+    fn decode_with(bytes: &[u8], file_len: Option<u64>) -> Result<Self> {
         if bytes.len() < 8 || bytes[..8] != MAGIC {
             let mut found = [0u8; 8];
             let n = bytes.len().min(8);
@@ -100,7 +113,7 @@ impl Header {
         Ok(header)
     }
 
-    fn check_fields(&self, bytes: &[u8], file_len: u64) -> Result<()> {
+    fn check_fields(&self, bytes: &[u8], file_len: Option<u64>) -> Result<()> {
         if self.flags & !KNOWN_FLAGS != 0 {
             return Err(Error::corrupt(format!("unknown header flags {:#x}", self.flags)));
         }
@@ -113,6 +126,7 @@ impl Header {
         if u32_at(bytes, 20) as usize != HEADER_LEN || u64_at(bytes, 24) != HEADER_LEN as u64 {
             return Err(Error::corrupt("header length or payload offset is not 64"));
         }
+        let Some(file_len) = file_len else { return Ok(()) };
         let needed = (HEADER_LEN as u64).saturating_add(self.payload_len);
         if needed > file_len {
             return Err(Error::Truncated { what: "archive", needed, available: file_len });

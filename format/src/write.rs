@@ -96,6 +96,27 @@ impl BakedScene {
     }
 }
 
+impl BakedScene {
+    /// Writes the scene zstd-compressed (`level` 1-22; 3 is a good default) to `path`,
+    /// atomically like [`BakedScene::write`]. The stream decompresses to exactly the
+    /// bytes of the uncompressed file. Returns (uncompressed, compressed) sizes.
+    ///
+    /// # Errors
+    /// [`Error::Io`] naming the path.
+    pub fn write_compressed(&self, path: impl AsRef<Path>, bake_time_us: u64, level: i32) -> Result<(u64, u64)> {
+        let path = path.as_ref();
+        let io = |e: std::io::Error| Error::io(path, e);
+        let image = self.to_file_bytes(bake_time_us)?;
+        let mut tmp = temporary_beside(path)?;
+        let mut encoder = zstd::stream::write::Encoder::new(tmp.as_file_mut(), level).map_err(io)?;
+        encoder.write_all(&image).map_err(io)?;
+        encoder.finish().map_err(io)?;
+        let compressed = tmp.as_file().metadata().map_err(io)?.len();
+        finish(tmp, path)?;
+        Ok((image.len() as u64, compressed))
+    }
+}
+
 /// Passes writes through and hashes them.
 struct HashingWriter<W> {
     inner: W,

@@ -69,7 +69,8 @@ pub(crate) struct Loaded {
     pub scene: Scene,
     pub bake: Option<Duration>,
     pub open_validated: Duration,
-    pub open_trusted: Duration,
+    /// None for a compressed file, which is read, never mapped.
+    pub open_trusted: Option<Duration>,
     pub bytes: u64,
     _dir: Option<tempfile::TempDir>,
 }
@@ -90,11 +91,15 @@ pub(crate) fn load(input: &Path) -> anyhow::Result<Loaded> {
     let t = Instant::now();
     let scene = crate::open::open_scene(&path)?;
     let open_validated = t.elapsed();
-    let t = Instant::now();
     // Validated just above: the header-only open is sound, and what apps that trust
-    // their pipeline pay.
-    drop(crate::open::map_scene(&path, crate::open::Trust::HeaderOnly)?);
-    let open_trusted = t.elapsed();
+    // their pipeline pay (compressed files cannot be mapped).
+    let open_trusted = if crate::open::is_compressed(&path)? {
+        None
+    } else {
+        let t = Instant::now();
+        drop(crate::open::map_scene(&path, crate::open::Trust::HeaderOnly)?);
+        Some(t.elapsed())
+    };
     let bytes = std::fs::metadata(&path)?.len();
     Ok(Loaded { scene, bake, open_validated, open_trusted, bytes, _dir: dir })
 }
@@ -234,19 +239,19 @@ fn report(
                 "input": crate::show(&args.input), "threads": threads, "runs": args.runs,
                 "triangle_test": if args.moller_trumbore { "moller-trumbore" } else { "watertight" },
                 "bake_s": l.bake.map(secs), "open_validated_s": secs(l.open_validated),
-                "open_trusted_s": secs(l.open_trusted), "bytes": l.bytes,
+                "open_trusted_s": l.open_trusted.map(secs), "bytes": l.bytes,
                 "obvhs_build_s": peer_build.map(secs), "sets": sets,
             }))?
         );
         return Ok(());
     }
     crate::out!(
-        "{}: {}{}, open {:.1} ms validated / {:.3} ms header only; {} triangle test; {} threads, median (min-max) of {} runs",
+        "{}: {}{}, open {:.1} ms validated / {} header only; {} triangle test; {} threads, median (min-max) of {} runs",
         crate::show(&args.input),
         mb(l.bytes),
         l.bake.map_or(String::new(), |b| format!(", baked in {:.2} s", b.as_secs_f64())),
         l.open_validated.as_secs_f64() * 1e3,
-        l.open_trusted.as_secs_f64() * 1e3,
+        l.open_trusted.map_or("n/a (compressed)".into(), |d| format!("{:.3} ms", d.as_secs_f64() * 1e3)),
         if args.moller_trumbore { "Möller-Trumbore" } else { "watertight" },
         threads,
         args.runs

@@ -35,6 +35,7 @@ pub(crate) struct Report<'a> {
     stats: SceneStatistics,
     version: octrace_format::Version,
     bake_time_us: u64,
+    payload_len: u64,
     file_bytes: u64,
 }
 
@@ -45,12 +46,27 @@ impl<'a> Report<'a> {
             view: view.clone(),
             version: header.version,
             bake_time_us: header.bake_time_us,
+            payload_len: header.payload_len,
             file_bytes,
         })
     }
 
     fn balance_growth(&self) -> f64 {
         100.0 * (self.stats.leaves as f64 / self.view.stats.leaves_before_balance.max(1) as f64 - 1.0)
+    }
+
+    /// Bytes of the uncompressed file (header and archive).
+    fn archive_file_bytes(&self) -> u64 {
+        octrace_format::HEADER_LEN as u64 + self.payload_len
+    }
+
+    /// ", zstd: X on disk" when the file on disk is compressed.
+    fn on_disk(&self) -> String {
+        if self.file_bytes == self.archive_file_bytes() {
+            String::new()
+        } else {
+            format!(" (zstd-compressed: {} on disk)", mb(self.file_bytes))
+        }
     }
 
     fn bake_time(&self) -> String {
@@ -72,7 +88,12 @@ impl<'a> Report<'a> {
             .map(|(level, &n)| format!("{level}:{}", thousands(n)))
             .collect();
         let lines = [
-            format!("{name}: octrace scene, format {}, {}", self.version, mb(self.file_bytes)),
+            format!(
+                "{name}: octrace scene, format {}, {}{}",
+                self.version,
+                mb(self.archive_file_bytes()),
+                self.on_disk()
+            ),
             format!(
                 "triangles          {} stored, {} degenerate left out, {} in the input",
                 thousands(s.triangles),
@@ -124,7 +145,8 @@ impl<'a> Report<'a> {
         let b = &s.bytes;
         json!({
             "format_version": self.version.to_string(),
-            "file_bytes": self.file_bytes,
+            "file_bytes": self.archive_file_bytes(),
+            "bytes_on_disk": self.file_bytes,
             "triangles": s.triangles,
             "degenerate_triangles": v.stats.degenerate_triangles,
             "input_triangles": v.stats.input_triangles,

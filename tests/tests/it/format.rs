@@ -157,3 +157,46 @@ fn large_files_are_validated_on_two_threads_with_the_same_verdicts() {
     bad.cube_map[0] = NodeRef::Leaf(last).encode();
     assert!(matches!(open(&bad.to_file_bytes(0).unwrap()), Err(Error::Corrupt(_))));
 }
+
+#[test]
+fn compressed_files_round_trip_and_refuse_to_be_mapped() {
+    let s = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.oct.zst");
+    let (raw, compressed) = s.write_compressed(&path, 9, 3).unwrap();
+    assert_eq!(raw as usize, s.to_file_bytes(9).unwrap().len());
+    assert!(compressed < raw, "{compressed} >= {raw}");
+    let f = SceneFile::read(&path).unwrap();
+    assert_eq!(f.view().octree, s.octree.as_slice());
+    assert_eq!(f.header().bake_time_us, 9);
+    // SAFETY: a file this test wrote and nobody changes.
+    let mapped = unsafe { SceneFile::map(&path) };
+    assert!(matches!(mapped, Err(Error::Compressed { .. })));
+}
+
+#[test]
+fn broken_compressed_files_give_named_errors() {
+    let s = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let image = s.to_file_bytes(0).unwrap();
+    // Truncated compressed stream.
+    let full = octrace_tests::zstd_compress(&image);
+    let cut = dir.path().join("cut.oct.zst");
+    std::fs::write(&cut, &full[..full.len() / 2]).unwrap();
+    assert!(SceneFile::read(&cut).is_err());
+    // A header that declares a huge archive: refused before allocating.
+    let mut huge = image[..HEADER_LEN].to_vec();
+    huge[32..40].copy_from_slice(&(1u64 << 50).to_le_bytes());
+    let sum = xxhash_rust::xxh3::xxh3_64(&huge[..56]);
+    huge[56..64].copy_from_slice(&sum.to_le_bytes());
+    let bomb = dir.path().join("bomb.oct.zst");
+    std::fs::write(&bomb, octrace_tests::zstd_compress(&huge)).unwrap();
+    let err = SceneFile::read(&bomb).unwrap_err();
+    assert!(matches!(err, Error::Corrupt(ref m) if m.contains("times the compressed file")), "{err}");
+    // Compressed garbage after a good archive.
+    let mut trailing = image.clone();
+    trailing.extend_from_slice(b"extra");
+    let extra = dir.path().join("extra.oct.zst");
+    std::fs::write(&extra, octrace_tests::zstd_compress(&trailing)).unwrap();
+    assert!(matches!(SceneFile::read(&extra), Err(Error::Corrupt(_))));
+}
