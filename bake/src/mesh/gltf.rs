@@ -10,12 +10,47 @@ use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
+    // The gltf crate (gltf-json 1.4) indexes arrays with unchecked indices while it
+    // validates, and panics on some malformed files (a POSITION accessor index out of
+    // range, found by fuzzing). A panic there is a malformed file, not a bug of ours:
+    // it becomes a parse error.
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_unguarded(bytes, path, base))).unwrap_or_else(|_| {
+        Err(Error::Parse {
+            path: path.into(),
+            element: "document".into(),
+            message: "malformed glTF (an index out of range made the glTF parser give up)".into(),
+        })
+    })
+}
+
+fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
     let parse_error = |element: &str, e: gltf::Error| Error::Parse {
         path: path.into(),
         element: element.into(),
         message: e.to_string(),
     };
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes).map_err(|e| parse_error("document", e))?;
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error("document", e))?;
+    // gltf-json's validation reads `accessors[i]` for every primitive attribute before
+    // checking `i`: refuse out-of-range accessor indices first, then validate.
+    let json = document.into_json();
+    let accessors = json.accessors.len();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let targets = prim.targets.iter().flatten().flat_map(|t| [t.positions, t.normals, t.tangents]).flatten();
+            if let Some(bad) =
+                prim.attributes.values().copied().chain(prim.indices).chain(targets).find(|i| i.value() >= accessors)
+            {
+                return Err(Error::IndexOutOfRange {
+                    path: path.into(),
+                    element: format!("mesh {m} primitive {p}: accessor"),
+                    index: bad.value() as i64,
+                    count: accessors,
+                });
+            }
+        }
+    }
+    let document = gltf::Document::from_json(json).map_err(|e| parse_error("document", e))?;
     let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| parse_error("buffers", e))?;
     // The default scene, or scene 0 when the file names none.
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
@@ -74,6 +109,22 @@ impl Loader<'_> {
             self.mesh.warnings.push(format!("{}: {element}: skipped {name} primitive", self.path.display()));
             self.skipped.get_or_insert((element, name));
             return Ok(());
+        }
+        // The spec's types, checked before the gltf crate reads (it panics on others).
+        use gltf::accessor::{DataType, Dimensions};
+        let bad_type = |what: &str| Error::Parse {
+            path: self.path.into(),
+            element: element.clone(),
+            message: format!("{what} accessor has a type the glTF spec does not allow"),
+        };
+        if prim.indices().is_some_and(|a| !matches!(a.data_type(), DataType::U8 | DataType::U16 | DataType::U32)) {
+            return Err(bad_type("index"));
+        }
+        if prim
+            .get(&gltf::Semantic::Positions)
+            .is_some_and(|a| a.data_type() != DataType::F32 || a.dimensions() != Dimensions::Vec3)
+        {
+            return Err(bad_type("POSITION"));
         }
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
         let Some(positions) = reader.read_positions() else {

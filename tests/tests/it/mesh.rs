@@ -173,6 +173,23 @@ fn tiny_gltf(positions: &[[f32; 3]], indices: &[u16], mode: u32) -> String {
     )
 }
 
+/// Regression, found by fuzzing (fuzz/load_gltf): a POSITION accessor index out of
+/// range made the gltf crate panic while validating; it is an index error.
+#[test]
+fn a_gltf_with_an_accessor_out_of_range_is_an_index_error() {
+    let err = Mesh::load(data("gltf-accessor-out-of-range.gltf")).unwrap_err();
+    assert!(matches!(err, Error::IndexOutOfRange { .. }), "{err}");
+    assert!(err.to_string().contains("gltf-accessor-out-of-range.gltf"), "{err}");
+}
+
+/// Regression, found by fuzzing: an index accessor of floats reached an
+/// `unreachable!()` in the gltf crate; the spec's types are checked first.
+#[test]
+fn a_gltf_with_float_indices_is_a_parse_error() {
+    let err = Mesh::load(data("gltf-float-indices.gltf")).unwrap_err();
+    assert!(matches!(err, Error::Parse { ref message, .. } if message.contains("index accessor")), "{err}");
+}
+
 #[test]
 fn bad_gltf_gives_named_errors() {
     let dir = tempfile::tempdir().unwrap();
