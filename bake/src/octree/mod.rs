@@ -54,6 +54,11 @@ pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
     n == [0.0; 3]
 }
 
+/// The smallest root edge: `2^-100`, so that cells at the deepest level the format
+/// allows (`2^-20` of the root) are still normal `f32` (`>= 2^-126`). Found by fuzzing:
+/// a mesh 1e-39 across got a subnormal root.
+pub const MIN_ROOT_EDGE: f64 = 7.888609052210118e-31; // 2^-100
+
 /// The root cube: a power-of-two edge at least the mesh's largest extent, centred on
 /// the mesh, its low corner rounded down to `f32`; doubled until it holds the mesh.
 ///
@@ -62,6 +67,9 @@ pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
 pub fn root_cube(lo: [f32; 3], hi: [f32; 3]) -> Result<([f32; 3], f32)> {
     let extent = (0..3).map(|a| hi[a] as f64 - lo[a] as f64).fold(0.0, f64::max);
     let mut size = if extent > 0.0 { extent.log2().ceil().exp2() } else { 1.0 };
+    // Every level's cell edge must stay a normal f32 (subnormals lose the exactness
+    // the walk relies on, and the format refuses them).
+    size = size.max(MIN_ROOT_EDGE);
     loop {
         if !((size as f32).is_finite()) {
             return Err(Error::Extent { extent });

@@ -187,6 +187,23 @@ fn one_thread_and_two_threads_give_byte_identical_files() {
     assert!(one == two, "files differ between 1 and 2 threads");
 }
 
+/// Regression, found by fuzzing (fuzz/load_gltf): a mesh 1e-39 across got a
+/// subnormal root edge, and the bake wrote a file its own validation refused.
+#[test]
+fn a_vanishingly_small_mesh_bakes_a_valid_file() {
+    let tiny = Mesh {
+        triangles: vec![
+            [[0.0, 0.0, 0.0], [1e-39, 0.0, 0.0], [0.0, 1e-39, 0.0]],
+            [[0.0; 3], [2e-45, 0.0, 0.0], [0.0, 3e-45, 0.0]],
+        ],
+        warnings: vec![],
+    };
+    let scene = bake(&tiny, &BuildParams::auto()).unwrap();
+    assert!(scene.bounds.root_size.is_normal());
+    scene.view().validate().unwrap();
+    SceneFile::from_bytes(&scene.to_file_bytes(0).unwrap()).unwrap();
+}
+
 #[test]
 fn the_root_cube_holds_the_mesh_and_has_a_power_of_two_edge() {
     for (lo, hi) in [
