@@ -51,6 +51,18 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
         }
     }
     let document = gltf::Document::from_json(json).map_err(|e| parse_error("document", e))?;
+    // gltf's import unwraps the percent-decoding of a file URI as UTF-8: check first.
+    for buffer in document.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            if !uri.starts_with("data:") && !percent_decodes_to_utf8(uri) {
+                return Err(Error::Parse {
+                    path: path.into(),
+                    element: format!("buffer {}", buffer.index()),
+                    message: "URI does not decode to UTF-8".into(),
+                });
+            }
+        }
+    }
     let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| parse_error("buffers", e))?;
     // The default scene, or scene 0 when the file names none.
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
@@ -66,6 +78,28 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
         }
     }
     Ok(loader.mesh)
+}
+
+/// Whether `%XX` escapes in `uri` decode to valid UTF-8 (malformed escapes are left
+/// as they are, as percent-decoders do).
+fn percent_decodes_to_utf8(uri: &str) -> bool {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match (b[i], b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c))) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, _, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8(out).is_ok()
 }
 
 struct Loader<'a> {

@@ -190,6 +190,14 @@ fn a_gltf_with_float_indices_is_a_parse_error() {
     assert!(matches!(err, Error::Parse { ref message, .. } if message.contains("index accessor")), "{err}");
 }
 
+/// Regression, found by fuzzing: a buffer URI whose %-escapes are not UTF-8 hit an
+/// `unwrap` in the gltf crate's import; it is a parse error naming the buffer.
+#[test]
+fn a_gltf_buffer_uri_that_is_not_utf8_is_a_parse_error() {
+    let err = Mesh::load(data("gltf-bad-uri-escape.gltf")).unwrap_err();
+    assert!(matches!(err, Error::Parse { ref element, .. } if element.starts_with("buffer")), "{err}");
+}
+
 #[test]
 fn bad_gltf_gives_named_errors() {
     let dir = tempfile::tempdir().unwrap();
