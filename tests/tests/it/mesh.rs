@@ -198,6 +198,14 @@ fn a_gltf_buffer_uri_that_is_not_utf8_is_a_parse_error() {
     assert!(matches!(err, Error::Parse { ref element, .. } if element.starts_with("buffer")), "{err}");
 }
 
+/// Regression, found by fuzzing: an accessor reaching past its buffer view trips an
+/// assertion inside the gltf crate; the loader's guard turns that into a parse error.
+#[test]
+fn a_gltf_accessor_past_its_view_is_a_parse_error() {
+    let err = Mesh::load(data("gltf-accessor-past-view.gltf")).unwrap_err();
+    assert!(matches!(err, Error::Parse { .. }), "{err}");
+}
+
 #[test]
 fn bad_gltf_gives_named_errors() {
     let dir = tempfile::tempdir().unwrap();
