@@ -8,19 +8,10 @@ use octrace_runtime::Scene;
 /// Memory-maps and fully validates a scene; a zstd-compressed one is read and
 /// decompressed into memory instead (it cannot be mapped).
 pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
-    if is_compressed(path)? {
+    if octrace_format::is_compressed_file(path)? {
         return Scene::open(path).with_context(|| format!("cannot open scene {}", path.display()));
     }
     map_scene(path, Trust::Validate)
-}
-
-/// Whether the file starts with a zstd frame.
-pub(crate) fn is_compressed(path: &Path) -> anyhow::Result<bool> {
-    use std::io::Read;
-    let mut magic = [0u8; 4];
-    let mut f = std::fs::File::open(path).with_context(|| format!("cannot open scene {}", path.display()))?;
-    let n = f.read(&mut magic)?;
-    Ok(n == 4 && magic == octrace_format::ZSTD_MAGIC)
 }
 
 /// How much of a file to check when opening it.

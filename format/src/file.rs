@@ -208,6 +208,16 @@ pub const MAX_COMPRESSION_RATIO: u64 = 1024;
 /// The four bytes every zstd frame starts with.
 pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
 
+/// Whether the file at `path` is a zstd-compressed scene (starts with a zstd frame).
+///
+/// # Errors
+/// [`Error::Io`] if the file cannot be opened or read.
+pub fn is_compressed_file(path: impl AsRef<Path>) -> Result<bool> {
+    let path = path.as_ref();
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    is_compressed(&mut file).map_err(|e| Error::io(path, e))
+}
+
 /// Whether the file starts with a zstd frame (the read position is put back).
 fn is_compressed(file: &mut File) -> std::io::Result<bool> {
     use std::io::Seek;

@@ -35,7 +35,7 @@ mod view;
 mod write;
 
 pub use error::{Error, Result, Version};
-pub use file::{SceneFile, MAX_COMPRESSION_RATIO, ZSTD_MAGIC};
+pub use file::{is_compressed_file, SceneFile, MAX_COMPRESSION_RATIO, ZSTD_MAGIC};
 pub use header::{Header, ARCHIVE_ALIGN, HEADER_LEN, MAGIC, RKYV_SETTINGS, VERSION};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};

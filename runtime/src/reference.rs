@@ -47,6 +47,12 @@ impl Reference {
         Reference { triangles, ids }
     }
 
+    /// An oracle over a mesh's triangles, whose ids are their positions in the list.
+    pub fn in_input_order(triangles: Vec<[[f32; 3]; 3]>) -> Reference {
+        let ids = (0..triangles.len() as u32).collect();
+        Reference::new(triangles, ids)
+    }
+
     /// An oracle over the triangles stored in a scene.
     pub fn from_view(view: &octrace_format::SceneView<'_>) -> Reference {
         let tris = (0..view.triangle_count() as u32).map(|t| view.triangle(t)).collect();

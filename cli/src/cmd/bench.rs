@@ -93,7 +93,7 @@ pub(crate) fn load(input: &Path) -> anyhow::Result<Loaded> {
     let open_validated = t.elapsed();
     // Validated just above: the header-only open is sound, and what apps that trust
     // their pipeline pay (compressed files cannot be mapped).
-    let open_trusted = if crate::open::is_compressed(&path)? {
+    let open_trusted = if octrace_format::is_compressed_file(&path)? {
         None
     } else {
         let t = Instant::now();

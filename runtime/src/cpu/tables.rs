@@ -35,9 +35,6 @@ pub const EXIT_FACE: [[u8; 8]; 8] = [
     [0, 2, 4, 4, 0, 2, 0, 0],
 ];
 
-/// The two other axes of each axis, increasing (as `octrace_format::layout::other_axes`).
-pub const OTHER_AXES: [[usize; 2]; 3] = [[1, 2], [0, 2], [0, 1]];
-
 /// The exit code of a ray in a cell: the three Plücker sign bits.
 #[inline(always)]
 pub fn exit_code(a: [f32; 3], d: [f32; 3]) -> usize {

@@ -23,10 +23,12 @@
 //! ever reaches the bound (the hard-case suite and the soak check it on millions of
 //! rays).
 
-use octrace_format::layout::{links_before, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+use octrace_format::layout::{
+    links_before, other_axes, texel_index, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS,
+};
 use octrace_format::SceneView;
 
-use super::tables::{exit_code, octant, EXIT_FACE, OTHER_AXES};
+use super::tables::{exit_code, octant, EXIT_FACE};
 pub(crate) use super::triangle::{intersect, TriRay};
 use super::watertight::Shear;
 use crate::ray::{Hit, Ray};
@@ -497,9 +499,9 @@ impl<'a> Tracer<'a> {
         let face = 2 * axis + high as usize;
         let level = self.view.params.cube_level;
         let res = 1usize << level;
-        let [u, v] = OTHER_AXES[axis];
+        let (u, v) = other_axes(axis);
         let shift = self.max_depth - level;
-        let texel = (face * res + (q[v] >> shift) as usize) * res + (q[u] >> shift) as usize;
+        let texel = texel_index(face, res, (q[u] >> shift) as usize, (q[v] >> shift) as usize);
         let word = self.view.cube_map[texel];
         match NodeRef::decode(word) {
             NodeRef::Internal(_) => self.descend(word, level, q),

@@ -3,7 +3,7 @@
 //! checksums every correct tracer gives (`shared/bench/PEERS.md`).
 
 use octrace_runtime::raysets::{self, Frame};
-use octrace_runtime::reference::Reference;
+use octrace_runtime::reference::{Agreement, Reference};
 use octrace_runtime::{Hit, Ray};
 use octrace_tests::{bunny_mesh, bunny_scene};
 
@@ -12,27 +12,19 @@ fn frame() -> Frame {
 }
 
 fn oracle() -> Reference {
-    let m = bunny_mesh();
-    Reference::new(m.triangles.clone(), (0..m.triangles.len() as u32).collect())
+    Reference::in_input_order(bunny_mesh().triangles.clone())
 }
 
-/// Same triangle, or the same distance within 1e-5 t (two triangles tie there).
-fn agree(got: Option<Hit>, want: Option<(f64, u32)>) -> bool {
-    match (got, want) {
-        (None, None) => true,
-        (Some(h), Some((t, id))) => h.triangle == id || (h.t as f64 - t).abs() <= 1e-5 * t,
-        _ => false,
-    }
-}
-
+/// Every `step`-th ray gives the oracle's answer: the same triangle, or the same
+/// distance within 1e-5 t (two triangles tie there).
 fn sample_agrees(name: &str, rays: &[Ray], step: usize) {
     let scene = bunny_scene();
     let oracle = oracle();
     let mut checked = 0;
     for r in rays.iter().step_by(step) {
-        let want = oracle.intersect(r).map(|h| (h.t, h.triangle));
         let got = scene.intersect(r);
-        assert!(agree(got, want), "{name}: ray {r:?}: octree {got:?}, oracle {want:?}");
+        let verdict = oracle.compare(r, got.map(|h| (h.t, h.triangle, h.u, h.v)));
+        assert_eq!(verdict, Agreement::Same, "{name}: ray {r:?}: octree {got:?}, oracle {:?}", oracle.intersect(r));
         checked += 1;
     }
     assert!(checked > 300, "{name}: only {checked} rays checked");
@@ -47,24 +39,23 @@ fn within(got: usize, want: usize) -> bool {
     got.abs_diff(want) * 10_000 <= want * 3
 }
 
+/// A sample of `rays` agrees with the oracle, and the whole set reproduces the
+/// published hits and sum of distances.
+fn set_agrees(name: &str, rays: &[Ray], step: usize, published_hits: usize, published_sum: f64) {
+    sample_agrees(name, rays, step);
+    let (n, sum) = checksum(&bunny_scene().intersect_all(rays));
+    assert!(within(n, published_hits), "{name} hits {n}, published {published_hits}");
+    assert!((sum - published_sum).abs() < published_sum * 3e-4, "{name} sum of t {sum}, published {published_sum}");
+}
+
 #[test]
 fn primary_agrees_with_the_oracle_and_the_published_checksum() {
-    let rays = raysets::primary(&frame());
-    sample_agrees("primary", &rays, 1009);
-    let hits = bunny_scene().intersect_all(&rays);
-    let (n, sum) = checksum(&hits);
-    assert!(within(n, 223_442), "primary hits {n}, published 223442");
-    assert!((sum - 69_618.09).abs() < 69_618.09 * 3e-4, "primary sum of t {sum}, published 69618.09");
+    set_agrees("primary", &raysets::primary(&frame()), 1009, 223_442, 69_618.09);
 }
 
 #[test]
 fn incoherent_agrees_with_the_oracle_and_the_published_checksum() {
-    let rays = raysets::incoherent(&frame(), 1_000_000);
-    sample_agrees("incoherent", &rays, 997);
-    let hits = bunny_scene().intersect_all(&rays);
-    let (n, sum) = checksum(&hits);
-    assert!(within(n, 431_741), "incoherent hits {n}, published 431741");
-    assert!((sum - 14_676.46).abs() < 14_676.46 * 3e-4, "incoherent sum of t {sum}, published 14676.46");
+    set_agrees("incoherent", &raysets::incoherent(&frame(), 1_000_000), 997, 431_741, 14_676.46);
 }
 
 #[test]

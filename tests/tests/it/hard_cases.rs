@@ -13,7 +13,7 @@ fn scene(mesh: &Mesh, depth: Option<u32>, leaf: u32) -> Scene {
 }
 
 fn oracle(mesh: &Mesh) -> Reference {
-    Reference::new(mesh.triangles.clone(), (0..mesh.triangles.len() as u32).collect())
+    Reference::in_input_order(mesh.triangles.clone())
 }
 
 /// Every ray agrees with the oracle (see `reference::Agreement`: the same answer, or
