@@ -68,7 +68,8 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         return Err(Error::EmptyScene { path: path.into() });
     };
-    let mut loader = Loader { path, buffers: &buffers, mesh: Mesh::default(), skipped: None };
+    let input_bytes = bytes.len() + buffers.iter().map(|b| b.0.len()).sum::<usize>();
+    let mut loader = Loader { path, buffers: &buffers, input_bytes, mesh: Mesh::default(), skipped: None };
     for node in scene.nodes() {
         loader.node(&node, DMat4::IDENTITY, 0)?;
     }
@@ -105,6 +106,9 @@ fn percent_decodes_to_utf8(uri: &str) -> bool {
 struct Loader<'a> {
     path: &'a Path,
     buffers: &'a [gltf::buffer::Data],
+    /// Bytes of the document and its buffers: what bounds the elements an accessor
+    /// without a buffer view may declare.
+    input_bytes: usize,
     mesh: Mesh,
     /// The first primitive skipped for its mode, for the error when nothing else is left.
     skipped: Option<(String, String)>,
@@ -113,7 +117,85 @@ struct Loader<'a> {
 /// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
 const MAX_NODE_DEPTH: usize = 256;
 
+/// An accessor may declare at most this many elements per byte of input (document and
+/// buffers) beyond [`VIEWLESS_SLACK`]: an accessor without a buffer view (all zeros,
+/// perhaps with sparse values) is not backed by bytes, and its count is what the
+/// reader allocates.
+const ELEMENTS_PER_INPUT_BYTE: usize = 16;
+/// Elements any accessor may declare whatever the input's size.
+const VIEWLESS_SLACK: usize = 1 << 16;
+
+/// Checks that `bytes` bytes of `elem`-byte elements, `stride` apart, from `offset`
+/// fit in a buffer view of `view_len` bytes, and that the view fits in its buffer.
+fn check_range(
+    view: &gltf::buffer::View<'_>,
+    buffers: &[gltf::buffer::Data],
+    offset: usize,
+    count: usize,
+    elem: usize,
+) -> std::result::Result<(), String> {
+    let stride = view.stride().unwrap_or(elem);
+    if stride < elem {
+        return Err(format!("buffer view {} has stride {stride}, less than the element's {elem} bytes", view.index()));
+    }
+    let end = count
+        .checked_sub(1)
+        .and_then(|n| n.checked_mul(stride))
+        .and_then(|n| n.checked_add(elem))
+        .and_then(|n| n.checked_add(offset))
+        .ok_or_else(|| format!("{count} elements of {elem} bytes, stride {stride}, overflow"))?;
+    if end > view.length() {
+        return Err(format!(
+            "{count} elements of {elem} bytes from offset {offset} (stride {stride}) need {end} bytes, buffer view {} has {}",
+            view.index(),
+            view.length()
+        ));
+    }
+    let buffer = view.buffer().index();
+    let available = buffers.get(buffer).map_or(0, |d| d.0.len());
+    match view.offset().checked_add(view.length()) {
+        Some(view_end) if view_end <= available => Ok(()),
+        _ => Err(format!(
+            "buffer view {} ({} bytes at {}) runs past buffer {buffer} ({available} bytes)",
+            view.index(),
+            view.length(),
+            view.offset()
+        )),
+    }
+}
+
 impl Loader<'_> {
+    /// Every range the reader will touch for `a`, and its count against the input size.
+    fn check_accessor(&self, a: &gltf::Accessor<'_>) -> std::result::Result<(), String> {
+        let count = a.count();
+        if count == 0 {
+            return Err("count is 0 (the glTF spec requires at least 1)".into());
+        }
+        let limit = self.input_bytes.saturating_mul(ELEMENTS_PER_INPUT_BYTE).saturating_add(VIEWLESS_SLACK);
+        if count > limit {
+            return Err(format!(
+                "declares {count} elements, more than {limit} for an input of {} bytes",
+                self.input_bytes
+            ));
+        }
+        if let Some(view) = a.view() {
+            check_range(&view, self.buffers, a.offset(), count, a.size())?;
+        }
+        if let Some(sparse) = a.sparse() {
+            let n = sparse.count();
+            if n == 0 || n > count {
+                return Err(format!("sparse count {n} outside 1..={count}"));
+            }
+            let indices = sparse.indices();
+            check_range(&indices.view(), self.buffers, indices.offset(), n, indices.index_type().size())
+                .map_err(|e| format!("sparse indices: {e}"))?;
+            let values = sparse.values();
+            check_range(&values.view(), self.buffers, values.offset(), n, a.size())
+                .map_err(|e| format!("sparse values: {e}"))?;
+        }
+        Ok(())
+    }
+
     fn node(&mut self, node: &gltf::Node<'_>, parent: DMat4, depth: usize) -> Result<()> {
         if depth > MAX_NODE_DEPTH {
             return Err(Error::Parse {
@@ -159,6 +241,17 @@ impl Loader<'_> {
             .is_some_and(|a| a.data_type() != DataType::F32 || a.dimensions() != Dimensions::Vec3)
         {
             return Err(bad_type("POSITION"));
+        }
+        // The gltf crate's reader trusts counts, offsets and strides (it panics or
+        // allocates what a count declares): every range is checked here first.
+        for (what, accessor) in [("index", prim.indices()), ("POSITION", prim.get(&gltf::Semantic::Positions))] {
+            if let Some(a) = accessor {
+                self.check_accessor(&a).map_err(|message| Error::Parse {
+                    path: self.path.into(),
+                    element: format!("{element}: {what} accessor {}", a.index()),
+                    message,
+                })?;
+            }
         }
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
         let Some(positions) = reader.read_positions() else {

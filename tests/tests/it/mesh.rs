@@ -198,12 +198,78 @@ fn a_gltf_buffer_uri_that_is_not_utf8_is_a_parse_error() {
     assert!(matches!(err, Error::Parse { ref element, .. } if element.starts_with("buffer")), "{err}");
 }
 
-/// Regression, found by fuzzing: an accessor reaching past its buffer view trips an
-/// assertion inside the gltf crate; the loader's guard turns that into a parse error.
+/// Regression, found by fuzzing: an accessor reaching past its buffer view tripped an
+/// assertion inside the gltf crate; the loader checks every range first.
 #[test]
 fn a_gltf_accessor_past_its_view_is_a_parse_error() {
     let err = Mesh::load(data("gltf-accessor-past-view.gltf")).unwrap_err();
-    assert!(matches!(err, Error::Parse { .. }), "{err}");
+    assert!(matches!(err, Error::Parse { ref message, .. } if message.contains("buffer view")), "{err}");
+}
+
+/// Counts, offsets and strides the gltf crate's reader would trust (panicking, or
+/// allocating what a count declares) are refused with a named error first.
+#[test]
+fn gltf_accessors_with_hostile_ranges_are_parse_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let good = tiny_gltf(&tri, &[0, 1, 2], 4);
+    let position =
+        r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[-10,-10,-10],"max":[10,10,10]}"#;
+    assert!(good.contains(position));
+    let cases = [
+        ("count 0", position.replace(r#""count":3"#, r#""count":0"#), "count is 0"),
+        ("past the view", position.replace(r#""count":3"#, r#""count":4"#), "buffer view 0 has 36"),
+        ("offset past the view", position.replace(r#""bufferView":0,"#, r#""bufferView":0,"byteOffset":8,"#), "need 44 bytes"),
+        (
+            "count overflows",
+            position.replace(r#""count":3"#, r#""count":1537228672809129301"#),
+            "more than",
+        ),
+        (
+            "a view-less accessor declaring 2^40 zeros",
+            position.replace(r#""bufferView":0,"#, "").replace(
+                r#""count":3,"type":"VEC3","#,
+                r#""count":1099511627776,"type":"VEC3","sparse":{"count":3,"indices":{"bufferView":1,"componentType":5123},"values":{"bufferView":0}},"#,
+            ),
+            "more than",
+        ),
+        (
+            "sparse count above the count",
+            position.replace(
+                r#""type":"VEC3","#,
+                r#""type":"VEC3","sparse":{"count":5,"indices":{"bufferView":1,"componentType":5123},"values":{"bufferView":0}},"#,
+            ),
+            "sparse count 5",
+        ),
+        (
+            "sparse values past their view",
+            position.replace(
+                r#""type":"VEC3","#,
+                r#""type":"VEC3","sparse":{"count":3,"indices":{"bufferView":1,"componentType":5123},"values":{"bufferView":0,"byteOffset":4}},"#,
+            ),
+            "sparse values",
+        ),
+    ];
+    for (what, accessor, says) in cases {
+        let path = obj(dir.path(), "hostile.gltf", &good.replace(position, &accessor));
+        let err = Mesh::load(&path).unwrap_err();
+        assert!(
+            matches!(err, Error::Parse { ref element, ref message, .. }
+                if element.contains("POSITION accessor 0") && message.contains(says)),
+            "{what}: {err}"
+        );
+    }
+    // A stride shorter than the element, and a view that runs past its buffer.
+    let views = r#""bufferViews":[{"buffer":0,"byteLength":36}"#;
+    assert!(good.contains(views));
+    for (view, says) in [
+        (r#""bufferViews":[{"buffer":0,"byteLength":36,"byteStride":4}"#, "stride 4"),
+        (r#""bufferViews":[{"buffer":0,"byteLength":36,"byteOffset":20}"#, "runs past buffer 0"),
+    ] {
+        let path = obj(dir.path(), "hostile.gltf", &good.replace(views, view));
+        let err = Mesh::load(&path).unwrap_err();
+        assert!(matches!(err, Error::Parse { ref message, .. } if message.contains(says)), "{view}: {err}");
+    }
 }
 
 #[test]
