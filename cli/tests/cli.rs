@@ -28,7 +28,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 1.0, 0.0 MB
+cube.oct: octrace scene, format 2.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
@@ -44,6 +44,11 @@ bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0
     assert_eq!(json["leaves"], 246);
     assert_eq!(json["degenerate_triangles"], 1);
     assert_eq!(json["bake"]["time_s"], serde_json::Value::Null);
+    let sections = json["sections"].as_array().unwrap();
+    let names: Vec<&str> = sections.iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, octrace_format::SECTION_NAMES);
+    let bytes: u64 = sections.iter().map(|s| s["bytes"].as_u64().unwrap()).sum();
+    assert_eq!(bytes + octrace_format::HEADER_LEN as u64, json["file_bytes"].as_u64().unwrap());
 }
 
 #[test]

@@ -9,7 +9,7 @@ use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
 use crate::error::{Error, Result};
-use crate::header::{Header, ARCHIVE_ALIGN, HEADER_LEN};
+use crate::header::{Header, Section, ARCHIVE_ALIGN, HEADER_LEN, SECTION_COUNT};
 use crate::scene::{ArchivedBakedScene, BakeParams, BakeStats, Bounds};
 use crate::view::SceneView;
 
@@ -81,9 +81,6 @@ impl SceneFile {
         let mut stream = zstd::stream::read::Decoder::new(file).map_err(io)?;
         let mut head = Vec::with_capacity(HEADER_LEN);
         (&mut stream).take(HEADER_LEN as u64).read_to_end(&mut head).map_err(io)?;
-        if head.len() < HEADER_LEN {
-            return Err(Error::Truncated { what: "header", needed: HEADER_LEN as u64, available: head.len() as u64 });
-        }
         let header = Header::decode_stream(&head)?;
         let bound = compressed_len.saturating_mul(MAX_COMPRESSION_RATIO);
         if header.payload_len > bound {
@@ -143,8 +140,8 @@ impl SceneFile {
         Self::validated(Storage::Mapped(map), header)
     }
 
-    /// Memory-maps the file and checks its header only: the trusted fast path, whose
-    /// cost does not grow with the file.
+    /// Memory-maps the file and checks its header and section table only: the trusted
+    /// fast path, whose cost does not grow with the file.
     ///
     /// # Safety
     /// Everything [`SceneFile::map`] requires, and the file must be a valid scene
@@ -162,12 +159,10 @@ impl SceneFile {
     fn validated(storage: Storage, header: Header) -> Result<Self> {
         let file = SceneFile { storage, header };
         let payload = file.payload();
-        let computed = xxhash_rust::xxh3::xxh3_64(payload);
-        if computed != header.payload_xxh3 {
-            return Err(Error::Checksum { section: "archive", stored: header.payload_xxh3, computed });
-        }
-        rkyv::access::<ArchivedBakedScene, rancor::Error>(payload)
+        check_sections(&header, payload)?;
+        let archived = rkyv::access::<ArchivedBakedScene, rancor::Error>(payload)
             .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
+        check_arrays_in_sections(&header, payload, archived)?;
         file.view().validate()?;
         Ok(file)
     }
@@ -199,6 +194,58 @@ impl SceneFile {
         let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) };
         view_of(archived)
     }
+}
+
+/// Checks every section's checksum; the first that fails is named. Large files hash
+/// their sections on two threads.
+fn check_sections(header: &Header, payload: &[u8]) -> Result<()> {
+    let check = |s: &Section| -> Result<()> {
+        let bytes = s.bytes(payload).ok_or_else(|| Error::corrupt(format!("section {} past the archive", s.name)))?;
+        let computed = xxhash_rust::xxh3::xxh3_64(bytes);
+        if computed != s.xxh3 {
+            return Err(Error::Checksum { section: s.name, stored: s.xxh3, computed });
+        }
+        Ok(())
+    };
+    const PARALLEL_BYTES: usize = 16 << 20;
+    if payload.len() < PARALLEL_BYTES {
+        return header.sections.iter().try_for_each(check);
+    }
+    // Split the sections into two runs of about equal bytes.
+    let half = payload.len() as u64 / 2;
+    let split = header.sections.iter().position(|s| s.offset + s.len / 2 >= half).unwrap_or(0);
+    let (first, second) = header.sections.split_at(split);
+    std::thread::scope(|scope| {
+        let other = scope.spawn(|| second.iter().try_for_each(check));
+        let mine = first.iter().try_for_each(check);
+        let theirs = other.join().unwrap_or_else(|p| std::panic::resume_unwind(p));
+        mine.and(theirs)
+    })
+}
+
+/// Checks that each array lies exactly in its own section, so the section table
+/// describes the archive it guards.
+fn check_arrays_in_sections(header: &Header, payload: &[u8], a: &ArchivedBakedScene) -> Result<()> {
+    let base = payload.as_ptr() as usize;
+    let arrays: [(*const u8, usize); SECTION_COUNT - 1] = [
+        (a.octree.as_ptr().cast(), a.octree.len()),
+        (a.tri_refs.as_ptr().cast(), a.tri_refs.len()),
+        (a.triangles.as_ptr().cast(), a.triangles.len()),
+        (a.triangle_ids.as_ptr().cast(), a.triangle_ids.len()),
+        (a.boxes.as_ptr().cast(), a.boxes.len()),
+        (a.cube_map.as_ptr().cast(), a.cube_map.len()),
+        (a.nodes.as_ptr().cast(), a.nodes.len()),
+    ];
+    for ((ptr, len), s) in arrays.into_iter().zip(&header.sections) {
+        let at = (ptr as usize).wrapping_sub(base) as u64;
+        if 4 * len as u64 != s.len || (len > 0 && at != s.offset) {
+            return Err(Error::corrupt(format!(
+                "array {} ({len} words at offset {at}) is not its section ({} bytes at offset {})",
+                s.name, s.len, s.offset
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The most a compressed scene may expand: its archive's declared length is checked

@@ -1,7 +1,8 @@
 //! The octrace baked-scene file: layout, version, reading, writing and validation.
 //!
-//! A `.oct` file is a 64-byte [`Header`] (magic, version, flags, rkyv settings, payload
-//! length and checksums) followed by an rkyv archive of a [`BakedScene`]: the four
+//! A `.oct` file is a [`Header`] (magic, version, flags, rkyv settings, lengths, and a
+//! table of the archive's sections, each with its own checksum) followed by an rkyv
+//! archive of a [`BakedScene`]: the four
 //! arrays of Portalez & Duguet, *Lancer de rayons dans un octree* (2016) — octree leaf
 //! records, triangles, boxes, cube map — plus the point-location tree and the
 //! triangle-id map. `format/FORMAT.md` gives the byte layout; [`layout`] gives the
@@ -36,7 +37,10 @@ mod write;
 
 pub use error::{Error, Result, Version};
 pub use file::{is_compressed_file, SceneFile, MAX_COMPRESSION_RATIO, ZSTD_MAGIC};
-pub use header::{Header, ARCHIVE_ALIGN, HEADER_LEN, MAGIC, RKYV_SETTINGS, VERSION};
+pub use header::{
+    Header, Section, ARCHIVE_ALIGN, FIXED_HEADER_LEN, HEADER_LEN, MAGIC, RKYV_SETTINGS, SECTION_COUNT, SECTION_NAMES,
+    VERSION,
+};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use view::{LeafRecord, SceneView};
@@ -47,6 +51,43 @@ pub mod testing {
     //! Tiny hand-built scenes for doc examples and tests.
     use crate::layout::{cell_box, pack_counts};
     use crate::{BakeParams, BakeStats, BakedScene, Bounds};
+
+    /// A header that makes `payload` a complete file with correct checksums: the
+    /// sections follow the arrays when the payload is a structurally sound archive,
+    /// else the whole payload is the `root` section (so the open fails in bytecheck, not
+    /// at a checksum). For fuzzing past the checksums.
+    pub fn header_for_archive(payload: &[u8]) -> crate::Header {
+        use crate::header::{ARCHIVE_ALIGN, SECTION_COUNT};
+        let mut aligned = rkyv::util::AlignedVec::<ARCHIVE_ALIGN>::with_capacity(payload.len());
+        aligned.extend_from_slice(payload);
+        let mut lens = [0u64; SECTION_COUNT];
+        if let Ok(a) = rkyv::access::<crate::scene::ArchivedBakedScene, rkyv::rancor::Error>(&aligned) {
+            let arrays = [
+                a.octree.len(),
+                a.tri_refs.len(),
+                a.triangles.len(),
+                a.triangle_ids.len(),
+                a.boxes.len(),
+                a.cube_map.len(),
+                a.nodes.len(),
+            ];
+            for (len, n) in lens.iter_mut().zip(arrays) {
+                *len = 4 * n as u64;
+            }
+        }
+        let arrays: u64 = lens.iter().sum();
+        if arrays > payload.len() as u64 {
+            lens = [0; SECTION_COUNT];
+        }
+        lens[SECTION_COUNT - 1] = payload.len() as u64 - lens.iter().sum::<u64>();
+        let mut offset = 0usize;
+        let sums = lens.map(|len| {
+            let bytes = &payload[offset..offset + len as usize];
+            offset += len as usize;
+            (len, xxhash_rust::xxh3::xxh3_64(bytes))
+        });
+        crate::Header::new(sums, 0)
+    }
 
     /// A scene with one triangle in a single leaf (the root), no links.
     pub fn single_leaf_scene() -> BakedScene {

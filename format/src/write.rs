@@ -9,8 +9,8 @@ use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
 use crate::error::{Error, Result};
-use crate::header::{Header, ARCHIVE_ALIGN, HEADER_LEN, RKYV_SETTINGS, VERSION};
-use crate::scene::BakedScene;
+use crate::header::{Header, ARCHIVE_ALIGN, HEADER_LEN, SECTION_COUNT};
+use crate::scene::{ArchivedBakedScene, BakedScene};
 
 impl BakedScene {
     /// Serializes the scene to a complete file image: header, then archive.
@@ -33,25 +33,30 @@ impl BakedScene {
     fn archive(&self, bake_time_us: u64) -> Result<(Header, AlignedVec<ARCHIVE_ALIGN>)> {
         // Sized up front: growing a buffer of a hundred megabytes by doubling costs more
         // than the serialization itself.
-        let arrays = self.octree.len()
-            + self.tri_refs.len()
-            + self.triangles.len()
-            + self.triangle_ids.len()
-            + self.boxes.len()
-            + self.cube_map.len()
-            + self.nodes.len();
-        let buffer = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(4 * arrays + 1024);
+        let buffer = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(self.array_bytes() as usize + 1024);
         let payload = rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, buffer)
             .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
-        let header = Header {
-            version: VERSION,
-            flags: 0,
-            rkyv_settings: RKYV_SETTINGS,
-            payload_len: payload.len() as u64,
-            payload_xxh3: xxhash_rust::xxh3::xxh3_64(&payload),
-            bake_time_us,
-        };
-        Ok((header, payload))
+        let mut sections = SectionHasher::new(self);
+        sections.update(&payload);
+        Ok((Header::new(sections.finish()?, bake_time_us), payload))
+    }
+
+    /// The arrays in file order, as the sections before `root` hold them.
+    fn arrays(&self) -> [&[u32]; SECTION_COUNT - 1] {
+        [
+            &self.octree,
+            &self.tri_refs,
+            bytemuck::cast_slice(&self.triangles),
+            &self.triangle_ids,
+            bytemuck::cast_slice(&self.boxes),
+            &self.cube_map,
+            &self.nodes,
+        ]
+    }
+
+    /// Bytes of all the arrays together.
+    fn array_bytes(&self) -> u64 {
+        self.arrays().iter().map(|a| 4 * a.len() as u64).sum()
     }
 
     /// Writes the scene to `path` atomically: into a temporary file beside it, flushed
@@ -71,24 +76,18 @@ impl BakedScene {
         let mut tmp = temporary_beside(path)?;
         let file = tmp.as_file_mut();
         file.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
-        let mut sink = HashingWriter {
-            inner: std::io::BufWriter::with_capacity(1 << 20, &mut *file),
-            hasher: Xxh3::new(),
-            len: 0,
+        let sections = {
+            let mut sink = HashingWriter {
+                inner: std::io::BufWriter::with_capacity(1 << 20, &mut *file),
+                sections: SectionHasher::new(self),
+            };
+            rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
+                .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
+            sink.inner.flush().map_err(io)?;
+            sink.sections
         };
-        rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
-            .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
-        sink.inner.flush().map_err(io)?;
-        let (payload_len, payload_xxh3) = (sink.len, sink.hasher.digest());
-        drop(sink);
-        let header = Header {
-            version: VERSION,
-            flags: 0,
-            rkyv_settings: RKYV_SETTINGS,
-            payload_len,
-            payload_xxh3,
-            bake_time_us,
-        };
+        let header = Header::new(sections.finish()?, bake_time_us);
+        let payload_len = header.payload_len;
         file.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
         file.write_all(&header.encode()).map_err(io)?;
         finish(tmp, path)?;
@@ -117,23 +116,92 @@ impl BakedScene {
     }
 }
 
-/// Passes writes through and hashes them.
+/// Passes writes through and hashes them, section by section.
 struct HashingWriter<W> {
     inner: W,
-    hasher: Xxh3,
-    len: u64,
+    sections: SectionHasher,
 }
 
 impl<W: Write> Write for HashingWriter<W> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.inner.write(buf)?;
-        self.hasher.update(&buf[..n]);
-        self.len += n as u64;
+        self.sections.update(&buf[..n]);
         Ok(n)
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
         self.inner.flush()
+    }
+}
+
+/// Hashes an archive as it streams by, in the sections of
+/// [`crate::header::SECTION_NAMES`]: each array's bytes, then the rest (`root`).
+///
+/// The arrays are `u32`/`f32` vectors, which rkyv writes back to back in field order
+/// with no padding (4-byte elements, 4-byte alignment), so their sections' ends are
+/// known before a byte is written; [`SectionHasher::finish`] checks that the archive
+/// ended where that layout says, and validation checks every array against its section.
+struct SectionHasher {
+    /// End offset of each array's section.
+    ends: [u64; SECTION_COUNT - 1],
+    /// Where the archive's root object ends.
+    root_end: u64,
+    pos: u64,
+    start: u64,
+    index: usize,
+    hasher: Xxh3,
+    sums: [(u64, u64); SECTION_COUNT],
+}
+
+impl SectionHasher {
+    fn new(scene: &BakedScene) -> Self {
+        let mut end = 0u64;
+        let ends = scene.arrays().map(|a| {
+            end += 4 * a.len() as u64;
+            end
+        });
+        let align = std::mem::align_of::<ArchivedBakedScene>() as u64;
+        let root_end = end.next_multiple_of(align) + std::mem::size_of::<ArchivedBakedScene>() as u64;
+        SectionHasher { ends, root_end, pos: 0, start: 0, index: 0, hasher: Xxh3::new(), sums: [(0, 0); SECTION_COUNT] }
+    }
+
+    fn update(&mut self, mut buf: &[u8]) {
+        while !buf.is_empty() {
+            let room = match self.ends.get(self.index) {
+                Some(&end) => end - self.pos,
+                None => u64::MAX,
+            };
+            if room == 0 {
+                self.close();
+                continue;
+            }
+            let n = buf.len().min(usize::try_from(room).unwrap_or(usize::MAX));
+            self.hasher.update(&buf[..n]);
+            self.pos += n as u64;
+            buf = &buf[n..];
+        }
+    }
+
+    /// Ends the current section.
+    fn close(&mut self) {
+        self.sums[self.index] = (self.pos - self.start, self.hasher.digest());
+        self.hasher.reset();
+        self.start = self.pos;
+        self.index += 1;
+    }
+
+    fn finish(mut self) -> Result<[(u64, u64); SECTION_COUNT]> {
+        while self.index < SECTION_COUNT - 1 && self.pos == self.ends[self.index] {
+            self.close();
+        }
+        if self.index != SECTION_COUNT - 1 || self.pos != self.root_end {
+            return Err(Error::corrupt(format!(
+                "internal: rkyv wrote {} bytes, the section layout expects {}",
+                self.pos, self.root_end
+            )));
+        }
+        self.close();
+        Ok(self.sums)
     }
 }
 

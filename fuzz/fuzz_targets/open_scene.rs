@@ -8,7 +8,7 @@
 
 use glam::Vec3;
 use libfuzzer_sys::fuzz_target;
-use octrace_format::{Header, HEADER_LEN, RKYV_SETTINGS, VERSION};
+use octrace_format::HEADER_LEN;
 use octrace_runtime::{Ray, Scene};
 
 fuzz_target!(|data: &[u8]| {
@@ -16,14 +16,7 @@ fuzz_target!(|data: &[u8]| {
     let opened = if mode & 1 == 1 {
         Scene::from_bytes(rest)
     } else {
-        let header = Header {
-            version: VERSION,
-            flags: 0,
-            rkyv_settings: RKYV_SETTINGS,
-            payload_len: rest.len() as u64,
-            payload_xxh3: xxhash_rust::xxh3::xxh3_64(rest),
-            bake_time_us: 0,
-        };
+        let header = octrace_format::testing::header_for_archive(rest);
         let mut file = Vec::with_capacity(HEADER_LEN + rest.len());
         file.extend_from_slice(&header.encode());
         file.extend_from_slice(rest);

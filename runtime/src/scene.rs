@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::ray::{Hit, Ray};
 
 enum Source {
-    File(SceneFile),
+    File(Box<SceneFile>),
     Baked(Box<BakedScene>),
 }
 
@@ -41,7 +41,7 @@ impl Scene {
     /// The format crate's errors: I/O, bad magic, unsupported version, checksum,
     /// corrupt contents.
     pub fn open(path: impl AsRef<Path>) -> Result<Scene> {
-        Ok(Scene { source: Source::File(SceneFile::read(path)?) })
+        Ok(Scene { source: Source::File(Box::new(SceneFile::read(path)?)) })
     }
 
     /// Memory-maps and validates a `.oct` file.
@@ -54,7 +54,7 @@ impl Scene {
     /// As [`Scene::open`].
     pub unsafe fn map(path: impl AsRef<Path>) -> Result<Scene> {
         // SAFETY: forwarded to our caller.
-        Ok(Scene { source: Source::File(unsafe { SceneFile::map(path)? }) })
+        Ok(Scene { source: Source::File(Box::new(unsafe { SceneFile::map(path)? })) })
     }
 
     /// Memory-maps a `.oct` file checking its header only: microseconds whatever the
@@ -68,7 +68,7 @@ impl Scene {
     /// I/O and header errors.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Scene> {
         // SAFETY: forwarded to our caller.
-        Ok(Scene { source: Source::File(unsafe { SceneFile::map_unchecked(path)? }) })
+        Ok(Scene { source: Source::File(Box::new(unsafe { SceneFile::map_unchecked(path)? })) })
     }
 
     /// Validates a whole file held in memory.
@@ -76,7 +76,7 @@ impl Scene {
     /// # Errors
     /// As [`Scene::open`].
     pub fn from_bytes(bytes: &[u8]) -> Result<Scene> {
-        Ok(Scene { source: Source::File(SceneFile::from_bytes(bytes)?) })
+        Ok(Scene { source: Source::File(Box::new(SceneFile::from_bytes(bytes)?)) })
     }
 
     /// Wraps a scene baked in this process (it is validated first).

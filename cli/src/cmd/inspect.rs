@@ -36,6 +36,7 @@ pub(crate) struct Report<'a> {
     version: octrace_format::Version,
     bake_time_us: u64,
     payload_len: u64,
+    sections: [octrace_format::Section; octrace_format::SECTION_COUNT],
     file_bytes: u64,
 }
 
@@ -47,6 +48,7 @@ impl<'a> Report<'a> {
             version: header.version,
             bake_time_us: header.bake_time_us,
             payload_len: header.payload_len,
+            sections: header.sections,
             file_bytes,
         })
     }
@@ -171,6 +173,12 @@ impl<'a> Report<'a> {
                 "mesh_lo": v.bounds.mesh_lo, "mesh_hi": v.bounds.mesh_hi,
                 "root_lo": v.bounds.root_lo, "root_size": v.bounds.root_size,
             },
+            "sections": self.sections.iter().map(|s| json!({
+                "name": s.name,
+                "offset": octrace_format::HEADER_LEN as u64 + s.offset,
+                "bytes": s.len,
+                "xxh3": format!("{:016x}", s.xxh3),
+            })).collect::<Vec<_>>(),
         })
     }
 }

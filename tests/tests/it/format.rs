@@ -2,7 +2,9 @@
 
 use octrace_bake::{bake, procedural, BuildParams};
 use octrace_format::layout::{NodeRef, LEAF_HEADER_WORDS};
-use octrace_format::{BakedScene, Error, SceneFile, HEADER_LEN};
+use octrace_format::{BakedScene, Error, Header, SceneFile, Section, FIXED_HEADER_LEN, HEADER_LEN};
+
+const SECTION_ENTRY_LEN: usize = (HEADER_LEN - FIXED_HEADER_LEN) / octrace_format::SECTION_COUNT;
 
 fn scene() -> BakedScene {
     let mesh = procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
@@ -36,14 +38,14 @@ fn wrong_magic_is_bad_magic() {
 
 #[test]
 fn older_and_newer_versions_name_both_versions() {
-    for (major, minor) in [(0u16, 3u16), (2, 0), (1, 7)] {
+    for (major, minor) in [(1u16, 0u16), (0, 3), (3, 0), (2, 7)] {
         let mut bytes = scene().to_file_bytes(0).unwrap();
         bytes[8..10].copy_from_slice(&major.to_le_bytes());
         bytes[10..12].copy_from_slice(&minor.to_le_bytes());
         let err = open(&bytes).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, Error::UnsupportedVersion { .. }), "{msg}");
-        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("1.0"), "{msg}");
+        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("2.0"), "{msg}");
     }
 }
 
@@ -51,20 +53,104 @@ fn older_and_newer_versions_name_both_versions() {
 fn truncated_files_are_truncated_errors() {
     let bytes = scene().to_file_bytes(0).unwrap();
     let len = bytes.len();
-    for cut in [0, 1, 7, 8, 12, 40, HEADER_LEN - 1, HEADER_LEN, HEADER_LEN + 1, len / 2, len - 16, len - 1] {
+    for cut in [0, 1, 7, 8, 12, 40, 63, 64, 100, HEADER_LEN - 1, HEADER_LEN, HEADER_LEN + 1, len / 2, len - 16, len - 1]
+    {
         let err = open(&bytes[..cut]).unwrap_err();
         assert!(matches!(err, Error::Truncated { .. }), "cut at {cut}: {err}");
     }
 }
 
+/// The section a byte of the archive belongs to (the first non-empty one that holds it).
+fn section_of(header: &Header, at: u64) -> &'static str {
+    header.sections.iter().find(|s| at < s.offset + s.len).unwrap().name
+}
+
 #[test]
-fn a_flipped_bit_fails_a_checksum() {
+fn truncation_at_every_section_boundary_names_the_section() {
     let bytes = scene().to_file_bytes(0).unwrap();
-    for at in [HEADER_LEN + 3, bytes.len() / 3, bytes.len() - 5] {
-        let mut b = bytes.clone();
-        b[at] ^= 0x10;
-        assert!(matches!(open(&b), Err(Error::Checksum { section: "archive", .. })), "flip at {at}");
+    let header = *open(&bytes).unwrap().header();
+    assert!(header.sections.iter().all(|s| s.len > 0), "the test scene should fill every section");
+    for s in &header.sections {
+        // At the section's start, one byte in, in its middle, and one byte short of its end.
+        for at in [s.offset, s.offset + 1, s.offset + s.len / 2, s.offset + s.len - 1] {
+            let cut = HEADER_LEN + at as usize;
+            let err = open(&bytes[..cut]).unwrap_err();
+            let expected = format!("section {}", section_of(&header, at));
+            assert!(
+                matches!(&err, Error::Truncated { what, needed, available }
+                    if *what == expected && *available == cut as u64 && *needed > *available),
+                "cut at {cut} ({} + {}): {err}",
+                s.name,
+                at - s.offset
+            );
+            assert!(err.to_string().contains(&expected), "{err}");
+        }
     }
+    // Ending inside the header or the section table says so.
+    assert!(matches!(open(&bytes[..40]), Err(Error::Truncated { what: "header", .. })));
+    assert!(matches!(open(&bytes[..FIXED_HEADER_LEN + 5]), Err(Error::Truncated { what: "section table", .. })));
+}
+
+#[test]
+fn a_flipped_bit_in_every_section_names_the_section() {
+    let bytes = scene().to_file_bytes(0).unwrap();
+    let header = *open(&bytes).unwrap().header();
+    for s in &header.sections {
+        for at in [s.offset, s.offset + s.len / 2, s.offset + s.len - 1] {
+            for bit in [0, 7] {
+                let mut b = bytes.clone();
+                b[HEADER_LEN + at as usize] ^= 1 << bit;
+                let err = open(&b).unwrap_err();
+                assert!(
+                    matches!(err, Error::Checksum { section, .. } if section == s.name),
+                    "bit {bit} of byte {at} of {}: {err}",
+                    s.name
+                );
+            }
+        }
+    }
+    // The header's fixed part past the magic and version, and the section table.
+    for at in [12, 20, 33, 50, 60] {
+        let mut b = bytes.clone();
+        b[at] ^= 2;
+        assert!(matches!(open(&b), Err(Error::Checksum { section: "header", .. })), "header byte {at}");
+    }
+    for at in [FIXED_HEADER_LEN, FIXED_HEADER_LEN + 17, HEADER_LEN - 1] {
+        let mut b = bytes.clone();
+        b[at] ^= 2;
+        assert!(matches!(open(&b), Err(Error::Checksum { section: "section table", .. })), "table byte {at}");
+    }
+}
+
+/// Recomputes the section table's and the header's checksums after an edit.
+fn reseal(b: &mut [u8]) {
+    let sum = xxhash_rust::xxh3::xxh3_64(&b[FIXED_HEADER_LEN..HEADER_LEN]);
+    b[40..48].copy_from_slice(&sum.to_le_bytes());
+    let sum = xxhash_rust::xxh3::xxh3_64(&b[..56]);
+    b[56..64].copy_from_slice(&sum.to_le_bytes());
+}
+
+#[test]
+fn a_section_table_that_lies_about_the_archive_is_rejected() {
+    let bytes = scene().to_file_bytes(0).unwrap();
+    let header = *open(&bytes).unwrap().header();
+    // Move four bytes from `tri_refs` to `octree`, checksums recomputed to match:
+    // every checksum holds, but the arrays are not where the table says.
+    let mut b = bytes.clone();
+    let entry = |i: usize| FIXED_HEADER_LEN + i * SECTION_ENTRY_LEN;
+    let (first, second) = (&header.sections[0], &header.sections[1]);
+    let moved = |s: &Section, delta: i64| {
+        let len = (s.len as i64 + delta) as u64;
+        let start = HEADER_LEN + (s.offset as i64 + if delta < 0 { 4 } else { 0 }) as usize;
+        (len, xxhash_rust::xxh3::xxh3_64(&bytes[start..start + len as usize]))
+    };
+    for (i, (len, sum)) in [(0, moved(first, 4)), (1, moved(second, -4))] {
+        b[entry(i) + 16..entry(i) + 24].copy_from_slice(&len.to_le_bytes());
+        b[entry(i) + 24..entry(i) + 32].copy_from_slice(&sum.to_le_bytes());
+    }
+    reseal(&mut b);
+    let err = open(&b).unwrap_err();
+    assert!(matches!(err, Error::Corrupt(ref m) if m.contains("not its section")), "{err}");
 }
 
 /// Rewrites a scene with one change and a valid checksum: only validation can refuse it.
@@ -145,7 +231,16 @@ fn large_files_are_validated_on_two_threads_with_the_same_verdicts() {
     let params = BuildParams { max_depth: Some(8), leaf_size: Some(1), ..BuildParams::auto() };
     let good = bake(&mesh, &params).unwrap();
     assert!(good.leaf_count() > 70_000, "only {} leaves: the two-thread path is not reached", good.leaf_count());
-    open(&good.to_file_bytes(0).unwrap()).unwrap();
+    let image = good.to_file_bytes(0).unwrap();
+    let header = *open(&image).unwrap().header();
+    // Section checksums run on two threads from 16 MiB: a flip in the first and in the
+    // last array is named either way.
+    assert!(image.len() > 16 << 20, "{} bytes: the two-thread checksum path is not reached", image.len());
+    for s in [&header.sections[0], &header.sections[6]] {
+        let mut b = image.clone();
+        b[HEADER_LEN + (s.offset + s.len / 2) as usize] ^= 1;
+        assert!(matches!(open(&b), Err(Error::Checksum { section, .. }) if section == s.name), "{}", s.name);
+    }
     // A broken link in the second half of the leaves (checked by the second thread).
     let mut bad = good.clone();
     let address = bad.view().leaves().filter(|r| !r.links.is_empty()).last().unwrap().address;
@@ -186,9 +281,12 @@ fn broken_compressed_files_give_named_errors() {
     assert!(SceneFile::read(&cut).is_err());
     // A header that declares a huge archive: refused before allocating.
     let mut huge = image[..HEADER_LEN].to_vec();
-    huge[32..40].copy_from_slice(&(1u64 << 50).to_le_bytes());
-    let sum = xxhash_rust::xxh3::xxh3_64(&huge[..56]);
-    huge[56..64].copy_from_slice(&sum.to_le_bytes());
+    let root_entry = HEADER_LEN - SECTION_ENTRY_LEN;
+    let root_len = u64::from_le_bytes(huge[root_entry + 16..root_entry + 24].try_into().unwrap()) + (1u64 << 50);
+    huge[root_entry + 16..root_entry + 24].copy_from_slice(&root_len.to_le_bytes());
+    let payload_len = u64::from_le_bytes(huge[32..40].try_into().unwrap()) + (1u64 << 50);
+    huge[32..40].copy_from_slice(&payload_len.to_le_bytes());
+    reseal(&mut huge);
     let bomb = dir.path().join("bomb.oct.zst");
     std::fs::write(&bomb, octrace_tests::zstd_compress(&huge)).unwrap();
     let err = SceneFile::read(&bomb).unwrap_err();
@@ -199,4 +297,71 @@ fn broken_compressed_files_give_named_errors() {
     let extra = dir.path().join("extra.oct.zst");
     std::fs::write(&extra, octrace_tests::zstd_compress(&trailing)).unwrap();
     assert!(matches!(SceneFile::read(&extra), Err(Error::Corrupt(_))));
+}
+
+/// Every link of a valid scene rewritten by `relink(own address, link)`, written
+/// without validation (the archive stays structurally sound).
+fn relinked(relink: impl Fn(u32, u32) -> u32) -> BakedScene {
+    let mut s = scene();
+    let records: Vec<(u32, usize)> = s.view().leaves().map(|r| (r.address, r.links.len())).collect();
+    for (address, links) in records {
+        let first = address as usize + LEAF_HEADER_WORDS;
+        for word in &mut s.octree[first..first + links] {
+            *word = relink(address, *word);
+        }
+    }
+    s
+}
+
+#[test]
+fn walks_through_link_cycles_stop_even_on_the_trusted_path() {
+    use octrace_runtime::{Ray, Scene};
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, BakedScene); 2] = [
+        // Every link back to its own leaf: each step is a one-leaf cycle.
+        ("self links", relinked(|own, _| own)),
+        // Every link to the first leaf: two-leaf cycles between far-apart cells.
+        ("links to leaf 0", relinked(|_, _| 0)),
+    ];
+    for (name, bad) in cases {
+        let path = dir.path().join("cycle.oct");
+        bad.write(&path, 0).unwrap();
+        let err = Scene::open(&path).unwrap_err();
+        assert!(err.to_string().contains("corrupt"), "{name}: validation should refuse it: {err}");
+        // SAFETY: this test's own file, not changed while mapped; its archive structure
+        // is sound (only link values were changed), which is what tracing needs to stay
+        // memory-safe.
+        let scene = unsafe { Scene::map_unchecked(&path) }.unwrap();
+        let tracer = scene.tracer();
+        let mut rng = procedural::SplitMix(7);
+        let mut stopped = 0;
+        let mut rays = Vec::new();
+        for _ in 0..2000 {
+            let o = [rng.unit() * 4.0 - 2.0, rng.unit() * 4.0 - 2.0, rng.unit() * 4.0 - 2.0];
+            let d = [rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5];
+            let ray = Ray::segment(o.into(), d.into(), 0.0, f32::INFINITY);
+            let (_, stats) = tracer.intersect_with_stats(&ray);
+            assert!(stats.leaves <= tracer.max_steps() + 1, "{name}: {} steps", stats.leaves);
+            stopped += stats.stopped_at_bound as u32;
+            let _ = tracer.occluded(&ray);
+            rays.push(ray);
+        }
+        // The batch paths (interleaved SIMD walks) stop at the same bound.
+        assert_eq!(scene.intersect_all(&rays).len(), rays.len());
+        assert_eq!(scene.occluded_all(&rays).len(), rays.len());
+        // Rays that walk on are stopped by the bound, not by luck.
+        assert!(stopped > 0, "{name}: no walk reached the step bound");
+    }
+}
+
+#[test]
+fn the_fuzzing_header_helper_rebuilds_a_real_header() {
+    let bytes = scene().to_file_bytes(0).unwrap();
+    let real = *open(&bytes).unwrap().header();
+    assert_eq!(octrace_format::testing::header_for_archive(&bytes[HEADER_LEN..]), real);
+    // Garbage gets one `root` section whose checksum holds: the open fails past it.
+    let junk = vec![7u8; 100];
+    let mut file = octrace_format::testing::header_for_archive(&junk).encode().to_vec();
+    file.extend_from_slice(&junk);
+    assert!(matches!(open(&file), Err(Error::Corrupt(ref m)) if m.contains("archive structure")));
 }

@@ -319,8 +319,8 @@ fn nan_inf_inverted_and_zero_rays_are_defined_misses() {
 }
 
 /// Termination: a walk visits at most `Tracer::max_steps` leaves (9 * 2^depth + 64,
-/// see `runtime/src/cpu/traverse.rs`); debug builds assert it, release builds stop
-/// there. Long walks through the deepest trees stay well inside the bound.
+/// see `runtime/src/cpu/traverse.rs`); every build stops there and says so. Long walks
+/// through the deepest trees stay well inside the bound.
 #[test]
 fn walks_stay_within_the_proven_step_bound() {
     for depth in [1, 4, 8, 10] {
@@ -336,6 +336,7 @@ fn walks_stay_within_the_proven_step_bound() {
             // Misses walk the whole root: the longest walks.
             let (_, stats) = t.intersect_with_stats(&Ray::segment(o, d, 0.0, f32::INFINITY));
             most = most.max(stats.leaves);
+            assert!(!stats.stopped_at_bound, "depth {depth}: a walk was stopped at the bound");
         }
         assert!(most <= bound, "depth {depth}: {most} steps > bound {bound}");
         assert!(most > 0);
