@@ -199,3 +199,150 @@ fn compressed_bakes_open_and_inspect_shows_both_sizes() {
     assert_eq!(raw["bytes_on_disk"], raw["file_bytes"]);
     assert!(ok(dir.path(), &["verify", "cube.oct.zst", "--rays", "300"]).contains(" 0 mismatches"));
 }
+
+/// The bunny the repository carries.
+fn bunny_path() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj.zst").to_str().unwrap().to_string()
+}
+
+/// Temporary files a write left in `dir`.
+fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".octrace-"))
+        .collect()
+}
+
+/// A bake killed (SIGKILL) while it writes leaves the old file under the target name,
+/// whole: the new file is written beside it and renamed only when complete. The
+/// compressed write is slow (zstd level 19), so the kill lands mid-write every time;
+/// the plain write is fast, so it is tried a few times.
+#[test]
+fn a_bake_killed_mid_write_leaves_the_old_file_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = bunny_path();
+    for (target, extra, attempts) in
+        [("scene.oct.zst", &["--compress", "--level", "19"][..], 1), ("scene.oct", &[][..], 10)]
+    {
+        let path = dir.path().join(target);
+        std::fs::write(&path, b"the old file").unwrap();
+        let mut caught = 0;
+        for _ in 0..attempts {
+            let mut child = Command::new(env!("CARGO_BIN_EXE_octrace"))
+                .args(["bake", &bunny, "-o", target])
+                .args(extra)
+                .current_dir(dir.path())
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .unwrap();
+            // Wait for the temporary file to appear, then kill at once.
+            let started = std::time::Instant::now();
+            let mid_write = loop {
+                if !leftovers(dir.path()).is_empty() {
+                    child.kill().unwrap();
+                    break true;
+                }
+                if child.try_wait().unwrap().is_some() || started.elapsed().as_secs() > 60 {
+                    break false;
+                }
+                std::thread::sleep(std::time::Duration::from_micros(200));
+            };
+            child.wait().unwrap();
+            if mid_write && leftovers(dir.path()).len() == 1 {
+                caught += 1;
+                assert_eq!(std::fs::read(&path).unwrap(), b"the old file", "{target}: the old file changed");
+                // SIGKILL gives no chance to clean up: the temporary file stays, under
+                // a name no reader opens.
+                for name in leftovers(dir.path()) {
+                    std::fs::remove_file(dir.path().join(name)).unwrap();
+                }
+                break;
+            }
+            // The bake finished first: the new file replaced the old one whole.
+            if std::fs::read(&path).unwrap() != b"the old file" {
+                ok(dir.path(), &["inspect", target]);
+                std::fs::write(&path, b"the old file").unwrap();
+            }
+        }
+        assert!(caught > 0, "{target}: no kill landed mid-write in {attempts} attempts");
+    }
+}
+
+/// Runs `octrace` with `setup` applied in the child before it starts.
+fn octrace_with(dir: &Path, args: &[&str], setup: fn() -> std::io::Result<()>) -> Output {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_octrace"));
+    cmd.args(args).current_dir(dir);
+    // SAFETY: `setup` only makes async-signal-safe system calls (setrlimit, signal,
+    // setgid, setuid), as a child between fork and exec requires.
+    unsafe { cmd.pre_exec(setup) };
+    cmd.output().unwrap()
+}
+
+/// A write that fails part way (the disk fills up, here simulated with a file-size
+/// limit, which fails writes the same way without needing a small file system) gives a
+/// clear message, leaves the old file and no temporary file.
+#[test]
+fn a_write_that_fails_part_way_says_why_and_leaves_nothing_behind() {
+    fn limit_file_size() -> std::io::Result<()> {
+        // SAFETY: plain system calls on this process; SIGXFSZ ignored (inherited across
+        // exec) so that a write past the limit fails with EFBIG instead of killing.
+        unsafe {
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            let limit = libc::rlimit { rlim_cur: 1 << 20, rlim_max: 1 << 20 };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+        }
+        Ok(())
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.oct"), b"the old file").unwrap();
+    for args in
+        [&["bake", &bunny_path(), "-o", "scene.oct"][..], &["bake", &bunny_path(), "-o", "scene.oct", "--compress"]]
+    {
+        let out = octrace_with(dir.path(), args, limit_file_size);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains("cannot write scene.oct")
+                && err.contains("ulimit -f")
+                && err.contains("nothing under that name"),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains(".tmp"), "the message names the temporary file: {err}");
+        assert_eq!(std::fs::read(dir.path().join("scene.oct")).unwrap(), b"the old file");
+        assert_eq!(leftovers(dir.path()), Vec::<String>::new());
+    }
+}
+
+/// Writing into a directory the user may not write gives a clear message. (Root may
+/// write anywhere, so as root the child drops to the `nobody` user first.)
+#[test]
+fn a_directory_without_write_permission_says_so() {
+    use std::os::unix::fs::PermissionsExt;
+    fn unprivileged() -> std::io::Result<()> {
+        // SAFETY: plain system calls on this process.
+        unsafe {
+            if libc::geteuid() == 0 && (libc::setgid(65534) != 0 || libc::setuid(65534) != 0) {
+                return Err(std::io::Error::last_os_error());
+            }
+        }
+        Ok(())
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    std::fs::set_permissions(dir.path().join("cube.obj"), std::fs::Permissions::from_mode(0o644)).unwrap();
+    std::fs::create_dir(dir.path().join("locked")).unwrap();
+    std::fs::set_permissions(dir.path().join("locked"), std::fs::Permissions::from_mode(0o555)).unwrap();
+    let out = octrace_with(dir.path(), &["bake", "cube.obj", "-o", "locked/cube.oct"], unprivileged);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cannot write locked/cube.oct: permission denied in locked"), "{err}");
+    let out = octrace(dir.path(), &["bake", "cube.obj", "-o", "missing/cube.oct"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the directory missing does not exist"), "{err}");
+}

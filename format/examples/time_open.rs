@@ -16,8 +16,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("map + header      {:>7.2} ms", ms(t));
     let t = Instant::now();
     let payload = file.payload();
-    let sums: Vec<u64> =
-        file.header().sections.iter().map(|s| xxhash_rust::xxh3::xxh3_64(s.bytes(payload).unwrap_or_default())).collect();
+    let sums: Vec<u64> = file
+        .header()
+        .sections
+        .iter()
+        .map(|s| xxhash_rust::xxh3::xxh3_64(s.bytes(payload).unwrap_or_default()))
+        .collect();
     println!("section xxh3s     {:>7.2} ms (one thread; {} sections)", ms(t), sums.len());
     let t = Instant::now();
     let view = file.view();

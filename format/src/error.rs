@@ -18,6 +18,19 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// Writing a file failed. Writes go to a temporary file beside the target and are
+    /// renamed over it only when complete, so the target is unchanged (and the
+    /// temporary file removed).
+    #[error("cannot write {path}: {reason} (nothing under that name was changed)")]
+    Write {
+        /// The target file.
+        path: PathBuf,
+        /// What went wrong, in words: "no space left on the device", "permission
+        /// denied in DIR", ...
+        reason: String,
+        /// The underlying error.
+        source: std::io::Error,
+    },
     /// The first bytes are not the octrace magic: this is not a baked scene.
     #[error("not an octrace scene (bad magic {found:02x?})")]
     BadMagic {
@@ -87,6 +100,19 @@ impl Error {
         Error::Io { path: path.into(), source }
     }
 
+    /// A failed write to `path`, with the reason in words.
+    pub(crate) fn write(path: &std::path::Path, source: std::io::Error) -> Self {
+        let reason = write_failure(path, &source);
+        // tempfile appends the temporary file's name ("... at path \"dir/.octrace-x.tmp\"),
+        // which means nothing to the user: the source keeps the OS's words alone.
+        let text = source.to_string();
+        let source = match text.find(" at path ") {
+            Some(cut) => std::io::Error::new(source.kind(), &text[..cut]),
+            None => source,
+        };
+        Error::Write { path: path.into(), reason, source }
+    }
+
     pub(crate) fn corrupt(msg: impl Into<String>) -> Self {
         Error::Corrupt(msg.into())
     }
@@ -94,3 +120,52 @@ impl Error {
 
 /// The format crate's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Says why writing `path` failed in the terms a user acts on.
+pub(crate) fn write_failure(path: &std::path::Path, e: &std::io::Error) -> String {
+    use std::io::ErrorKind;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.display().to_string(),
+        _ => ".".into(),
+    };
+    match e.kind() {
+        ErrorKind::StorageFull => "no space left on the device".into(),
+        ErrorKind::QuotaExceeded => "disk quota exceeded".into(),
+        ErrorKind::FileTooLarge => "the file is larger than this process may write (see `ulimit -f`)".into(),
+        ErrorKind::PermissionDenied => format!("permission denied in {dir}"),
+        ErrorKind::ReadOnlyFilesystem => format!("{dir} is on a read-only file system"),
+        ErrorKind::NotFound => format!("the directory {dir} does not exist"),
+        ErrorKind::NotADirectory => format!("{dir} is not a directory"),
+        // The raw OS error without the temporary file's path that tempfile adds.
+        _ => match e.raw_os_error() {
+            Some(code) => std::io::Error::from_raw_os_error(code).to_string(),
+            None => e.kind().to_string(),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::ErrorKind;
+
+    #[test]
+    fn write_failures_say_what_to_do() {
+        let path = std::path::Path::new("out/scene.oct");
+        for (kind, says) in [
+            (ErrorKind::StorageFull, "cannot write out/scene.oct: no space left on the device"),
+            (ErrorKind::PermissionDenied, "permission denied in out"),
+            (ErrorKind::NotFound, "the directory out does not exist"),
+            (ErrorKind::FileTooLarge, "ulimit -f"),
+            (ErrorKind::ReadOnlyFilesystem, "out is on a read-only file system"),
+        ] {
+            let msg = Error::write(path, std::io::Error::new(kind, "at path \"out/.octrace-x.tmp\"")).to_string();
+            assert!(msg.contains(says) && msg.contains("nothing under that name was changed"), "{msg}");
+            let e = Error::write(path, std::io::Error::new(kind, "at path \"out/.octrace-x.tmp\""));
+            let source = std::error::Error::source(&e).unwrap().to_string();
+            assert!(!msg.contains(".tmp") && !source.contains(".tmp"), "{msg}: {source}");
+        }
+        let msg = Error::write(path, std::io::Error::from_raw_os_error(28)).to_string();
+        assert!(msg.contains("no space left on the device"), "{msg}");
+    }
+}

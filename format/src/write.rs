@@ -61,7 +61,9 @@ impl BakedScene {
 
     /// Writes the scene to `path` atomically: into a temporary file beside it, flushed
     /// to disk, then renamed over `path`. An interrupted write never leaves a partial
-    /// file under `path`. Returns the bytes written.
+    /// file under `path`: on an error the temporary file is removed, and a process
+    /// killed mid-write leaves only its temporary file (`.octrace-*.tmp` beside the
+    /// target, which nothing reads and which may be deleted). Returns the bytes written.
     ///
     /// The archive is streamed to the file as rkyv produces it, hashed on the way, and
     /// the header written last: no in-memory copy of a file that can be hundreds of
@@ -69,10 +71,10 @@ impl BakedScene {
     /// writing it).
     ///
     /// # Errors
-    /// [`Error::Io`] naming the path on any failure (the temporary file is removed).
+    /// [`Error::Write`] naming the path on any failure (the temporary file is removed).
     pub fn write(&self, path: impl AsRef<Path>, bake_time_us: u64) -> Result<u64> {
         let path = path.as_ref();
-        let io = |e: std::io::Error| Error::io(path, e);
+        let io = |e: std::io::Error| Error::write(path, e);
         let mut tmp = temporary_beside(path)?;
         let file = tmp.as_file_mut();
         file.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
@@ -80,9 +82,15 @@ impl BakedScene {
             let mut sink = HashingWriter {
                 inner: std::io::BufWriter::with_capacity(1 << 20, &mut *file),
                 sections: SectionHasher::new(self),
+                failure: None,
             };
-            rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
-                .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
+            let archived =
+                rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
+                    .map(drop);
+            if let Some(e) = sink.failure.take() {
+                return Err(io(e));
+            }
+            archived.map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
             sink.inner.flush().map_err(io)?;
             sink.sections
         };
@@ -101,10 +109,10 @@ impl BakedScene {
     /// bytes of the uncompressed file. Returns (uncompressed, compressed) sizes.
     ///
     /// # Errors
-    /// [`Error::Io`] naming the path.
+    /// [`Error::Write`] naming the path.
     pub fn write_compressed(&self, path: impl AsRef<Path>, bake_time_us: u64, level: i32) -> Result<(u64, u64)> {
         let path = path.as_ref();
-        let io = |e: std::io::Error| Error::io(path, e);
+        let io = |e: std::io::Error| Error::write(path, e);
         let image = self.to_file_bytes(bake_time_us)?;
         let mut tmp = temporary_beside(path)?;
         let mut encoder = zstd::stream::write::Encoder::new(tmp.as_file_mut(), level).map_err(io)?;
@@ -120,13 +128,23 @@ impl BakedScene {
 struct HashingWriter<W> {
     inner: W,
     sections: SectionHasher,
+    /// The first write error: rkyv's error type keeps no trace of it.
+    failure: Option<std::io::Error>,
 }
 
 impl<W: Write> Write for HashingWriter<W> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let n = self.inner.write(buf)?;
-        self.sections.update(&buf[..n]);
-        Ok(n)
+        match self.inner.write(buf) {
+            Ok(n) => {
+                self.sections.update(&buf[..n]);
+                Ok(n)
+            }
+            Err(e) => {
+                let kind = e.kind();
+                self.failure.get_or_insert(e);
+                Err(kind.into())
+            }
+        }
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
@@ -211,13 +229,13 @@ fn temporary_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    tempfile::Builder::new().prefix(".octrace-").suffix(".tmp").tempfile_in(dir).map_err(|e| Error::io(path, e))
+    tempfile::Builder::new().prefix(".octrace-").suffix(".tmp").tempfile_in(dir).map_err(|e| Error::write(path, e))
 }
 
 /// Gives the temporary file `path`'s permissions (or 0644), flushes it to disk and
 /// renames it over `path`.
 fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    let io = |e: std::io::Error| Error::io(path, e);
+    let io = |e: std::io::Error| Error::write(path, e);
     // A temporary file is private (0600); the result gets the target's permissions
     // when it replaces a file, else the usual 0644.
     #[cfg(unix)]
@@ -235,11 +253,11 @@ fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
 /// directory, `fsync`, and a rename: readers see the old file or the whole new one.
 ///
 /// # Errors
-/// [`Error::Io`] naming `path`.
+/// [`Error::Write`] naming `path`.
 pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
     let mut tmp = temporary_beside(path)?;
     for part in parts {
-        tmp.write_all(part).map_err(|e| Error::io(path, e))?;
+        tmp.write_all(part).map_err(|e| Error::write(path, e))?;
     }
     finish(tmp, path)
 }
