@@ -63,7 +63,7 @@ impl Mesh {
         let (format, zst) = MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
         let raw = std::fs::read(path).map_err(unreadable)?;
-        let bytes = if zst { zstd::stream::decode_all(raw.as_slice()).map_err(unreadable)? } else { raw };
+        let bytes = if zst { decompress(&raw).map_err(unreadable)? } else { raw };
         let base = path.parent().map(Path::to_path_buf);
         Mesh::from_bytes(&bytes, format, path, base.as_deref())
     }
@@ -94,4 +94,24 @@ pub(crate) fn check_finite(v: [f32; 3], path: &Path, element: impl FnOnce() -> S
         None => Ok(()),
         Some(&value) => Err(Error::NonFinite { path: PathBuf::from(path), element: element(), value }),
     }
+}
+
+/// The most a compressed mesh may expand: decompression stops with an error past this
+/// many times the compressed size, so a small hostile file cannot claim all memory.
+/// (Text meshes compress 3-10×; a million identical lines, 1000× at most.)
+pub const MAX_MESH_COMPRESSION_RATIO: u64 = 1024;
+
+/// Decompresses a zstd mesh, refusing to expand past [`MAX_MESH_COMPRESSION_RATIO`].
+fn decompress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let limit = (raw.len() as u64).saturating_mul(MAX_MESH_COMPRESSION_RATIO);
+    let mut out = Vec::new();
+    zstd::stream::read::Decoder::new(raw)?.take(limit + 1).read_to_end(&mut out)?;
+    if out.len() as u64 > limit {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("decompresses to more than {MAX_MESH_COMPRESSION_RATIO} times its size"),
+        ));
+    }
+    Ok(out)
 }

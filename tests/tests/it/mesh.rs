@@ -145,6 +145,14 @@ fn bad_meshes_give_named_errors() {
     let err = Mesh::load(&missing).unwrap_err();
     assert!(matches!(err, Error::Unreadable { .. }) && err.to_string().contains("missing.obj"), "{err}");
 
+    // A compressed bomb: 64 MiB of blanks in a few kilobytes, refused at 1024 times
+    // the compressed size, before the whole expansion is held.
+    let bomb = d.join("bomb.obj.zst");
+    std::fs::write(&bomb, zstd_compress(&vec![b' '; 64 << 20])).unwrap();
+    assert!(std::fs::metadata(&bomb).unwrap().len() < (64 << 20) / octrace_bake::MAX_MESH_COMPRESSION_RATIO);
+    let err = Mesh::load(&bomb).unwrap_err();
+    assert!(matches!(err, Error::Unreadable { .. }) && err.to_string().contains("1024 times"), "{err}");
+
     let unknown = obj(d, "mesh.stl", "solid");
     assert!(matches!(Mesh::load(&unknown), Err(Error::UnknownFormat { .. })));
 
