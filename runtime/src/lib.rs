@@ -23,6 +23,8 @@
 
 pub mod cpu;
 mod error;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 mod ray;
 pub mod raysets;
 pub mod reference;

@@ -58,3 +58,20 @@ pub fn base64(bytes: &[u8]) -> String {
     }
     out
 }
+
+/// The GPU (a Vulkan adapter) for the GPU tests, opened once.
+///
+/// Without an adapter: with `OCTRACE_REQUIRE_GPU=1` (CI, which installs Mesa's software
+/// driver), a panic; without it, `None` and a visible skip notice on stderr.
+pub fn gpu(test: &str) -> Option<&'static octrace_runtime::gpu::GpuContext> {
+    static GPU: OnceLock<Result<octrace_runtime::gpu::GpuContext, String>> = OnceLock::new();
+    let required = std::env::var("OCTRACE_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    match GPU.get_or_init(|| octrace_runtime::gpu::GpuContext::new().map_err(|e| e.to_string())) {
+        Ok(gpu) => Some(gpu),
+        Err(e) if required => panic!("OCTRACE_REQUIRE_GPU=1 but {e}"),
+        Err(e) => {
+            eprintln!("SKIPPED {test}: {e} (set OCTRACE_REQUIRE_GPU=1 to make this a failure)");
+            None
+        }
+    }
+}

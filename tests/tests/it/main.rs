@@ -2,6 +2,7 @@
 
 mod bunny;
 mod format;
+mod gpu;
 mod hard_cases;
 mod mesh;
 mod raysets;

@@ -1,0 +1,580 @@
+//! Tracing on the GPU with wgpu (cargo feature `gpu`, on by default).
+//!
+//! [`GpuTracer`] uploads a scene's arrays as they are in the file (no re-encoding) and
+//! walks the octree in a WGSL compute kernel that is the CPU's scalar step, line for
+//! line: cube-map entry, Plücker exit face, neighbour index, point location for
+//! origins inside the scene, the watertight triangle test. Its answers are the CPU's
+//! (the tests compare every ray of the standard sets).
+//!
+//! The backend is Vulkan, asked for explicitly: a machine without a Vulkan driver gets
+//! [`GpuError::NoAdapter`], not a silent fallback. Without a GPU, Mesa's software
+//! driver (lavapipe; Debian's `mesa-vulkan-drivers`) runs the same kernel on the CPU.
+//!
+//! # Example
+//! ```no_run
+//! use octrace_runtime::gpu::{GpuContext, GpuTracer};
+//! use octrace_runtime::{Ray, Scene};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let scene = Scene::open("bunny.oct")?;
+//! let gpu = GpuContext::new()?;
+//! let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+//! let rays = [Ray::new(glam::Vec3::new(0.0, 0.1, 1.0), glam::Vec3::NEG_Z)];
+//! let hits = tracer.intersect(&rays)?;
+//! println!("{:?} on {}", hits[0], gpu.info.name);
+//! # Ok(()) }
+//! ```
+
+use std::time::{Duration, Instant};
+
+use octrace_format::SceneView;
+
+use crate::ray::{Hit, Ray};
+use crate::Scene;
+
+/// What can go wrong on the GPU path.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum GpuError {
+    /// No Vulkan adapter: no GPU driver, and no software one.
+    #[error(
+        "no Vulkan adapter found ({0}); install a GPU driver, or Mesa's software driver \
+         (Debian: mesa-vulkan-drivers)"
+    )]
+    NoAdapter(String),
+    /// The adapter refused the device or a resource.
+    #[error("GPU device: {0}")]
+    Device(String),
+    /// The scene does not fit the adapter's limits.
+    #[error("the scene does not fit this GPU: {0}")]
+    TooLarge(String),
+}
+
+/// The GPU result type.
+pub type GpuResult<T> = std::result::Result<T, GpuError>;
+
+/// A Vulkan device and its queue.
+#[derive(Debug)]
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// What the adapter is (name, driver, device type).
+    pub info: wgpu::AdapterInfo,
+}
+
+impl GpuContext {
+    /// Opens the first Vulkan adapter (a discrete GPU preferred), with the largest
+    /// storage bindings and buffers it allows and 64-bit floats where it has them.
+    ///
+    /// # Errors
+    /// [`GpuError::NoAdapter`] without a Vulkan driver; [`GpuError::Device`] if the
+    /// adapter refuses the device.
+    pub fn new() -> GpuResult<GpuContext> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::VULKAN;
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let limits = adapter.limits();
+        let required_limits = wgpu::Limits {
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
+            max_buffer_size: limits.max_buffer_size,
+            max_storage_buffers_per_shader_stage: limits.max_storage_buffers_per_shader_stage,
+            ..wgpu::Limits::defaults()
+        };
+        let required_features = adapter.features() & wgpu::Features::SHADER_F64;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("octrace"),
+            required_features,
+            required_limits,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(GpuContext { device, queue, info: adapter.get_info() })
+    }
+
+    /// One line about the adapter: name, driver, type.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        format!("{} ({} {}, {:?})", i.name, i.driver, i.driver_info, i.device_type)
+    }
+}
+
+/// Options of [`GpuTracer::with_options`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuOptions {
+    /// The largest storage binding to use, in bytes (default: the device's limit). The
+    /// scene's words are split across as many bindings as this takes; smaller values
+    /// exercise the split on scenes that would fit one.
+    pub max_binding_bytes: Option<u64>,
+}
+
+/// Word offsets of the scene's arrays in the uploaded words, in the kernel's order.
+#[derive(Clone, Copy, Debug)]
+struct Offsets {
+    octree: u32,
+    refs: u32,
+    tris: u32,
+    ids: u32,
+    boxes: u32,
+    cube: u32,
+    nodes: u32,
+    total: u64,
+}
+
+/// The kernel's uniform block (`Params` in trace.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    ray_count: u32,
+    max_depth: u32,
+    max_steps: u32,
+    cube_level: u32,
+    root_node: u32,
+    offsets: [u32; 7],
+    root_lo: [f32; 4],
+    root_hi: [f32; 4],
+}
+
+/// The kernel's output record (`HitOut` in trace.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct HitOut {
+    t: f32,
+    triangle: u32,
+    u: f32,
+    v: f32,
+    leaf: u32,
+    prim: u32,
+    steps: u32,
+    flags: u32,
+}
+
+/// Rays a dispatch takes at most (64-thread workgroups, at most 65535 of them).
+const RAYS_PER_DISPATCH: usize = 1 << 21;
+/// Threads a workgroup (`@workgroup_size` in trace.wgsl).
+const WORKGROUP: u32 = 64;
+
+/// Traces rays through one scene on the GPU.
+#[derive(Debug)]
+pub struct GpuTracer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    nearest: wgpu::ComputePipeline,
+    any: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    scene_buffers: Vec<wgpu::Buffer>,
+    params: Params,
+    chunk_words: u64,
+    f64_edges: bool,
+}
+
+/// Timings of one batch, for benchmarks.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuTimings {
+    /// Uploading the rays.
+    pub upload: Duration,
+    /// The kernel alone (submitted to finished).
+    pub kernel: Duration,
+    /// Reading the hits back.
+    pub download: Duration,
+}
+
+impl GpuTracer {
+    /// Uploads `scene` to `device` and builds the kernels.
+    ///
+    /// # Errors
+    /// [`GpuError::TooLarge`] when the scene needs more bindings or a larger buffer
+    /// than the device allows; [`GpuError::Device`] for a refused resource.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> GpuResult<GpuTracer> {
+        Self::with_options(device, queue, scene, GpuOptions::default())
+    }
+
+    /// [`GpuTracer::new`] with options.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::new`].
+    pub fn with_options(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+        options: GpuOptions,
+    ) -> GpuResult<GpuTracer> {
+        let view = scene.view();
+        let limits = device.limits();
+        let binding_limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_binding = options.max_binding_bytes.map_or(binding_limit, |m| m.min(binding_limit));
+        // Chunks of a power-of-two number of words, so the kernel splits an index with a
+        // shift and a mask.
+        let chunk_words = 1u64 << (max_binding / 4).max(1).ilog2().min(31);
+        let arrays = arrays_of(&view);
+        let offsets = offsets_of(&arrays)?;
+        let chunks = offsets.total.div_ceil(chunk_words).max(1);
+        // The rays and hits take two storage bindings besides the scene's.
+        if chunks + 2 > u64::from(limits.max_storage_buffers_per_shader_stage) {
+            return Err(GpuError::TooLarge(format!(
+                "{} MB of scene words need {chunks} bindings of {} MB; the device allows {} storage buffers",
+                offsets.total * 4 / 1_000_000,
+                chunk_words * 4 / 1_000_000,
+                limits.max_storage_buffers_per_shader_stage
+            )));
+        }
+        let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
+        let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
+        let source = shader_source(chunks as usize, chunk_words, f64_edges);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("octrace trace"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = bind_group_layout(device, chunks as usize);
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("octrace trace"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |any: bool| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(if any { "octrace occluded" } else { "octrace intersect" }),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("ANY_HIT", if any { 1.0 } else { 0.0 })],
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        };
+        let b = view.bounds;
+        let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
+        let max_depth = view.params.max_depth;
+        let params = Params {
+            ray_count: 0,
+            max_depth,
+            max_steps: crate::Tracer::new(view.clone()).max_steps(),
+            cube_level: view.params.cube_level,
+            root_node: view.root,
+            offsets: [
+                offsets.octree,
+                offsets.refs,
+                offsets.tris,
+                offsets.ids,
+                offsets.boxes,
+                offsets.cube,
+                offsets.nodes,
+            ],
+            root_lo: [root[0], root[1], root[2], b.root_size],
+            root_hi: [root[3], root[4], root[5], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
+        };
+        Ok(GpuTracer {
+            device: device.clone(),
+            queue: queue.clone(),
+            nearest: pipeline(false),
+            any: pipeline(true),
+            layout,
+            scene_buffers,
+            params,
+            chunk_words,
+            f64_edges,
+        })
+    }
+
+    /// How many storage bindings the scene's words take (1 unless the scene is larger
+    /// than one binding may be).
+    pub fn scene_bindings(&self) -> usize {
+        self.scene_buffers.len()
+    }
+
+    /// Words a scene binding holds.
+    pub fn words_per_binding(&self) -> u64 {
+        self.chunk_words
+    }
+
+    /// Whether the triangle test's edge functions run in `f64` (exact: watertight
+    /// whatever the compiler fuses) — where the adapter has 64-bit floats.
+    pub fn exact_edges(&self) -> bool {
+        self.f64_edges
+    }
+
+    /// The nearest hit of each ray, in ray order.
+    ///
+    /// # Errors
+    /// [`GpuError::Device`] if the device is lost or a buffer cannot be read.
+    pub fn intersect(&self, rays: &[Ray]) -> GpuResult<Vec<Option<Hit>>> {
+        Ok(self.run(rays, false)?.0.iter().map(to_hit).collect())
+    }
+
+    /// Whether each ray hits anything in `[tmin, tmax]`, in ray order.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::intersect`].
+    pub fn occluded(&self, rays: &[Ray]) -> GpuResult<Vec<bool>> {
+        Ok(self.run(rays, true)?.0.iter().map(|h| h.triangle != u32::MAX).collect())
+    }
+
+    /// [`GpuTracer::intersect`] (or, with `any`, the occluder of each ray) with the
+    /// time each part took.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::intersect`].
+    pub fn trace_timed(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<Option<Hit>>, GpuTimings)> {
+        let (out, timings) = self.run(rays, any)?;
+        Ok((out.iter().map(to_hit).collect(), timings))
+    }
+
+    /// Runs the kernel over `rays` in dispatches of at most [`RAYS_PER_DISPATCH`].
+    fn run(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
+        let mut out = Vec::with_capacity(rays.len());
+        let mut timings = GpuTimings::default();
+        if rays.is_empty() {
+            return Ok((out, timings));
+        }
+        let batch = rays.len().min(RAYS_PER_DISPATCH);
+        let ray_bytes = (batch * std::mem::size_of::<Ray>()) as u64;
+        let hit_bytes = (batch * std::mem::size_of::<HitOut>()) as u64;
+        let buffer = |label, size, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let ray_buffer = buffer("octrace rays", ray_bytes, U::STORAGE | U::COPY_DST);
+        let hit_buffer = buffer("octrace hits", hit_bytes, U::STORAGE | U::COPY_SRC);
+        let readback = buffer("octrace readback", hit_bytes, U::MAP_READ | U::COPY_DST);
+        let params_buffer = buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: ray_buffer.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: hit_buffer.as_entire_binding() },
+        ];
+        for (k, b) in self.scene_buffers.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: 3 + k as u32, resource: b.as_entire_binding() });
+        }
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("octrace trace"),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        let pipeline = if any { &self.any } else { &self.nearest };
+        for part in rays.chunks(RAYS_PER_DISPATCH) {
+            let t = Instant::now();
+            let params = Params { ray_count: part.len() as u32, ..self.params };
+            self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+            self.queue.write_buffer(&ray_buffer, 0, bytemuck::cast_slice(part));
+            self.queue.submit([]);
+            self.wait()?;
+            timings.upload += t.elapsed();
+
+            let t = Instant::now();
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups((part.len() as u32).div_ceil(WORKGROUP), 1, 1);
+            }
+            self.queue.submit([encoder.finish()]);
+            self.wait()?;
+            timings.kernel += t.elapsed();
+
+            let t = Instant::now();
+            let bytes = (part.len() * std::mem::size_of::<HitOut>()) as u64;
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, bytes);
+            self.queue.submit([encoder.finish()]);
+            let slice = readback.slice(..bytes);
+            let (send, receive) = std::sync::mpsc::channel();
+            slice.map_async(wgpu::MapMode::Read, move |r| {
+                let _ = send.send(r);
+            });
+            self.wait()?;
+            receive
+                .recv()
+                .map_err(|e| GpuError::Device(e.to_string()))?
+                .map_err(|e| GpuError::Device(e.to_string()))?;
+            {
+                let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
+                out.extend_from_slice(bytemuck::cast_slice(&mapped));
+            }
+            readback.unmap();
+            timings.download += t.elapsed();
+        }
+        Ok((out, timings))
+    }
+
+    fn wait(&self) -> GpuResult<()> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
+            .map(drop)
+            .map_err(|e| GpuError::Device(e.to_string()))
+    }
+}
+
+fn to_hit(h: &HitOut) -> Option<Hit> {
+    (h.triangle != u32::MAX).then_some(Hit { t: h.t, triangle: h.triangle, u: h.u, v: h.v, leaf: h.leaf, prim: h.prim })
+}
+
+/// The scene's arrays as words, in upload order (the file's section order).
+fn arrays_of<'a>(v: &SceneView<'a>) -> [&'a [u32]; 7] {
+    [
+        v.octree,
+        v.tri_refs,
+        bytemuck::cast_slice(v.triangles),
+        v.triangle_ids,
+        bytemuck::cast_slice(v.boxes),
+        v.cube_map,
+        v.nodes,
+    ]
+}
+
+fn offsets_of(arrays: &[&[u32]; 7]) -> GpuResult<Offsets> {
+    let mut at = [0u64; 8];
+    for (i, a) in arrays.iter().enumerate() {
+        at[i + 1] = at[i] + a.len() as u64;
+    }
+    let word = |i: usize| {
+        u32::try_from(at[i]).map_err(|_| GpuError::TooLarge(format!("{} scene words, more than 2^32", at[7])))
+    };
+    Ok(Offsets {
+        octree: word(0)?,
+        refs: word(1)?,
+        tris: word(2)?,
+        ids: word(3)?,
+        boxes: word(4)?,
+        cube: word(5)?,
+        nodes: word(6)?,
+        total: at[7],
+    })
+}
+
+/// Uploads the arrays back to back into buffers of `chunk_words` words (the last one
+/// shorter), each array copied straight from its slice (the mapped file).
+fn upload(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    arrays: &[&[u32]; 7],
+    total: u64,
+    chunk_words: u64,
+) -> Vec<wgpu::Buffer> {
+    let chunks = total.div_ceil(chunk_words).max(1);
+    let buffers: Vec<wgpu::Buffer> = (0..chunks)
+        .map(|k| {
+            let words = (total - k * chunk_words).min(chunk_words).max(1);
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("octrace scene"),
+                size: 4 * words,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })
+        .collect();
+    let mut at = 0u64;
+    for array in arrays {
+        let mut rest: &[u32] = array;
+        while !rest.is_empty() {
+            let (k, within) = (at / chunk_words, at % chunk_words);
+            let n = rest.len().min((chunk_words - within) as usize);
+            queue.write_buffer(&buffers[k as usize], 4 * within, bytemuck::cast_slice(&rest[..n]));
+            rest = &rest[n..];
+            at += n as u64;
+        }
+    }
+    queue.submit([]);
+    buffers
+}
+
+fn bind_group_layout(device: &wgpu::Device, chunks: usize) -> wgpu::BindGroupLayout {
+    let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let mut entries = vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        storage(1, true),
+        storage(2, false),
+    ];
+    entries.extend((0..chunks).map(|k| storage(3 + k as u32, true)));
+    device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("octrace trace"), entries: &entries })
+}
+
+/// The kernel's source: trace.wgsl with the scene's bindings, the `word` accessor over
+/// them, and the precision-dependent helpers.
+fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
+    let mut g = String::new();
+    for k in 0..chunks {
+        g += &format!("@group(0) @binding({}) var<storage, read> scene_{k}: array<u32>;\n", 3 + k);
+    }
+    if chunks == 1 {
+        g += "fn word(i: u32) -> u32 {\n    return scene_0[i];\n}\n";
+    } else {
+        let shift = chunk_words.ilog2();
+        g +=
+            &format!("fn word(i: u32) -> u32 {{\n    let j = i & {}u;\n    switch i >> {shift}u {{\n", chunk_words - 1);
+        for k in 0..chunks {
+            g += &format!("        case {k}u: {{ return scene_{k}[j]; }}\n");
+        }
+        g += "        default: { return 0u; }\n    }\n}\n";
+    }
+    if f64_edges {
+        // Products of f32s are exact in f64, and so is the sign of their difference:
+        // the edge function of a shared edge is the exact negation in both triangles,
+        // whatever the compiler fuses.
+        g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    \
+              return f32(f64(px) * f64(qy) - f64(py) * f64(qx));\n}\n";
+        g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
+              let last = f64((1u << params.max_depth) - 1u);\n    \
+              let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
+              return u32(f32(clamp(x, 0.0lf, last)));\n}\n";
+    } else {
+        g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
+        g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
+              let last = f32((1u << params.max_depth) - 1u);\n    \
+              return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
+    }
+    include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The generated kernel parses and validates (naga, no device needed) for one
+    /// binding and for a split scene, with and without f64.
+    #[test]
+    fn the_kernel_source_is_valid_wgsl() {
+        for (chunks, f64_edges) in [(1, false), (1, true), (3, false), (5, true)] {
+            let source = shader_source(chunks, 1 << 10, f64_edges);
+            let module =
+                naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)));
+            let caps = if f64_edges { naga::valid::Capabilities::FLOAT64 } else { naga::valid::Capabilities::empty() };
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps)
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("{chunks} chunks, f64 {f64_edges}: {}", e.emit_to_string(&source)));
+        }
+    }
+}

@@ -1,0 +1,450 @@
+// The octree walk of runtime/src/cpu/traverse.rs, one ray per invocation.
+//
+// The scene is one array of 32-bit words (the file's sections octree, tri_refs,
+// triangles, triangle_ids, boxes, cube_map, nodes, back to back, at the word offsets in
+// `params`), split across several bindings when it is larger than one binding may be:
+// `word(i)` hides the split. The host generates `word` and the bindings above it, and the
+// two helpers whose precision depends on the adapter (`grid_coord`, `edge`).
+//
+// Every step is the CPU's scalar step, in the same order and with the same
+// conventions (faces 2 * axis + side, exit-face table, quadrant order, cell-derived
+// boxes); see the CPU code for the reasoning behind each line.
+
+// Any hit (shadow rays) rather than the nearest.
+override ANY_HIT: bool = false;
+
+struct Params {
+    ray_count: u32,
+    max_depth: u32,
+    max_steps: u32,
+    cube_level: u32,
+    root_node: u32,
+    o_octree: u32,
+    o_refs: u32,
+    o_tris: u32,
+    o_ids: u32,
+    o_boxes: u32,
+    o_cube: u32,
+    o_nodes: u32,
+    // xyz: the root cube's low corner; w: its edge.
+    root_lo: vec4<f32>,
+    // xyz: the root cube's high corner; w: 2^max_depth / edge.
+    root_hi: vec4<f32>,
+}
+
+// 32 bytes a hit; `triangle` is 0xFFFFFFFF on a miss.
+struct HitOut {
+    t: f32,
+    triangle: u32,
+    u: f32,
+    v: f32,
+    leaf: u32,
+    prim: u32,
+    steps: u32,
+    // Bit 0: the walk was stopped by the step bound.
+    flags: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+// Two vec4s a ray: (ox, oy, oz, tmin), (dx, dy, dz, tmax): the 32-byte RAYS.bin record.
+@group(0) @binding(1) var<storage, read> rays: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> hits: array<HitOut>;
+
+//GENERATED//
+
+const LEAF_HEADER_WORDS: u32 = 4u;
+const INTERNAL_BIT: u32 = 0x80000000u;
+const COARSER_SHIFT: u32 = 24u;
+const MISS: u32 = 0xFFFFFFFFu;
+
+fn wordf(i: u32) -> f32 {
+    return bitcast<f32>(word(i));
+}
+
+fn inf() -> f32 {
+    return bitcast<f32>(0x7F800000u);
+}
+
+fn is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7F800000u) != 0x7F800000u;
+}
+
+fn is_nan(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7FFFFFFFu) > 0x7F800000u;
+}
+
+fn is_negative(x: f32) -> bool {
+    // The sign bit: -0.0 counts as negative, as on the CPU.
+    return (bitcast<u32>(x) & 0x80000000u) != 0u;
+}
+
+// EXIT_FACE[octant] (runtime/src/cpu/tables.rs), three bits a code.
+fn exit_row(octant: u32) -> u32 {
+    switch octant {
+        case 0u: { return pack_row(1u, 3u, 5u, 5u, 1u, 3u, 1u, 1u); }
+        case 1u: { return pack_row(3u, 0u, 0u, 0u, 3u, 0u, 5u, 5u); }
+        case 2u: { return pack_row(5u, 5u, 2u, 1u, 1u, 1u, 2u, 1u); }
+        case 3u: { return pack_row(0u, 0u, 0u, 2u, 5u, 5u, 0u, 2u); }
+        case 4u: { return pack_row(1u, 1u, 1u, 3u, 4u, 4u, 1u, 3u); }
+        case 5u: { return pack_row(4u, 4u, 3u, 0u, 0u, 0u, 3u, 0u); }
+        case 6u: { return pack_row(2u, 1u, 1u, 1u, 2u, 1u, 4u, 4u); }
+        default: { return pack_row(0u, 2u, 4u, 4u, 0u, 2u, 0u, 0u); }
+    }
+}
+
+fn pack_row(a: u32, b: u32, c: u32, d: u32, e: u32, f: u32, g: u32, h: u32) -> u32 {
+    return a | (b << 3u) | (c << 6u) | (d << 9u) | (e << 12u) | (f << 15u) | (g << 18u) | (h << 21u);
+}
+
+fn links_before(ncount: u32, face: u32) -> u32 {
+    let below = ncount & ((1u << (4u * face)) - 1u);
+    let pairs = (below & 0x0F0F0Fu) + ((below >> 4u) & 0x0F0F0Fu);
+    return ((pairs * 0x010101u) >> 16u) & 0xFFu;
+}
+
+// The leaf holding finest-grid cell q, descending from `start` (a node at `level`):
+// (address, level) in .xy; its cell is q >> (max_depth - level).
+fn descend(start: u32, start_level: u32, q: vec3<u32>) -> vec2<u32> {
+    var node = start;
+    var level = start_level;
+    // A valid tree is at most max_depth deep; the bound keeps any file finite.
+    for (var guard = 0u; guard <= 32u; guard++) {
+        if (node & INTERNAL_BIT) == 0u {
+            return vec2<u32>(node, level);
+        }
+        let shift = params.max_depth - level - 1u;
+        let child = ((q.x >> shift) & 1u) | (((q.y >> shift) & 1u) << 1u) | (((q.z >> shift) & 1u) << 2u);
+        node = word(params.o_nodes + 8u * (node & ~INTERNAL_BIT) + child);
+        level += 1u;
+    }
+    return vec2<u32>(0u, 0u);
+}
+
+fn grid_coords(p: vec3<f32>) -> vec3<u32> {
+    let lo = params.root_lo.xyz;
+    return vec3<u32>(grid_coord(p.x, lo.x), grid_coord(p.y, lo.y), grid_coord(p.z, lo.z));
+}
+
+struct Walk {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    inv: vec3<f32>,
+    high: vec3<u32>,
+    row: u32,
+    tmin: f32,
+    tmax: f32,
+    address: u32,
+    level: u32,
+    cell: vec3<u32>,
+    // Watertight shear: axes (kx, ky, kz) and (d[kx]/d[kz], d[ky]/d[kz], 1/d[kz]).
+    k: vec3<u32>,
+    s: vec3<f32>,
+    best: HitOut,
+    t_best: f32,
+    steps: u32,
+    done: bool,
+}
+
+fn component(v: vec3<f32>, i: u32) -> f32 {
+    return select(select(v.z, v.y, i == 1u), v.x, i == 0u);
+}
+
+fn ucomponent(v: vec3<u32>, i: u32) -> u32 {
+    return select(select(v.z, v.y, i == 1u), v.x, i == 0u);
+}
+
+// Woop, Benthin & Wald's watertight test (runtime/src/cpu/watertight.rs) against the
+// triangle at word `at`; a hit in [tmin, tmax] comes back as (t, u, v, 1).
+fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {
+    let o = (*wk).o;
+    let a = vec3<f32>(wordf(at), wordf(at + 1u), wordf(at + 2u)) - o;
+    let b = vec3<f32>(wordf(at + 3u), wordf(at + 4u), wordf(at + 5u)) - o;
+    let c = vec3<f32>(wordf(at + 6u), wordf(at + 7u), wordf(at + 8u)) - o;
+    let k = (*wk).k;
+    let s = (*wk).s;
+    let az = component(a, k.z);
+    let bz = component(b, k.z);
+    let cz = component(c, k.z);
+    let ax = component(a, k.x) - s.x * az;
+    let ay = component(a, k.y) - s.y * az;
+    let bx = component(b, k.x) - s.x * bz;
+    let by = component(b, k.y) - s.y * bz;
+    let cx = component(c, k.x) - s.x * cz;
+    let cy = component(c, k.y) - s.y * cz;
+    let u = edge(cx, cy, bx, by);
+    let v = edge(ax, ay, cx, cy);
+    let w = edge(bx, by, ax, ay);
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return vec4<f32>(0.0);
+    }
+    let scaled = u * (s.z * az) + v * (s.z * bz) + w * (s.z * cz);
+    let inv_det = 1.0 / det;
+    let dist = scaled * inv_det;
+    if dist >= tmin && dist <= tmax {
+        return vec4<f32>(dist, v * inv_det, w * inv_det, 1.0);
+    }
+    return vec4<f32>(0.0);
+}
+
+// Visits the current leaf: its triangles, then the neighbour to go on to. Sets
+// `done` when the walk is over.
+fn step(wk: ptr<function, Walk>) {
+    (*wk).steps += 1u;
+    if (*wk).steps > params.max_steps {
+        (*wk).best.flags |= 1u;
+        (*wk).done = true;
+        return;
+    }
+    let address = (*wk).address;
+    let rec = params.o_octree + address;
+    let count = word(rec);
+    let offset = word(rec + 1u);
+    let box_index = word(rec + 2u);
+    let ncount = word(rec + 3u);
+    // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
+    for (var j = 0u; j < count; j++) {
+        let tri = word(params.o_refs + offset + j);
+        let h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+        if h.w != 0.0 {
+            (*wk).t_best = h.x;
+            (*wk).best.t = h.x;
+            (*wk).best.triangle = word(params.o_ids + tri);
+            (*wk).best.u = h.y;
+            (*wk).best.v = h.z;
+            (*wk).best.leaf = box_index;
+            (*wk).best.prim = tri;
+            if ANY_HIT {
+                (*wk).done = true;
+                return;
+            }
+        }
+    }
+    // 2. The exit corner from the cell, then the exit face from three Plücker signs.
+    let cell = (*wk).cell;
+    let level = (*wk).level;
+    let size = ldexp(params.root_lo.w, -i32(level & 31u));
+    let lo = params.root_lo.xyz;
+    let o = (*wk).o;
+    let d = (*wk).d;
+    let off = (lo + vec3<f32>(cell + (*wk).high) * size) - o;
+    let p_xy = off.x * d.y - off.y * d.x;
+    let p_yz = off.y * d.z - off.z * d.y;
+    let p_zx = off.z * d.x - off.x * d.z;
+    let code = select(0u, 1u, p_xy > 0.0) | select(0u, 2u, p_yz > 0.0) | select(0u, 4u, p_zx > 0.0);
+    var face = ((*wk).row >> (3u * code)) & 7u;
+    if component(d, face >> 1u) == 0.0 {
+        face = exit_along_moving_axes(off, d, (*wk).inv);
+    }
+    let axis = face >> 1u;
+    let off_a = component(off, axis);
+    let d_a = component(d, axis);
+    // 3. A candidate inside this leaf is the nearest; past tmax nothing more counts.
+    let t_exit = off_a * component((*wk).inv, axis);
+    if ((*wk).best.triangle != MISS && (*wk).best.t <= t_exit) || t_exit >= (*wk).tmax {
+        (*wk).done = true;
+        return;
+    }
+    // 4. The neighbour across the face: one, or one of four by the median lines.
+    let n = (ncount >> (4u * face)) & 0xFu;
+    if n == 0u {
+        (*wk).done = true;
+        return;
+    }
+    let half = 0.5 * size;
+    let negative_a = (face & 1u) == 0u;
+    let mid = lo + vec3<f32>(2u * cell + 1u) * half;
+    let p = off_a * d - (mid - o) * d_a;
+    let sides = vec3<u32>(select(vec3<u32>(0u), vec3<u32>(1u), p > vec3<f32>(0.0))) ^ vec3<u32>(select(0u, 1u, negative_a));
+    let side_bits = sides.x | (sides.y << 1u) | (sides.z << 2u);
+    let quadrant = (side_bits & ((1u << axis) - 1u)) | ((side_bits >> (axis + 1u)) << axis);
+    let link = address + LEAF_HEADER_WORDS + links_before(ncount, face) + (n >> 2u) * quadrant;
+    (*wk).address = word(params.o_octree + link);
+    // 5. The neighbour's cell: ((across << 1) | child bit) >> (1 + coarser - finer).
+    let coarser = (ncount >> (COARSER_SHIFT + face)) & 1u;
+    let finer = n >> 2u;
+    let shift = 1u + coarser - finer;
+    let up = (face & 1u) * 2u;
+    var next = (cell << vec3<u32>(1u)) | sides;
+    let across = ((ucomponent(cell, axis) + up - 1u) << 1u) | select(0u, 1u, negative_a);
+    if axis == 0u {
+        next.x = across;
+    } else if axis == 1u {
+        next.y = across;
+    } else {
+        next.z = across;
+    }
+    (*wk).cell = next >> vec3<u32>(shift);
+    (*wk).level = level + finer - coarser;
+}
+
+// The exit face when the table chose an axis the ray does not move along: the nearest
+// exit among the axes it moves along (ties to the lowest axis).
+fn exit_along_moving_axes(off: vec3<f32>, d: vec3<f32>, inv: vec3<f32>) -> u32 {
+    var best_t = inf();
+    var best_axis = 0u;
+    var found = false;
+    for (var a = 0u; a < 3u; a++) {
+        if component(d, a) != 0.0 {
+            let t = component(off, a) * component(inv, a);
+            if t < best_t || !found {
+                best_t = t;
+                best_axis = a;
+                found = true;
+            }
+        }
+    }
+    return 2u * best_axis + select(1u, 0u, is_negative(component(d, best_axis)));
+}
+
+// Starts a walk: clips to the root, finds the first leaf. `done` when it cannot hit.
+fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
+    var wk: Walk;
+    wk.done = true;
+    wk.best.t = tmax;
+    wk.best.triangle = MISS;
+    wk.best.flags = 0u;
+    wk.steps = 0u;
+    let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
+    if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin) || is_nan(tmax) || !(tmin <= tmax) {
+        return wk;
+    }
+    // Clip to the root cube (zero components explicitly: 0 * inf never happens).
+    let lo = params.root_lo.xyz;
+    let hi = params.root_hi.xyz;
+    var t0 = -inf();
+    var t1 = inf();
+    var entry_axis = 0u;
+    for (var a = 0u; a < 3u; a++) {
+        let da = component(d, a);
+        let oa = component(o, a);
+        let la = component(lo, a);
+        let ha = component(hi, a);
+        if da == 0.0 {
+            if oa < la || oa > ha {
+                return wk;
+            }
+            continue;
+        }
+        let ta = (la - oa) / da;
+        let tb = (ha - oa) / da;
+        let near = min(ta, tb);
+        let far = max(ta, tb);
+        if near > t0 {
+            t0 = near;
+            entry_axis = a;
+        }
+        t1 = min(t1, far);
+    }
+    if !(t0 <= t1) {
+        return wk;
+    }
+    let t_start = max(t0, tmin);
+    if t_start > min(t1, tmax) {
+        return wk;
+    }
+    // The first leaf: through the cube map from outside, by point location inside.
+    var leaf: vec2<u32>;
+    var q: vec3<u32>;
+    if t0 > tmin {
+        q = grid_coords(o + t0 * d);
+        let high = d[entry_axis] < 0.0;
+        let last = (1u << params.max_depth) - 1u;
+        let qa = select(0u, last, high);
+        if entry_axis == 0u {
+            q.x = qa;
+        } else if entry_axis == 1u {
+            q.y = qa;
+        } else {
+            q.z = qa;
+        }
+        let face = 2u * entry_axis + select(0u, 1u, high);
+        let level = params.cube_level;
+        let res = 1u << level;
+        let shift = params.max_depth - level;
+        var iu: u32;
+        var iv: u32;
+        if entry_axis == 0u {
+            iu = q.y;
+            iv = q.z;
+        } else if entry_axis == 1u {
+            iu = q.x;
+            iv = q.z;
+        } else {
+            iu = q.x;
+            iv = q.y;
+        }
+        let texel = (face * res + (iv >> shift)) * res + (iu >> shift);
+        let node = word(params.o_cube + texel);
+        if (node & INTERNAL_BIT) != 0u {
+            leaf = descend(node, level, q);
+        } else {
+            // The texel's leaf may be coarser than the texel: its level from its box's
+            // edge, a power-of-two fraction of the root's.
+            let b = params.o_boxes + 6u * word(params.o_octree + node + 2u);
+            let edge = wordf(b + 3u) - wordf(b);
+            let ratio = params.root_lo.w / edge * 1.4142135;
+            let exponent = i32((bitcast<u32>(ratio) >> 23u) & 0xFFu) - 127;
+            leaf = vec2<u32>(node, u32(clamp(exponent, 0, i32(level))));
+        }
+    } else {
+        q = grid_coords(o + t_start * d);
+        leaf = descend(params.root_node, 0u, q);
+    }
+    wk.o = o;
+    wk.d = d;
+    wk.inv = vec3<f32>(1.0) / d;
+    wk.high = vec3<u32>(select(1u, 0u, is_negative(d.x)), select(1u, 0u, is_negative(d.y)), select(1u, 0u, is_negative(d.z)));
+    let octant = select(0u, 1u, is_negative(d.x)) | select(0u, 2u, is_negative(d.y)) | select(0u, 4u, is_negative(d.z));
+    wk.row = exit_row(octant);
+    wk.tmin = tmin;
+    wk.tmax = tmax;
+    wk.address = leaf.x;
+    wk.level = leaf.y;
+    wk.cell = q >> vec3<u32>(params.max_depth - leaf.y);
+    // The shear: kz the largest component, winding kept.
+    let ad = abs(d);
+    var kz = 2u;
+    if ad.x >= ad.y && ad.x >= ad.z {
+        kz = 0u;
+    } else if ad.y >= ad.z {
+        kz = 1u;
+    }
+    var kx = (kz + 1u) % 3u;
+    var ky = (kz + 2u) % 3u;
+    if component(d, kz) < 0.0 {
+        let t = kx;
+        kx = ky;
+        ky = t;
+    }
+    let dz = component(d, kz);
+    wk.k = vec3<u32>(kx, ky, kz);
+    wk.s = vec3<f32>(component(d, kx) / dz, component(d, ky) / dz, 1.0 / dz);
+    wk.t_best = tmax;
+    wk.done = false;
+    return wk;
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= params.ray_count {
+        return;
+    }
+    let r0 = rays[2u * i];
+    let r1 = rays[2u * i + 1u];
+    var wk = begin(r0.xyz, r1.xyz, r0.w, r1.w);
+    // Bounded by max_steps (step() stops the walk there).
+    loop {
+        if wk.done {
+            break;
+        }
+        step(&wk);
+    }
+    var out = wk.best;
+    out.steps = wk.steps;
+    hits[i] = out;
+}

@@ -1,0 +1,149 @@
+//! The GPU tracer (wgpu, Vulkan) gives the CPU's answers, ray for ray.
+
+use glam::Vec3;
+use octrace_runtime::gpu::{GpuOptions, GpuTracer};
+use octrace_runtime::raysets::{self, Frame};
+use octrace_runtime::reference::ZERO_T_SPACINGS;
+use octrace_runtime::{Hit, Ray, Scene};
+use octrace_tests::{bunny_mesh, bunny_scene, gpu};
+
+/// How two answers for one ray compare.
+#[derive(Debug, Default)]
+struct Tally {
+    same: usize,
+    /// Different triangles at the same distance (a shared edge or vertex), or a hit
+    /// on a triangle's very boundary that the other side's rounding put outside.
+    ties: usize,
+    different: Vec<usize>,
+}
+
+/// Distances this close (relative) are equal: the acceptance's |Δt| ≤ 1e-5 t.
+const SAME_T: f32 = 1e-5;
+/// A hit this close to its triangle's boundary (smallest barycentric) is on the edge.
+const ON_EDGE: f32 = 1e-5;
+
+fn on_edge(h: &Hit) -> bool {
+    h.u.min(h.v).min(1.0 - h.u - h.v) <= ON_EDGE
+}
+
+/// |Δt| allowed between two answers for `ray`: 1e-5 t, plus the rounding of a point
+/// on the ray near its origin (a few f32 spacings of the origin's coordinates; the
+/// oracle's rule, `reference::ZERO_T_SPACINGS`), which dominates for hits at t ≈ 0.
+fn t_tolerance(ray: &Ray, t: f32) -> f32 {
+    let near_origin = ZERO_T_SPACINGS * f32::EPSILON * ray.origin.abs().max_element() / ray.dir.length();
+    SAME_T * t.abs() + near_origin
+}
+
+fn compare(rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>]) -> Tally {
+    assert_eq!(cpu.len(), gpu.len());
+    let mut tally = Tally::default();
+    for (i, (c, g)) in cpu.iter().zip(gpu).enumerate() {
+        match (c, g) {
+            (None, None) => tally.same += 1,
+            (Some(c), Some(g)) if (c.t - g.t).abs() <= t_tolerance(&rays[i], c.t) => {
+                if c.triangle == g.triangle {
+                    tally.same += 1;
+                } else {
+                    tally.ties += 1;
+                }
+            }
+            (Some(h), None) | (None, Some(h)) if on_edge(h) => tally.ties += 1,
+            _ => tally.different.push(i),
+        }
+    }
+    tally
+}
+
+fn check(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>]) {
+    let t = compare(rays, cpu, gpu);
+    eprintln!("{name}: {} rays, {} same, {} ties, {} different", rays.len(), t.same, t.ties, t.different.len());
+    if let Some(&i) = t.different.first() {
+        panic!("{name}: ray {i} {:?}: CPU {:?}, GPU {:?}", rays[i], cpu[i], gpu[i]);
+    }
+    // Ties are rays through shared edges: a handful in a million.
+    assert!(t.ties * 10_000 <= rays.len(), "{name}: {} ties in {} rays", t.ties, rays.len());
+}
+
+/// The three standard sets of `shared/bench/RAYS.md` on the bunny: the same triangle
+/// (or a tie at the same distance) and |Δt| ≤ 1e-5 t for every ray; the same occlusion
+/// for every shadow ray but those whose occluder lies on a triangle's boundary.
+#[test]
+fn the_standard_sets_on_the_bunny_match_the_cpu() {
+    let Some(gpu) = gpu("the_standard_sets_on_the_bunny_match_the_cpu") else { return };
+    let scene = bunny_scene();
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
+    let frame = Frame::from_triangles(&bunny_mesh().triangles);
+    let primary = raysets::primary(&frame);
+    let cpu_primary = scene.intersect_all(&primary);
+    check("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
+    let incoherent = raysets::incoherent(&frame, 1_000_000);
+    check("incoherent", &incoherent, &scene.intersect_all(&incoherent), &tracer.intersect(&incoherent).unwrap());
+    let view = scene.view();
+    let shadow = raysets::shadow(&frame, |i| cpu_primary[i].map(|h| (h.t, view.triangle(h.prim))));
+    let cpu_occluded = scene.occluded_all(&shadow);
+    let (occluders, _) = tracer.trace_timed(&shadow, true).unwrap();
+    assert_eq!(tracer.occluded(&shadow).unwrap(), occluders.iter().map(Option::is_some).collect::<Vec<_>>());
+    let cpu_occluders: Vec<Option<Hit>> = shadow.iter().map(|r| scene.tracer().occluder(r)).collect();
+    let mut differ = 0;
+    for (i, (&c, g)) in cpu_occluded.iter().zip(&occluders).enumerate() {
+        if c != g.is_some() {
+            let h = g.or(cpu_occluders[i]).unwrap();
+            assert!(on_edge(&h), "shadow ray {i} {:?}: CPU {c}, GPU {g:?}", shadow[i]);
+            differ += 1;
+        }
+    }
+    eprintln!("shadow: {} rays, {differ} differ on a triangle's boundary", shadow.len());
+    assert!(differ * 10_000 <= shadow.len());
+}
+
+/// A scene split across many storage bindings (as one larger than the device's binding
+/// limit is) gives exactly the answers of one binding.
+#[test]
+fn a_scene_split_across_bindings_gives_the_same_answers() {
+    let Some(gpu) = gpu("a_scene_split_across_bindings_gives_the_same_answers") else { return };
+    let scene = bunny_scene();
+    let whole = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
+    let options = GpuOptions { max_binding_bytes: Some(1 << 20) };
+    let split = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options).unwrap();
+    assert_eq!(whole.scene_bindings(), 1);
+    assert!(split.scene_bindings() >= 4, "{} bindings", split.scene_bindings());
+    let frame = Frame::from_triangles(&bunny_mesh().triangles);
+    let rays = raysets::incoherent(&frame, 200_000);
+    let (a, b) = (whole.intersect(&rays).unwrap(), split.intersect(&rays).unwrap());
+    assert!(a == b, "split and whole scenes disagree");
+    assert_eq!(whole.occluded(&rays).unwrap(), split.occluded(&rays).unwrap());
+}
+
+/// Rays from inside the scene start by point location; rays that cannot hit (NaN,
+/// zero direction, tmin > tmax, missing the root) are defined misses, as on the CPU.
+#[test]
+fn inside_origins_and_untraceable_rays_match_the_cpu() {
+    let Some(gpu) = gpu("inside_origins_and_untraceable_rays_match_the_cpu") else { return };
+    let mesh = octrace_bake::procedural::blob(48, 64);
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap()).unwrap();
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    let mut rng = octrace_bake::procedural::SplitMix(11);
+    let mut rays: Vec<Ray> = (0..100_000)
+        .map(|_| {
+            let o = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.6 - 0.3;
+            let d = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+            Ray::new(o, d)
+        })
+        .collect();
+    let nan = f32::NAN;
+    rays.extend([
+        Ray::new(Vec3::new(nan, 0.0, 0.0), Vec3::X),
+        Ray::new(Vec3::ZERO, Vec3::ZERO),
+        Ray::new(Vec3::ZERO, Vec3::new(0.0, nan, 1.0)),
+        Ray::segment(Vec3::ZERO, Vec3::X, 2.0, 1.0),
+        Ray::segment(Vec3::ZERO, Vec3::X, nan, 1.0),
+        Ray::new(Vec3::new(5.0, 5.0, 5.0), Vec3::X),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, -0.0, 1.0)),
+    ]);
+    let cpu = scene.intersect_all(&rays);
+    let got = tracer.intersect(&rays).unwrap();
+    check("inside", &rays, &cpu, &got);
+    assert!(got[got.len() - 7..got.len() - 1].iter().all(Option::is_none));
+    assert!(got.last().unwrap().is_some(), "an axis-parallel ray from outside hits the blob");
+    assert!(cpu.iter().take(100_000).all(Option::is_some), "every inside ray of a closed blob hits it");
+}
