@@ -346,3 +346,83 @@ fn a_directory_without_write_permission_says_so() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("the directory missing does not exist"), "{err}");
 }
+
+/// Runs `octrace` with `--gpu`; `None` (and a visible skip) when there is no Vulkan
+/// adapter and `OCTRACE_REQUIRE_GPU` is not 1.
+fn on_gpu(dir: &Path, args: &[&str], test: &str) -> Option<String> {
+    let out = octrace(dir, args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success()
+        && err.contains("no Vulkan adapter")
+        && std::env::var("OCTRACE_REQUIRE_GPU").as_deref() != Ok("1")
+    {
+        eprintln!("SKIPPED {test}: {err}");
+        return None;
+    }
+    assert!(out.status.success(), "octrace {args:?} failed: {err}");
+    Some(String::from_utf8(out.stdout).unwrap())
+}
+
+/// `trace --gpu` writes the CPU's hit file, and `render --gpu` the CPU's image.
+#[test]
+fn trace_and_render_on_the_gpu_give_the_cpus_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(d, &["bake", &bunny_path(), "-o", "bunny.oct"]);
+    // Rays from a ring around the bunny towards its middle, and some from inside.
+    let mut bytes = Vec::new();
+    for i in 0..20_000u32 {
+        let a = i as f32 * 0.01;
+        let (o, tmin) = if i % 4 == 0 {
+            ([-0.02, 0.1, 0.0], 0.0)
+        } else {
+            ([0.3 * a.cos(), 0.1 + 0.1 * (a * 0.37).sin(), 0.3 * a.sin()], 0.0)
+        };
+        let d = [-0.02 - o[0] + 0.05 * (a * 1.3).sin(), 0.1 - o[1], -o[2] + 0.05 * (a * 0.7).cos()];
+        for f in [o[0], o[1], o[2], tmin, d[0], d[1], d[2], f32::INFINITY] {
+            bytes.extend_from_slice(&f.to_le_bytes());
+        }
+    }
+    std::fs::write(d.join("rays.bin"), bytes).unwrap();
+    let test = "trace_and_render_on_the_gpu_give_the_cpus_files";
+    for extra in [&[][..], &["--occluded"][..]] {
+        let cpu: Vec<&str> = [&["trace", "bunny.oct", "--rays", "rays.bin", "--out", "cpu.bin"][..], extra].concat();
+        ok(d, &cpu);
+        let gpu: Vec<&str> =
+            [&["trace", "bunny.oct", "--rays", "rays.bin", "--out", "gpu.bin", "--gpu"][..], extra].concat();
+        let Some(out) = on_gpu(d, &gpu, test) else { return };
+        assert!(out.contains("kernel only"), "{out}");
+        let (a, b) = (std::fs::read(d.join("cpu.bin")).unwrap(), std::fs::read(d.join("gpu.bin")).unwrap());
+        let records = |x: &[u8]| -> Vec<(f32, u32)> {
+            x.chunks(8)
+                .map(|r| {
+                    (f32::from_le_bytes(r[..4].try_into().unwrap()), u32::from_le_bytes(r[4..].try_into().unwrap()))
+                })
+                .collect()
+        };
+        let (a, b) = (records(&a), records(&b));
+        let hits = a.iter().filter(|r| r.1 != u32::MAX).count();
+        assert!(hits > 10_000, "{hits} hits: the rays should mostly hit");
+        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+            // Occluders may be any triangle on the way; nearest hits are the same one
+            // at the same distance (or a triangle tied with it).
+            let same = if extra.is_empty() {
+                x == y || (x.0 - y.0).abs() <= 1e-5 * x.0.abs()
+            } else {
+                (x.1 == u32::MAX) == (y.1 == u32::MAX)
+            };
+            assert!(same, "{extra:?} ray {i}: CPU {x:?}, GPU {y:?}");
+        }
+    }
+    ok(d, &["render", "bunny.oct", "-o", "cpu.png", "--width", "160", "--height", "120", "--mode", "cells"]);
+    on_gpu(
+        d,
+        &["render", "bunny.oct", "-o", "gpu.png", "--width", "160", "--height", "120", "--mode", "cells", "--gpu"],
+        test,
+    )
+    .unwrap();
+    assert!(
+        std::fs::read(d.join("cpu.png")).unwrap() == std::fs::read(d.join("gpu.png")).unwrap(),
+        "the images differ"
+    );
+}

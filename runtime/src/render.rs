@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::raysets::Camera;
 use crate::scene::Scene;
+use crate::{Hit, WalkStats};
 
 /// What a pixel shows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,13 +80,48 @@ pub struct RenderStats {
 /// Renders `scene` through `camera` on all cores.
 pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, RenderStats) {
     let tracer = scene.tracer();
+    let walks: Vec<(Option<Hit>, WalkStats)> = (0..camera.width * camera.height)
+        .into_par_iter()
+        .map(|i| tracer.intersect_with_stats(&pixel_ray(camera, i)))
+        .collect();
+    compose(scene, camera, mode, &walks)
+}
+
+/// Renders `scene` through `camera` on the GPU: the same image as [`render`] (the GPU
+/// walk gives the CPU's hits and visits the same leaves).
+///
+/// # Errors
+/// The GPU's errors.
+#[cfg(feature = "gpu")]
+pub fn render_gpu(
+    scene: &Scene,
+    gpu: &crate::gpu::GpuTracer,
+    camera: &Camera,
+    mode: RenderMode,
+) -> crate::gpu::GpuResult<(Image, RenderStats)> {
+    let rays: Vec<_> = (0..camera.width * camera.height).map(|i| pixel_ray(camera, i)).collect();
+    Ok(compose(scene, camera, mode, &gpu.intersect_with_stats(&rays)?))
+}
+
+/// Pixel `i`'s ray, row by row from the top.
+fn pixel_ray(camera: &Camera, i: u32) -> crate::Ray {
+    camera.ray(i % camera.width, i / camera.width)
+}
+
+/// The image from each pixel's hit and walk.
+fn compose(
+    scene: &Scene,
+    camera: &Camera,
+    mode: RenderMode,
+    walks: &[(Option<Hit>, WalkStats)],
+) -> (Image, RenderStats) {
     let view = scene.view();
     let (w, h) = (camera.width, camera.height);
-    let pixels: Vec<(Option<Vec3>, Vec3, u32, u32)> = (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let ray = camera.ray(i % w, i / w);
-            let (hit, stats) = tracer.intersect_with_stats(&ray);
+    let pixels: Vec<(Option<Vec3>, Vec3, u32, u32)> = walks
+        .par_iter()
+        .enumerate()
+        .map(|(i, (hit, stats))| {
+            let ray = pixel_ray(camera, i as u32);
             let normal = hit.map(|hit| {
                 let t = view.triangle(hit.prim).map(Vec3::from);
                 let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();

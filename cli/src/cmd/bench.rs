@@ -36,6 +36,11 @@ pub(crate) struct Args {
     /// (to measure what watertightness costs).
     #[arg(long)]
     pub moller_trumbore: bool,
+    /// Also trace each set on the GPU (Vulkan; Mesa's lavapipe without a GPU): the
+    /// adapter, Mrays/s of the kernel alone and with the transfers, and whether every
+    /// ray's answer is the CPU's.
+    #[arg(long)]
+    pub gpu: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -126,27 +131,30 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let peer = (!args.no_peer).then(|| peer::Peer::build(&view));
     #[cfg(not(feature = "obvhs"))]
     let peer: Option<()> = None;
-    let mut results = Vec::new();
     let want = |s: SetChoice| args.set == s || args.set == SetChoice::All;
     let primary = raysets::primary(&frame);
+    let mut sets: Vec<(&'static str, Vec<Ray>, bool)> = Vec::new();
     if want(SetChoice::Primary) {
-        results.push(measure("primary", &primary, false, &tracer, peer.as_ref(), &args)?);
+        sets.push(("primary", primary.clone(), false));
     }
     if want(SetChoice::Incoherent) {
-        let rays = raysets::incoherent(&frame, 1_000_000);
-        results.push(measure("incoherent", &rays, false, &tracer, peer.as_ref(), &args)?);
+        sets.push(("incoherent", raysets::incoherent(&frame, 1_000_000), false));
     }
     if want(SetChoice::Shadow) {
         let mut hits = vec![None; primary.len()];
         tracer.intersect_batch(&primary, &mut hits);
-        let rays = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))));
-        results.push(measure("shadow", &rays, true, &tracer, peer.as_ref(), &args)?);
+        sets.push(("shadow", raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim)))), true));
     }
+    let mut results = Vec::new();
+    for (name, rays, occlusion) in &sets {
+        results.push(measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?);
+    }
+    let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &tracer, &sets, args.runs)?) } else { None };
     #[cfg(feature = "obvhs")]
     let peer_build = peer.as_ref().map(|p| p.build_time);
     #[cfg(not(feature = "obvhs"))]
     let peer_build: Option<Duration> = None;
-    report(&args, &loaded, threads, &results, peer_build)
+    report(&args, &loaded, threads, &results, peer_build, gpu.as_ref())
 }
 
 #[cfg(feature = "obvhs")]
@@ -218,6 +226,7 @@ fn report(
     threads: usize,
     results: &[SetResult],
     peer_build: Option<Duration>,
+    gpu: Option<&gpu::GpuReport>,
 ) -> anyhow::Result<()> {
     let secs = |d: Duration| d.as_secs_f64();
     if args.json {
@@ -241,6 +250,7 @@ fn report(
                 "bake_s": l.bake.map(secs), "open_validated_s": secs(l.open_validated),
                 "open_trusted_s": l.open_trusted.map(secs), "bytes": l.bytes,
                 "obvhs_build_s": peer_build.map(secs), "sets": sets,
+                "gpu": gpu.map(gpu::GpuReport::json),
             }))?
         );
         return Ok(());
@@ -293,7 +303,133 @@ fn report(
             peer_check
         );
     }
+    if let Some(g) = gpu {
+        crate::out!("{}", g.text());
+    }
     Ok(())
+}
+
+mod gpu {
+    //! The GPU figures of `bench --gpu`.
+    use std::time::{Duration, Instant};
+
+    use octrace_runtime::gpu::{GpuContext, GpuTracer};
+    use octrace_runtime::{Hit, Ray, Scene, Tracer};
+    use serde_json::json;
+
+    use super::Spread;
+    use crate::output::thousands;
+
+    pub(super) struct GpuSet {
+        name: &'static str,
+        rays: usize,
+        kernel: Spread,
+        end_to_end: Spread,
+        hits: usize,
+        sum_t: f64,
+        /// Rays whose answer differs from the CPU's (another triangle at the same
+        /// distance counts as the same answer).
+        differ: usize,
+    }
+
+    pub(super) struct GpuReport {
+        adapter: String,
+        exact_edges: bool,
+        upload: Duration,
+        sets: Vec<GpuSet>,
+    }
+
+    pub(super) fn measure(
+        scene: &Scene,
+        cpu: &Tracer<'_>,
+        sets: &[(&'static str, Vec<Ray>, bool)],
+        runs: usize,
+    ) -> anyhow::Result<GpuReport> {
+        let gpu = GpuContext::new()?;
+        let t = Instant::now();
+        let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
+        let upload = t.elapsed();
+        let mut out = Vec::new();
+        for (name, rays, occlusion) in sets {
+            let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+            let (mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new());
+            for _ in 0..runs {
+                let (h, timings) = tracer.trace_timed(rays, *occlusion)?;
+                kernel.push(mrays(timings.kernel));
+                total.push(mrays(timings.upload + timings.kernel + timings.download));
+                hits = h;
+            }
+            let differ = rays
+                .iter()
+                .zip(&hits)
+                .filter(|(r, g)| if *occlusion { cpu.occluded(r) != g.is_some() } else { !same(&cpu.intersect(r), g) })
+                .count();
+            let found = hits.iter().flatten();
+            out.push(GpuSet {
+                name,
+                rays: rays.len(),
+                kernel: Spread::of(kernel),
+                end_to_end: Spread::of(total),
+                hits: hits.iter().flatten().count(),
+                sum_t: if *occlusion { 0.0 } else { found.map(|h| h.t as f64).sum::<f64>() + 0.0 },
+                differ,
+            });
+        }
+        Ok(GpuReport { adapter: gpu.describe(), exact_edges: tracer.exact_edges(), upload, sets: out })
+    }
+
+    /// The same answer: both miss, or hits at the same distance (1e-5 relative).
+    fn same(a: &Option<Hit>, b: &Option<Hit>) -> bool {
+        match (a, b) {
+            (None, None) => true,
+            (Some(a), Some(b)) => a.triangle == b.triangle || (a.t - b.t).abs() <= 1e-5 * a.t.abs(),
+            _ => false,
+        }
+    }
+
+    impl GpuReport {
+        pub(super) fn text(&self) -> String {
+            let fmt = |s: &Spread| format!("{:.1} ({:.1}-{:.1})", s.median, s.min, s.max);
+            let mut lines = vec![
+                format!(
+                    "GPU: {}; scene uploaded in {:.1} ms; {} edge functions",
+                    self.adapter,
+                    self.upload.as_secs_f64() * 1e3,
+                    if self.exact_edges { "f64 (exact)" } else { "f32" }
+                ),
+                format!("{:<11} {:>9} {:>22} {:>22}  checksum", "set", "rays", "kernel Mrays/s", "with transfers"),
+            ];
+            for s in &self.sets {
+                let check = if s.name == "shadow" {
+                    format!("{} occluded", thousands(s.hits as u64))
+                } else {
+                    format!("{} hits, sum t {:.2}", thousands(s.hits as u64), s.sum_t)
+                };
+                lines.push(format!(
+                    "{:<11} {:>9} {:>22} {:>22}  {}; {} rays differ from the CPU",
+                    s.name,
+                    thousands(s.rays as u64),
+                    fmt(&s.kernel),
+                    fmt(&s.end_to_end),
+                    check,
+                    s.differ
+                ));
+            }
+            lines.join("\n")
+        }
+
+        pub(super) fn json(&self) -> serde_json::Value {
+            json!({
+                "adapter": self.adapter,
+                "exact_edges": self.exact_edges,
+                "upload_s": self.upload.as_secs_f64(),
+                "sets": self.sets.iter().map(|s| json!({
+                    "set": s.name, "rays": s.rays, "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
+                    "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,
+                })).collect::<Vec<_>>(),
+            })
+        }
+    }
 }
 
 #[cfg(feature = "obvhs")]

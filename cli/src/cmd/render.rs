@@ -34,6 +34,9 @@ pub(crate) struct Args {
     /// cells: leaves each ray visited (the paper's Figure 6), with a legend.
     #[arg(long, value_enum, default_value_t = Mode::Shaded)]
     pub mode: Mode,
+    /// Trace on the GPU (Vulkan; Mesa's lavapipe without a GPU): the same image.
+    #[arg(long)]
+    pub gpu: bool,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -62,9 +65,18 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         Mode::Normals => RenderMode::Normals,
         Mode::Cells => RenderMode::Cells,
     };
-    let t = Instant::now();
-    let (image, stats) = render(&scene, &camera, mode);
-    let secs = t.elapsed().as_secs_f64();
+    let (image, stats, secs) = if args.gpu {
+        let gpu = octrace_runtime::gpu::GpuContext::new()?;
+        let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+        eprintln!("tracing on {}", gpu.describe());
+        let t = Instant::now();
+        let (image, stats) = octrace_runtime::render::render_gpu(&scene, &tracer, &camera, mode)?;
+        (image, stats, t.elapsed().as_secs_f64())
+    } else {
+        let t = Instant::now();
+        let (image, stats) = render(&scene, &camera, mode);
+        (image, stats, t.elapsed().as_secs_f64())
+    };
     image.write_png(&args.output)?;
     crate::out!(
         "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",

@@ -31,6 +31,10 @@ pub(crate) struct Args {
     /// Threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Trace on the GPU (Vulkan; Mesa's lavapipe without a GPU). The Mrays/s printed
+    /// are then of the kernel alone, without the transfers.
+    #[arg(long)]
+    pub gpu: bool,
 }
 
 /// The id written for a miss.
@@ -46,19 +50,15 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         bytes.len()
     );
     let rays: Vec<Ray> = bytemuck::pod_collect_to_vec(&bytes);
-    let tracer = scene.tracer();
-    let (hits, seconds) = crate::with_threads(args.threads, || {
-        let t = Instant::now();
-        let hits: Vec<Option<Hit>> = if args.occluded {
-            use rayon::prelude::*;
-            rays.par_iter().map(|r| tracer.occluder(r)).collect()
-        } else {
-            let mut out = vec![None; rays.len()];
-            tracer.par_intersect_batch(&rays, &mut out);
-            out
-        };
-        (hits, t.elapsed().as_secs_f64())
-    })?;
+    let (hits, seconds, on) = if args.gpu {
+        let gpu = octrace_runtime::gpu::GpuContext::new()?;
+        let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+        let (hits, timings) = tracer.trace_timed(&rays, args.occluded)?;
+        (hits, timings.kernel.as_secs_f64(), format!("kernel only, {}", gpu.describe()))
+    } else {
+        let (hits, seconds) = trace_cpu(&scene, &rays, &args)?;
+        (hits, seconds, format!("tracing only, {} threads", args.threads.unwrap_or_else(rayon::current_num_threads)))
+    };
     let mut out = Vec::with_capacity(8 * rays.len());
     for (r, h) in rays.iter().zip(&hits) {
         let (t, id) = h.map_or((r.tmax, MISS), |h| (h.t, h.triangle));
@@ -68,12 +68,28 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     octrace_format::write_atomically(&args.out, &[&out])?;
     let n = hits.iter().flatten().count();
     crate::out!(
-        "{} rays, {} {}, {:.2} Mrays/s (tracing only, {} threads)",
+        "{} rays, {} {}, {:.2} Mrays/s ({on})",
         thousands(rays.len() as u64),
         thousands(n as u64),
         if args.occluded { "occluded" } else { "hits" },
         rays.len() as f64 / seconds.max(1e-9) / 1e6,
-        args.threads.unwrap_or_else(rayon::current_num_threads)
     );
     Ok(())
+}
+
+/// Traces on all cores (or `--threads`); the hits and the seconds of tracing alone.
+fn trace_cpu(scene: &octrace_runtime::Scene, rays: &[Ray], args: &Args) -> anyhow::Result<(Vec<Option<Hit>>, f64)> {
+    let tracer = scene.tracer();
+    crate::with_threads(args.threads, || {
+        let t = Instant::now();
+        let hits: Vec<Option<Hit>> = if args.occluded {
+            use rayon::prelude::*;
+            rays.par_iter().map(|r| tracer.occluder(r)).collect()
+        } else {
+            let mut out = vec![None; rays.len()];
+            tracer.par_intersect_batch(rays, &mut out);
+            out
+        };
+        (hits, t.elapsed().as_secs_f64())
+    })
 }

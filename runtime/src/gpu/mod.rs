@@ -30,6 +30,7 @@ use octrace_format::SceneView;
 
 use crate::ray::{Hit, Ray};
 use crate::Scene;
+use crate::WalkStats;
 
 /// What can go wrong on the GPU path.
 #[derive(Debug, thiserror::Error)]
@@ -316,6 +317,20 @@ impl GpuTracer {
     /// As [`GpuTracer::intersect`].
     pub fn occluded(&self, rays: &[Ray]) -> GpuResult<Vec<bool>> {
         Ok(self.run(rays, true)?.0.iter().map(|h| h.triangle != u32::MAX).collect())
+    }
+
+    /// [`GpuTracer::intersect`] with what each walk did (leaves visited, triangle tests,
+    /// whether the step bound stopped it), as the CPU's `Tracer::intersect_with_stats`.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::intersect`].
+    pub fn intersect_with_stats(&self, rays: &[Ray]) -> GpuResult<Vec<(Option<Hit>, WalkStats)>> {
+        let stats = |h: &HitOut| WalkStats {
+            leaves: h.steps,
+            triangle_tests: h.flags >> 1,
+            stopped_at_bound: h.flags & 1 != 0,
+        };
+        Ok(self.run(rays, false)?.0.iter().map(|h| (to_hit(h), stats(h))).collect())
     }
 
     /// [`GpuTracer::intersect`] (or, with `any`, the occluder of each ray) with the

@@ -41,7 +41,7 @@ struct HitOut {
     leaf: u32,
     prim: u32,
     steps: u32,
-    // Bit 0: the walk was stopped by the step bound.
+    // Bit 0: the walk was stopped by the step bound; bits 1..32: triangle tests run.
     flags: u32,
 }
 
@@ -142,6 +142,7 @@ struct Walk {
     best: HitOut,
     t_best: f32,
     steps: u32,
+    tests: u32,
     done: bool,
 }
 
@@ -205,6 +206,7 @@ fn step(wk: ptr<function, Walk>) {
     let offset = word(rec + 1u);
     let box_index = word(rec + 2u);
     let ncount = word(rec + 3u);
+    (*wk).tests += count;
     // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
     for (var j = 0u; j < count; j++) {
         let tri = word(params.o_refs + offset + j);
@@ -308,6 +310,7 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
     wk.best.triangle = MISS;
     wk.best.flags = 0u;
     wk.steps = 0u;
+    wk.tests = 0u;
     let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
     if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin) || is_nan(tmax) || !(tmin <= tmax) {
         return wk;
@@ -446,5 +449,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var out = wk.best;
     out.steps = wk.steps;
+    out.flags = (out.flags & 1u) | (min(wk.tests, 0x7FFFFFFFu) << 1u);
     hits[i] = out;
 }
