@@ -70,9 +70,26 @@ fn check(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>]) {
 #[test]
 fn the_standard_sets_on_the_bunny_match_the_cpu() {
     let Some(gpu) = gpu("the_standard_sets_on_the_bunny_match_the_cpu") else { return };
-    let scene = bunny_scene();
+    standard_sets_match(gpu, bunny_scene(), &bunny_mesh().triangles);
+}
+
+/// The same on the dragon (871k triangles, a 117 MB file), when `../shared` is there.
+#[test]
+fn the_standard_sets_on_the_dragon_match_the_cpu() {
+    let Some(gpu) = gpu("the_standard_sets_on_the_dragon_match_the_cpu") else { return };
+    let path = octrace_tests::repo_root().join("../shared/meshes/dragon.obj");
+    if !path.exists() {
+        eprintln!("SKIPPED the_standard_sets_on_the_dragon_match_the_cpu: no {}", path.display());
+        return;
+    }
+    let mesh = octrace_bake::Mesh::load(&path).unwrap();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap()).unwrap();
+    standard_sets_match(gpu, &scene, &mesh.triangles);
+}
+
+fn standard_sets_match(gpu: &octrace_runtime::gpu::GpuContext, scene: &Scene, triangles: &[[[f32; 3]; 3]]) {
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
-    let frame = Frame::from_triangles(&bunny_mesh().triangles);
+    let frame = Frame::from_triangles(triangles);
     let primary = raysets::primary(&frame);
     let cpu_primary = scene.intersect_all(&primary);
     check("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
