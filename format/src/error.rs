@@ -159,9 +159,11 @@ mod tests {
             (ErrorKind::FileTooLarge, "ulimit -f"),
             (ErrorKind::ReadOnlyFilesystem, "out is on a read-only file system"),
         ] {
-            let msg = Error::write(path, std::io::Error::new(kind, "at path \"out/.octrace-x.tmp\"")).to_string();
+            // What tempfile reports: the OS's words, then the temporary file's path.
+            let os = || std::io::Error::new(kind, "os words (os error 1) at path \"out/.octrace-x.tmp\"");
+            let msg = Error::write(path, os()).to_string();
             assert!(msg.contains(says) && msg.contains("nothing under that name was changed"), "{msg}");
-            let e = Error::write(path, std::io::Error::new(kind, "at path \"out/.octrace-x.tmp\""));
+            let e = Error::write(path, os());
             let source = std::error::Error::source(&e).unwrap().to_string();
             assert!(!msg.contains(".tmp") && !source.contains(".tmp"), "{msg}: {source}");
         }

@@ -39,6 +39,10 @@ pub struct Tracer<'a> {
     view: SceneView<'a>,
     root_lo: [f32; 3],
     root_hi: [f32; 3],
+    /// The mesh's box, enlarged by [`box_slack`]: a ray that misses it misses every
+    /// triangle, and a walk ends where the ray leaves it.
+    box_lo: [f32; 3],
+    box_hi: [f32; 3],
     /// `2^max_depth / root_size`: world to finest-grid coordinates.
     grid_scale: f64,
     /// Cell edge at each level, `root_size / 2^level` (exact: the edge is a power of two).
@@ -84,6 +88,7 @@ pub(crate) struct RayWalk {
     /// Exit-face row of the ray's octant.
     exits: &'static [u8; 8],
     tmin: f32,
+    /// Where the walk stops: the ray's `tmax`, or sooner where it leaves the mesh box.
     tmax: f32,
     /// The current leaf: record address, level and cell.
     address: u32,
@@ -128,6 +133,9 @@ impl RayWalk {
     pub(crate) fn tmax(&self) -> f32 {
         self.tmax
     }
+    pub(crate) fn t_best(&self) -> f32 {
+        self.t_best
+    }
     pub(crate) fn address(&self) -> u32 {
         self.address
     }
@@ -148,9 +156,14 @@ impl<'a> Tracer<'a> {
         let b = view.bounds;
         let root_box = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
         let max_depth = view.params.max_depth;
+        let root_lo = [root_box[0], root_box[1], root_box[2]];
+        let root_hi = [root_box[3], root_box[4], root_box[5]];
+        let (box_lo, box_hi) = mesh_box(&view);
         Tracer {
-            root_lo: [root_box[0], root_box[1], root_box[2]],
-            root_hi: [root_box[3], root_box[4], root_box[5]],
+            root_lo,
+            root_hi,
+            box_lo,
+            box_hi,
             grid_scale: (1u64 << max_depth) as f64 / b.root_size as f64,
             sizes: std::array::from_fn(|l| (b.root_size as f64 / (1u64 << l) as f64) as f32),
             max_depth,
@@ -271,14 +284,21 @@ impl<'a> Tracer<'a> {
         }
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
-        let (t_enter, t_leave, entry_axis) = self.clip_to_root(o, d)?;
+        let (t_enter, t_leave, entry_axis) = clip(o, d, self.root_lo, self.root_hi)?;
+        // Beyond the (enlarged) mesh box there is nothing to hit: a ray that misses it
+        // costs nothing more, and a walk stops where the ray leaves it (a little later:
+        // a relative slack for the rounding of distances far from the origin).
+        let (box_enter, box_leave, _) = clip(o, d, self.box_lo, self.box_hi)?;
         let t_start = t_enter.max(ray.tmin);
-        if t_start > t_leave.min(ray.tmax) {
-            return None; // misses the root cube within [tmin, tmax]
+        let t_stop = ray.tmax.min(box_leave + box_leave.abs() * BOX_T_SLACK);
+        if t_start > t_leave.min(ray.tmax) || t_start.max(box_enter) > t_stop {
+            return None; // misses the root cube or the mesh box within [tmin, tmax]
         }
         // The entry leaf, and its cell: with the cell, every box along the walk is
         // computed rather than loaded (the paper's own suggestion, section 6).
-        let (address, level, cell) = if t_enter > ray.tmin {
+        let (address, level, cell) = if box_enter > t_start {
+            self.locate_cell(point_at(o, d, box_enter))
+        } else if t_enter > ray.tmin {
             self.enter_through_cube_map(o, d, t_enter, entry_axis)
         } else {
             self.locate_cell(point_at(o, d, t_start))
@@ -291,7 +311,7 @@ impl<'a> Tracer<'a> {
             exits: &EXIT_FACE[octant(d)],
             shear: Shear::new(o, d),
             tmin: ray.tmin,
-            tmax: ray.tmax,
+            tmax: t_stop,
             address,
             level,
             cell,
@@ -429,14 +449,37 @@ impl<'a> Tracer<'a> {
         w.level = (level + finer).wrapping_sub(coarser);
         false
     }
+}
 
-    /// The ray's parameter interval inside the root cube and the axis it enters by,
-    /// or `None` if it misses. Zero components are handled explicitly: `0 * inf` never
-    /// happens.
-    fn clip_to_root(&self, o: [f32; 3], d: [f32; 3]) -> Option<(f32, f32, usize)> {
+/// Relative slack on the distance where a ray leaves the mesh box: f32 distances far
+/// from the origin carry a relative error of a few ulps (2^-21); this is 32 times that.
+pub(crate) const BOX_T_SLACK: f32 = 1.0 / (1 << 16) as f32;
+
+/// How far the mesh box is enlarged on every side: 2^-16 of the root edge, and at least
+/// 16 f32 spacings of the root's largest coordinate, so that rounding in the clip never
+/// moves a triangle on the box's faces outside it.
+pub(crate) fn box_slack(root_lo: [f32; 3], root_hi: [f32; 3], root_size: f32) -> f32 {
+    let largest = root_lo.iter().chain(&root_hi).fold(0.0f32, |m, c| m.max(c.abs()));
+    (root_size / (1 << 16) as f32).max(16.0 * f32::EPSILON * largest)
+}
+
+/// The mesh box enlarged by [`box_slack`] on every side, as the walks clip to it.
+pub fn mesh_box(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
+    let b = view.bounds;
+    let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
+    let slack = box_slack([root[0], root[1], root[2]], [root[3], root[4], root[5]], b.root_size);
+    (b.mesh_lo.map(|c| c - slack), b.mesh_hi.map(|c| c + slack))
+}
+
+/// The ray's parameter interval inside the box `lo..hi` and the axis it enters by, or
+/// `None` if it misses. Zero components are handled explicitly: `0 * inf` never
+/// happens.
+#[inline(always)]
+fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
+    {
         let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
         for a in 0..3 {
-            let (lo, hi) = (self.root_lo[a], self.root_hi[a]);
+            let (lo, hi) = (lo[a], hi[a]);
             if d[a] == 0.0 {
                 if o[a] < lo || o[a] > hi {
                     return None;
@@ -453,7 +496,9 @@ impl<'a> Tracer<'a> {
         }
         (t0 <= t1).then_some((t0, t1, axis))
     }
+}
 
+impl Tracer<'_> {
     /// Finest-grid coordinates of a point, clamped into the root.
     fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
         let last = ((1u64 << self.max_depth) - 1) as f64;

@@ -141,6 +141,8 @@ struct Params {
     offsets: [u32; 7],
     root_lo: [f32; 4],
     root_hi: [f32; 4],
+    box_lo: [f32; 4],
+    box_hi: [f32; 4],
 }
 
 /// The kernel's output record (`HitOut` in trace.wgsl).
@@ -255,6 +257,7 @@ impl GpuTracer {
         let b = view.bounds;
         let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
         let max_depth = view.params.max_depth;
+        let (lo, hi) = crate::cpu::mesh_box(&view);
         let params = Params {
             ray_count: 0,
             max_depth,
@@ -272,6 +275,8 @@ impl GpuTracer {
             ],
             root_lo: [root[0], root[1], root[2], b.root_size],
             root_hi: [root[3], root[4], root[5], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
+            box_lo: [lo[0], lo[1], lo[2], 0.0],
+            box_hi: [hi[0], hi[1], hi[2], 0.0],
         };
         Ok(GpuTracer {
             device: device.clone(),

@@ -30,7 +30,13 @@ struct Params {
     root_lo: vec4<f32>,
     // xyz: the root cube's high corner; w: 2^max_depth / edge.
     root_hi: vec4<f32>,
+    // The mesh box, enlarged (runtime/src/cpu/traverse.rs, box_slack); w: unused.
+    box_lo: vec4<f32>,
+    box_hi: vec4<f32>,
 }
+
+// Relative slack on the distance where a ray leaves the mesh box (BOX_T_SLACK).
+const BOX_T_SLACK: f32 = 1.52587890625e-5;
 
 // 32 bytes a hit; `triangle` is 0xFFFFFFFF on a miss.
 struct HitOut {
@@ -302,22 +308,9 @@ fn exit_along_moving_axes(off: vec3<f32>, d: vec3<f32>, inv: vec3<f32>) -> u32 {
     return 2u * best_axis + select(1u, 0u, is_negative(component(d, best_axis)));
 }
 
-// Starts a walk: clips to the root, finds the first leaf. `done` when it cannot hit.
-fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
-    var wk: Walk;
-    wk.done = true;
-    wk.best.t = tmax;
-    wk.best.triangle = MISS;
-    wk.best.flags = 0u;
-    wk.steps = 0u;
-    wk.tests = 0u;
-    let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
-    if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin) || is_nan(tmax) || !(tmin <= tmax) {
-        return wk;
-    }
-    // Clip to the root cube (zero components explicitly: 0 * inf never happens).
-    let lo = params.root_lo.xyz;
-    let hi = params.root_hi.xyz;
+// The ray's interval in the box lo..hi: (t0, t1, entry axis, 1) or w = 0 on a miss.
+// Zero components explicitly: 0 * inf never happens.
+fn clip(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec4<f32> {
     var t0 = -inf();
     var t1 = inf();
     var entry_axis = 0u;
@@ -328,7 +321,7 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
         let ha = component(hi, a);
         if da == 0.0 {
             if oa < la || oa > ha {
-                return wk;
+                return vec4<f32>(0.0);
             }
             continue;
         }
@@ -343,18 +336,46 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
         t1 = min(t1, far);
     }
     if !(t0 <= t1) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(t0, t1, f32(entry_axis), 1.0);
+}
+
+// Starts a walk: clips to the root, finds the first leaf. `done` when it cannot hit.
+fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
+    var wk: Walk;
+    wk.done = true;
+    wk.best.t = tmax;
+    wk.best.triangle = MISS;
+    wk.best.flags = 0u;
+    wk.steps = 0u;
+    wk.tests = 0u;
+    let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
+    if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin) || is_nan(tmax) || !(tmin <= tmax) {
         return wk;
     }
+    // Clip to the root cube, then to the mesh box: beyond it there is nothing to hit.
+    let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
+    let mesh = clip(o, d, params.box_lo.xyz, params.box_hi.xyz);
+    if root.w == 0.0 || mesh.w == 0.0 {
+        return wk;
+    }
+    let t0 = root.x;
+    let entry_axis = u32(root.z);
     let t_start = max(t0, tmin);
-    if t_start > min(t1, tmax) {
+    let t_stop = min(tmax, mesh.y + abs(mesh.y) * BOX_T_SLACK);
+    if t_start > min(root.y, tmax) || max(t_start, mesh.x) > t_stop {
         return wk;
     }
     // The first leaf: through the cube map from outside, by point location inside.
     var leaf: vec2<u32>;
     var q: vec3<u32>;
-    if t0 > tmin {
+    if mesh.x > t_start {
+        q = grid_coords(o + mesh.x * d);
+        leaf = descend(params.root_node, 0u, q);
+    } else if t0 > tmin {
         q = grid_coords(o + t0 * d);
-        let high = d[entry_axis] < 0.0;
+        let high = component(d, entry_axis) < 0.0;
         let last = (1u << params.max_depth) - 1u;
         let qa = select(0u, last, high);
         if entry_axis == 0u {
@@ -404,7 +425,7 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
     let octant = select(0u, 1u, is_negative(d.x)) | select(0u, 2u, is_negative(d.y)) | select(0u, 4u, is_negative(d.z));
     wk.row = exit_row(octant);
     wk.tmin = tmin;
-    wk.tmax = tmax;
+    wk.tmax = t_stop;
     wk.address = leaf.x;
     wk.level = leaf.y;
     wk.cell = q >> vec3<u32>(params.max_depth - leaf.y);

@@ -61,7 +61,7 @@ impl SseWalk {
             address: w.address(),
             level: w.level(),
             best: None,
-            t_best: w.tmax(),
+            t_best: w.t_best(),
             steps: 0,
         }
     }
