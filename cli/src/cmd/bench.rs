@@ -285,11 +285,7 @@ fn report(
             Some(p) if r.rays > 0 => format!("{:.2}x", r.single.median / p.0.median),
             _ => "-".into(),
         };
-        let check = if r.name == "shadow" {
-            format!("{} occluded", thousands(r.hits as u64))
-        } else {
-            format!("{} hits, sum t {:.2}", thousands(r.hits as u64), r.sum_t)
-        };
+        let check = checksum(r.name, r.hits, r.sum_t);
         let peer_check = r.peer.map_or(String::new(), |p| format!(" (obvhs {})", thousands(p.1 as u64)));
         crate::out!(
             "{:<11} {:>9} {:>22} {:>22} {:>22} {:>7}  {}{}",
@@ -307,6 +303,15 @@ fn report(
         crate::out!("{}", g.text());
     }
     Ok(())
+}
+
+/// A set's checksum in words: rays occluded for shadow rays, else hits and their sum of t.
+fn checksum(set: &str, hits: usize, sum_t: f64) -> String {
+    if set == "shadow" {
+        format!("{} occluded", thousands(hits as u64))
+    } else {
+        format!("{} hits, sum t {:.2}", thousands(hits as u64), sum_t)
+    }
 }
 
 mod gpu {
@@ -400,11 +405,7 @@ mod gpu {
                 format!("{:<11} {:>9} {:>22} {:>22}  checksum", "set", "rays", "kernel Mrays/s", "with transfers"),
             ];
             for s in &self.sets {
-                let check = if s.name == "shadow" {
-                    format!("{} occluded", thousands(s.hits as u64))
-                } else {
-                    format!("{} hits, sum t {:.2}", thousands(s.hits as u64), s.sum_t)
-                };
+                let check = super::checksum(s.name, s.hits, s.sum_t);
                 lines.push(format!(
                     "{:<11} {:>9} {:>22} {:>22}  {}; {} rays differ from the CPU",
                     s.name,

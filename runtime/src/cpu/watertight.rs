@@ -38,6 +38,21 @@ impl Shear {
         Shear { k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]], o }
     }
 
+    /// The permuted axes `(kx, ky, kz)`.
+    pub fn axes(&self) -> [usize; 3] {
+        self.k
+    }
+
+    /// The shear `(d[kx] / d[kz], d[ky] / d[kz], 1 / d[kz])`.
+    pub fn scales(&self) -> [f32; 3] {
+        self.s
+    }
+
+    /// The ray's origin.
+    pub fn origin(&self) -> [f32; 3] {
+        self.o
+    }
+
     /// The hit `(t, u, v)` of the triangle `v0 v1 v2` (nine floats) within
     /// `[tmin, tmax]`; `u` and `v` weigh `v1` and `v2`.
     #[inline(always)]

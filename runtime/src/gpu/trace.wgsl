@@ -160,6 +160,11 @@ fn ucomponent(v: vec3<u32>, i: u32) -> u32 {
     return select(select(v.z, v.y, i == 1u), v.x, i == 0u);
 }
 
+// `v` with component `i` replaced by `x`.
+fn with_component(v: vec3<u32>, i: u32, x: u32) -> vec3<u32> {
+    return select(v, vec3<u32>(x), vec3<u32>(0u, 1u, 2u) == vec3<u32>(i));
+}
+
 // Woop, Benthin & Wald's watertight test (runtime/src/cpu/watertight.rs) against the
 // triangle at word `at`; a hit in [tmin, tmax] comes back as (t, u, v, 1).
 fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {
@@ -276,15 +281,8 @@ fn step(wk: ptr<function, Walk>) {
     let finer = n >> 2u;
     let shift = 1u + coarser - finer;
     let up = (face & 1u) * 2u;
-    var next = (cell << vec3<u32>(1u)) | sides;
     let across = ((ucomponent(cell, axis) + up - 1u) << 1u) | select(0u, 1u, negative_a);
-    if axis == 0u {
-        next.x = across;
-    } else if axis == 1u {
-        next.y = across;
-    } else {
-        next.z = across;
-    }
+    let next = with_component((cell << vec3<u32>(1u)) | sides, axis, across);
     (*wk).cell = next >> vec3<u32>(shift);
     (*wk).level = level + finer - coarser;
 }
@@ -377,14 +375,7 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
         q = grid_coords(o + t0 * d);
         let high = component(d, entry_axis) < 0.0;
         let last = (1u << params.max_depth) - 1u;
-        let qa = select(0u, last, high);
-        if entry_axis == 0u {
-            q.x = qa;
-        } else if entry_axis == 1u {
-            q.y = qa;
-        } else {
-            q.z = qa;
-        }
+        q = with_component(q, entry_axis, select(0u, last, high));
         let face = 2u * entry_axis + select(0u, 1u, high);
         let level = params.cube_level;
         let res = 1u << level;

@@ -26,8 +26,8 @@ pub(crate) struct SseWalk {
     /// Scalar direction and inverse, for the exit distance along the chosen axis.
     d_s: [f32; 3],
     inv_s: [f32; 3],
-    /// The ray's shear for the watertight test.
-    shear: Shear,
+    /// The ray's shear for the watertight test, in three-lane form.
+    shear_sse: ShearSse,
     exits: &'static [u8; 8],
     tmin: f32,
     tmax: f32,
@@ -54,7 +54,7 @@ impl SseWalk {
             cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
             d_s: d,
             inv_s: w.inv(),
-            shear: w.shear(),
+            shear_sse: ShearSse::new(&w.shear()),
             exits: w.exits(),
             tmin: w.tmin(),
             tmax: w.tmax(),
@@ -116,6 +116,87 @@ fn intersect_sse(o: __m128, d: __m128, t: &[f32], tmin: f32, tmax: f32) -> Optio
     (dist >= tmin && dist <= tmax).then_some((dist, u, v))
 }
 
+/// The watertight test (`watertight::Shear`) with one vertex a lane: the same
+/// operations in the same order as the scalar test, so the same bits, without the
+/// scalar form's indexing by the ray's axes (a trip through the stack) and with the
+/// three edge signs decided by two mask compares instead of six branches.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShearSse {
+    o: [__m128; 3],
+    /// `select[r][c]`: all ones where `k[r] == c` (rows kx, ky, kz), to pick a
+    /// vertex coordinate by the ray's axes with masks.
+    select: [[__m128; 3]; 3],
+    sx: __m128,
+    sy: __m128,
+    sz: __m128,
+    scalar: Shear,
+}
+
+impl ShearSse {
+    #[target_feature(enable = "sse2")]
+    pub(crate) fn new(shear: &Shear) -> ShearSse {
+        let k = shear.axes();
+        let [sx, sy, sz] = shear.scales();
+        let o = shear.origin();
+        let ones = _mm_castsi128_ps(_mm_set1_epi32(-1));
+        let select = k.map(|kr| [0, 1, 2].map(|c| if kr == c { ones } else { _mm_setzero_ps() }));
+        ShearSse {
+            o: [_mm_set1_ps(o[0]), _mm_set1_ps(o[1]), _mm_set1_ps(o[2])],
+            select,
+            sx: _mm_set1_ps(sx),
+            sy: _mm_set1_ps(sy),
+            sz: _mm_set1_ps(sz),
+            scalar: *shear,
+        }
+    }
+
+    /// As `Shear::intersect`, bit for bit.
+    #[target_feature(enable = "sse2")]
+    #[inline]
+    pub(crate) fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let t: &[f32; 9] = t.try_into().ok()?;
+        // Vertices relative to the origin, one a lane: (a, b, c) for x, y and z.
+        let rx = _mm_sub_ps(_mm_setr_ps(t[0], t[3], t[6], 0.0), self.o[0]);
+        let ry = _mm_sub_ps(_mm_setr_ps(t[1], t[4], t[7], 0.0), self.o[1]);
+        let rz = _mm_sub_ps(_mm_setr_ps(t[2], t[5], t[8], 0.0), self.o[2]);
+        let pick =
+            |m: &[__m128; 3]| _mm_or_ps(_mm_or_ps(_mm_and_ps(rx, m[0]), _mm_and_ps(ry, m[1])), _mm_and_ps(rz, m[2]));
+        let (px, py, pz) = (pick(&self.select[0]), pick(&self.select[1]), pick(&self.select[2]));
+        // Sheared x and y: a[kx] - sx * a[kz], a[ky] - sy * a[kz].
+        let x = _mm_sub_ps(px, _mm_mul_ps(self.sx, pz));
+        let y = _mm_sub_ps(py, _mm_mul_ps(self.sy, pz));
+        // Edge functions (u, v, w) = (cx*by - cy*bx, ax*cy - ay*cx, bx*ay - by*ax):
+        // lanes rotated to (b, c, a) and (c, a, b).
+        let x1 = _mm_shuffle_ps::<0b11_00_10_01>(x, x);
+        let y1 = _mm_shuffle_ps::<0b11_00_10_01>(y, y);
+        let x2 = _mm_shuffle_ps::<0b11_01_00_10>(x, x);
+        let y2 = _mm_shuffle_ps::<0b11_01_00_10>(y, y);
+        let e = _mm_sub_ps(_mm_mul_ps(x2, y1), _mm_mul_ps(y2, x1));
+        let zero = _mm_setzero_ps();
+        if _mm_movemask_ps(_mm_cmpeq_ps(e, zero)) & 7 != 0 {
+            // An edge function rounded to zero: the scalar test decides it in f64.
+            return self.scalar.intersect(t, tmin, tmax);
+        }
+        let negative = _mm_movemask_ps(_mm_cmplt_ps(e, zero)) & 7;
+        let positive = _mm_movemask_ps(_mm_cmpgt_ps(e, zero)) & 7;
+        if negative != 0 && positive != 0 {
+            return None;
+        }
+        let u = _mm_cvtss_f32(e);
+        let v = _mm_cvtss_f32(_mm_shuffle_ps::<0b01_01_01_01>(e, e));
+        let w = _mm_cvtss_f32(_mm_movehl_ps(e, e));
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        // Scaled distance u * az + v * bz + w * cz, in that order.
+        let scaled = dot(e, _mm_mul_ps(self.sz, pz));
+        let inv = 1.0 / det;
+        let dist = scaled * inv;
+        (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
+    }
+}
+
 /// The lanes equal to `axis`, all ones.
 #[target_feature(enable = "sse2")]
 fn axis_mask(axis: usize) -> __m128i {
@@ -139,7 +220,7 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
     let v = t.view();
     let a = w.address as usize;
     // 1. Triangles.
-    let (shear, o, d, watertight) = (w.shear, w.o, w.d, t.triangle_test() == TriangleTest::Watertight);
+    let (shear, o, d, watertight) = (w.shear_sse, w.o, w.d, t.triangle_test() == TriangleTest::Watertight);
     let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
     let test = |tri: &[f32], tmin: f32, tmax: f32| {
         if watertight {
