@@ -267,6 +267,9 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
     let quadrant = (sides & ((1 << axis) - 1)) | ((sides >> (axis + 1)) << axis);
     let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
     w.address = v.octree[link];
+    // The next record is this ray's next load, after the other rays in flight have
+    // stepped: ask for it now.
+    prefetch(v.octree, w.address);
     // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
     let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
     let finer = n >> 2;
@@ -294,10 +297,23 @@ pub(crate) fn walk<const ANY: bool>(t: &Tracer<'_>, start: &RayWalk, stats: &mut
     }
 }
 
-/// Starts a walk in SSE form.
+/// Starts a walk in SSE form (and asks for its first leaf's record).
 pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
     // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
-    unsafe { SseWalk::from_scalar(start, t.root_lo()) }
+    let w = unsafe { SseWalk::from_scalar(start, t.root_lo()) };
+    prefetch(t.view().octree, w.address);
+    w
+}
+
+/// Asks for the cache line of `words[at]`, if `at` is in range (a hint: no load, no
+/// fault).
+#[inline(always)]
+fn prefetch(words: &[u32], at: u32) {
+    if let Some(word) = words.get(at as usize) {
+        // SAFETY: a prefetch reads nothing architecturally; the address is that of a
+        // live element, and SSE (which has PREFETCHT0) is enabled for this module.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(std::ptr::from_ref(word).cast::<i8>()) };
+    }
 }
 
 /// One step in SSE form.
