@@ -123,9 +123,8 @@ fn intersect_sse(o: __m128, d: __m128, t: &[f32], tmin: f32, tmax: f32) -> Optio
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShearSse {
     o: [__m128; 3],
-    /// `select[r][c]`: all ones where `k[r] == c` (rows kx, ky, kz), to pick a
-    /// vertex coordinate by the ray's axes with masks.
-    select: [[__m128; 3]; 3],
+    /// The ray's axes `(kx, ky, kz)`, to pick coordinate vectors.
+    k: [u8; 3],
     sx: __m128,
     sy: __m128,
     sz: __m128,
@@ -138,11 +137,9 @@ impl ShearSse {
         let k = shear.axes();
         let [sx, sy, sz] = shear.scales();
         let o = shear.origin();
-        let ones = _mm_castsi128_ps(_mm_set1_epi32(-1));
-        let select = k.map(|kr| [0, 1, 2].map(|c| if kr == c { ones } else { _mm_setzero_ps() }));
         ShearSse {
             o: [_mm_set1_ps(o[0]), _mm_set1_ps(o[1]), _mm_set1_ps(o[2])],
-            select,
+            k: k.map(|a| a as u8),
             sx: _mm_set1_ps(sx),
             sy: _mm_set1_ps(sy),
             sz: _mm_set1_ps(sz),
@@ -159,9 +156,8 @@ impl ShearSse {
         let rx = _mm_sub_ps(_mm_setr_ps(t[0], t[3], t[6], 0.0), self.o[0]);
         let ry = _mm_sub_ps(_mm_setr_ps(t[1], t[4], t[7], 0.0), self.o[1]);
         let rz = _mm_sub_ps(_mm_setr_ps(t[2], t[5], t[8], 0.0), self.o[2]);
-        let pick =
-            |m: &[__m128; 3]| _mm_or_ps(_mm_or_ps(_mm_and_ps(rx, m[0]), _mm_and_ps(ry, m[1])), _mm_and_ps(rz, m[2]));
-        let (px, py, pz) = (pick(&self.select[0]), pick(&self.select[1]), pick(&self.select[2]));
+        let r = [rx, ry, rz];
+        let (px, py, pz) = (r[self.k[0] as usize], r[self.k[1] as usize], r[self.k[2] as usize]);
         // Sheared x and y: a[kx] - sx * a[kz], a[ky] - sy * a[kz].
         let x = _mm_sub_ps(px, _mm_mul_ps(self.sx, pz));
         let y = _mm_sub_ps(py, _mm_mul_ps(self.sy, pz));
