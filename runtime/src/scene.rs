@@ -4,7 +4,7 @@ use std::path::Path;
 
 use octrace_format::{BakedScene, SceneFile, SceneView};
 
-use crate::cpu::Tracer;
+use crate::cpu::{LocateGrid, Tracer};
 use crate::error::Result;
 use crate::ray::{Hit, Ray};
 
@@ -33,6 +33,8 @@ enum Source {
 /// * zstd-compressed files (`.oct.zst`) cannot be mapped: [`Scene::open`] reads them.
 pub struct Scene {
     source: Source,
+    /// Point location's top levels, built on the first tracer.
+    grid: std::sync::OnceLock<LocateGrid>,
 }
 
 impl std::fmt::Debug for Scene {
@@ -49,7 +51,7 @@ impl Scene {
     /// The format crate's errors: I/O, bad magic, unsupported version, checksum,
     /// corrupt contents.
     pub fn open(path: impl AsRef<Path>) -> Result<Scene> {
-        Ok(Scene { source: Source::File(Box::new(SceneFile::read(path)?)) })
+        Ok(Scene::with(Source::File(Box::new(SceneFile::read(path)?))))
     }
 
     /// Memory-maps and validates a `.oct` file.
@@ -62,7 +64,8 @@ impl Scene {
     /// As [`Scene::open`].
     pub unsafe fn map(path: impl AsRef<Path>) -> Result<Scene> {
         // SAFETY: forwarded to our caller.
-        Ok(Scene { source: Source::File(Box::new(unsafe { SceneFile::map(path)? })) })
+        let file = unsafe { SceneFile::map(path)? };
+        Ok(Scene::with(Source::File(Box::new(file))))
     }
 
     /// Memory-maps a `.oct` file checking its header only: microseconds whatever the
@@ -76,7 +79,8 @@ impl Scene {
     /// I/O and header errors.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Scene> {
         // SAFETY: forwarded to our caller.
-        Ok(Scene { source: Source::File(Box::new(unsafe { SceneFile::map_unchecked(path)? })) })
+        let file = unsafe { SceneFile::map_unchecked(path)? };
+        Ok(Scene::with(Source::File(Box::new(file))))
     }
 
     /// Validates a whole file held in memory.
@@ -84,7 +88,7 @@ impl Scene {
     /// # Errors
     /// As [`Scene::open`].
     pub fn from_bytes(bytes: &[u8]) -> Result<Scene> {
-        Ok(Scene { source: Source::File(Box::new(SceneFile::from_bytes(bytes)?)) })
+        Ok(Scene::with(Source::File(Box::new(SceneFile::from_bytes(bytes)?))))
     }
 
     /// Wraps a scene baked in this process (it is validated first).
@@ -93,7 +97,11 @@ impl Scene {
     /// [`crate::Error::Format`] if the scene breaks the format's rules.
     pub fn from_baked(scene: BakedScene) -> Result<Scene> {
         scene.view().validate()?;
-        Ok(Scene { source: Source::Baked(Box::new(scene)) })
+        Ok(Scene::with(Source::Baked(Box::new(scene))))
+    }
+
+    fn with(source: Source) -> Scene {
+        Scene { source, grid: std::sync::OnceLock::new() }
     }
 
     /// The scene's arrays.
@@ -112,9 +120,12 @@ impl Scene {
         }
     }
 
-    /// A CPU tracer over the scene; build one per batch of rays.
+    /// A CPU tracer over the scene; build one per batch of rays. (The first one also
+    /// builds the scene's point-location grid, a few milliseconds.)
     pub fn tracer(&self) -> Tracer<'_> {
-        Tracer::new(self.view())
+        let view = self.view();
+        let grid = self.grid.get_or_init(|| LocateGrid::build(&view));
+        Tracer::new(view).with_locate_grid(grid)
     }
 
     /// The nearest hit of `ray` in `[tmin, tmax]`.

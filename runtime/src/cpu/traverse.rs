@@ -50,6 +50,8 @@ pub struct Tracer<'a> {
     max_depth: u32,
     max_steps: u32,
     test: TriangleTest,
+    /// The top levels of point location as a grid, when the scene has one.
+    grid: Option<&'a LocateGrid>,
 }
 
 /// The ray/triangle test a tracer uses.
@@ -173,7 +175,14 @@ impl<'a> Tracer<'a> {
             max_steps: 9 * (1u32 << max_depth) + 64,
             view,
             test: TriangleTest::default(),
+            grid: None,
         }
+    }
+
+    /// The same tracer locating points with `grid` (built for this scene).
+    pub fn with_locate_grid(mut self, grid: &'a LocateGrid) -> Self {
+        self.grid = Some(grid);
+        self
     }
 
     /// The same tracer with another triangle test.
@@ -514,28 +523,25 @@ impl Tracer<'_> {
         self.locate_cell(p).0
     }
 
-    /// The leaf holding point `p`: its address, level and cell.
+    /// The leaf holding point `p`: its address, level and cell. With a locate grid,
+    /// one load replaces the top levels of the descent.
     fn locate_cell(&self, p: [f32; 3]) -> (u32, u32, [u32; 3]) {
-        self.descend(self.view.root, 0, self.grid_coords(p))
+        let q = self.grid_coords(p);
+        match self.grid {
+            Some(grid) => {
+                let (word, level) = grid.entry(q, self.max_depth);
+                self.descend(word, level, q)
+            }
+            None => self.descend(self.view.root, 0, q),
+        }
     }
 
     /// Descends from `word` (a node at `level`) to the leaf holding finest-grid cell
     /// `q`: its address, level and cell.
-    fn descend(&self, mut word: u32, mut level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
-        loop {
-            match NodeRef::decode(word) {
-                NodeRef::Leaf(address) => {
-                    let shift = self.max_depth - level;
-                    return (address, level, q.map(|c| c >> shift));
-                }
-                NodeRef::Internal(i) => {
-                    let shift = self.max_depth - level - 1;
-                    let child = (q[0] >> shift & 1) | (q[1] >> shift & 1) << 1 | (q[2] >> shift & 1) << 2;
-                    word = self.view.nodes[8 * i as usize + child as usize];
-                    level += 1;
-                }
-            }
-        }
+    fn descend(&self, word: u32, level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
+        let (address, level) = descend_to(&self.view, word, level, q, self.max_depth);
+        let shift = self.max_depth.saturating_sub(level).min(31);
+        (address, level, q.map(|c| c >> shift))
     }
 
     /// The leaf a ray from outside enters first (address, level, cell): the cube-map
@@ -565,6 +571,73 @@ impl Tracer<'_> {
                 let shift = self.max_depth - leaf_level;
                 (address, leaf_level, [q[0] >> shift, q[1] >> shift, q[2] >> shift])
             }
+        }
+    }
+}
+
+/// Descends the point-location tree from `word` (a node at `level`) towards
+/// finest-grid cell `q` until a leaf or level `stop`: (the word there, its level). A
+/// valid tree has no internal node at `max_depth`; a hostile one (on the trusted path)
+/// stops there too, so the descent is bounded whatever the file.
+fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32) -> (u32, u32) {
+    while let NodeRef::Internal(i) = NodeRef::decode(word) {
+        if level >= stop {
+            break;
+        }
+        let shift = (view.params.max_depth - level - 1).min(31);
+        let child = (q[0] >> shift & 1) | (q[1] >> shift & 1) << 1 | (q[2] >> shift & 1) << 2;
+        word = view.nodes.get(8 * i as usize + child as usize).copied().unwrap_or(0);
+        level += 1;
+    }
+    (word, level)
+}
+
+/// The point-location tree's top levels as a grid: for each cell of level `level`, the
+/// leaf that holds it (and that leaf's level) or the internal node at that level. A
+/// point is located with one load and a short descent instead of up to `max_depth`
+/// dependent loads. Built once per scene (`Scene` keeps it).
+#[derive(Debug)]
+pub struct LocateGrid {
+    level: u32,
+    words: Vec<u32>,
+    levels: Vec<u8>,
+}
+
+impl LocateGrid {
+    /// Grid cells a side at most: 2^6 (262,144 cells, 1.25 MB).
+    const MAX_LEVEL: u32 = 6;
+
+    /// The grid of a validated scene.
+    pub fn build(view: &SceneView<'_>) -> LocateGrid {
+        let level = view.params.max_depth.min(Self::MAX_LEVEL);
+        let res = 1u32 << level;
+        let shift = view.params.max_depth - level;
+        let cells = (res as usize).pow(3);
+        let (mut words, mut levels) = (Vec::with_capacity(cells), Vec::with_capacity(cells));
+        for z in 0..res {
+            for y in 0..res {
+                for x in 0..res {
+                    let q = [x << shift, y << shift, z << shift];
+                    let (word, l) = descend_to(view, view.root, 0, q, level);
+                    words.push(word);
+                    levels.push(l as u8);
+                }
+            }
+        }
+        LocateGrid { level, words, levels }
+    }
+
+    /// The word and level to descend from for finest-grid cell `q`.
+    #[inline(always)]
+    fn entry(&self, q: [u32; 3], max_depth: u32) -> (u32, u32) {
+        let shift = max_depth.saturating_sub(self.level).min(31);
+        let res = 1usize << self.level;
+        let mask = res - 1;
+        let i = (((q[2] >> shift) as usize & mask) * res + ((q[1] >> shift) as usize & mask)) * res
+            + ((q[0] >> shift) as usize & mask);
+        match (self.words.get(i), self.levels.get(i)) {
+            (Some(&w), Some(&l)) => (w, l as u32),
+            _ => (0, 0),
         }
     }
 }
