@@ -6,6 +6,8 @@
 //! The walk is the one of Portalez & Duguet, *Lancer de rayons dans un octree* (2016):
 //! cube-map entry, exit face from Plücker signs, neighbour from two more signs.
 //! [`reference::Reference`] is the `f64` brute-force oracle the tests compare with.
+//! With the `gpu` feature (on by default), `gpu::GpuTracer` runs the same walk in a
+//! wgpu compute kernel on Vulkan, from the same bytes, with the same answers.
 //!
 //! # Example
 //! ```
