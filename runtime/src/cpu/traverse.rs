@@ -472,7 +472,8 @@ pub(crate) fn box_slack(root_lo: [f32; 3], root_hi: [f32; 3], root_size: f32) ->
     (root_size / (1 << 16) as f32).max(16.0 * f32::EPSILON * largest)
 }
 
-/// The mesh box enlarged by [`box_slack`] on every side, as the walks clip to it.
+/// The mesh box enlarged on every side (by 2^-16 of the root edge, and at least 16 f32
+/// spacings of the root's largest coordinate), as the walks clip to it.
 pub fn mesh_box(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
     let b = view.bounds;
     let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
