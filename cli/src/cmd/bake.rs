@@ -14,7 +14,8 @@ use crate::output::{mb, thousands};
 pub(crate) struct Args {
     /// Mesh to bake: .obj, .gltf or .glb, optionally compressed as .zst.
     pub input: PathBuf,
-    /// The .oct file to write.
+    /// The .oct file to write. (A bake killed outright leaves its temporary
+    /// .octrace-XXXX.tmp beside it, which may be deleted.)
     #[arg(short, long)]
     pub output: PathBuf,
     /// Deepest octree level (root = 0). Default: ceil(log4(triangles / leaf size)) + 2.
