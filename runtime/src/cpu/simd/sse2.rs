@@ -147,49 +147,53 @@ impl ShearSse {
         }
     }
 
-    /// As `Shear::intersect`, bit for bit.
-    #[target_feature(enable = "sse2")]
-    #[inline]
+    /// As `Shear::intersect`, bit for bit. (No `target_feature` attribute: SSE2 is
+    /// enabled for the whole build, which this module requires, and the attribute
+    /// would forbid `inline(always)`: the step calls this for every triangle.)
+    #[inline(always)]
     pub(crate) fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-        let t: &[f32; 9] = t.try_into().ok()?;
-        // Vertices relative to the origin, one a lane: (a, b, c) for x, y and z.
-        let rx = _mm_sub_ps(_mm_setr_ps(t[0], t[3], t[6], 0.0), self.o[0]);
-        let ry = _mm_sub_ps(_mm_setr_ps(t[1], t[4], t[7], 0.0), self.o[1]);
-        let rz = _mm_sub_ps(_mm_setr_ps(t[2], t[5], t[8], 0.0), self.o[2]);
-        let r = [rx, ry, rz];
-        let (px, py, pz) = (r[self.k[0] as usize], r[self.k[1] as usize], r[self.k[2] as usize]);
-        // Sheared x and y: a[kx] - sx * a[kz], a[ky] - sy * a[kz].
-        let x = _mm_sub_ps(px, _mm_mul_ps(self.sx, pz));
-        let y = _mm_sub_ps(py, _mm_mul_ps(self.sy, pz));
-        // Edge functions (u, v, w) = (cx*by - cy*bx, ax*cy - ay*cx, bx*ay - by*ax):
-        // lanes rotated to (b, c, a) and (c, a, b).
-        let x1 = _mm_shuffle_ps::<0b11_00_10_01>(x, x);
-        let y1 = _mm_shuffle_ps::<0b11_00_10_01>(y, y);
-        let x2 = _mm_shuffle_ps::<0b11_01_00_10>(x, x);
-        let y2 = _mm_shuffle_ps::<0b11_01_00_10>(y, y);
-        let e = _mm_sub_ps(_mm_mul_ps(x2, y1), _mm_mul_ps(y2, x1));
-        let zero = _mm_setzero_ps();
-        if _mm_movemask_ps(_mm_cmpeq_ps(e, zero)) & 7 != 0 {
-            // An edge function rounded to zero: the scalar test decides it in f64.
-            return self.scalar.intersect(t, tmin, tmax);
+        // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
+        unsafe {
+            let t: &[f32; 9] = t.try_into().ok()?;
+            // Vertices relative to the origin, one a lane: (a, b, c) for x, y and z.
+            let rx = _mm_sub_ps(_mm_setr_ps(t[0], t[3], t[6], 0.0), self.o[0]);
+            let ry = _mm_sub_ps(_mm_setr_ps(t[1], t[4], t[7], 0.0), self.o[1]);
+            let rz = _mm_sub_ps(_mm_setr_ps(t[2], t[5], t[8], 0.0), self.o[2]);
+            let r = [rx, ry, rz];
+            let (px, py, pz) = (r[self.k[0] as usize], r[self.k[1] as usize], r[self.k[2] as usize]);
+            // Sheared x and y: a[kx] - sx * a[kz], a[ky] - sy * a[kz].
+            let x = _mm_sub_ps(px, _mm_mul_ps(self.sx, pz));
+            let y = _mm_sub_ps(py, _mm_mul_ps(self.sy, pz));
+            // Edge functions (u, v, w) = (cx*by - cy*bx, ax*cy - ay*cx, bx*ay - by*ax):
+            // lanes rotated to (b, c, a) and (c, a, b).
+            let x1 = _mm_shuffle_ps::<0b11_00_10_01>(x, x);
+            let y1 = _mm_shuffle_ps::<0b11_00_10_01>(y, y);
+            let x2 = _mm_shuffle_ps::<0b11_01_00_10>(x, x);
+            let y2 = _mm_shuffle_ps::<0b11_01_00_10>(y, y);
+            let e = _mm_sub_ps(_mm_mul_ps(x2, y1), _mm_mul_ps(y2, x1));
+            let zero = _mm_setzero_ps();
+            if _mm_movemask_ps(_mm_cmpeq_ps(e, zero)) & 7 != 0 {
+                // An edge function rounded to zero: the scalar test decides it in f64.
+                return self.scalar.intersect(t, tmin, tmax);
+            }
+            let negative = _mm_movemask_ps(_mm_cmplt_ps(e, zero)) & 7;
+            let positive = _mm_movemask_ps(_mm_cmpgt_ps(e, zero)) & 7;
+            if negative != 0 && positive != 0 {
+                return None;
+            }
+            let u = _mm_cvtss_f32(e);
+            let v = _mm_cvtss_f32(_mm_shuffle_ps::<0b01_01_01_01>(e, e));
+            let w = _mm_cvtss_f32(_mm_movehl_ps(e, e));
+            let det = u + v + w;
+            if det == 0.0 {
+                return None;
+            }
+            // Scaled distance u * az + v * bz + w * cz, in that order.
+            let scaled = dot(e, _mm_mul_ps(self.sz, pz));
+            let inv = 1.0 / det;
+            let dist = scaled * inv;
+            (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
         }
-        let negative = _mm_movemask_ps(_mm_cmplt_ps(e, zero)) & 7;
-        let positive = _mm_movemask_ps(_mm_cmpgt_ps(e, zero)) & 7;
-        if negative != 0 && positive != 0 {
-            return None;
-        }
-        let u = _mm_cvtss_f32(e);
-        let v = _mm_cvtss_f32(_mm_shuffle_ps::<0b01_01_01_01>(e, e));
-        let w = _mm_cvtss_f32(_mm_movehl_ps(e, e));
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
-        // Scaled distance u * az + v * bz + w * cz, in that order.
-        let scaled = dot(e, _mm_mul_ps(self.sz, pz));
-        let inv = 1.0 / det;
-        let dist = scaled * inv;
-        (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
     }
 }
 
