@@ -9,7 +9,7 @@ use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
 use crate::error::{Error, Result};
-use crate::header::{Header, Section, ARCHIVE_ALIGN, HEADER_LEN, SECTION_COUNT};
+use crate::header::{Header, Section, ARCHIVE_ALIGN, HEADER_LEN};
 use crate::scene::{ArchivedBakedScene, BakeParams, BakeStats, Bounds};
 use crate::view::SceneView;
 
@@ -227,17 +227,8 @@ fn check_sections(header: &Header, payload: &[u8]) -> Result<()> {
 /// describes the archive it guards.
 fn check_arrays_in_sections(header: &Header, payload: &[u8], a: &ArchivedBakedScene) -> Result<()> {
     let base = payload.as_ptr() as usize;
-    let arrays: [(*const u8, usize); SECTION_COUNT - 1] = [
-        (a.octree.as_ptr().cast(), a.octree.len()),
-        (a.tri_refs.as_ptr().cast(), a.tri_refs.len()),
-        (a.triangles.as_ptr().cast(), a.triangles.len()),
-        (a.triangle_ids.as_ptr().cast(), a.triangle_ids.len()),
-        (a.boxes.as_ptr().cast(), a.boxes.len()),
-        (a.cube_map.as_ptr().cast(), a.cube_map.len()),
-        (a.nodes.as_ptr().cast(), a.nodes.len()),
-    ];
-    for ((ptr, len), s) in arrays.into_iter().zip(&header.sections) {
-        let at = (ptr as usize).wrapping_sub(base) as u64;
+    for (words, s) in view_of(a).section_words().into_iter().zip(&header.sections) {
+        let (at, len) = ((words.as_ptr() as usize).wrapping_sub(base) as u64, words.len());
         if 4 * len as u64 != s.len || (len > 0 && at != s.offset) {
             return Err(Error::corrupt(format!(
                 "array {} ({len} words at offset {at}) is not its section ({} bytes at offset {})",
@@ -287,7 +278,7 @@ fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
 }
 
 /// Builds a view with native-typed slices over an archive.
-fn view_of(a: &ArchivedBakedScene) -> SceneView<'_> {
+pub(crate) fn view_of(a: &ArchivedBakedScene) -> SceneView<'_> {
     let v3 = |x: &[rkyv::rend::f32_le; 3]| [x[0].to_native(), x[1].to_native(), x[2].to_native()];
     SceneView {
         params: BakeParams {

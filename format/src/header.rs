@@ -148,11 +148,12 @@ impl Header {
         Self::decode_with(bytes, None)
     }
 
-    /// The section in which a file of `file_len` bytes ends, when it ends inside the
-    /// archive (its last section when it ends exactly at a boundary before it).
-    pub fn section_at(&self, file_len: u64) -> Option<&Section> {
+    /// The index (in `sections`) of the section in which a file of `file_len` bytes
+    /// ends, when it ends inside the archive (the last section when it ends at or past
+    /// the archive's end).
+    pub fn section_at(&self, file_len: u64) -> Option<usize> {
         let at = file_len.checked_sub(HEADER_LEN as u64)?;
-        self.sections.iter().find(|s| at < s.offset + s.len).or(self.sections.last())
+        Some(self.sections.iter().position(|s| at < s.offset + s.len).unwrap_or(SECTION_COUNT - 1))
     }
 
     fn decode_with(bytes: &[u8], file_len: Option<u64>) -> Result<Self> {
@@ -208,8 +209,8 @@ impl Header {
         let needed = (HEADER_LEN as u64).saturating_add(header.payload_len);
         if needed > file_len {
             let (what, needed) = match header.section_at(file_len) {
-                Some(s) => {
-                    let i = SECTION_NAMES.iter().position(|n| *n == s.name).unwrap_or(SECTION_COUNT - 1);
+                Some(i) => {
+                    let s = &header.sections[i];
                     (SECTION_LABELS[i], HEADER_LEN as u64 + s.offset + s.len)
                 }
                 None => ("archive", needed),

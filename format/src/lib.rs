@@ -62,17 +62,8 @@ pub mod testing {
         aligned.extend_from_slice(payload);
         let mut lens = [0u64; SECTION_COUNT];
         if let Ok(a) = rkyv::access::<crate::scene::ArchivedBakedScene, rkyv::rancor::Error>(&aligned) {
-            let arrays = [
-                a.octree.len(),
-                a.tri_refs.len(),
-                a.triangles.len(),
-                a.triangle_ids.len(),
-                a.boxes.len(),
-                a.cube_map.len(),
-                a.nodes.len(),
-            ];
-            for (len, n) in lens.iter_mut().zip(arrays) {
-                *len = 4 * n as u64;
+            for (len, words) in lens.iter_mut().zip(crate::file::view_of(a).section_words()) {
+                *len = 4 * words.len() as u64;
             }
         }
         let arrays: u64 = lens.iter().sum();

@@ -65,6 +65,21 @@ impl LeafRecord<'_> {
 }
 
 impl<'a> SceneView<'a> {
+    /// The seven arrays as 32-bit words, in the file's section order (octree,
+    /// tri_refs, triangles, triangle_ids, boxes, cube_map, nodes): the sections before
+    /// `root` hold exactly these bytes.
+    pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
+        [
+            self.octree,
+            self.tri_refs,
+            bytemuck::cast_slice(self.triangles),
+            self.triangle_ids,
+            bytemuck::cast_slice(self.boxes),
+            self.cube_map,
+            self.nodes,
+        ]
+    }
+
     /// Number of leaves.
     pub fn leaf_count(&self) -> usize {
         self.boxes.len() / crate::layout::BOX_FLOATS

@@ -41,22 +41,9 @@ impl BakedScene {
         Ok((Header::new(sections.finish()?, bake_time_us), payload))
     }
 
-    /// The arrays in file order, as the sections before `root` hold them.
-    fn arrays(&self) -> [&[u32]; SECTION_COUNT - 1] {
-        [
-            &self.octree,
-            &self.tri_refs,
-            bytemuck::cast_slice(&self.triangles),
-            &self.triangle_ids,
-            bytemuck::cast_slice(&self.boxes),
-            &self.cube_map,
-            &self.nodes,
-        ]
-    }
-
     /// Bytes of all the arrays together.
     fn array_bytes(&self) -> u64 {
-        self.arrays().iter().map(|a| 4 * a.len() as u64).sum()
+        self.view().section_words().iter().map(|a| 4 * a.len() as u64).sum()
     }
 
     /// Writes the scene to `path` atomically: into a temporary file beside it, flushed
@@ -174,7 +161,7 @@ struct SectionHasher {
 impl SectionHasher {
     fn new(scene: &BakedScene) -> Self {
         let mut end = 0u64;
-        let ends = scene.arrays().map(|a| {
+        let ends = scene.view().section_words().map(|a| {
             end += 4 * a.len() as u64;
             end
         });
