@@ -7,7 +7,7 @@ mod traverse;
 mod triangle;
 pub mod watertight;
 
-pub use traverse::{mesh_box, LocateGrid, Tracer, TriangleTest, WalkStats};
+pub use traverse::{mesh_box, root_corners, LocateGrid, Tracer, TriangleTest, WalkStats};
 
 use rayon::prelude::*;
 

@@ -156,10 +156,8 @@ impl<'a> Tracer<'a> {
     /// Prepares a tracer for a validated view.
     pub fn new(view: SceneView<'a>) -> Tracer<'a> {
         let b = view.bounds;
-        let root_box = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
         let max_depth = view.params.max_depth;
-        let root_lo = [root_box[0], root_box[1], root_box[2]];
-        let root_hi = [root_box[3], root_box[4], root_box[5]];
+        let (root_lo, root_hi) = root_corners(&view);
         let (box_lo, box_hi) = mesh_box(&view);
         Tracer {
             root_lo,
@@ -476,9 +474,16 @@ pub(crate) fn box_slack(root_lo: [f32; 3], root_hi: [f32; 3], root_size: f32) ->
 /// spacings of the root's largest coordinate), as the walks clip to it.
 pub fn mesh_box(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
     let b = view.bounds;
-    let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
-    let slack = box_slack([root[0], root[1], root[2]], [root[3], root[4], root[5]], b.root_size);
+    let (root_lo, root_hi) = root_corners(view);
+    let slack = box_slack(root_lo, root_hi, b.root_size);
     (b.mesh_lo.map(|c| c - slack), b.mesh_hi.map(|c| c + slack))
+}
+
+/// The root cube's low and high corners, as the format computes cell planes.
+pub fn root_corners(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
+    let b = view.bounds;
+    let r = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
+    ([r[0], r[1], r[2]], [r[3], r[4], r[5]])
 }
 
 /// The ray's parameter interval inside the box `lo..hi` and the axis it enters by, or
@@ -486,26 +491,24 @@ pub fn mesh_box(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
 /// happens.
 #[inline(always)]
 fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
-    {
-        let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
-        for a in 0..3 {
-            let (lo, hi) = (lo[a], hi[a]);
-            if d[a] == 0.0 {
-                if o[a] < lo || o[a] > hi {
-                    return None;
-                }
-                continue;
+    let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
+    for a in 0..3 {
+        let (lo, hi) = (lo[a], hi[a]);
+        if d[a] == 0.0 {
+            if o[a] < lo || o[a] > hi {
+                return None;
             }
-            let (ta, tb) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
-            let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
-            if near > t0 {
-                t0 = near;
-                axis = a;
-            }
-            t1 = t1.min(far);
+            continue;
         }
-        (t0 <= t1).then_some((t0, t1, axis))
+        let (ta, tb) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
+        let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
+        if near > t0 {
+            t0 = near;
+            axis = a;
+        }
+        t1 = t1.min(far);
     }
+    (t0 <= t1).then_some((t0, t1, axis))
 }
 
 impl Tracer<'_> {

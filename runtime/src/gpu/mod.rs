@@ -26,8 +26,6 @@
 
 use std::time::{Duration, Instant};
 
-use octrace_format::SceneView;
-
 use crate::ray::{Hit, Ray};
 use crate::Scene;
 use crate::WalkStats;
@@ -216,7 +214,7 @@ impl GpuTracer {
         // Chunks of a power-of-two number of words, so the kernel splits an index with a
         // shift and a mask.
         let chunk_words = 1u64 << (max_binding / 4).max(1).ilog2().min(31);
-        let arrays = arrays_of(&view);
+        let arrays = view.section_words();
         let offsets = offsets_of(&arrays)?;
         let chunks = offsets.total.div_ceil(chunk_words).max(1);
         // The rays and hits take two storage bindings besides the scene's.
@@ -255,7 +253,7 @@ impl GpuTracer {
             })
         };
         let b = view.bounds;
-        let root = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
+        let (root_lo, root_hi) = crate::cpu::root_corners(&view);
         let max_depth = view.params.max_depth;
         let (lo, hi) = crate::cpu::mesh_box(&view);
         let params = Params {
@@ -273,8 +271,8 @@ impl GpuTracer {
                 offsets.cube,
                 offsets.nodes,
             ],
-            root_lo: [root[0], root[1], root[2], b.root_size],
-            root_hi: [root[3], root[4], root[5], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
+            root_lo: [root_lo[0], root_lo[1], root_lo[2], b.root_size],
+            root_hi: [root_hi[0], root_hi[1], root_hi[2], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
             box_lo: [lo[0], lo[1], lo[2], 0.0],
             box_hi: [hi[0], hi[1], hi[2], 0.0],
         };
@@ -441,19 +439,6 @@ impl GpuTracer {
 
 fn to_hit(h: &HitOut) -> Option<Hit> {
     (h.triangle != u32::MAX).then_some(Hit { t: h.t, triangle: h.triangle, u: h.u, v: h.v, leaf: h.leaf, prim: h.prim })
-}
-
-/// The scene's arrays as words, in upload order (the file's section order).
-fn arrays_of<'a>(v: &SceneView<'a>) -> [&'a [u32]; 7] {
-    [
-        v.octree,
-        v.tri_refs,
-        bytemuck::cast_slice(v.triangles),
-        v.triangle_ids,
-        bytemuck::cast_slice(v.boxes),
-        v.cube_map,
-        v.nodes,
-    ]
 }
 
 fn offsets_of(arrays: &[&[u32]; 7]) -> GpuResult<Offsets> {
