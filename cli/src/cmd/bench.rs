@@ -117,6 +117,10 @@ struct SetResult {
     hits: usize,
     sum_t: f64,
     peer: Option<(Spread, usize, f64)>,
+    /// The answers of the last run: nearest hits, or (for occlusion) whether each
+    /// ray is occluded; what the GPU's answers are compared with.
+    nearest: Vec<Option<Hit>>,
+    occluded: Vec<bool>,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -149,7 +153,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     for (name, rays, occlusion) in &sets {
         results.push(measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?);
     }
-    let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &tracer, &sets, args.runs)?) } else { None };
+    let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &sets, &results, args.runs)?) } else { None };
     #[cfg(feature = "obvhs")]
     let peer_build = peer.as_ref().map(|p| p.build_time);
     #[cfg(not(feature = "obvhs"))]
@@ -203,12 +207,7 @@ fn measure(
         })?;
         all.push(mrays(d));
     }
-    let (n, sum_t) = if occlusion {
-        (occluded.iter().filter(|&&o| o).count(), 0.0)
-    } else {
-        // `+ 0.0`: an empty sum is -0.0.
-        (hits.iter().flatten().count(), hits.iter().flatten().map(|h| h.t as f64).sum::<f64>() + 0.0)
-    };
+    let (n, sum_t) = if occlusion { (occluded.iter().filter(|&&o| o).count(), 0.0) } else { hit_sums(&hits) };
     Ok(SetResult {
         name,
         rays: rays.len(),
@@ -217,7 +216,14 @@ fn measure(
         hits: n,
         sum_t,
         peer: (!peer_runs.is_empty()).then(|| (Spread::of(peer_runs), peer_sum.0, peer_sum.1)),
+        nearest: if occlusion { Vec::new() } else { hits },
+        occluded: if occlusion { occluded } else { Vec::new() },
     })
+}
+
+/// Rays that hit and the sum of their distances (`+ 0.0`: an empty sum is -0.0).
+fn hit_sums(hits: &[Option<Hit>]) -> (usize, f64) {
+    (hits.iter().flatten().count(), hits.iter().flatten().map(|h| h.t as f64).sum::<f64>() + 0.0)
 }
 
 fn report(
@@ -319,7 +325,7 @@ mod gpu {
     use std::time::{Duration, Instant};
 
     use octrace_runtime::gpu::{GpuContext, GpuTracer};
-    use octrace_runtime::{Hit, Ray, Scene, Tracer};
+    use octrace_runtime::{Hit, Ray, Scene};
     use serde_json::json;
 
     use super::Spread;
@@ -344,10 +350,12 @@ mod gpu {
         sets: Vec<GpuSet>,
     }
 
+    /// Times each set on the GPU and compares its answers with the CPU's (`cpu`, the
+    /// sets' CPU results, in the same order).
     pub(super) fn measure(
         scene: &Scene,
-        cpu: &Tracer<'_>,
         sets: &[(&'static str, Vec<Ray>, bool)],
+        cpu: &[super::SetResult],
         runs: usize,
     ) -> anyhow::Result<GpuReport> {
         let gpu = GpuContext::new()?;
@@ -355,7 +363,7 @@ mod gpu {
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
         let upload = t.elapsed();
         let mut out = Vec::new();
-        for (name, rays, occlusion) in sets {
+        for ((name, rays, occlusion), cpu) in sets.iter().zip(cpu) {
             let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
             let (mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new());
             for _ in 0..runs {
@@ -364,19 +372,19 @@ mod gpu {
                 total.push(mrays(timings.upload + timings.kernel + timings.download));
                 hits = h;
             }
-            let differ = rays
-                .iter()
-                .zip(&hits)
-                .filter(|(r, g)| if *occlusion { cpu.occluded(r) != g.is_some() } else { !same(&cpu.intersect(r), g) })
-                .count();
-            let found = hits.iter().flatten();
+            let differ = if *occlusion {
+                cpu.occluded.iter().zip(&hits).filter(|(c, g)| **c != g.is_some()).count()
+            } else {
+                cpu.nearest.iter().zip(&hits).filter(|(c, g)| !same(c, g)).count()
+            };
+            let (found, sum_t) = super::hit_sums(&hits);
             out.push(GpuSet {
                 name,
                 rays: rays.len(),
                 kernel: Spread::of(kernel),
                 end_to_end: Spread::of(total),
-                hits: hits.iter().flatten().count(),
-                sum_t: if *occlusion { 0.0 } else { found.map(|h| h.t as f64).sum::<f64>() + 0.0 },
+                hits: found,
+                sum_t: if *occlusion { 0.0 } else { sum_t },
                 differ,
             });
         }
