@@ -8,13 +8,10 @@
 //! ```
 //! use octrace_bake::{bake, BuildParams, Mesh};
 //! // Two triangles making a unit square.
-//! let mesh = Mesh {
-//!     triangles: vec![
-//!         [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
-//!         [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
-//!     ],
-//!     warnings: vec![],
-//! };
+//! let mesh = Mesh::from_triangles(vec![
+//!     [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+//!     [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+//! ]);
 //! let scene = bake(&mesh, &BuildParams::auto())?;
 //! let dir = tempfile::tempdir()?;
 //! scene.write(dir.path().join("square.oct"), 0)?;
@@ -22,6 +19,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod effects;
 mod error;
 pub mod mesh;
 pub mod octree;

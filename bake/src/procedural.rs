@@ -4,7 +4,7 @@
 use crate::mesh::Mesh;
 
 fn mesh(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
-    Mesh { triangles, warnings: Vec::new() }
+    Mesh::from_triangles(triangles)
 }
 
 /// A closed UV sphere with `stacks x slices` quads (poles as fans).
@@ -227,4 +227,98 @@ impl ClosedSolid {
         }
         rays
     }
+}
+
+/// The scene of `octrace demo --scene effects`: every effect the renderer knows, each
+/// on its own object, lit by a point light (hard shadows) and an area light (soft
+/// shadows), seen through a camera the scene carries.
+///
+/// A diffuse floor; a mirror standing behind the objects; a glass sphere
+/// (transmission 1, index 1.5); a clay torus; a green blended pane (alpha 0.35); a
+/// lamp: an emissive square under the ceiling. The spheres carry smooth shading
+/// normals.
+///
+/// # Example
+/// ```
+/// let scene = octrace_bake::procedural::effects_scene();
+/// let baked = octrace_bake::bake(&scene, &Default::default())?;
+/// assert_eq!(baked.shading.effects.len(), 5); // every effect
+/// # Ok::<(), octrace_bake::Error>(())
+/// ```
+pub fn effects_scene() -> Mesh {
+    use octrace_format::{AlphaMode, Camera, Light, LightKind, Material};
+    let diffuse = |name: &str, rgb: [f32; 3], roughness: f32| Material {
+        name: name.into(),
+        base_color: [rgb[0], rgb[1], rgb[2], 1.0],
+        metallic: 0.0,
+        roughness,
+        ..Material::default()
+    };
+    let mut out = Mesh {
+        materials: vec![
+            diffuse("floor", [0.75, 0.72, 0.66], 1.0),
+            Material { roughness: 0.0, base_color: [0.92, 0.93, 0.95, 1.0], ..diffuse("mirror", [0.0; 3], 0.0) },
+            Material { transmission: 1.0, ior: 1.5, ..diffuse("glass", [0.97, 0.99, 1.0], 0.0) },
+            diffuse("clay", [0.8, 0.25, 0.15], 0.45),
+            Material { alpha_mode: AlphaMode::Blend, ..diffuse("tinted pane", [0.2, 0.8, 0.3], 1.0) },
+            Material { emissive: [14.0, 13.0, 11.5], ..diffuse("lamp", [0.0; 3], 1.0) },
+        ],
+        lights: vec![Light {
+            name: "key".into(),
+            kind: LightKind::Point,
+            color: [1.0, 0.95, 0.85],
+            intensity: 24.0,
+            position: [3.0, 4.5, 3.5],
+            direction: [0.0, -1.0, 0.0],
+            range: f32::INFINITY,
+            inner_cone: 0.0,
+            outer_cone: 0.0,
+        }],
+        cameras: vec![Camera {
+            name: "front".into(),
+            position: [0.2, 2.1, 6.4],
+            forward: normalized([-0.2, -1.5, -6.4]),
+            up: [0.0, 1.0, 0.0],
+            yfov: 0.7,
+            aspect: Some(4.0 / 3.0),
+        }],
+        ..Mesh::default()
+    };
+    out.materials[1].metallic = 1.0;
+    out.materials[4].base_color[3] = 0.35;
+    // The cameras' up must be orthogonal to its forward.
+    let f = out.cameras[0].forward;
+    let up = [-f[0] * f[1], 1.0 - f[1] * f[1], -f[2] * f[1]];
+    out.cameras[0].up = normalized(up);
+    let quad = |a: [f32; 3], b: [f32; 3], c: [f32; 3], d: [f32; 3]| vec![[a, b, c], [a, c, d]];
+    // Counter-clockwise seen from the side their normal points to.
+    add(&mut out, quad([-5.0, 0.0, -3.0], [-5.0, 0.0, 5.0], [5.0, 0.0, 5.0], [5.0, 0.0, -3.0]), 0, None);
+    add(&mut out, quad([-2.6, 0.0, -1.8], [1.4, 0.0, -2.4], [1.4, 2.6, -2.4], [-2.6, 2.6, -1.8]), 1, None);
+    let glass = sphere([-0.9, 0.7, 0.4], 0.7, 24, 48);
+    add(&mut out, outward(glass.triangles), 2, Some(([-0.9, 0.7, 0.4], 0.7)));
+    let clay = torus([1.0, 0.3, -0.3], 0.55, 0.25, 48, 24);
+    add(&mut out, clay.triangles, 3, None);
+    add(&mut out, quad([1.2, 0.0, 1.6], [2.4, 0.0, 0.9], [2.4, 1.5, 0.9], [1.2, 1.5, 1.6]), 4, None);
+    add(&mut out, quad([-0.5, 3.6, -0.5], [0.5, 3.6, -0.5], [0.5, 3.6, 0.5], [-0.5, 3.6, 0.5]), 5, None);
+    out
+}
+
+/// Appends `triangles` with material `material`, and radial shading normals when
+/// they are the surface of sphere `(centre, radius)`.
+fn add(mesh: &mut Mesh, triangles: Vec<[[f32; 3]; 3]>, material: u32, sphere: Option<([f32; 3], f32)>) {
+    for t in triangles {
+        let normals = sphere.map(|(c, r)| t.map(|v| [0, 1, 2].map(|a| (v[a] - c[a]) / r)));
+        mesh.push(t, normals, None);
+        mesh.material_ids.push(material);
+    }
+}
+
+/// The triangles of [`sphere`] wound counter-clockwise seen from outside.
+fn outward(triangles: Vec<[[f32; 3]; 3]>) -> Vec<[[f32; 3]; 3]> {
+    triangles.into_iter().map(|[a, b, c]| [a, c, b]).collect()
+}
+
+fn normalized(v: [f32; 3]) -> [f32; 3] {
+    let len = v.iter().map(|c| c * c).sum::<f32>().sqrt();
+    v.map(|c| c / len)
 }

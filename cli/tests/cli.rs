@@ -28,16 +28,18 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 2.0, 0.0 MB
+cube.oct: octrace scene, format 3.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
 triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
-bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB; total 0.0 MB
+bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
 bake               max depth 3, leaf size 2, margin 9.536743e-7 of the root edge; time not recorded (reproducible file)
 bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0.0, 0.0], edge 1
+scene data         0 materials, 0 lights, 0 cameras; per triangle: none
+effects            none (primary rays only)
 ";
     assert_eq!(text, expected);
     let json: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct", "--json"])).unwrap();
@@ -49,6 +51,75 @@ bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0
     assert_eq!(names, octrace_format::SECTION_NAMES);
     let bytes: u64 = sections.iter().map(|s| s["bytes"].as_u64().unwrap()).sum();
     assert_eq!(bytes + octrace_format::HEADER_LEN as u64, json["file_bytes"].as_u64().unwrap());
+}
+
+/// Two cubes and a lamp, with an MTL library: a mirror, a glass and an emitter.
+const MTL_OBJ: &str = "mtllib scene.mtl
+v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1
+v 2 0 0\nv 3 0 0\nv 3 1 0\nv 2 1 0
+v 0 3 0\nv 1 3 0\nv 1 3 1
+usemtl chrome
+f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\nf 2 6 7 3
+usemtl glass
+f 9 10 11 12
+usemtl lamp
+f 13 14 15
+";
+const MTL: &str = "newmtl chrome\nKd 0.1 0.1 0.1\nKs 0.9 0.9 0.9\nNs 200\nillum 3
+newmtl glass\nKd 1 1 1\nd 0.2\nNi 1.5\nillum 6
+newmtl lamp\nKd 0 0 0\nKe 4 4 3\n";
+
+#[test]
+fn inspect_lists_each_effect_with_its_reason_and_render_turns_them_off() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.obj"), MTL_OBJ).unwrap();
+    std::fs::write(dir.path().join("scene.mtl"), MTL).unwrap();
+    ok(dir.path(), &["bake", "scene.obj", "-o", "scene.oct"]);
+    let text = ok(dir.path(), &["inspect", "scene.oct"]);
+    let tail: Vec<&str> = text.lines().skip_while(|l| !l.starts_with("scene data")).collect();
+    assert_eq!(
+        tail,
+        [
+            "scene data         3 materials, 0 lights, 0 cameras; per triangle: material ids",
+            "effects            shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangles",
+            "                   soft-shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangles",
+            "                   reflection: material 'chrome', illum 3, Ks (0.90, 0.90, 0.90) (and 1 more)",
+            "                   refraction: material 'glass', d 0.20, Ni 1.50",
+        ],
+        "{text}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_octrace"))
+        .current_dir(dir.path())
+        .args(["render", "scene.oct", "-o", "s.png", "--width", "48", "--effects", "-reflection,-alpha", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("effects: reflection: turned off"), "{stderr}");
+    assert!(stderr.contains("effects: alpha: not in this scene, nothing to turn off"), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["effects"], serde_json::json!(["shadows", "soft-shadows", "refraction"]));
+    assert_eq!(json["rays"]["primary"], 48 * 48);
+    assert_eq!(json["rays"]["reflection"], 0);
+    assert!(json["rays"]["soft_shadow"].as_u64().unwrap() > 0);
+    let text = ok(dir.path(), &["render", "scene.oct", "-o", "s.png", "--width", "48", "--effects", "none", "--stats"]);
+    assert!(text.contains("effects: none"), "{text}");
+    assert!(text.contains("  shadow                    0"), "{text}");
+    let out = octrace(dir.path(), &["render", "scene.oct", "-o", "s.png", "--effects", "-glow"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("unknown effect 'glow'"), "{err}");
+}
+
+#[test]
+fn demo_renders_the_effects_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ok(dir.path(), &["demo", "--scene", "effects", "-o", "fx.png"]);
+    for kind in ["shadow", "soft_shadow", "reflection", "refraction", "alpha"] {
+        let line =
+            out.lines().find(|l| l.trim_start().starts_with(&format!("{kind} "))).unwrap_or_else(|| panic!("{out}"));
+        assert!(!line.trim().ends_with(" 0"), "{line}");
+    }
+    assert!(dir.path().join("fx.png").exists());
 }
 
 #[test]

@@ -11,6 +11,7 @@ use rkyv::util::AlignedVec;
 use crate::error::{Error, Result};
 use crate::header::{Header, Section, ARCHIVE_ALIGN, HEADER_LEN};
 use crate::scene::{ArchivedBakedScene, BakeParams, BakeStats, Bounds};
+use crate::shading::Shading;
 use crate::view::SceneView;
 
 #[cfg(target_endian = "big")]
@@ -33,6 +34,9 @@ enum Storage {
 pub struct SceneFile {
     storage: Storage,
     header: Header,
+    /// The archive's shading data, deserialized at open (a few kilobytes at most for
+    /// materials, lights and cameras): the views borrow it.
+    shading: Shading,
 }
 
 impl std::fmt::Debug for SceneFile {
@@ -153,18 +157,29 @@ impl SceneFile {
     /// [`Error::Io`] and the header errors.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Self> {
         let (map, header) = map_file(path.as_ref())?;
-        Ok(SceneFile { storage: Storage::Mapped(map), header })
+        let mut file = SceneFile { storage: Storage::Mapped(map), header, shading: Shading::default() };
+        // SAFETY: our caller promised a valid file (see above); the payload is aligned
+        // as in `view`.
+        let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(file.payload()) };
+        file.shading = deserialize_shading(archived)?;
+        Ok(file)
     }
 
     fn validated(storage: Storage, header: Header) -> Result<Self> {
-        let file = SceneFile { storage, header };
+        let mut file = SceneFile { storage, header, shading: Shading::default() };
         let payload = file.payload();
         check_sections(&header, payload)?;
         let archived = rkyv::access::<ArchivedBakedScene, rancor::Error>(payload)
             .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
         check_arrays_in_sections(&header, payload, archived)?;
+        file.shading = deserialize_shading(archived)?;
         file.view().validate()?;
         Ok(file)
+    }
+
+    /// The scene's materials, lights, cameras and effects.
+    pub fn shading(&self) -> &Shading {
+        &self.shading
     }
 
     /// The file's header.
@@ -192,7 +207,7 @@ impl SceneFile {
         // payload starts 16-byte aligned: a map starts on a page and the header is 64
         // bytes; owned bytes are an `AlignedVec<16>`.
         let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) };
-        view_of(archived)
+        view_of(archived, &self.shading)
     }
 }
 
@@ -227,7 +242,7 @@ fn check_sections(header: &Header, payload: &[u8]) -> Result<()> {
 /// describes the archive it guards.
 fn check_arrays_in_sections(header: &Header, payload: &[u8], a: &ArchivedBakedScene) -> Result<()> {
     let base = payload.as_ptr() as usize;
-    for (words, s) in view_of(a).section_words().into_iter().zip(&header.sections) {
+    for (words, s) in view_of(a, &EMPTY_SHADING).section_words().into_iter().zip(&header.sections) {
         let (at, len) = ((words.as_ptr() as usize).wrapping_sub(base) as u64, words.len());
         if 4 * len as u64 != s.len || (len > 0 && at != s.offset) {
             return Err(Error::corrupt(format!(
@@ -278,7 +293,7 @@ fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
 }
 
 /// Builds a view with native-typed slices over an archive.
-pub(crate) fn view_of(a: &ArchivedBakedScene) -> SceneView<'_> {
+pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> SceneView<'a> {
     let v3 = |x: &[rkyv::rend::f32_le; 3]| [x[0].to_native(), x[1].to_native(), x[2].to_native()];
     SceneView {
         params: BakeParams {
@@ -307,6 +322,19 @@ pub(crate) fn view_of(a: &ArchivedBakedScene) -> SceneView<'_> {
         boxes: bytemuck::cast_slice(a.boxes.as_slice()),
         cube_map: bytemuck::cast_slice(a.cube_map.as_slice()),
         nodes: bytemuck::cast_slice(a.nodes.as_slice()),
+        material_ids: bytemuck::cast_slice(a.material_ids.as_slice()),
+        normals: bytemuck::cast_slice(a.normals.as_slice()),
+        uvs: bytemuck::cast_slice(a.uvs.as_slice()),
         root: a.root.to_native(),
+        shading,
     }
+}
+
+/// No materials, lights, cameras or effects: for views that only need the arrays.
+pub(crate) static EMPTY_SHADING: Shading =
+    Shading { materials: Vec::new(), lights: Vec::new(), cameras: Vec::new(), effects: Vec::new() };
+
+/// The archive's shading data as native values.
+fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {
+    rkyv::deserialize::<Shading, rancor::Error>(&a.shading).map_err(|e| Error::corrupt(format!("shading data: {e}")))
 }

@@ -46,6 +46,8 @@ pub const WORD_NCOUNT: usize = 3;
 pub const INTERNAL_BIT: u32 = 1 << 31;
 /// `f32`s a triangle takes in the triangle array: three vertices, `x y z` each.
 pub const TRIANGLE_FLOATS: usize = 9;
+/// `f32`s a triangle's texture coordinates take: `u v` for each of its three corners.
+pub const UV_FLOATS: usize = 6;
 /// `f32`s a box takes in the box array: `lo.xyz`, then `hi.xyz`.
 pub const BOX_FLOATS: usize = 6;
 /// Deepest octree level the format allows (cell coordinates must fit in 24 bits and

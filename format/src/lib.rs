@@ -30,6 +30,7 @@ mod file;
 mod header;
 pub mod layout;
 mod scene;
+mod shading;
 pub mod stats;
 pub mod validate;
 mod view;
@@ -43,6 +44,9 @@ pub use header::{
 };
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
+pub use shading::{
+    AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, Shading, DIELECTRIC_F0, VISIBLE_WEIGHT,
+};
 pub use view::{LeafRecord, SceneView};
 pub use write::write_atomically;
 
@@ -62,7 +66,9 @@ pub mod testing {
         aligned.extend_from_slice(payload);
         let mut lens = [0u64; SECTION_COUNT];
         if let Ok(a) = rkyv::access::<crate::scene::ArchivedBakedScene, rkyv::rancor::Error>(&aligned) {
-            for (len, words) in lens.iter_mut().zip(crate::file::view_of(a).section_words()) {
+            for (len, words) in
+                lens.iter_mut().zip(crate::file::view_of(a, &crate::file::EMPTY_SHADING).section_words())
+            {
                 *len = 4 * words.len() as u64;
             }
         }
@@ -94,7 +100,11 @@ pub mod testing {
             boxes: cell_box(root_lo, 1.0, 0, [0; 3]).to_vec(),
             cube_map: vec![0; 6],
             nodes: vec![],
+            material_ids: vec![],
+            normals: vec![],
+            uvs: vec![],
             root: 0,
+            shading: Default::default(),
         }
     }
 }

@@ -50,6 +50,8 @@ pub struct BakeStats {
 /// `triangle_ids` maps a triangle's index in the triangle array to its index in the
 /// input mesh; `nodes` is the point-location tree (eight [`crate::NodeRef`] words a
 /// node) and `root` its root; `cube_map` holds one [`crate::NodeRef`] word a texel.
+/// The per-triangle shading arrays (`material_ids`, `normals`, `uvs`) follow the
+/// triangle array's order and are empty when the input has none.
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[rkyv(derive(Debug))]
 pub struct BakedScene {
@@ -73,8 +75,17 @@ pub struct BakedScene {
     pub cube_map: Vec<u32>,
     /// Internal nodes of the point-location tree, eight references each.
     pub nodes: Vec<u32>,
+    /// Material index of each stored triangle (into `shading.materials`), or empty
+    /// when the mesh has no materials.
+    pub material_ids: Vec<u32>,
+    /// Shading normals of each stored triangle's three corners (nine `f32`), or empty.
+    pub normals: Vec<f32>,
+    /// Texture coordinates of each stored triangle's three corners (six `f32`), or empty.
+    pub uvs: Vec<f32>,
     /// The point-location tree's root reference.
     pub root: u32,
+    /// Materials, lights, cameras and the effects the scene calls for.
+    pub shading: crate::Shading,
 }
 
 impl BakedScene {
@@ -96,7 +107,11 @@ impl BakedScene {
             boxes: &self.boxes,
             cube_map: &self.cube_map,
             nodes: &self.nodes,
+            material_ids: &self.material_ids,
+            normals: &self.normals,
+            uvs: &self.uvs,
             root: self.root,
+            shading: &self.shading,
         }
     }
 }

@@ -18,12 +18,14 @@ pub struct ArrayBytes {
     pub cube_map: u64,
     /// The point-location tree.
     pub point_location: u64,
+    /// The per-triangle shading arrays: material ids, normals, texture coordinates.
+    pub shading: u64,
 }
 
 impl ArrayBytes {
     /// Sum of the arrays.
     pub fn total(&self) -> u64 {
-        self.octree + self.triangles + self.boxes + self.cube_map + self.point_location
+        self.octree + self.triangles + self.boxes + self.cube_map + self.point_location + self.shading
     }
 }
 
@@ -91,6 +93,7 @@ impl SceneStatistics {
                 boxes: four(view.boxes.len()),
                 cube_map: four(view.cube_map.len()),
                 point_location: four(view.nodes.len()),
+                shading: four(view.material_ids.len() + view.normals.len() + view.uvs.len()),
             },
         })
     }

@@ -7,7 +7,7 @@
 use crate::error::{Error, Result};
 use crate::layout::{
     cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef, BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL,
-    TRIANGLE_FLOATS,
+    TRIANGLE_FLOATS, UV_FLOATS,
 };
 use crate::view::SceneView;
 
@@ -128,7 +128,30 @@ impl SceneView<'_> {
         if stats.input_triangles != tri_count + stats.degenerate_triangles {
             return Err(Error::corrupt("triangle counts in the statistics do not add up"));
         }
-        Ok(())
+        self.check_shading()
+    }
+
+    /// The shading arrays are absent or one entry a stored triangle; material ids in
+    /// range; the shading data's numbers finite.
+    fn check_shading(&self) -> Result<()> {
+        let n = self.triangle_count();
+        for (name, len, per) in [
+            ("material-id", self.material_ids.len(), 1),
+            ("normal", self.normals.len(), TRIANGLE_FLOATS),
+            ("texture-coordinate", self.uvs.len(), UV_FLOATS),
+        ] {
+            if len != 0 && Some(len) != n.checked_mul(per) {
+                return Err(Error::corrupt(format!(
+                    "{name} array holds {len} values, {n} triangles need {} (or none)",
+                    n.saturating_mul(per)
+                )));
+            }
+        }
+        let materials = self.shading.materials.len();
+        if let Some(bad) = self.material_ids.iter().find(|&&m| m as usize >= materials) {
+            return Err(Error::corrupt(format!("material id {bad} out of range ({materials} materials)")));
+        }
+        self.shading.validate()
     }
 
     fn check_triangle_ids(&self) -> Result<()> {

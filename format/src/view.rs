@@ -1,7 +1,8 @@
 //! A borrowed, validated view of a baked scene's arrays: what the tracers read.
 
 use crate::layout::{
-    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT, WORD_TRI_OFFSET,
+    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, UV_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT,
+    WORD_TRI_OFFSET,
 };
 use crate::scene::{BakeParams, BakeStats, Bounds};
 
@@ -34,8 +35,16 @@ pub struct SceneView<'a> {
     pub cube_map: &'a [u32],
     /// Point-location nodes, eight references each.
     pub nodes: &'a [u32],
+    /// Material index of each stored triangle, or empty.
+    pub material_ids: &'a [u32],
+    /// Shading normals, nine `f32` a stored triangle, or empty.
+    pub normals: &'a [f32],
+    /// Texture coordinates, six `f32` a stored triangle, or empty.
+    pub uvs: &'a [f32],
     /// Root reference of the point-location tree.
     pub root: u32,
+    /// Materials, lights, cameras and effects.
+    pub shading: &'a crate::Shading,
 }
 
 /// One leaf record, decoded.
@@ -65,9 +74,9 @@ impl LeafRecord<'_> {
 }
 
 impl<'a> SceneView<'a> {
-    /// The seven arrays as 32-bit words, in the file's section order (octree,
-    /// tri_refs, triangles, triangle_ids, boxes, cube_map, nodes): the sections before
-    /// `root` hold exactly these bytes.
+    /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
+    /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs):
+    /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
             self.octree,
@@ -77,7 +86,29 @@ impl<'a> SceneView<'a> {
             bytemuck::cast_slice(self.boxes),
             self.cube_map,
             self.nodes,
+            self.material_ids,
+            bytemuck::cast_slice(self.normals),
+            bytemuck::cast_slice(self.uvs),
         ]
+    }
+
+    /// The material of stored triangle `index`: its entry in the scene's materials,
+    /// or `None` when the scene has no materials.
+    pub fn material(&self, index: u32) -> Option<&'a crate::Material> {
+        let id = *self.material_ids.get(index as usize)?;
+        self.shading.materials.get(id as usize)
+    }
+
+    /// The shading normals of stored triangle `index`'s corners, when the scene has them.
+    pub fn corner_normals(&self, index: u32) -> Option<[[f32; 3]; 3]> {
+        let n = self.normals.get(index as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?;
+        Some([[n[0], n[1], n[2]], [n[3], n[4], n[5]], [n[6], n[7], n[8]]])
+    }
+
+    /// The texture coordinates of stored triangle `index`'s corners, when the scene has them.
+    pub fn corner_uvs(&self, index: u32) -> Option<[[f32; 2]; 3]> {
+        let t = self.uvs.get(index as usize * UV_FLOATS..)?.get(..UV_FLOATS)?;
+        Some([[t[0], t[1]], [t[2], t[3]], [t[4], t[5]]])
     }
 
     /// Number of leaves.

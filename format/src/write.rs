@@ -145,12 +145,13 @@ impl<W: Write> Write for HashingWriter<W> {
 /// The arrays are `u32`/`f32` vectors, which rkyv writes back to back in field order
 /// with no padding (4-byte elements, 4-byte alignment), so their sections' ends are
 /// known before a byte is written; [`SectionHasher::finish`] checks that the archive
-/// ended where that layout says, and validation checks every array against its section.
+/// went on past them at least by the root object, and validation checks every array
+/// against its section.
 struct SectionHasher {
     /// End offset of each array's section.
     ends: [u64; SECTION_COUNT - 1],
-    /// Where the archive's root object ends.
-    root_end: u64,
+    /// The shortest archive the layout allows: the arrays, then the root object.
+    min_end: u64,
     pos: u64,
     start: u64,
     index: usize,
@@ -166,8 +167,8 @@ impl SectionHasher {
             end
         });
         let align = std::mem::align_of::<ArchivedBakedScene>() as u64;
-        let root_end = end.next_multiple_of(align) + std::mem::size_of::<ArchivedBakedScene>() as u64;
-        SectionHasher { ends, root_end, pos: 0, start: 0, index: 0, hasher: Xxh3::new(), sums: [(0, 0); SECTION_COUNT] }
+        let min_end = end.next_multiple_of(align) + std::mem::size_of::<ArchivedBakedScene>() as u64;
+        SectionHasher { ends, min_end, pos: 0, start: 0, index: 0, hasher: Xxh3::new(), sums: [(0, 0); SECTION_COUNT] }
     }
 
     fn update(&mut self, mut buf: &[u8]) {
@@ -199,10 +200,10 @@ impl SectionHasher {
         while self.index < SECTION_COUNT - 1 && self.pos == self.ends[self.index] {
             self.close();
         }
-        if self.index != SECTION_COUNT - 1 || self.pos != self.root_end {
+        if self.index != SECTION_COUNT - 1 || self.pos < self.min_end {
             return Err(Error::corrupt(format!(
-                "internal: rkyv wrote {} bytes, the section layout expects {}",
-                self.pos, self.root_end
+                "internal: rkyv wrote {} bytes, the section layout expects at least {}",
+                self.pos, self.min_end
             )));
         }
         self.close();

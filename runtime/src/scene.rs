@@ -112,6 +112,14 @@ impl Scene {
         }
     }
 
+    /// The scene's materials, lights, cameras and effects.
+    pub fn shading(&self) -> &octrace_format::Shading {
+        match &self.source {
+            Source::File(f) => f.shading(),
+            Source::Baked(b) => &b.shading,
+        }
+    }
+
     /// The file behind the scene, when it came from one.
     pub fn file(&self) -> Option<&SceneFile> {
         match &self.source {

@@ -5,7 +5,8 @@
 //! `gamma(7) * (|b0 v0| + |b1 v1| + |b2 v2|)` per axis, `gamma(n) = n eps / (1 - n eps)`
 //! with `eps = 2^-24` (pbrt's bound for this sum of three products). The spawned
 //! ray's origin is moved along the geometric normal, to the side the new direction
-//! leaves by, by that error projected on the normal, then each coordinate one float
+//! leaves by, by that error projected on the normal (and at least `gamma(7)` of the
+//! triangle's largest coordinate, for exact hit points), then each coordinate one float
 //! further out, so that the true surface lies behind it whatever the rounding.
 
 use glam::Vec3;
@@ -37,7 +38,12 @@ pub fn spawn(tri: &[[f32; 3]; 3], hit: &Hit, dir: Vec3, tmax: f32) -> Ray {
     if n.dot(dir) < 0.0 {
         n = -n;
     }
-    let offset = n * err.dot(n.abs());
+    // At least gamma(7) of the triangle's largest coordinate: where the hit point is
+    // exact (vertices on a plane of representable coordinates) its error bound is zero,
+    // yet the triangle test that meets the spawned ray rounds its coordinates'
+    // differences by up to that much, and would find the surface again at t = 0.
+    let scale = tri.iter().flatten().fold(0.0f32, |m, c| m.max(c.abs()));
+    let offset = n * err.dot(n.abs()).max(gamma(7) * scale);
     let mut o = p + offset;
     // One float further out, in the direction of the offset, per axis.
     for a in 0..3 {

@@ -6,6 +6,8 @@ use std::path::Path;
 use glam::{DMat4, DVec3};
 use gltf::mesh::Mode;
 
+use octrace_format::{AlphaMode, Camera, Light, LightKind, Material};
+
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
@@ -69,7 +71,11 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
         return Err(Error::EmptyScene { path: path.into() });
     };
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.0.len()).sum::<usize>();
-    let mut loader = Loader { path, buffers: &buffers, input_bytes, mesh: Mesh::default(), skipped: None };
+    let mut mesh = Mesh::default();
+    for m in document.materials() {
+        mesh.materials.push(material(&m, path)?);
+    }
+    let mut loader = Loader { path, buffers: &buffers, input_bytes, mesh, skipped: None, default_material: None };
     for node in scene.nodes() {
         loader.node(&node, DMat4::IDENTITY, 0)?;
     }
@@ -112,6 +118,46 @@ struct Loader<'a> {
     mesh: Mesh,
     /// The first primitive skipped for its mode, for the error when nothing else is left.
     skipped: Option<(String, String)>,
+    /// Index of glTF's default material, once a primitive without one needed it.
+    default_material: Option<u32>,
+}
+
+/// A glTF material in octrace's terms. Factors are clamped to their ranges (the spec's
+/// ranges: 0-1 for colours and factors, an index of refraction of at least 1).
+///
+/// # Errors
+/// [`Error::Parse`] for a value that is not finite (a JSON number beyond `f32`).
+fn material(m: &gltf::Material<'_>, path: &Path) -> Result<Material> {
+    let name = m.name().map_or_else(|| format!("material {}", m.index().unwrap_or(0)), str::to_string);
+    let pbr = m.pbr_metallic_roughness();
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    let unit = |v: f32| v.clamp(0.0, 1.0);
+    let out = Material {
+        base_color: pbr.base_color_factor().map(unit),
+        metallic: unit(pbr.metallic_factor()),
+        roughness: unit(pbr.roughness_factor()),
+        emissive: m.emissive_factor().map(|e| unit(e) * strength.max(0.0)),
+        alpha_mode: match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask,
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        },
+        alpha_cutoff: m.alpha_cutoff().unwrap_or(0.5).max(0.0),
+        transmission: unit(m.transmission().map_or(0.0, |t| t.transmission_factor())),
+        ior: m.ior().unwrap_or(1.5).max(1.0),
+        specular: [0.0; 3],
+        illum: None,
+        name,
+    };
+    let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
+    if let Some(bad) = numbers.into_iter().find(|v| !v.is_finite()) {
+        return Err(Error::Parse {
+            path: path.into(),
+            element: format!("material '{}'", out.name),
+            message: format!("value {bad} is not a finite number"),
+        });
+    }
+    Ok(out)
 }
 
 /// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
@@ -206,6 +252,12 @@ impl Loader<'_> {
         }
         let local = node.transform().matrix().map(|c| c.map(f64::from));
         let world = parent * DMat4::from_cols_array_2d(&local);
+        if let Some(light) = node.light() {
+            self.light(&light, &world, node.index())?;
+        }
+        if let Some(camera) = node.camera() {
+            self.camera(&camera, &world, node.index());
+        }
         if let Some(mesh) = node.mesh() {
             for prim in mesh.primitives() {
                 let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
@@ -216,6 +268,147 @@ impl Loader<'_> {
             self.node(&child, world, depth + 1)?;
         }
         Ok(())
+    }
+
+    /// A `KHR_lights_punctual` light placed by `world`: at its origin, shining along
+    /// its `-z` axis.
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light<'_>, world: &DMat4, node: usize) -> Result<()> {
+        use gltf::khr_lights_punctual::Kind;
+        let name = light.name().map_or_else(|| format!("light {}", light.index()), str::to_string);
+        let (kind, inner, outer) = match light.kind() {
+            Kind::Point => (LightKind::Point, 0.0, 0.0),
+            Kind::Directional => (LightKind::Directional, 0.0, 0.0),
+            Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                let outer = outer_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2);
+                (LightKind::Spot, inner_cone_angle.clamp(0.0, outer), outer)
+            }
+        };
+        let out = Light {
+            kind,
+            color: light.color().map(|c| c.clamp(0.0, 1.0)),
+            intensity: light.intensity().max(0.0),
+            position: to_f32(world.transform_point3(DVec3::ZERO)),
+            direction: to_f32(world.transform_vector3(DVec3::NEG_Z).normalize_or_zero()),
+            range: light.range().filter(|r| *r > 0.0).unwrap_or(f32::INFINITY),
+            inner_cone: inner,
+            outer_cone: outer,
+            name,
+        };
+        let numbers = out.color.iter().chain(&out.position).chain(&out.direction).chain([&out.intensity]);
+        if numbers.into_iter().any(|v| !v.is_finite()) || out.range.is_nan() || out.direction == [0.0; 3] {
+            return Err(Error::Parse {
+                path: self.path.into(),
+                element: format!("node {node}, light '{}'", out.name),
+                message: "a value is not finite, or the node's transform collapses the light's direction".into(),
+            });
+        }
+        self.mesh.lights.push(out);
+        Ok(())
+    }
+
+    /// A perspective camera placed by `world` (glTF cameras look along `-z`, up `+y`);
+    /// orthographic cameras and degenerate transforms are skipped with a warning.
+    fn camera(&mut self, camera: &gltf::Camera<'_>, world: &DMat4, node: usize) {
+        let name = camera.name().map_or_else(|| format!("camera {}", camera.index()), str::to_string);
+        let gltf::camera::Projection::Perspective(p) = camera.projection() else {
+            self.mesh
+                .warnings
+                .push(format!("{}: node {node}: orthographic camera '{name}' skipped", self.path.display()));
+            return;
+        };
+        let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
+        let up = world.transform_vector3(DVec3::Y);
+        let up = (up - forward * up.dot(forward)).normalize_or_zero();
+        let out = Camera {
+            position: to_f32(world.transform_point3(DVec3::ZERO)),
+            forward: to_f32(forward),
+            up: to_f32(up),
+            yfov: p.yfov(),
+            aspect: p.aspect_ratio(),
+            name,
+        };
+        let finite = out.position.iter().chain([&out.yfov]).chain(out.aspect.as_ref()).all(|v| v.is_finite());
+        let fov_ok = out.yfov > 0.0 && out.yfov < std::f32::consts::PI && out.aspect.is_none_or(|a| a > 0.0);
+        if !finite || !fov_ok || forward == DVec3::ZERO || up == DVec3::ZERO {
+            self.mesh.warnings.push(format!(
+                "{}: node {node}: camera '{}' skipped (degenerate transform or field of view)",
+                self.path.display(),
+                out.name
+            ));
+            return;
+        }
+        self.mesh.cameras.push(out);
+    }
+
+    /// The primitive's `NORMAL`s in world space (the inverse transpose of `world`),
+    /// when it has usable ones: an attribute of the wrong type, a short one, or one
+    /// whose ranges do not fit its buffer is left out with a warning.
+    fn normals(
+        &mut self,
+        prim: &gltf::Primitive<'_>,
+        world: &DMat4,
+        vertices: usize,
+        element: &str,
+    ) -> Option<Vec<[f32; 3]>> {
+        use gltf::accessor::{DataType, Dimensions};
+        let a = prim.get(&gltf::Semantic::Normals)?;
+        let usable = a.data_type() == DataType::F32 && a.dimensions() == Dimensions::Vec3;
+        if let Err(why) = self.attribute_usable(&a, usable, vertices) {
+            self.mesh.warnings.push(format!("{}: {element}: NORMAL left out: {why}", self.path.display()));
+            return None;
+        }
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let normal_matrix = glam::DMat3::from_mat4(*world).inverse().transpose();
+        let out = reader.read_normals()?.take(vertices).map(|n| {
+            let w = (normal_matrix * DVec3::from(n.map(f64::from))).normalize_or_zero();
+            to_f32(if w.is_finite() { w } else { DVec3::ZERO })
+        });
+        Some(out.collect())
+    }
+
+    /// The primitive's `TEXCOORD_0`, when it has usable ones (as [`Loader::normals`]).
+    fn uvs(&mut self, prim: &gltf::Primitive<'_>, vertices: usize, element: &str) -> Option<Vec<[f32; 2]>> {
+        use gltf::accessor::{DataType, Dimensions};
+        let a = prim.get(&gltf::Semantic::TexCoords(0))?;
+        let usable = matches!(a.data_type(), DataType::F32 | DataType::U8 | DataType::U16)
+            && a.dimensions() == Dimensions::Vec2
+            && (a.data_type() == DataType::F32 || a.normalized());
+        if let Err(why) = self.attribute_usable(&a, usable, vertices) {
+            self.mesh.warnings.push(format!("{}: {element}: TEXCOORD_0 left out: {why}", self.path.display()));
+            return None;
+        }
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let out = reader.read_tex_coords(0)?.into_f32().take(vertices);
+        Some(out.map(|t| if t.iter().all(|v| v.is_finite()) { t } else { [0.0; 2] }).collect())
+    }
+
+    /// Whether a vertex attribute can be read: the spec's type, ranges inside the
+    /// buffers, and one value a vertex.
+    fn attribute_usable(
+        &self,
+        a: &gltf::Accessor<'_>,
+        type_ok: bool,
+        vertices: usize,
+    ) -> std::result::Result<(), String> {
+        if !type_ok {
+            return Err("a type the glTF spec does not allow".into());
+        }
+        self.check_accessor(a)?;
+        if a.count() < vertices {
+            return Err(format!("{} values for {vertices} vertices", a.count()));
+        }
+        Ok(())
+    }
+
+    /// The material index of a primitive: its glTF material, or glTF's default one.
+    fn material_of(&mut self, prim: &gltf::Primitive<'_>) -> u32 {
+        match prim.material().index() {
+            Some(i) if i < self.mesh.materials.len() => i as u32,
+            _ => *self.default_material.get_or_insert_with(|| {
+                self.mesh.materials.push(Material::default());
+                self.mesh.materials.len() as u32 - 1
+            }),
+        }
     }
 
     fn primitive(&mut self, prim: &gltf::Primitive<'_>, world: &DMat4, element: String) -> Result<()> {
@@ -278,24 +471,35 @@ impl Loader<'_> {
                 count: verts.len(),
             });
         }
-        let v = |i: u32| verts[i as usize];
-        let tris = &mut self.mesh.triangles;
-        match mode {
-            Mode::Triangles => tris.extend(indices.chunks_exact(3).map(|t| [v(t[0]), v(t[1]), v(t[2])])),
+        // Corner indices of each triangle, in the file's winding.
+        let corners: Vec<[u32; 3]> = match mode {
+            Mode::Triangles => indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
             // Every other strip triangle swaps its first two corners to keep the winding.
-            Mode::TriangleStrip => tris.extend(indices.windows(3).enumerate().map(|(k, t)| {
-                if k % 2 == 0 {
-                    [v(t[0]), v(t[1]), v(t[2])]
-                } else {
-                    [v(t[1]), v(t[0]), v(t[2])]
-                }
-            })),
-            _ => {
-                if let Some((&first, rest)) = indices.split_first() {
-                    tris.extend(rest.windows(2).map(|t| [v(first), v(t[0]), v(t[1])]));
-                }
-            }
+            Mode::TriangleStrip => indices
+                .windows(3)
+                .enumerate()
+                .map(|(k, t)| if k % 2 == 0 { [t[0], t[1], t[2]] } else { [t[1], t[0], t[2]] })
+                .collect(),
+            _ => match indices.split_first() {
+                Some((&first, rest)) => rest.windows(2).map(|t| [first, t[0], t[1]]).collect(),
+                None => Vec::new(),
+            },
+        };
+        let normals = self.normals(prim, world, verts.len(), &element);
+        let uvs = self.uvs(prim, verts.len(), &element);
+        let material = self.material_of(prim);
+        for c in corners {
+            let tri = c.map(|i| verts[i as usize]);
+            let n = normals.as_ref().map(|n| c.map(|i| n[i as usize]));
+            let t = uvs.as_ref().map(|t| c.map(|i| t[i as usize]));
+            self.mesh.push(tri, n, t);
+            self.mesh.material_ids.push(material);
         }
         Ok(())
     }
+}
+
+/// A `f64` vector rounded to `f32`.
+fn to_f32(v: DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
 }

@@ -9,13 +9,111 @@ use crate::error::{Error, Result};
 
 /// A triangle soup in input order: triangle `i` is the `i`-th triangle of the file
 /// (OBJ: faces fan-triangulated in file order; glTF: the default scene's nodes in
-/// depth-first order, then their primitives in order), so a hit can name it.
+/// depth-first order, then their primitives in order), so a hit can name it; with the
+/// materials, lights and cameras the file describes.
+///
+/// The per-triangle attributes (`material_ids`, `normals`, `uvs`) are either empty or
+/// one entry per triangle.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     /// The triangles' vertices, world space.
     pub triangles: Vec<[[f32; 3]; 3]>,
+    /// Index into `materials` of each triangle, or empty.
+    pub material_ids: Vec<u32>,
+    /// Shading normals of each triangle's corners, world space, or empty. Triangles of
+    /// a part of the file without normals get their face normal.
+    pub normals: Vec<[[f32; 3]; 3]>,
+    /// Texture coordinates of each triangle's corners, or empty (zeros for the parts of
+    /// the file without them).
+    pub uvs: Vec<[[f32; 2]; 3]>,
+    /// Materials (glTF materials, MTL materials), in file order, then a `"default"`
+    /// one when some triangles have none.
+    pub materials: Vec<octrace_format::Material>,
+    /// Punctual lights (glTF `KHR_lights_punctual`), world space.
+    pub lights: Vec<octrace_format::Light>,
+    /// Perspective cameras (glTF), world space.
+    pub cameras: Vec<octrace_format::Camera>,
     /// Things skipped while loading (non-triangle glTF primitives, ...), one line each.
     pub warnings: Vec<String>,
+}
+
+impl Mesh {
+    /// A mesh of bare triangles: no materials, lights or cameras.
+    ///
+    /// # Example
+    /// ```
+    /// let mesh = octrace_bake::Mesh::from_triangles(vec![[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]]);
+    /// assert!(mesh.materials.is_empty());
+    /// ```
+    pub fn from_triangles(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
+        Mesh { triangles, ..Mesh::default() }
+    }
+
+    /// Appends a triangle with its attributes, keeping every attribute array either
+    /// empty or one entry a triangle: the first triangle that has normals (or texture
+    /// coordinates) gives the earlier ones face normals (or zeros).
+    pub fn push(&mut self, triangle: [[f32; 3]; 3], normals: Option<[[f32; 3]; 3]>, uvs: Option<[[f32; 2]; 3]>) {
+        let before = self.triangles.len();
+        self.triangles.push(triangle);
+        if normals.is_some() || !self.normals.is_empty() {
+            while self.normals.len() < before {
+                let t = self.triangles[self.normals.len()];
+                self.normals.push([face_normal(&t); 3]);
+            }
+            self.normals.push(normals.unwrap_or([face_normal(&triangle); 3]));
+        }
+        if uvs.is_some() || !self.uvs.is_empty() {
+            self.uvs.resize(before, [[0.0; 2]; 3]);
+            self.uvs.push(uvs.unwrap_or([[0.0; 2]; 3]));
+        }
+    }
+
+    /// Checks that each attribute array is empty or one entry a triangle, and that
+    /// material ids are in range.
+    ///
+    /// # Errors
+    /// [`Error::Parse`] naming the attribute.
+    pub fn check_attributes(&self, path: &Path) -> Result<()> {
+        let n = self.triangles.len();
+        let bad = |what: &str, len: usize| Error::Parse {
+            path: path.into(),
+            element: what.into(),
+            message: format!("{len} entries for {n} triangles"),
+        };
+        for (what, len) in
+            [("material ids", self.material_ids.len()), ("normals", self.normals.len()), ("uvs", self.uvs.len())]
+        {
+            if len != 0 && len != n {
+                return Err(bad(what, len));
+            }
+        }
+        if let Some(&m) = self.material_ids.iter().find(|&&m| m as usize >= self.materials.len()) {
+            return Err(Error::IndexOutOfRange {
+                path: path.into(),
+                element: "material id".into(),
+                index: m as i64,
+                count: self.materials.len(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The unit normal of a triangle's plane (counter-clockwise winding), or zero for a
+/// degenerate one.
+pub fn face_normal(t: &[[f32; 3]; 3]) -> [f32; 3] {
+    let d = |i: usize, a: usize| t[i][a] as f64 - t[0][a] as f64;
+    let n = [
+        d(1, 1) * d(2, 2) - d(1, 2) * d(2, 1),
+        d(1, 2) * d(2, 0) - d(1, 0) * d(2, 2),
+        d(1, 0) * d(2, 1) - d(1, 1) * d(2, 0),
+    ];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if len > 0.0 && len.is_finite() {
+        n.map(|c| (c / len) as f32)
+    } else {
+        [0.0; 3]
+    }
 }
 
 /// The mesh formats the loader reads.
@@ -69,15 +167,17 @@ impl Mesh {
     }
 
     /// Parses a mesh held in memory. `name` is used in error messages; `base` is the
-    /// folder external glTF buffers are read from (none: only embedded buffers).
+    /// folder external glTF buffers and OBJ material libraries are read from (none:
+    /// only embedded buffers, no MTL materials).
     ///
     /// # Errors
     /// As [`Mesh::load`].
     pub fn from_bytes(bytes: &[u8], format: MeshFormat, name: &Path, base: Option<&Path>) -> Result<Mesh> {
         let mesh = match format {
-            MeshFormat::Obj => obj::parse(bytes, name)?,
+            MeshFormat::Obj => obj::parse(bytes, name, base)?,
             MeshFormat::Gltf => gltf::parse(bytes, name, base)?,
         };
+        mesh.check_attributes(name)?;
         if mesh.triangles.is_empty() {
             return Err(Error::EmptyScene { path: name.into() });
         }

@@ -2,42 +2,149 @@
 
 use std::path::Path;
 
+use octrace_format::{AlphaMode, Material};
+
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
-pub(super) fn parse(bytes: &[u8], path: &Path) -> Result<Mesh> {
+pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
     let options = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
-    // Materials are not needed for geometry; a missing .mtl must not fail the bake.
-    let no_materials = |_: &Path| Err(tobj::LoadError::OpenFileFailed);
-    let (models, _) =
-        tobj::load_obj_buf(&mut { bytes }, &options, no_materials).map_err(|e| obj_error(e, bytes, path))?;
+    // Material libraries are read beside the OBJ; one that is missing or unreadable
+    // costs the materials (a warning), never the bake.
+    let load_mtl = |p: &Path| match base {
+        Some(dir) => tobj::load_mtl(dir.join(p)),
+        None => Err(tobj::LoadError::OpenFileFailed),
+    };
+    let (models, materials) =
+        tobj::load_obj_buf(&mut { bytes }, &options, load_mtl).map_err(|e| obj_error(e, bytes, path))?;
     let mut mesh = Mesh::default();
+    let wants_materials = bytes.windows(7).any(|w| w == b"mtllib ");
+    match materials {
+        Ok(list) => mesh.materials = list.iter().map(material).collect(),
+        Err(e) if wants_materials => {
+            mesh.warnings.push(format!("{}: material library not loaded ({e}): no materials", path.display()))
+        }
+        Err(_) => {}
+    }
     let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
     mesh.triangles.reserve(total);
+    // tobj makes up normals and texture coordinates for faces without them (the
+    // previous face's): which triangles really have them comes from the face lines.
+    let given = attributes_given(bytes);
+    let given = |t: usize| if given.len() == total { given[t] } else { (true, true) };
+    let mut material_ids = Vec::new();
     for model in &models {
-        let p = &model.mesh.positions;
-        let count = p.len() / 3;
-        for (face, idx) in model.mesh.indices.chunks_exact(3).enumerate() {
-            let mut tri = [[0.0f32; 3]; 3];
-            for (corner, &i) in tri.iter_mut().zip(idx) {
-                let i = i as usize;
-                if i >= count {
-                    return Err(Error::IndexOutOfRange {
-                        path: path.into(),
-                        element: format!("object '{}', triangle {face}", model.name),
-                        index: i as i64,
-                        count,
-                    });
-                }
-                *corner = [p[3 * i], p[3 * i + 1], p[3 * i + 2]];
+        let m = &model.mesh;
+        let element = |face: usize| format!("object '{}', triangle {face}", model.name);
+        for (face, idx) in m.indices.chunks_exact(3).enumerate() {
+            let tri = corners(&m.positions, idx, 3, path, || element(face))?;
+            let tri = tri.map(|c| [c[0], c[1], c[2]]);
+            for corner in &tri {
                 check_finite(*corner, path, || {
                     format!("object '{}', triangle {face} (triangle {} of the file)", model.name, mesh.triangles.len())
                 })?;
             }
-            mesh.triangles.push(tri);
+            let (has_uv, has_normal) = given(mesh.triangles.len());
+            let normals = match m.normal_indices.get(3 * face..3 * face + 3).filter(|_| has_normal) {
+                Some(ni) => Some(corners(&m.normals, ni, 3, path, || format!("{}: normal", element(face)))?),
+                None => None,
+            };
+            let uvs = match m.texcoord_indices.get(3 * face..3 * face + 3).filter(|_| has_uv) {
+                Some(ti) => Some(corners(&m.texcoords, ti, 2, path, || format!("{}: uv", element(face)))?),
+                None => None,
+            };
+            mesh.push(
+                tri,
+                normals.map(|n| n.map(|c| [c[0], c[1], c[2]])).filter(|n| n.iter().flatten().all(|v| v.is_finite())),
+                uvs.map(|t| t.map(|c| [c[0], c[1]])).filter(|t| t.iter().flatten().all(|v| v.is_finite())),
+            );
+            material_ids.push(m.material_id.filter(|&i| i < mesh.materials.len()));
         }
     }
+    // Faces without a (known) material get a default one, when there are materials.
+    if !mesh.materials.is_empty() {
+        let default = mesh.materials.len() as u32;
+        if material_ids.iter().any(Option::is_none) {
+            mesh.materials.push(default_obj_material());
+        }
+        mesh.material_ids = material_ids.iter().map(|m| m.map_or(default, |i| i as u32)).collect();
+    }
     Ok(mesh)
+}
+
+/// For each triangle the file's faces make (fan-triangulated, in file order), whether
+/// its face line gives texture coordinates and normals (`v/vt/vn`, `v//vn`).
+fn attributes_given(bytes: &[u8]) -> Vec<(bool, bool)> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        if words.next() != Some("f") {
+            continue;
+        }
+        let corners: Vec<&str> = words.collect();
+        let all = |k: usize| corners.iter().all(|c| c.split('/').nth(k).is_some_and(|x| !x.is_empty()));
+        let flags = (all(1), all(2));
+        out.extend(std::iter::repeat_n(flags, corners.len().saturating_sub(2)));
+    }
+    out
+}
+
+/// The `stride`-float entries of `values` at three indices, or an index error.
+fn corners(
+    values: &[f32],
+    idx: &[u32],
+    stride: usize,
+    path: &Path,
+    element: impl Fn() -> String,
+) -> Result<[[f32; 3]; 3]> {
+    let count = values.len() / stride;
+    let mut out = [[0.0f32; 3]; 3];
+    for (corner, &i) in out.iter_mut().zip(idx) {
+        let i = i as usize;
+        if i >= count {
+            return Err(Error::IndexOutOfRange { path: path.into(), element: element(), index: i as i64, count });
+        }
+        corner[..stride].copy_from_slice(&values[stride * i..stride * i + stride]);
+    }
+    Ok(out)
+}
+
+/// MTL's defaults for a face with no material: grey diffuse.
+fn default_obj_material() -> Material {
+    Material {
+        name: "default".into(),
+        base_color: [0.8, 0.8, 0.8, 1.0],
+        metallic: 0.0,
+        illum: Some(1),
+        ..Material::default()
+    }
+}
+
+/// An MTL material in octrace's terms (see [`Material`]'s fields). Values out of their
+/// range are clamped; a number that is not finite falls back to the default.
+fn material(m: &tobj::Material) -> Material {
+    let finite = |v: f32, default: f32| if v.is_finite() { v } else { default };
+    let colour = |c: Option<[f32; 3]>, default: f32| c.unwrap_or([default; 3]).map(|v| finite(v, default).max(0.0));
+    let kd = colour(m.diffuse, 0.8);
+    let tr = m.unknown_param.get("Tr").and_then(|t| t.trim().parse::<f32>().ok()).map(|tr| 1.0 - tr);
+    let d = finite(m.dissolve.or(tr).unwrap_or(1.0), 1.0).clamp(0.0, 1.0);
+    let ior = m.optical_density.map(|n| finite(n, 1.0).max(1.0));
+    let ns = finite(m.shininess.unwrap_or(0.0), 0.0).max(0.0);
+    let refracts = d < 1.0 && ior.is_some();
+    Material {
+        name: m.name.clone(),
+        base_color: [kd[0], kd[1], kd[2], if refracts { 1.0 } else { d }],
+        metallic: 0.0,
+        roughness: (2.0 / (ns + 2.0)).sqrt().clamp(0.0, 1.0),
+        emissive: colour(m.emissive, 0.0),
+        alpha_mode: if d < 1.0 && !refracts { AlphaMode::Blend } else { AlphaMode::Opaque },
+        alpha_cutoff: 0.5,
+        transmission: if refracts { 1.0 - d } else { 0.0 },
+        ior: ior.unwrap_or(1.5),
+        specular: colour(m.specular, 0.0),
+        illum: Some(m.illumination_model.map_or(2, u32::from)),
+    }
 }
 
 /// Turns a tobj error into one that names the element: tobj does not say where, so

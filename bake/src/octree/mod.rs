@@ -126,7 +126,7 @@ pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
 /// # Example
 /// ```
 /// use octrace_bake::{bake, BuildParams, Mesh};
-/// let mesh = Mesh { triangles: vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]], warnings: vec![] };
+/// let mesh = Mesh::from_triangles(vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]]);
 /// let scene = bake(&mesh, &BuildParams::auto())?;
 /// assert_eq!(scene.triangle_ids, vec![0]);
 /// scene.view().validate()?;
@@ -150,6 +150,7 @@ pub fn bake_with_progress(
     if mesh.triangles.is_empty() {
         return Err(Error::EmptyScene { path: name.into() });
     }
+    mesh.check_attributes(name)?;
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for (i, t) in mesh.triangles.iter().enumerate() {
         for v in t {
@@ -188,7 +189,23 @@ pub fn bake_with_progress(
     let arrays = flatten::arrays(&flat, kept.len(), root_lo, root_size, cube);
     debug_assert_eq!(arrays.tri_order.len(), kept.len(), "every triangle lies in some leaf");
     let triangles = arrays.tri_order.iter().flat_map(|&t| kept[t as usize].concat()).collect();
-    let triangle_ids = arrays.tri_order.iter().map(|&t| ids[t as usize]).collect();
+    let triangle_ids: Vec<u32> = arrays.tri_order.iter().map(|&t| ids[t as usize]).collect();
+    // Per-triangle attributes follow the stored order, when the mesh has them.
+    fn stored<T: Copy, U>(attr: &[T], ids: &[u32], f: impl Fn(T) -> U) -> Vec<U> {
+        if attr.is_empty() {
+            return Vec::new();
+        }
+        ids.iter().map(|&i| f(attr[i as usize])).collect()
+    }
+    let material_ids = stored(&mesh.material_ids, &triangle_ids, |m| m);
+    let normals = stored(&mesh.normals, &triangle_ids, |n| n.concat()).concat();
+    let uvs = stored(&mesh.uvs, &triangle_ids, |t| t.concat()).concat();
+    let shading = octrace_format::Shading {
+        materials: mesh.materials.clone(),
+        lights: mesh.lights.clone(),
+        cameras: mesh.cameras.clone(),
+        effects: crate::effects::decide(mesh, &ids),
+    };
     Ok(BakedScene {
         params: BakeParams {
             max_depth: resolved.max_depth,
@@ -209,6 +226,10 @@ pub fn bake_with_progress(
         boxes: arrays.boxes,
         cube_map: arrays.cube_map,
         nodes: arrays.nodes,
+        material_ids,
+        normals,
+        uvs,
         root: arrays.root,
+        shading,
     })
 }

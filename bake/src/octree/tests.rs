@@ -78,7 +78,7 @@ fn balance_check_catches_an_unbalanced_tree() {
     // (refinement towards a root corner would be balanced by itself); two more tiny
     // triangles at opposite corners fix the bounds.
     let tiny = |p: f32| [[p, p, p], [p + 0.001, p, p], [p, p + 0.001, p]];
-    let mesh = Mesh { triangles: vec![tiny(0.0), tiny(0.3), tiny(0.3004), tiny(0.999)], warnings: vec![] };
+    let mesh = Mesh::from_triangles(vec![tiny(0.0), tiny(0.3), tiny(0.3004), tiny(0.999)]);
     let scene = bake(&mesh, &params(8, 1)).unwrap();
     assert!(scene.leaf_count() as u64 > scene.stats.leaves_before_balance, "balancing added no leaf");
     assert_balanced("corner", &scene);
@@ -191,13 +191,10 @@ fn one_thread_and_two_threads_give_byte_identical_files() {
 /// subnormal root edge, and the bake wrote a file its own validation refused.
 #[test]
 fn a_vanishingly_small_mesh_bakes_a_valid_file() {
-    let tiny = Mesh {
-        triangles: vec![
-            [[0.0, 0.0, 0.0], [1e-39, 0.0, 0.0], [0.0, 1e-39, 0.0]],
-            [[0.0; 3], [2e-45, 0.0, 0.0], [0.0, 3e-45, 0.0]],
-        ],
-        warnings: vec![],
-    };
+    let tiny = Mesh::from_triangles(vec![
+        [[0.0, 0.0, 0.0], [1e-39, 0.0, 0.0], [0.0, 1e-39, 0.0]],
+        [[0.0; 3], [2e-45, 0.0, 0.0], [0.0, 3e-45, 0.0]],
+    ]);
     let scene = bake(&tiny, &BuildParams::auto()).unwrap();
     assert!(scene.bounds.root_size.is_normal());
     scene.view().validate().unwrap();

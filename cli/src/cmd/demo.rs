@@ -4,6 +4,7 @@ use std::time::Instant;
 
 use octrace_bake::{BuildParams, Mesh, MeshFormat};
 use octrace_runtime::raysets::{self, Camera, Frame};
+use octrace_runtime::render::effects::{render_effects, RayKind, RenderOptions};
 use octrace_runtime::render::{render, RenderMode};
 
 use crate::output::thousands;
@@ -14,12 +15,71 @@ const BUNNY: &[u8] = include_bytes!("../../../assets/bunny.obj.zst");
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
-    /// Where to write the rendering.
-    #[arg(short, long, default_value = "demo.png")]
-    pub output: std::path::PathBuf,
+    /// Where to write the rendering (default: demo.png, or effects.png for --scene effects).
+    #[arg(short, long)]
+    pub output: Option<std::path::PathBuf>,
+    /// bunny: bake, inspect, render and measure the bunny; effects: a procedural scene
+    /// with every effect (mirror, glass, blended pane, area light, hard and soft shadows).
+    #[arg(long, value_enum, default_value_t = DemoScene::Bunny)]
+    pub scene: DemoScene,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum DemoScene {
+    Bunny,
+    Effects,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    match args.scene {
+        DemoScene::Bunny => bunny(&args.output.unwrap_or_else(|| "demo.png".into())),
+        DemoScene::Effects => effects(&args.output.unwrap_or_else(|| "effects.png".into())),
+    }
+}
+
+/// Bakes the effects scene, lists its effects, renders it with all of them.
+fn effects(output: &std::path::Path) -> anyhow::Result<()> {
+    let mesh = octrace_bake::procedural::effects_scene();
+    let progress = super::bake::Progress::new();
+    let (scene, bake_time) = super::bake::bake_mesh(&mesh, &BuildParams::auto(), &progress)?;
+    progress.finish();
+    let dir = tempfile::tempdir()?;
+    let path = dir.path().join("effects.oct");
+    let bytes = scene.write(&path, bake_time.as_micros() as u64)?;
+    let scene = crate::open::open_scene(&path)?;
+    let report = super::inspect::Report::new(&scene.view(), scene.file().expect("from a file").header(), bytes)?;
+    crate::out!("{}", report.text("effects.oct"));
+    let c = &scene.shading().cameras[0];
+    let mut camera = Camera::look_at(
+        glam::DVec3::from(c.position.map(f64::from)),
+        glam::DVec3::from(c.position.map(f64::from)) + glam::DVec3::from(c.forward.map(f64::from)),
+        (c.yfov as f64).to_degrees(),
+        800,
+        600,
+    );
+    camera.width = 800;
+    let options = RenderOptions::for_scene(scene.shading());
+    let bar = super::render::RowsBar::new(camera.height);
+    let t = Instant::now();
+    let (radiance, counts) = render_effects(&scene, &camera, &options, &|rows| bar.set(rows));
+    let secs = t.elapsed().as_secs_f64();
+    bar.finish();
+    radiance.to_image().write_png(output)?;
+    crate::out!(
+        "rendered {} (800 x 600, every effect, {} soft-shadow samples) in {secs:.2} s on {} threads: {} rays",
+        crate::show(output),
+        options.soft_samples,
+        rayon::current_num_threads(),
+        thousands(counts.total())
+    );
+    for kind in RayKind::ALL {
+        crate::out!("  {:<12} {:>12}", kind.name(), thousands(counts.get(kind)));
+    }
+    Ok(())
+}
+
+/// Bakes, inspects, renders and measures the bunny.
+fn bunny(output: &std::path::Path) -> anyhow::Result<()> {
     let obj = zstd::stream::decode_all(BUNNY)?;
     let mesh = Mesh::from_bytes(&obj, MeshFormat::Obj, "bunny.obj".as_ref(), None)?;
     let progress = super::bake::Progress::new();
@@ -36,8 +96,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 
     let frame = Frame::from_bounds(scene.view().bounds.mesh_lo, scene.view().bounds.mesh_hi);
     let (image, _) = render(&scene, &Camera::standard(&frame), RenderMode::Shaded);
-    image.write_png(&args.output)?;
-    crate::out!("rendered {}", crate::show(&args.output));
+    image.write_png(output)?;
+    crate::out!("rendered {}", crate::show(output));
 
     let rays = raysets::primary(&frame);
     let tracer = scene.tracer();

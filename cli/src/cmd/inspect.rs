@@ -119,12 +119,13 @@ impl<'a> Report<'a> {
             format!("neighbours / leaf  mean {:.2}", s.neighbours_per_leaf_mean),
             format!("cube map           {res} x {res} texels a face, level {}", v.params.cube_level),
             format!(
-                "bytes              octree {}, triangles {}, boxes {}, cube map {}, point location {}; total {}",
+                "bytes              octree {}, triangles {}, boxes {}, cube map {}, point location {}, shading {}; total {}",
                 mb(b.octree),
                 mb(b.triangles),
                 mb(b.boxes),
                 mb(b.cube_map),
                 mb(b.point_location),
+                mb(b.shading),
                 mb(b.total())
             ),
             format!(
@@ -138,8 +139,39 @@ impl<'a> Report<'a> {
                 "bounds             mesh {:?} .. {:?}; root cube at {:?}, edge {}",
                 v.bounds.mesh_lo, v.bounds.mesh_hi, v.bounds.root_lo, v.bounds.root_size
             ),
+            self.scene_data(),
         ];
-        lines.join("\n")
+        let mut text = lines.join("\n");
+        let effects = &v.shading.effects;
+        if effects.is_empty() {
+            text.push_str("\neffects            none (primary rays only)");
+        }
+        for (i, e) in effects.iter().enumerate() {
+            let label = if i == 0 { "effects" } else { "" };
+            text.push_str(&format!("\n{label:<18} {}: {}", e.effect.name(), e.reason));
+        }
+        text
+    }
+
+    /// Materials, lights, cameras and the per-triangle attributes present.
+    fn scene_data(&self) -> String {
+        let v = &self.view;
+        let sh = v.shading;
+        let per_triangle: Vec<&str> = [
+            (!v.material_ids.is_empty()).then_some("material ids"),
+            (!v.normals.is_empty()).then_some("normals"),
+            (!v.uvs.is_empty()).then_some("uvs"),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        let attrs = if per_triangle.is_empty() { "none".to_string() } else { per_triangle.join(", ") };
+        format!(
+            "scene data         {} materials, {} lights, {} cameras; per triangle: {attrs}",
+            sh.materials.len(),
+            sh.lights.len(),
+            sh.cameras.len()
+        )
     }
 
     pub(crate) fn json(&self) -> serde_json::Value {
@@ -162,8 +194,33 @@ impl<'a> Report<'a> {
             "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
             "bytes": {
                 "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
-                "cube_map": b.cube_map, "point_location": b.point_location, "total": b.total(),
+                "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
+                "total": b.total(),
             },
+            "scene_data": {
+                "materials": v.shading.materials.iter().map(|m| json!({
+                    "name": m.name, "base_color": m.base_color, "metallic": m.metallic,
+                    "roughness": m.roughness, "emissive": m.emissive,
+                    "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
+                    "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
+                })).collect::<Vec<_>>(),
+                "lights": v.shading.lights.iter().map(|l| json!({
+                    "name": l.name, "kind": format!("{:?}", l.kind).to_lowercase(), "color": l.color,
+                    "intensity": l.intensity, "position": l.position, "direction": l.direction,
+                    "range": l.range.is_finite().then_some(l.range),
+                })).collect::<Vec<_>>(),
+                "cameras": v.shading.cameras.iter().map(|c| json!({
+                    "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
+                    "yfov": c.yfov, "aspect": c.aspect,
+                })).collect::<Vec<_>>(),
+                "per_triangle": {
+                    "material_ids": !v.material_ids.is_empty(), "normals": !v.normals.is_empty(),
+                    "uvs": !v.uvs.is_empty(),
+                },
+            },
+            "effects": v.shading.effects.iter().map(|e| json!({
+                "effect": e.effect.name(), "reason": e.reason,
+            })).collect::<Vec<_>>(),
             "bake": {
                 "max_depth": v.params.max_depth, "leaf_size": v.params.leaf_size,
                 "margin": v.params.margin,

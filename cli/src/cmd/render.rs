@@ -1,14 +1,30 @@
 //! `octrace render`.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::DVec3;
+use octrace_format::{Effect, Shading};
 use octrace_runtime::raysets::{Camera, Frame};
+use octrace_runtime::render::effects::{
+    render_effects, render_effects_gpu, EffectSet, RayCounts, RayKind, RenderOptions,
+};
 use octrace_runtime::render::{render, RenderMode};
 use octrace_runtime::Scene;
 
+use crate::output::thousands;
+
 #[derive(clap::Args, Debug)]
+#[command(after_long_help = "\
+Shaded images simulate only the effects the scene calls for (see `octrace inspect`):
+shadows, soft shadows, reflection, refraction, alpha. Turn some off with --effects:
+
+  octrace render scene.oct -o fast.png --effects -soft-shadows,-reflection --stats
+
+A scene without lights is lit by a headlight at the camera, without shadow rays.
+--stats prints the rays traced per kind (primary, shadow, soft_shadow, reflection,
+refraction, alpha); --json prints the same as JSON.")]
 pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
@@ -18,28 +34,48 @@ pub(crate) struct Args {
     /// Image width.
     #[arg(long, default_value_t = 1024)]
     pub width: u32,
-    /// Image height.
-    #[arg(long, default_value_t = 1024)]
-    pub height: u32,
-    /// Eye position `x,y,z` (default: the standard camera of shared/bench/RAYS.md).
+    /// Image height (default: the width, or the width over the scene camera's aspect).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Eye position `x,y,z` (default: the scene's first camera, else the standard
+    /// camera of shared/bench/RAYS.md).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<DVec3>,
     /// Point looked at `x,y,z` (default: the scene's centre).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub target: Option<DVec3>,
-    /// Vertical field of view in degrees.
-    #[arg(long, default_value_t = 45.0)]
-    pub fov: f64,
-    /// shaded: grey by the angle to the camera; normals: normals as colours;
+    /// Vertical field of view in degrees (default 45, or the scene camera's).
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// Render through the scene's camera with this index (see `octrace inspect --json`).
+    #[arg(long, conflicts_with_all = ["eye", "target"])]
+    pub camera: Option<usize>,
+    /// shaded: materials, lights and effects; normals: normals as colours;
     /// cells: leaves each ray visited (the paper's Figure 6), with a legend.
     #[arg(long, value_enum, default_value_t = Mode::Shaded)]
     pub mode: Mode,
+    /// Effects to turn off, e.g. `-shadows,-reflection` (names: shadows, soft-shadows,
+    /// reflection, refraction, alpha), or `none` for primary rays only.
+    #[arg(long, allow_hyphen_values = true)]
+    pub effects: Option<String>,
+    /// Shadow rays towards area lights per shading point (soft shadows).
+    #[arg(long, default_value_t = 16)]
+    pub soft_samples: u32,
+    /// Secondary rays (reflection, refraction, alpha) a path may take.
+    #[arg(long, default_value_t = 6)]
+    pub max_depth: u32,
+    /// Print rays traced per kind.
+    #[arg(long)]
+    pub stats: bool,
+    /// Print the summary and the rays per kind as JSON.
+    #[arg(long)]
+    pub json: bool,
     /// Trace on the GPU (Vulkan; Mesa's lavapipe without a GPU): the same image.
     #[arg(long)]
     pub gpu: bool,
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Mode {
     Shaded,
     Normals,
@@ -55,60 +91,230 @@ fn parse_vec3(s: &str) -> Result<DVec3, String> {
     }
 }
 
+/// The effects to run: the scene's, less those `spec` turns off. Returns the set and
+/// one line per effect turned off or asked for but absent.
+pub(crate) fn effect_set(shading: &Shading, spec: Option<&str>) -> anyhow::Result<(EffectSet, Vec<String>)> {
+    let scene = EffectSet::of(shading);
+    let mut set = scene;
+    let mut notes = Vec::new();
+    for word in spec.unwrap_or("").split(',').map(str::trim).filter(|w| !w.is_empty()) {
+        if word == "none" {
+            set = EffectSet::NONE;
+            notes.push("all effects turned off (primary rays only)".to_string());
+            continue;
+        }
+        let (off, name) = match word.strip_prefix('-') {
+            Some(name) => (true, name),
+            None => (false, word.strip_prefix('+').unwrap_or(word)),
+        };
+        let effect = Effect::from_name(name).ok_or_else(|| {
+            let names: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+            anyhow::anyhow!(
+                "--effects: unknown effect '{name}' (effects: {}; prefix - to turn one off)",
+                names.join(", ")
+            )
+        })?;
+        match (off, scene.contains(effect)) {
+            (true, true) => {
+                set = set.without(effect);
+                notes.push(format!("{}: turned off", effect.name()));
+            }
+            (true, false) => notes.push(format!("{}: not in this scene, nothing to turn off", effect.name())),
+            (false, true) => {}
+            (false, false) => {
+                notes.push(format!("{}: not in this scene (nothing calls for it), not simulated", effect.name()))
+            }
+        }
+    }
+    Ok((set, notes))
+}
+
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(args.width > 0 && args.height > 0, "image size must be at least 1 x 1");
-    anyhow::ensure!(args.fov > 0.0 && args.fov < 180.0, "--fov must be between 0 and 180 degrees");
+    let height = args.height.unwrap_or(args.width);
+    anyhow::ensure!(args.width > 0 && height > 0, "image size must be at least 1 x 1");
+    if let Some(fov) = args.fov {
+        anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
+    }
     let scene = crate::open::open_scene(&args.scene)?;
-    let camera = camera(&scene, &args);
-    let mode = match args.mode {
-        Mode::Shaded => RenderMode::Shaded,
-        Mode::Normals => RenderMode::Normals,
-        Mode::Cells => RenderMode::Cells,
-    };
-    let (image, stats, secs) = if args.gpu {
+    let camera = camera(&scene, &args)?;
+    let (effects, notes) = effect_set(scene.shading(), args.effects.as_deref())?;
+    anyhow::ensure!(args.effects.is_none() || args.mode == Mode::Shaded, "--effects applies to --mode shaded");
+    for n in &notes {
+        eprintln!("effects: {n}");
+    }
+    let options = RenderOptions { effects, max_depth: args.max_depth, soft_samples: args.soft_samples.max(1) };
+    let gpu = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
         eprintln!("tracing on {}", gpu.describe());
-        let t = Instant::now();
-        let (image, stats) = octrace_runtime::render::render_gpu(&scene, &tracer, &camera, mode)?;
-        (image, stats, t.elapsed().as_secs_f64())
+        Some((gpu, tracer))
     } else {
-        let t = Instant::now();
-        let (image, stats) = render(&scene, &camera, mode);
-        (image, stats, t.elapsed().as_secs_f64())
+        None
     };
+    let t = Instant::now();
+    let (image, summary) = match args.mode {
+        Mode::Shaded => {
+            let (radiance, counts) = match &gpu {
+                Some((_, tracer)) => render_effects_gpu(&scene, tracer, &camera, &options)?,
+                None => {
+                    let bar = RowsBar::new(camera.height);
+                    let out = render_effects(&scene, &camera, &options, &|rows| bar.set(rows));
+                    bar.finish();
+                    out
+                }
+            };
+            (radiance.to_image(), Summary::Effects(counts))
+        }
+        mode => {
+            let mode = if mode == Mode::Normals { RenderMode::Normals } else { RenderMode::Cells };
+            let (image, stats) = match &gpu {
+                Some((_, tracer)) => octrace_runtime::render::render_gpu(&scene, tracer, &camera, mode)?,
+                None => render(&scene, &camera, mode),
+            };
+            (image, Summary::Walks(stats))
+        }
+    };
+    let secs = t.elapsed().as_secs_f64();
     image.write_png(&args.output)?;
-    crate::out!(
-        "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
-        crate::show(&args.scene),
-        args.width,
-        args.height,
-        mode,
-        stats.hits,
-        stats.rays,
-        stats.mean_leaves,
-        stats.mean_triangle_tests,
-        stats.max_leaves,
-        secs,
-        crate::show(&args.output)
-    );
+    let effect_names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+    if args.json {
+        let mut j = serde_json::json!({
+            "scene": crate::show(&args.scene), "output": crate::show(&args.output),
+            "width": camera.width, "height": camera.height, "mode": format!("{:?}", args.mode).to_lowercase(),
+            "seconds": secs, "gpu": args.gpu, "notes": notes,
+        });
+        match &summary {
+            Summary::Effects(counts) => {
+                j["effects"] = serde_json::json!(effect_names);
+                j["rays"] = rays_json(counts);
+            }
+            Summary::Walks(s) => {
+                j["rays"] = serde_json::json!({ "primary": s.rays, "total": s.rays });
+                j["hits"] = s.hits.into();
+                j["mean_leaves"] = s.mean_leaves.into();
+            }
+        }
+        crate::out!("{}", serde_json::to_string_pretty(&j)?);
+        return Ok(());
+    }
+    match &summary {
+        Summary::Effects(counts) => {
+            let listed = if effect_names.is_empty() { "none".to_string() } else { effect_names.join(", ") };
+            crate::out!(
+                "rendered {} ({} x {}, shaded; effects: {listed}): {} rays, {:.3} s -> {}",
+                crate::show(&args.scene),
+                camera.width,
+                camera.height,
+                thousands(counts.total()),
+                secs,
+                crate::show(&args.output)
+            );
+            if args.stats {
+                for kind in RayKind::ALL {
+                    crate::out!("  {:<12} {:>14}", kind.name(), thousands(counts.get(kind)));
+                }
+            }
+        }
+        Summary::Walks(stats) => crate::out!(
+            "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
+            crate::show(&args.scene),
+            camera.width,
+            camera.height,
+            args.mode,
+            stats.hits,
+            stats.rays,
+            stats.mean_leaves,
+            stats.mean_triangle_tests,
+            stats.max_leaves,
+            secs,
+            crate::show(&args.output)
+        ),
+    }
     Ok(())
 }
 
-fn camera(scene: &Scene, args: &Args) -> Camera {
+/// What a render reports.
+enum Summary {
+    Effects(RayCounts),
+    Walks(octrace_runtime::render::RenderStats),
+}
+
+/// Rays per kind, and their total, as JSON.
+pub(crate) fn rays_json(counts: &RayCounts) -> serde_json::Value {
+    let mut j = serde_json::Map::new();
+    for kind in RayKind::ALL {
+        j.insert(kind.name().into(), counts.get(kind).into());
+    }
+    j.insert("total".into(), counts.total().into());
+    j.into()
+}
+
+/// A progress bar over image rows on a terminal; silent otherwise.
+pub(crate) struct RowsBar(Option<indicatif::ProgressBar>);
+
+impl RowsBar {
+    pub(crate) fn new(rows: u32) -> RowsBar {
+        RowsBar(std::io::stderr().is_terminal().then(|| {
+            let bar = indicatif::ProgressBar::new(u64::from(rows));
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{elapsed:>3} [{bar:40}] {pos}/{len} rows, {eta} left")
+                    .expect("valid template"),
+            );
+            bar
+        }))
+    }
+
+    pub(crate) fn set(&self, rows: u32) {
+        if let Some(b) = &self.0 {
+            b.set_position(u64::from(rows).max(b.position()));
+        }
+    }
+
+    pub(crate) fn finish(&self) {
+        if let Some(b) = &self.0 {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     let b = scene.view().bounds;
     let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
-    match (args.eye, args.target) {
-        (None, None) if args.fov == 45.0 => Camera::standard_sized(&frame, args.width, args.height),
+    let cameras = &scene.shading().cameras;
+    let from_file = match args.camera {
+        Some(i) => Some(
+            cameras.get(i).ok_or_else(|| anyhow::anyhow!("--camera {i}: the scene has {} cameras", cameras.len()))?,
+        ),
+        None if args.eye.is_none() && args.target.is_none() => cameras.first(),
+        None => None,
+    };
+    if let Some(c) = from_file {
+        let height = args.height.unwrap_or_else(|| match c.aspect {
+            Some(a) => ((args.width as f32 / a).round() as u32).max(1),
+            None => args.width,
+        });
+        let fov = args.fov.unwrap_or((c.yfov as f64).to_degrees());
+        let eye = DVec3::from(c.position.map(f64::from));
+        let target = eye + DVec3::from(c.forward.map(f64::from));
+        let mut cam = Camera::look_at(eye, target, fov, args.width, height);
+        // The file's up vector, not the world's +y.
+        let up = DVec3::from(c.up.map(f64::from)).normalize();
+        cam.u = up.cross(cam.w).normalize();
+        cam.s = cam.w.cross(cam.u);
+        return Ok(cam);
+    }
+    let height = args.height.unwrap_or(args.width);
+    Ok(match (args.eye, args.target, args.fov) {
+        (None, None, None) => Camera::standard_sized(&frame, args.width, height),
         _ => {
             let standard = Camera::standard(&frame);
             Camera::look_at(
                 args.eye.unwrap_or(standard.eye),
                 args.target.unwrap_or(frame.c),
-                args.fov,
+                args.fov.unwrap_or(45.0),
                 args.width,
-                args.height,
+                height,
             )
         }
-    }
+    })
 }

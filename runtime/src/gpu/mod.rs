@@ -214,7 +214,10 @@ impl GpuTracer {
         // Chunks of a power-of-two number of words, so the kernel splits an index with a
         // shift and a mask.
         let chunk_words = 1u64 << (max_binding / 4).max(1).ilog2().min(31);
-        let arrays = view.section_words();
+        // The tracing arrays: the file's first seven sections (the shading arrays that
+        // follow are the host's business).
+        let words = view.section_words();
+        let arrays: [&[u32]; TRACE_ARRAYS] = std::array::from_fn(|i| words[i]);
         let offsets = offsets_of(&arrays)?;
         let chunks = offsets.total.div_ceil(chunk_words).max(1);
         // The rays and hits take two storage bindings besides the scene's.
@@ -437,11 +440,15 @@ impl GpuTracer {
     }
 }
 
+/// The arrays the kernel walks: octree, tri_refs, triangles, triangle_ids, boxes,
+/// cube_map, nodes.
+const TRACE_ARRAYS: usize = 7;
+
 fn to_hit(h: &HitOut) -> Option<Hit> {
     (h.triangle != u32::MAX).then_some(Hit { t: h.t, triangle: h.triangle, u: h.u, v: h.v, leaf: h.leaf, prim: h.prim })
 }
 
-fn offsets_of(arrays: &[&[u32]; 7]) -> GpuResult<Offsets> {
+fn offsets_of(arrays: &[&[u32]; TRACE_ARRAYS]) -> GpuResult<Offsets> {
     let mut at = [0u64; 8];
     for (i, a) in arrays.iter().enumerate() {
         at[i + 1] = at[i] + a.len() as u64;
@@ -466,7 +473,7 @@ fn offsets_of(arrays: &[&[u32]; 7]) -> GpuResult<Offsets> {
 fn upload(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    arrays: &[&[u32]; 7],
+    arrays: &[&[u32]; TRACE_ARRAYS],
     total: u64,
     chunk_words: u64,
 ) -> Vec<wgpu::Buffer> {

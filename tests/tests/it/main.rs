@@ -1,6 +1,7 @@
 //! octrace's integration tests, one module per area.
 
 mod bunny;
+mod effects;
 mod format;
 mod gpu;
 mod hard_cases;

@@ -299,3 +299,135 @@ fn bad_gltf_gives_named_errors() {
     let points = obj(dir.path(), "points.gltf", &tiny_gltf(&tri, &[0, 1, 2], 0));
     assert!(matches!(Mesh::load(&points), Err(Error::UnsupportedMode { .. })));
 }
+
+#[test]
+fn gltf_samples_load_with_their_materials() {
+    // Box: baseColorFactor only, so glTF's defaults: metallic 1, roughness 1.
+    let b = gltf("Box.gltf");
+    assert_eq!(b.materials.len(), 1);
+    let m = &b.materials[0];
+    assert_eq!((m.metallic, m.roughness, m.alpha_mode), (1.0, 1.0, octrace_format::AlphaMode::Opaque));
+    assert_eq!(m.base_color, [0.8, 0.0, 0.0, 1.0]);
+    assert_eq!(b.material_ids, vec![0; 12]);
+    assert_eq!(b.normals.len(), 12, "Box has NORMALs");
+    // BoxVertexColors: explicit factors, and texture coordinates.
+    let v = gltf("BoxVertexColors.gltf");
+    assert_eq!((v.materials[0].metallic, v.materials[0].roughness), (0.1, 0.99));
+    assert_eq!(v.uvs.len(), 12);
+    // No material: glTF's default one is supplied.
+    let t = gltf("AnimatedTriangle.gltf");
+    assert_eq!(t.materials, vec![octrace_format::Material::default()]);
+    assert_eq!(t.material_ids, vec![0]);
+    // None of them has lights, emitters, mirrors, glass or alpha: no effects.
+    for mesh in [b, v, t] {
+        let baked = octrace_bake::bake(&mesh, &Default::default()).unwrap();
+        assert!(baked.shading.effects.is_empty(), "{:?}", baked.shading.effects);
+    }
+}
+
+/// A glTF with the extensions the renderer reads: lights, transmission, IOR, emissive
+/// strength, alpha modes, a camera; normals and texture coordinates.
+fn extensions_gltf() -> String {
+    let positions: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let normals: [[f32; 3]; 3] = [[0.0, 0.0, 1.0]; 3];
+    let uvs: [[f32; 2]; 3] = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
+    let mut buf: Vec<u8> = positions.iter().flatten().flat_map(|c| c.to_le_bytes()).collect();
+    buf.extend(normals.iter().flatten().flat_map(|c| c.to_le_bytes()));
+    buf.extend(uvs.iter().flatten().flat_map(|c| c.to_le_bytes()));
+    let b64 = octrace_tests::base64(&buf);
+    let prim = |material: usize| {
+        format!(r#"{{"attributes":{{"POSITION":0,"NORMAL":1,"TEXCOORD_0":2}},"material":{material}}}"#)
+    };
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},
+        "extensionsUsed":["KHR_lights_punctual","KHR_materials_transmission","KHR_materials_ior","KHR_materials_emissive_strength"],
+        "extensions":{{"KHR_lights_punctual":{{"lights":[
+            {{"name":"sun","type":"directional","color":[1,0.9,0.8],"intensity":3}},
+            {{"name":"spot","type":"spot","intensity":50,"range":20,"spot":{{"innerConeAngle":0.2,"outerConeAngle":0.5}}}}]}}}},
+        "scene":0,"scenes":[{{"nodes":[0,1,2,3,4,5,6,7]}}],
+        "nodes":[{{"mesh":0}},{{"mesh":1,"translation":[2,0,0]}},{{"mesh":2,"translation":[4,0,0]}},
+                 {{"mesh":3,"translation":[6,0,0]}},{{"mesh":4,"translation":[8,0,0]}},
+                 {{"extensions":{{"KHR_lights_punctual":{{"light":0}}}},"rotation":[-0.7071068,0,0,0.7071068]}},
+                 {{"extensions":{{"KHR_lights_punctual":{{"light":1}}}},"translation":[0,5,0]}},
+                 {{"camera":0,"translation":[0,1,10]}}],
+        "cameras":[{{"name":"cam","type":"perspective","perspective":{{"yfov":0.8,"aspectRatio":1.5,"znear":0.1}}}}],
+        "materials":[
+            {{"name":"chrome","pbrMetallicRoughness":{{"metallicFactor":1,"roughnessFactor":0.05}}}},
+            {{"name":"glass","pbrMetallicRoughness":{{"metallicFactor":0,"roughnessFactor":0}},
+              "extensions":{{"KHR_materials_transmission":{{"transmissionFactor":0.9}},"KHR_materials_ior":{{"ior":1.33}}}}}},
+            {{"name":"neon","emissiveFactor":[1,0.5,0],"extensions":{{"KHR_materials_emissive_strength":{{"emissiveStrength":4}}}}}},
+            {{"name":"leaves","alphaMode":"MASK","alphaCutoff":0.6,"pbrMetallicRoughness":{{"baseColorFactor":[0,1,0,0.3]}}}},
+            {{"name":"smoke","alphaMode":"BLEND","pbrMetallicRoughness":{{"baseColorFactor":[1,1,1,0.5]}}}}],
+        "meshes":[{{"primitives":[{p0}]}},{{"primitives":[{p1}]}},{{"primitives":[{p2}]}},{{"primitives":[{p3}]}},{{"primitives":[{p4}]}}],
+        "buffers":[{{"byteLength":{len},"uri":"data:application/octet-stream;base64,{b64}"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":36}},{{"buffer":0,"byteOffset":72,"byteLength":24}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+                     {{"bufferView":1,"componentType":5126,"count":3,"type":"VEC3"}},
+                     {{"bufferView":2,"componentType":5126,"count":3,"type":"VEC2"}}]}}"#,
+        p0 = prim(0),
+        p1 = prim(1),
+        p2 = prim(2),
+        p3 = prim(3),
+        p4 = prim(4),
+        len = buf.len(),
+    )
+}
+
+#[test]
+fn gltf_extensions_give_materials_lights_cameras_and_effects() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ext.gltf");
+    std::fs::write(&path, extensions_gltf()).unwrap();
+    let mesh = Mesh::load(&path).unwrap();
+    assert_eq!(mesh.triangles.len(), 5);
+    assert_eq!(mesh.material_ids, vec![0, 1, 2, 3, 4]);
+    let names: Vec<&str> = mesh.materials.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["chrome", "glass", "neon", "leaves", "smoke"]);
+    let glass = &mesh.materials[1];
+    assert_eq!((glass.transmission, glass.ior), (0.9, 1.33));
+    assert_eq!(mesh.materials[2].emissive, [4.0, 2.0, 0.0]);
+    assert_eq!(mesh.materials[3].alpha_mode, octrace_format::AlphaMode::Mask);
+    assert_eq!(mesh.materials[3].coverage(), 0.0);
+    assert_eq!(mesh.materials[4].coverage(), 0.5);
+    // The sun's node turns -z to -y: it shines straight down.
+    let sun = &mesh.lights[0];
+    assert_eq!(sun.kind, octrace_format::LightKind::Directional);
+    assert!((sun.direction[1] + 1.0).abs() < 1e-6 && sun.direction[2].abs() < 1e-6, "{:?}", sun.direction);
+    let spot = &mesh.lights[1];
+    assert_eq!((spot.kind, spot.position, spot.range), (octrace_format::LightKind::Spot, [0.0, 5.0, 0.0], 20.0));
+    assert_eq!((spot.inner_cone, spot.outer_cone), (0.2, 0.5));
+    let cam = &mesh.cameras[0];
+    assert_eq!(
+        (cam.position, cam.forward, cam.up, cam.aspect),
+        ([0.0, 1.0, 10.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], Some(1.5))
+    );
+    assert_eq!(mesh.normals[0], [[0.0, 0.0, 1.0]; 3]);
+    assert_eq!(mesh.uvs[0], [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]);
+    let baked = octrace_bake::bake(&mesh, &Default::default()).unwrap();
+    let effects: Vec<String> =
+        baked.shading.effects.iter().map(|e| format!("{}: {}", e.effect.name(), e.reason)).collect();
+    assert_eq!(
+        effects,
+        [
+            "shadows: light 'sun' (directional) (and 2 more)",
+            "soft-shadows: area light: material 'neon' emits (4.00, 2.00, 0.00) on 1 triangles",
+            "reflection: material 'chrome', metallic 1.00, roughness 0.05 (and 1 more)",
+            "refraction: material 'glass', transmission 0.90, ior 1.33",
+            "alpha: material 'leaves', alphaMode MASK, alpha 0.30 < cutoff 0.60 (and 1 more)",
+        ]
+    );
+}
+
+#[test]
+fn obj_normals_texture_coordinates_and_a_missing_material_library() {
+    let dir = tempfile::tempdir().unwrap();
+    // The second object has neither normals nor texture coordinates.
+    let text = "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvt 0.5 0.5\no lit\nf 1/1/1 2/1/1 3/1/1\n\
+                o plain\nf 1 3 2\n";
+    let path = obj(dir.path(), "n.obj", text);
+    let mesh = Mesh::load(&path).unwrap();
+    assert_eq!(mesh.normals, vec![[[0.0, 0.0, 1.0]; 3], [[0.0, 0.0, -1.0]; 3]], "the second face gets its face normal");
+    assert_eq!(mesh.uvs, vec![[[0.5, 0.5]; 3], [[0.0, 0.0]; 3]]);
+    assert!(mesh.materials.is_empty());
+    assert!(mesh.warnings.iter().any(|w| w.contains("material library not loaded")), "{:?}", mesh.warnings);
+}

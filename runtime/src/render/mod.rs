@@ -1,5 +1,10 @@
-//! Images of a scene: flat shading, normals, or the number of leaves each ray
-//! visited (the paper's Figure 6), written as PNG.
+//! Images of a scene: the effects renderer ([`effects`]: materials, lights, shadows,
+//! reflection, refraction, alpha, only those the scene calls for), and diagnostic
+//! images (normals, or the number of leaves each ray visited, the paper's Figure 6),
+//! written as PNG.
+
+pub mod effects;
+mod lighting;
 
 use std::path::Path;
 

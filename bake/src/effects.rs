@@ -1,0 +1,83 @@
+//! The effects a scene calls for, decided once at bake from its materials and lights,
+//! each with the reason a user can check.
+
+use octrace_format::{AlphaMode, Effect, EffectReason, Material, VISIBLE_WEIGHT};
+
+use crate::mesh::Mesh;
+
+/// The effects `mesh` calls for, in [`Effect::ALL`] order, considering only the
+/// materials of the triangles in `used` (the triangles that reach the octree).
+///
+/// * shadows: any punctual light or emissive triangle;
+/// * soft shadows: emissive triangles (area lights);
+/// * reflection: a material whose mirror weight ([`Material::mirror`]) is visible, or
+///   a transmissive one (its Fresnel reflection);
+/// * refraction: transmission above zero;
+/// * alpha: coverage ([`Material::coverage`]) below one.
+///
+/// # Example
+/// ```
+/// use octrace_bake::{effects::decide, Mesh};
+/// let mesh = Mesh::from_triangles(vec![[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]]);
+/// assert!(decide(&mesh, &[0]).is_empty()); // no lights, no materials: primary rays only
+/// ```
+pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
+    let mut counts = vec![0usize; mesh.materials.len()];
+    for &t in used {
+        if let Some(&m) = mesh.material_ids.get(t as usize) {
+            counts[m as usize] += 1;
+        }
+    }
+    let used_materials: Vec<(&Material, usize)> = mesh.materials.iter().zip(counts).filter(|&(_, n)| n > 0).collect();
+    let emitters: Vec<(&Material, usize)> = used_materials.iter().copied().filter(|(m, _)| m.is_emissive()).collect();
+    let mut effects = Vec::new();
+    let mut add = |effect: Effect, reasons: Vec<String>| {
+        if let Some(first) = reasons.first() {
+            let reason = match reasons.len() {
+                1 => first.clone(),
+                n => format!("{first} (and {} more)", n - 1),
+            };
+            effects.push(EffectReason { effect, reason });
+        }
+    };
+    let area = |(m, n): &(&Material, usize)| {
+        let e = m.emissive;
+        format!("area light: material '{}' emits ({:.2}, {:.2}, {:.2}) on {n} triangles", m.name, e[0], e[1], e[2])
+    };
+    let mut lights: Vec<String> =
+        mesh.lights.iter().map(|l| format!("light '{}' ({:?})", l.name, l.kind).to_lowercase()).collect();
+    lights.extend(emitters.iter().map(area));
+    add(Effect::Shadows, lights);
+    add(Effect::SoftShadows, emitters.iter().map(area).collect());
+    let mirrors = used_materials.iter().filter_map(|(m, _)| {
+        if m.transmission > 0.0 {
+            return Some(format!("material '{}', transmission {:.2} (Fresnel reflection)", m.name, m.transmission));
+        }
+        let w = m.mirror();
+        (w.iter().fold(0.0f32, |a, &b| a.max(b)) >= VISIBLE_WEIGHT).then(|| match m.illum {
+            Some(illum) => {
+                let k = m.specular;
+                format!("material '{}', illum {illum}, Ks ({:.2}, {:.2}, {:.2})", m.name, k[0], k[1], k[2])
+            }
+            None => format!("material '{}', metallic {:.2}, roughness {:.2}", m.name, m.metallic, m.roughness),
+        })
+    });
+    add(Effect::Reflection, mirrors.collect());
+    let glass = used_materials.iter().filter(|(m, _)| m.transmission > 0.0).map(|(m, _)| match m.illum {
+        Some(_) => format!("material '{}', d {:.2}, Ni {:.2}", m.name, 1.0 - m.transmission, m.ior),
+        None => format!("material '{}', transmission {:.2}, ior {:.2}", m.name, m.transmission, m.ior),
+    });
+    add(Effect::Refraction, glass.collect());
+    let cut = used_materials.iter().filter(|(m, _)| m.coverage() < 1.0).map(|(m, _)| {
+        let alpha = m.base_color[3];
+        match (m.alpha_mode, m.illum) {
+            (AlphaMode::Mask, _) => {
+                format!("material '{}', alphaMode MASK, alpha {alpha:.2} < cutoff {:.2}", m.name, m.alpha_cutoff)
+            }
+            (_, Some(_)) => format!("material '{}', d {alpha:.2}", m.name),
+            _ => format!("material '{}', alphaMode BLEND, alpha {alpha:.2}", m.name),
+        }
+    });
+    add(Effect::Alpha, cut.collect());
+    effects
+}

@@ -1,0 +1,305 @@
+//! What a renderer needs beyond geometry: materials, lights, cameras, and the set of
+//! effects the scene calls for, decided at bake.
+//!
+//! The per-triangle parts (material ids, shading normals, texture coordinates) are
+//! arrays of [`crate::BakedScene`], in the triangle array's order; the rest is here,
+//! small, in the archive's root section.
+
+use rkyv::{Archive, Deserialize, Serialize};
+
+/// How a material's alpha is used (glTF `alphaMode`).
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[rkyv(derive(Debug))]
+#[repr(u8)]
+pub enum AlphaMode {
+    /// Alpha is ignored: the surface is opaque.
+    #[default]
+    Opaque,
+    /// The surface exists where alpha is at least the cutoff, and not elsewhere.
+    Mask,
+    /// The surface covers a fraction alpha of what lies behind it.
+    Blend,
+}
+
+/// A surface material, from glTF's metallic-roughness model or from an MTL file.
+///
+/// Colours are linear RGB. glTF and MTL values land in the same fields; what a field
+/// means for each source is written on it.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Material {
+    /// The material's name in its file (`"default"` for the one a loader supplies).
+    pub name: String,
+    /// Base colour and alpha: glTF `baseColorFactor`; MTL `Kd` with alpha `d` (or
+    /// `1 - Tr`).
+    pub base_color: [f32; 4],
+    /// glTF `metallicFactor`; 0 for MTL.
+    pub metallic: f32,
+    /// glTF `roughnessFactor`; for MTL, from `Ns` (`sqrt(2 / (Ns + 2))`).
+    pub roughness: f32,
+    /// Emitted radiance: glTF `emissiveFactor` times `KHR_materials_emissive_strength`;
+    /// MTL `Ke`. Triangles of an emissive material are area lights.
+    pub emissive: [f32; 3],
+    /// glTF `alphaMode`; MTL: `Blend` when `d < 1` without an index of refraction.
+    pub alpha_mode: AlphaMode,
+    /// glTF `alphaCutoff` (0.5 by default), used by [`AlphaMode::Mask`].
+    pub alpha_cutoff: f32,
+    /// Fraction of light transmitted by refraction: glTF
+    /// `KHR_materials_transmission`; MTL `1 - d` when `Ni` is given.
+    pub transmission: f32,
+    /// Index of refraction: glTF `KHR_materials_ior` (1.5 by default); MTL `Ni`.
+    pub ior: f32,
+    /// Mirror reflectance of an MTL material with `illum` 3 to 7: its `Ks`; 0 otherwise
+    /// (glTF's mirror term follows from metallic and roughness, see [`Material::mirror`]).
+    pub specular: [f32; 3],
+    /// The MTL `illum` model, when the material came from an MTL file that gave one.
+    pub illum: Option<u32>,
+}
+
+impl Default for Material {
+    /// glTF's default material: white, fully metallic, fully rough, opaque.
+    fn default() -> Self {
+        Material {
+            name: "default".into(),
+            base_color: [1.0; 4],
+            metallic: 1.0,
+            roughness: 1.0,
+            emissive: [0.0; 3],
+            alpha_mode: AlphaMode::Opaque,
+            alpha_cutoff: 0.5,
+            transmission: 0.0,
+            ior: 1.5,
+            specular: [0.0; 3],
+            illum: None,
+        }
+    }
+}
+
+/// Reflectance at normal incidence of a dielectric of index 1.5 (glTF's `F0` of 0.04).
+pub const DIELECTRIC_F0: f32 = 0.04;
+
+/// A weight below this adds less than half a step of 8-bit colour to any pixel: an
+/// effect whose weights all lie below it is not worth a ray.
+pub const VISIBLE_WEIGHT: f32 = 1.0 / 512.0;
+
+impl Material {
+    /// Mirror reflectance per channel: the weight of a reflection ray.
+    ///
+    /// glTF: the metallic-roughness `F0` (`0.04` for dielectrics, the base colour for
+    /// metals, mixed by `metallic`), scaled by `(1 - roughness)^2` so that a rough
+    /// surface has no mirror image. MTL: `Ks` when `illum` is 3 to 7, else nothing.
+    pub fn mirror(&self) -> [f32; 3] {
+        if let Some(illum) = self.illum {
+            return if (3..=7).contains(&illum) { self.specular.map(|k| k.clamp(0.0, 1.0)) } else { [0.0; 3] };
+        }
+        let m = self.metallic.clamp(0.0, 1.0);
+        let gloss = (1.0 - self.roughness.clamp(0.0, 1.0)).powi(2);
+        [0, 1, 2].map(|c| ((1.0 - m) * DIELECTRIC_F0 + m * self.base_color[c].clamp(0.0, 1.0)) * gloss)
+    }
+
+    /// The fraction of the surface that exists (alpha coverage): 1 for opaque
+    /// surfaces, 0 or 1 for masks (alpha against the cutoff), alpha for blending.
+    pub fn coverage(&self) -> f32 {
+        let alpha = self.base_color[3].clamp(0.0, 1.0);
+        match self.alpha_mode {
+            AlphaMode::Opaque => 1.0,
+            AlphaMode::Mask => {
+                if alpha >= self.alpha_cutoff {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            AlphaMode::Blend => alpha,
+        }
+    }
+
+    /// Whether the material emits light.
+    pub fn is_emissive(&self) -> bool {
+        self.emissive.iter().any(|&e| e > 0.0)
+    }
+
+    /// Every number of the material is finite and in its range.
+    fn check(&self) -> std::result::Result<(), String> {
+        let all = self.base_color.iter().chain(&self.emissive).chain(&self.specular).chain([
+            &self.metallic,
+            &self.roughness,
+            &self.alpha_cutoff,
+            &self.transmission,
+            &self.ior,
+        ]);
+        if let Some(bad) = all.clone().find(|v| !v.is_finite()) {
+            return Err(format!("material '{}' holds {bad}", self.name));
+        }
+        if all.clone().any(|&v| v < 0.0) || self.ior == 0.0 {
+            return Err(format!("material '{}' holds a negative value or a zero index of refraction", self.name));
+        }
+        Ok(())
+    }
+}
+
+/// The kind of a punctual light (glTF `KHR_lights_punctual`).
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[rkyv(derive(Debug))]
+#[repr(u8)]
+pub enum LightKind {
+    /// Light from a point in every direction; intensity in candela.
+    Point,
+    /// A point light limited to a cone; intensity in candela.
+    Spot,
+    /// Parallel light from infinitely far away; intensity in lux.
+    Directional,
+}
+
+/// A punctual light, in world space.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Light {
+    /// The light's name, or `light N`.
+    pub name: String,
+    /// Point, spot or directional.
+    pub kind: LightKind,
+    /// Linear RGB colour.
+    pub color: [f32; 3],
+    /// Candela (point, spot) or lux (directional).
+    pub intensity: f32,
+    /// Position (unused by directional lights).
+    pub position: [f32; 3],
+    /// Unit direction the light shines towards (spot, directional).
+    pub direction: [f32; 3],
+    /// Distance where the light's influence ends; infinite when unlimited.
+    pub range: f32,
+    /// Spot: angle from the axis where the falloff starts, radians.
+    pub inner_cone: f32,
+    /// Spot: angle from the axis where the light ends, radians.
+    pub outer_cone: f32,
+}
+
+/// A perspective camera from the scene file, in world space.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Camera {
+    /// The camera's name, or `camera N`.
+    pub name: String,
+    /// Eye position.
+    pub position: [f32; 3],
+    /// Unit viewing direction.
+    pub forward: [f32; 3],
+    /// Unit up vector, orthogonal to `forward`.
+    pub up: [f32; 3],
+    /// Vertical field of view, radians.
+    pub yfov: f32,
+    /// Width over height, when the file fixes it.
+    pub aspect: Option<f32>,
+}
+
+/// An effect a renderer may have to simulate.
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[rkyv(derive(Debug))]
+#[repr(u8)]
+pub enum Effect {
+    /// Shadow rays towards lights (any light).
+    Shadows,
+    /// Several shadow rays towards points of area lights (emissive triangles).
+    SoftShadows,
+    /// Mirror reflection rays.
+    Reflection,
+    /// Refraction rays through transmissive materials.
+    Refraction,
+    /// Surfaces cut out or blended by alpha: rays continue through them.
+    Alpha,
+}
+
+impl Effect {
+    /// Every effect, in a fixed order.
+    pub const ALL: [Effect; 5] =
+        [Effect::Shadows, Effect::SoftShadows, Effect::Reflection, Effect::Refraction, Effect::Alpha];
+
+    /// The effect's name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::Shadows => "shadows",
+            Effect::SoftShadows => "soft-shadows",
+            Effect::Reflection => "reflection",
+            Effect::Refraction => "refraction",
+            Effect::Alpha => "alpha",
+        }
+    }
+
+    /// The effect a name stands for.
+    pub fn from_name(name: &str) -> Option<Effect> {
+        Effect::ALL.into_iter().find(|e| e.name() == name)
+    }
+}
+
+/// An effect the scene calls for, and why.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct EffectReason {
+    /// The effect.
+    pub effect: Effect,
+    /// What in the scene calls for it, e.g. `material 'chrome', metallic 1.00, roughness 0.05`.
+    pub reason: String,
+}
+
+/// Materials, lights, cameras and effects of a baked scene.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+#[rkyv(derive(Debug))]
+pub struct Shading {
+    /// Materials, indexed by the scene's `material_ids`.
+    pub materials: Vec<Material>,
+    /// Punctual lights.
+    pub lights: Vec<Light>,
+    /// Cameras.
+    pub cameras: Vec<Camera>,
+    /// The effects the scene calls for, one entry each, in [`Effect::ALL`] order; empty
+    /// when primary rays suffice.
+    pub effects: Vec<EffectReason>,
+}
+
+impl Shading {
+    /// Whether the scene calls for `effect`.
+    pub fn has(&self, effect: Effect) -> bool {
+        self.effects.iter().any(|e| e.effect == effect)
+    }
+
+    /// Checks that every number is finite and in range, and that each effect appears
+    /// at most once.
+    ///
+    /// # Errors
+    /// [`crate::Error::Corrupt`] naming the first bad value.
+    pub fn validate(&self) -> crate::Result<()> {
+        let corrupt = crate::Error::corrupt;
+        for m in &self.materials {
+            m.check().map_err(corrupt)?;
+        }
+        for l in &self.lights {
+            let finite = l.color.iter().chain(&l.position).chain(&l.direction).chain([&l.intensity]);
+            if finite.clone().any(|v| !v.is_finite()) || l.range.is_nan() || !l.inner_cone.is_finite() {
+                return Err(corrupt(format!("light '{}' holds a value that is not finite", l.name)));
+            }
+            if !l.outer_cone.is_finite() || l.range <= 0.0 || l.intensity < 0.0 || l.color.iter().any(|&c| c < 0.0) {
+                return Err(corrupt(format!("light '{}' holds a value out of range", l.name)));
+            }
+        }
+        for c in &self.cameras {
+            let v = c.position.iter().chain(&c.forward).chain(&c.up).chain([&c.yfov]).chain(c.aspect.as_ref());
+            if v.clone().any(|x| !x.is_finite()) || !(c.yfov > 0.0 && c.yfov < std::f32::consts::PI) {
+                return Err(corrupt(format!("camera '{}' holds a value that is not finite or out of range", c.name)));
+            }
+            let len2 = |v: [f32; 3]| v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>();
+            if len2(c.forward) == 0.0 || len2(c.up) == 0.0 {
+                return Err(corrupt(format!("camera '{}' has a zero direction", c.name)));
+            }
+            if c.aspect.is_some_and(|a| a <= 0.0) {
+                return Err(corrupt(format!("camera '{}' has a non-positive aspect ratio", c.name)));
+            }
+        }
+        for (i, e) in self.effects.iter().enumerate() {
+            if self.effects[..i].iter().any(|f| f.effect == e.effect) {
+                return Err(corrupt(format!("effect {} listed twice", e.effect.name())));
+            }
+        }
+        Ok(())
+    }
+}

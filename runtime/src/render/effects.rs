@@ -1,0 +1,596 @@
+//! The effects renderer: a Whitted-style integrator that runs only the passes the
+//! scene's effect set (decided at bake) enables, ray kind by ray kind.
+//!
+//! It works in waves: all rays of a wave are traced together (the CPU's batch walk, or
+//! one GPU dispatch), their hits shaded, and what the shading asks for — shadow rays,
+//! reflection, refraction, rays continuing through cut-out surfaces — traced as the
+//! next waves. An effect that is absent or turned off never creates a ray of its kind,
+//! and [`RayCounts`] shows it.
+
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use glam::Vec3;
+use octrace_format::{Effect, Material, SceneView, Shading, VISIBLE_WEIGHT};
+use rayon::prelude::*;
+
+use super::lighting::{self, Emitters, PLAIN};
+use super::Image;
+use crate::raysets::Camera;
+use crate::scene::Scene;
+use crate::spawn::spawn;
+use crate::{Hit, Ray};
+
+/// A set of [`Effect`]s.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct EffectSet(u8);
+
+impl EffectSet {
+    /// No effect: primary rays only.
+    pub const NONE: EffectSet = EffectSet(0);
+
+    /// The effects a scene calls for.
+    pub fn of(shading: &Shading) -> EffectSet {
+        shading.effects.iter().fold(EffectSet::NONE, |s, e| s.with(e.effect))
+    }
+
+    /// Whether `effect` is in the set.
+    pub fn contains(self, effect: Effect) -> bool {
+        self.0 & bit(effect) != 0
+    }
+
+    /// The set with `effect` added.
+    #[must_use]
+    pub fn with(self, effect: Effect) -> EffectSet {
+        EffectSet(self.0 | bit(effect))
+    }
+
+    /// The set without `effect`.
+    #[must_use]
+    pub fn without(self, effect: Effect) -> EffectSet {
+        EffectSet(self.0 & !bit(effect))
+    }
+
+    /// The effects in the set, in [`Effect::ALL`] order.
+    pub fn iter(self) -> impl Iterator<Item = Effect> {
+        Effect::ALL.into_iter().filter(move |&e| self.contains(e))
+    }
+}
+
+fn bit(effect: Effect) -> u8 {
+    1 << Effect::ALL.iter().position(|&e| e == effect).unwrap_or(0)
+}
+
+/// The kinds of rays the renderer traces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RayKind {
+    /// Camera rays.
+    Primary,
+    /// Shadow rays towards punctual lights, or towards the centre of an area light when
+    /// soft shadows are off.
+    Shadow,
+    /// Shadow rays towards sampled points of area lights.
+    SoftShadow,
+    /// Mirror reflection rays (and glass's Fresnel reflection).
+    Reflection,
+    /// Refraction rays.
+    Refraction,
+    /// Rays that continue through a cut-out or blended surface.
+    Alpha,
+}
+
+impl RayKind {
+    /// Every kind, in counter order.
+    pub const ALL: [RayKind; 6] = [
+        RayKind::Primary,
+        RayKind::Shadow,
+        RayKind::SoftShadow,
+        RayKind::Reflection,
+        RayKind::Refraction,
+        RayKind::Alpha,
+    ];
+
+    /// The kind's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            RayKind::Primary => "primary",
+            RayKind::Shadow => "shadow",
+            RayKind::SoftShadow => "soft_shadow",
+            RayKind::Reflection => "reflection",
+            RayKind::Refraction => "refraction",
+            RayKind::Alpha => "alpha",
+        }
+    }
+}
+
+/// Rays traced, per kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts([u64; 6]);
+
+impl RayCounts {
+    /// Rays of `kind`.
+    pub fn get(&self, kind: RayKind) -> u64 {
+        self.0[kind as usize]
+    }
+
+    /// Rays of every kind together.
+    pub fn total(&self) -> u64 {
+        self.0.iter().sum()
+    }
+
+    fn add(&mut self, kind: RayKind, n: u64) {
+        self.0[kind as usize] += n;
+    }
+
+    fn merge(mut self, other: RayCounts) -> RayCounts {
+        for (a, b) in self.0.iter_mut().zip(other.0) {
+            *a += b;
+        }
+        self
+    }
+}
+
+/// How to render with effects.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// The effects to simulate: the scene's set, less any turned off. Effects the scene
+    /// does not call for have nothing to act on.
+    pub effects: EffectSet,
+    /// Secondary rays (reflection, refraction, alpha) a path may take before it stops.
+    pub max_depth: u32,
+    /// Shadow rays towards area lights per shading point (per pixel for the surfaces
+    /// the camera sees).
+    pub soft_samples: u32,
+}
+
+impl RenderOptions {
+    /// Every effect the scene calls for, depth 6, 16 soft-shadow samples.
+    pub fn for_scene(shading: &Shading) -> RenderOptions {
+        RenderOptions { effects: EffectSet::of(shading), max_depth: 6, soft_samples: 16 }
+    }
+}
+
+/// A linear-light image: radiance per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Radiance {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB radiance, row by row from the top.
+    pub pixels: Vec<Vec3>,
+}
+
+impl Radiance {
+    /// The radiance of pixel `(x, y)`.
+    pub fn at(&self, x: u32, y: u32) -> Vec3 {
+        self.pixels[(y * self.width + x) as usize]
+    }
+
+    /// An 8-bit sRGB image: each channel clamped to `[0, 1]` and encoded with the sRGB
+    /// transfer function.
+    pub fn to_image(&self) -> Image {
+        let encode = |x: f32| {
+            let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+            let s = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+            (s * 255.0 + 0.5) as u8
+        };
+        let rgb = self.pixels.iter().flat_map(|p| p.to_array().map(encode)).collect();
+        Image { width: self.width, height: self.height, rgb }
+    }
+}
+
+/// What lights the scene: its punctual lights and emissive triangles, or, when it has
+/// neither, a headlight at the camera that casts no shadows.
+struct Context<'a> {
+    view: SceneView<'a>,
+    camera: &'a Camera,
+    options: RenderOptions,
+    emitters: Emitters,
+    headlight: bool,
+}
+
+/// Colour of rays that leave the scene.
+const BACKGROUND: Vec3 = Vec3::new(0.08, 0.08, 0.1);
+/// Ambient and direct parts of the headlight (the `shaded` look of scenes without lights).
+const HEADLIGHT: (f32, f32) = (0.1, 0.85);
+/// Shadow rays towards area lights stop this far short of the light (a fraction of
+/// the distance), so they do not find the emitter itself.
+const AREA_SHADOW_END: f32 = 1.0 - 1e-3;
+/// Alpha layers a shadow ray may pass through before it counts as blocked.
+const MAX_SHADOW_LAYERS: u32 = 16;
+
+/// A ray of a wave and what it carries to its pixel.
+struct Task {
+    ray: Ray,
+    pixel: u32,
+    weight: Vec3,
+    depth: u32,
+    kind: RayKind,
+}
+
+/// A shadow ray: `value` reaches its pixel if nothing blocks it.
+struct ShadowTask {
+    ray: Ray,
+    pixel: u32,
+    value: Vec3,
+    kind: RayKind,
+    layers: u32,
+}
+
+/// Traces waves of rays: the CPU tracer or the GPU.
+trait Backend {
+    type Error;
+    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error>;
+    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error>;
+}
+
+impl Backend for crate::Tracer<'_> {
+    type Error = std::convert::Infallible;
+
+    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error> {
+        let mut out = vec![None; rays.len()];
+        self.intersect_batch(rays, &mut out);
+        Ok(out)
+    }
+
+    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error> {
+        let mut out = vec![false; rays.len()];
+        self.occluded_batch(rays, &mut out);
+        Ok(out)
+    }
+}
+
+#[cfg(feature = "gpu")]
+impl Backend for crate::gpu::GpuTracer {
+    type Error = crate::gpu::GpuError;
+
+    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error> {
+        crate::gpu::GpuTracer::intersect(self, rays)
+    }
+
+    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error> {
+        crate::gpu::GpuTracer::occluded(self, rays)
+    }
+}
+
+/// Rows a CPU work item renders.
+const TILE_ROWS: u32 = 8;
+
+/// Renders `scene` through `camera` with the effects of `options`, on all cores,
+/// calling `progress` with the number of rows done as rows complete.
+///
+/// The image depends on the scene, camera and options only (not on the thread count).
+///
+/// # Example
+/// ```
+/// use octrace_runtime::raysets::{Camera, Frame};
+/// use octrace_runtime::render::effects::{render_effects, RayKind, RenderOptions};
+/// let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 8, 12);
+/// let scene = octrace_runtime::Scene::from_baked(octrace_bake::bake(&mesh, &Default::default())?)?;
+/// let b = scene.view().bounds;
+/// let camera = Camera::standard_sized(&Frame::from_bounds(b.mesh_lo, b.mesh_hi), 32, 32);
+/// let options = RenderOptions::for_scene(scene.shading());
+/// let (radiance, counts) = render_effects(&scene, &camera, &options, &|_| {});
+/// assert_eq!(counts.get(RayKind::Primary), 32 * 32);
+/// assert_eq!(counts.get(RayKind::Shadow), 0); // no lights: a headlight, no shadow rays
+/// radiance.to_image();
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn render_effects(
+    scene: &Scene,
+    camera: &Camera,
+    options: &RenderOptions,
+    progress: &(dyn Fn(u32) + Sync),
+) -> (Radiance, RayCounts) {
+    let ctx = Context::new(scene.view(), camera, options);
+    let tracer = scene.tracer();
+    let rows_done = AtomicU32::new(0);
+    let tiles: Vec<(Vec<Vec3>, RayCounts)> = (0..camera.height.div_ceil(TILE_ROWS))
+        .into_par_iter()
+        .map(|tile| {
+            let rows = tile * TILE_ROWS..((tile + 1) * TILE_ROWS).min(camera.height);
+            let n = rows.len() as u32;
+            let pixels = rows.start * camera.width..rows.end * camera.width;
+            let Ok(out) = ctx.run(&tracer, pixels);
+            progress(rows_done.fetch_add(n, Ordering::Relaxed) + n);
+            out
+        })
+        .collect();
+    let mut counts = RayCounts::default();
+    let mut pixels = Vec::with_capacity((camera.width * camera.height) as usize);
+    for (p, c) in tiles {
+        pixels.extend(p);
+        counts = counts.merge(c);
+    }
+    (Radiance { width: camera.width, height: camera.height, pixels }, counts)
+}
+
+/// [`render_effects`] with every wave traced on the GPU (the whole image a wave):
+/// the same image, up to the last bits of hit distances.
+///
+/// # Errors
+/// The GPU's errors.
+#[cfg(feature = "gpu")]
+pub fn render_effects_gpu(
+    scene: &Scene,
+    gpu: &crate::gpu::GpuTracer,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> crate::gpu::GpuResult<(Radiance, RayCounts)> {
+    let ctx = Context::new(scene.view(), camera, options);
+    let (pixels, counts) = ctx.run(gpu, 0..camera.width * camera.height)?;
+    Ok((Radiance { width: camera.width, height: camera.height, pixels }, counts))
+}
+
+impl<'a> Context<'a> {
+    fn new(view: SceneView<'a>, camera: &'a Camera, options: &RenderOptions) -> Context<'a> {
+        let emitters = Emitters::of(&view);
+        let headlight = view.shading.lights.is_empty() && emitters.is_empty();
+        Context { view, camera, options: *options, emitters, headlight }
+    }
+
+    fn has(&self, effect: Effect) -> bool {
+        self.options.effects.contains(effect)
+    }
+
+    /// Renders pixels `pixels` (row-major indices) wave by wave.
+    fn run<B: Backend>(&self, backend: &B, pixels: std::ops::Range<u32>) -> Result<(Vec<Vec3>, RayCounts), B::Error> {
+        let first = pixels.start;
+        let mut out = vec![Vec3::ZERO; pixels.len()];
+        let mut counts = RayCounts::default();
+        let w = self.camera.width;
+        let mut wave: Vec<Task> = pixels
+            .map(|p| Task {
+                ray: self.camera.ray(p % w, p / w),
+                pixel: p,
+                weight: Vec3::ONE,
+                depth: 0,
+                kind: RayKind::Primary,
+            })
+            .collect();
+        while !wave.is_empty() {
+            for t in &wave {
+                counts.add(t.kind, 1);
+            }
+            let rays: Vec<Ray> = wave.iter().map(|t| t.ray).collect();
+            let hits = backend.intersect(&rays)?;
+            let (mut next, mut shadows) = (Vec::new(), Vec::new());
+            for (task, hit) in wave.iter().zip(hits) {
+                let radiance = match hit {
+                    None => task.weight * BACKGROUND,
+                    Some(hit) => self.shade(task, &hit, &mut next, &mut shadows),
+                };
+                out[(task.pixel - first) as usize] += radiance;
+            }
+            self.trace_shadows(backend, shadows, &mut out, first, &mut counts)?;
+            wave = next;
+        }
+        Ok((out, counts))
+    }
+
+    /// Traces shadow rays and adds the light of those that get through. With the alpha
+    /// or refraction effects, a shadow ray that meets a cut-out, blended or
+    /// transmissive surface goes on past it, dimmed by what the surface lets through.
+    fn trace_shadows<B: Backend>(
+        &self,
+        backend: &B,
+        mut shadows: Vec<ShadowTask>,
+        out: &mut [Vec3],
+        first: u32,
+        counts: &mut RayCounts,
+    ) -> Result<(), B::Error> {
+        while !shadows.is_empty() {
+            for s in &shadows {
+                counts.add(s.kind, 1);
+            }
+            let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
+            if !self.has(Effect::Alpha) && !self.has(Effect::Refraction) {
+                for (s, blocked) in shadows.iter().zip(backend.occluded(&rays)?) {
+                    if !blocked {
+                        out[(s.pixel - first) as usize] += s.value;
+                    }
+                }
+                return Ok(());
+            }
+            let mut next = Vec::new();
+            for (s, hit) in shadows.iter().zip(backend.intersect(&rays)?) {
+                let Some(hit) = hit else {
+                    out[(s.pixel - first) as usize] += s.value;
+                    continue;
+                };
+                let pass = self.shadow_pass(self.material(hit.prim));
+                if pass.max_element() > 0.0 && s.layers < MAX_SHADOW_LAYERS {
+                    let tri = self.view.triangle(hit.prim);
+                    let ray = spawn(&tri, &hit, s.ray.dir, s.ray.tmax - hit.t);
+                    next.push(ShadowTask { ray, value: s.value * pass, layers: s.layers + 1, ..*s });
+                }
+            }
+            shadows = next;
+        }
+        Ok(())
+    }
+
+    /// What a shadow ray keeps of its light past a surface of `m`: what the alpha
+    /// coverage leaves, and what a transmissive material lets through.
+    fn shadow_pass(&self, m: &Material) -> Vec3 {
+        let coverage = if self.has(Effect::Alpha) { m.coverage() } else { 1.0 };
+        let transmitted = if self.has(Effect::Refraction) { lighting::shadow_transmittance(m) } else { Vec3::ZERO };
+        Vec3::splat(1.0 - coverage) + coverage * transmitted
+    }
+
+    fn material(&self, prim: u32) -> &'a Material {
+        self.view.material(prim).unwrap_or(&PLAIN)
+    }
+
+    /// The light `task` receives from its hit that needs no further ray, and the rays
+    /// that bring the rest.
+    fn shade(&self, task: &Task, hit: &Hit, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) -> Vec3 {
+        let tri = self.view.triangle(hit.prim);
+        let m = self.material(hit.prim);
+        let dir = task.ray.dir.normalize();
+        let [a, b, c] = tri.map(Vec3::from);
+        let mut ng = (b - a).cross(c - a).normalize_or_zero();
+        let entering = ng.dot(dir) < 0.0;
+        if !entering {
+            ng = -ng;
+        }
+        let n = self.shading_normal(hit, ng);
+        let can_continue = task.depth < self.options.max_depth;
+        let coverage = if self.has(Effect::Alpha) { m.coverage() } else { 1.0 };
+        if coverage < 1.0 && can_continue {
+            next.push(Task {
+                ray: spawn(&tri, hit, task.ray.dir, f32::INFINITY),
+                weight: task.weight * (1.0 - coverage),
+                depth: task.depth + 1,
+                kind: RayKind::Alpha,
+                ..*task
+            });
+        }
+        if coverage <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let weight = task.weight * coverage;
+        let v = -dir;
+        let transmits = self.has(Effect::Refraction) && m.transmission > 0.0;
+        let mut radiance = weight * Vec3::from(m.emissive);
+        if self.headlight {
+            let (ambient, direct) = HEADLIGHT;
+            radiance += weight * lighting::albedo(m, transmits) * (ambient + direct * n.dot(v).abs());
+        } else {
+            let mut light = |to: Vec3, tmax: f32, incident: Vec3, kind: RayKind| {
+                let l = to.normalize_or_zero();
+                let cos = n.dot(l);
+                if cos <= 0.0 || ng.dot(l) <= 0.0 {
+                    return;
+                }
+                let value = weight * lighting::reflectance(m, transmits, n, v, l) * incident * cos;
+                if value.max_element() <= 0.0 {
+                    return;
+                }
+                if self.has(Effect::Shadows) {
+                    let ray = spawn(&tri, hit, to, tmax);
+                    shadows.push(ShadowTask { ray, pixel: task.pixel, value, kind, layers: 0 });
+                } else {
+                    radiance += value;
+                }
+            };
+            let p = crate::spawn::hit_point(&tri, hit).0;
+            for l in &self.view.shading.lights {
+                if let Some((to, tmax, incident)) = lighting::punctual(l, p) {
+                    light(to, tmax, incident, RayKind::Shadow);
+                }
+            }
+            if !self.emitters.is_empty() {
+                self.sample_area_lights(task, p, &mut light);
+            }
+        }
+        if can_continue {
+            self.secondary(task, hit, &tri, m, (n, ng, dir), entering, weight, next);
+        }
+        radiance
+    }
+
+    /// Light from emissive triangles: `soft_samples` points spread over them by area
+    /// with soft shadows, else the centre of one (hard shadows).
+    fn sample_area_lights(&self, task: &Task, p: Vec3, light: &mut impl FnMut(Vec3, f32, Vec3, RayKind)) {
+        let soft = self.has(Effect::SoftShadows);
+        let samples = if soft { self.options.soft_samples.max(1) } else { 1 };
+        let scale = self.emitters.area() / samples as f32;
+        for s in 0..samples {
+            let (pick, _) = lighting::uniform2(task.pixel, task.depth, 2 * s);
+            let (prim, emitted) = self.emitters.pick(pick);
+            let tri = self.view.triangle(prim);
+            let [a, b, c] = tri.map(Vec3::from);
+            let y = if soft {
+                let (u, v) = lighting::uniform2(task.pixel, task.depth, 2 * s + 1);
+                lighting::point_on(&tri, u, v)
+            } else {
+                (a + b + c) / 3.0
+            };
+            let to = y - p;
+            let d2 = to.length_squared();
+            let ny = (b - a).cross(c - a).normalize_or_zero();
+            let cos_y = ny.dot(to).abs() / d2.sqrt();
+            if d2 > 0.0 && cos_y > 0.0 {
+                let kind = if soft { RayKind::SoftShadow } else { RayKind::Shadow };
+                light(to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
+            }
+        }
+    }
+
+    /// Reflection and refraction rays from a hit.
+    #[allow(clippy::too_many_arguments)]
+    fn secondary(
+        &self,
+        task: &Task,
+        hit: &Hit,
+        tri: &[[f32; 3]; 3],
+        m: &Material,
+        (n, ng, dir): (Vec3, Vec3, Vec3),
+        entering: bool,
+        weight: Vec3,
+        next: &mut Vec<Task>,
+    ) {
+        let mut push = |d: Vec3, w: Vec3, kind: RayKind| {
+            if w.max_element() >= VISIBLE_WEIGHT {
+                let ray = spawn(tri, hit, d, f32::INFINITY);
+                next.push(Task { ray, pixel: task.pixel, weight: w, depth: task.depth + 1, kind });
+            }
+        };
+        // A direction on the wrong side of the surface (a shading normal far from the
+        // geometric one) is mirrored about the geometric normal instead.
+        let reflect = |d: Vec3| {
+            let r = d - 2.0 * d.dot(n) * n;
+            if r.dot(ng) > 0.0 {
+                r
+            } else {
+                d - 2.0 * d.dot(ng) * ng
+            }
+        };
+        let reflects = self.has(Effect::Reflection);
+        if self.has(Effect::Refraction) && m.transmission > 0.0 {
+            let t = m.transmission.clamp(0.0, 1.0);
+            let eta = if entering { 1.0 / m.ior } else { m.ior };
+            let cos_i = -dir.dot(n);
+            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+            if k < 0.0 {
+                // Total internal reflection.
+                if reflects {
+                    push(reflect(dir), weight * t, RayKind::Reflection);
+                }
+            } else {
+                let cos_t = k.sqrt();
+                let fresnel = lighting::fresnel(cos_i, cos_t, eta);
+                let refracted = eta * dir + (eta * cos_i - cos_t) * n;
+                if refracted.dot(ng) < 0.0 {
+                    push(refracted, weight * t * (1.0 - fresnel) * lighting::base(m), RayKind::Refraction);
+                }
+                if reflects {
+                    push(reflect(dir), weight * t * fresnel, RayKind::Reflection);
+                }
+            }
+        }
+        if reflects {
+            let mirror = Vec3::from(m.mirror());
+            if mirror.max_element() >= VISIBLE_WEIGHT {
+                push(reflect(dir), weight * mirror, RayKind::Reflection);
+            }
+        }
+    }
+
+    /// The interpolated shading normal on the side of `ng`, or `ng` when the scene has
+    /// no normals (or they are degenerate there).
+    fn shading_normal(&self, hit: &Hit, ng: Vec3) -> Vec3 {
+        let Some(corners) = self.view.corner_normals(hit.prim) else { return ng };
+        let [n0, n1, n2] = corners.map(Vec3::from);
+        let n = (n0 * (1.0 - hit.u - hit.v) + n1 * hit.u + n2 * hit.v).normalize_or_zero();
+        if !n.is_finite() || n == Vec3::ZERO {
+            return ng;
+        }
+        if n.dot(ng) < 0.0 {
+            -n
+        } else {
+            n
+        }
+    }
+}

@@ -1,0 +1,180 @@
+//! Local shading for the effects renderer: the reflectance model, punctual lights,
+//! area lights (emissive triangles) and the renderer's random numbers.
+
+use std::f32::consts::PI;
+
+use glam::Vec3;
+use octrace_format::{Light, LightKind, Material, SceneView, DIELECTRIC_F0};
+
+/// The material of a triangle with none (a mesh without materials): white, diffuse.
+pub(super) static PLAIN: Material = Material {
+    name: String::new(),
+    base_color: [1.0; 4],
+    metallic: 0.0,
+    roughness: 1.0,
+    emissive: [0.0; 3],
+    alpha_mode: octrace_format::AlphaMode::Opaque,
+    alpha_cutoff: 0.5,
+    transmission: 0.0,
+    ior: 1.5,
+    specular: [0.0; 3],
+    illum: None,
+};
+
+/// The base colour of a material, without alpha.
+pub(super) fn base(m: &Material) -> Vec3 {
+    Vec3::new(m.base_color[0], m.base_color[1], m.base_color[2]).clamp(Vec3::ZERO, Vec3::ONE)
+}
+
+/// The diffuse albedo of `m`: its base colour, less what a smooth metal reflects as a
+/// mirror (`metallic * (1 - roughness)^2`: a rough metal scatters its colour like a
+/// diffuse surface, a polished one only mirrors) and less what it transmits.
+pub(super) fn albedo(m: &Material, transmits: bool) -> Vec3 {
+    let gloss = (1.0 - m.roughness.clamp(0.0, 1.0)).powi(2);
+    let metal = if m.illum.is_some() { 0.0 } else { m.metallic.clamp(0.0, 1.0) * gloss };
+    let transmission = if transmits { m.transmission.clamp(0.0, 1.0) } else { 0.0 };
+    base(m) * (1.0 - metal) * (1.0 - transmission)
+}
+
+/// Fresnel reflectance of a dielectric interface for unpolarised light: `cos_i` the
+/// cosine of incidence, `cos_t` of transmission, `eta` the ratio of the indices
+/// (incident over transmitted). Zero when the indices are equal.
+pub(super) fn fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    (0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
+}
+
+/// The fraction of light a transmissive material lets a shadow ray through (at normal
+/// incidence, ignoring the bending: Whitted's transparent shadows).
+pub(super) fn shadow_transmittance(m: &Material) -> Vec3 {
+    let f0 = ((1.0 - m.ior) / (1.0 + m.ior)).powi(2);
+    base(m) * m.transmission.clamp(0.0, 1.0) * (1.0 - f0)
+}
+
+/// The reflectance of `m` for light arriving along `l` and leaving along `v` (unit
+/// vectors, `n` the unit shading normal on their side): Lambert for the diffuse part
+/// ([`albedo`]) plus a normalised Blinn-Phong highlight (`(e + 8) / 8 pi`), Whitted's
+/// local model.
+///
+/// glTF materials: the highlight's colour is the metallic-roughness `F0` scaled by
+/// `(1 - roughness)^2`, its exponent `2 / roughness^4 - 2`. MTL materials: `Ks` and
+/// `Ns` (`illum` 2 and up).
+pub(super) fn reflectance(m: &Material, transmits: bool, n: Vec3, v: Vec3, l: Vec3) -> Vec3 {
+    let kd = albedo(m, transmits);
+    let (ks, e) = highlight(m);
+    let h = (v + l).normalize_or_zero();
+    let spec = if ks == Vec3::ZERO { Vec3::ZERO } else { ks * (e + 8.0) / (8.0 * PI) * n.dot(h).max(0.0).powf(e) };
+    kd / PI + spec
+}
+
+/// Colour and exponent of a material's highlight.
+fn highlight(m: &Material) -> (Vec3, f32) {
+    let r = m.roughness.clamp(0.0, 1.0);
+    let exponent = |alpha: f32| (2.0 / alpha.max(1e-2).powi(2) - 2.0).clamp(1.0, 1e4);
+    match m.illum {
+        Some(illum) if illum >= 2 => (Vec3::from(m.specular).clamp(Vec3::ZERO, Vec3::ONE), exponent(r)),
+        Some(_) => (Vec3::ZERO, 1.0),
+        None => {
+            let f0 = Vec3::splat(DIELECTRIC_F0).lerp(base(m), m.metallic.clamp(0.0, 1.0));
+            (f0 * (1.0 - r).powi(2), exponent(r * r))
+        }
+    }
+}
+
+/// What a punctual light sends towards point `p`: the unnormalised direction to it
+/// (from `p`; the light at `t = 1`, or at infinity), the farthest `t` a shadow ray
+/// should look, and the incident radiance (glTF's units: candela over distance
+/// squared, lux for directional lights; the spec's range window and spot falloff).
+pub(super) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
+    let colour = Vec3::from(light.color) * light.intensity;
+    if light.kind == LightKind::Directional {
+        return Some((-Vec3::from(light.direction), f32::INFINITY, colour));
+    }
+    let to_light = Vec3::from(light.position) - p;
+    let d2 = to_light.length_squared();
+    if d2 == 0.0 || !d2.is_finite() {
+        return None;
+    }
+    let d = d2.sqrt();
+    // glTF's recommended window: (1 - (d / range)^4)^2, clamped.
+    let window = if light.range.is_finite() { (1.0 - (d / light.range).powi(4)).clamp(0.0, 1.0).powi(2) } else { 1.0 };
+    let mut falloff = window / d2;
+    if light.kind == LightKind::Spot {
+        let cos = Vec3::from(light.direction).dot(-to_light / d);
+        let (cos_outer, cos_inner) = (light.outer_cone.cos(), light.inner_cone.cos());
+        let x = ((cos - cos_outer) / (cos_inner - cos_outer).max(1e-4)).clamp(0.0, 1.0);
+        falloff *= x * x;
+    }
+    (falloff > 0.0).then_some((to_light, 1.0, colour * falloff))
+}
+
+/// The scene's emissive triangles, chosen by area for sampling.
+pub(super) struct Emitters {
+    /// Stored triangle index and emitted radiance of each emitter.
+    triangles: Vec<(u32, Vec3)>,
+    /// Running sum of the areas, ending at the total.
+    cumulative: Vec<f64>,
+}
+
+impl Emitters {
+    /// The emissive triangles of `view` (triangles whose material emits).
+    pub(super) fn of(view: &SceneView<'_>) -> Emitters {
+        let mut triangles = Vec::new();
+        let mut cumulative = Vec::new();
+        let mut total = 0.0f64;
+        for prim in 0..view.triangle_count() as u32 {
+            let Some(m) = view.material(prim).filter(|m| m.is_emissive()) else { continue };
+            let area = area(&view.triangle(prim));
+            if area > 0.0 {
+                total += area as f64;
+                triangles.push((prim, Vec3::from(m.emissive)));
+                cumulative.push(total);
+            }
+        }
+        Emitters { triangles, cumulative }
+    }
+
+    /// Whether the scene has area lights.
+    pub(super) fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Total emitting area.
+    pub(super) fn area(&self) -> f32 {
+        self.cumulative.last().copied().unwrap_or(0.0) as f32
+    }
+
+    /// The emitter that `u` in `[0, 1)` falls on when the emitters are laid end to
+    /// end by area: its triangle and radiance.
+    pub(super) fn pick(&self, u: f32) -> (u32, Vec3) {
+        let target = u as f64 * self.cumulative.last().copied().unwrap_or(0.0);
+        let i = self.cumulative.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
+        self.triangles[i]
+    }
+}
+
+/// A triangle's area.
+pub(super) fn area(t: &[[f32; 3]; 3]) -> f32 {
+    let [a, b, c] = t.map(Vec3::from);
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// A point of triangle `t`, uniform in area, from two uniform numbers.
+pub(super) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> Vec3 {
+    let [a, b, c] = t.map(Vec3::from);
+    let s = u.sqrt();
+    a * (1.0 - s) + b * (s * (1.0 - v)) + c * (s * v)
+}
+
+/// Uniform numbers in `[0, 1)` that depend only on their inputs (SplitMix64), so an
+/// image does not depend on the thread count or the order pixels are done in.
+pub(super) fn uniform2(pixel: u32, depth: u32, sample: u32) -> (f32, f32) {
+    let mut z =
+        (u64::from(pixel) << 32 | u64::from(depth) << 16 | u64::from(sample)).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    let unit = |bits: u64| (bits >> 40) as f32 / (1u64 << 24) as f32;
+    (unit(z), unit(z << 24))
+}
