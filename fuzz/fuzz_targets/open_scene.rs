@@ -1,5 +1,6 @@
 //! Opening a baked file from arbitrary bytes on the validated path never panics,
-//! hangs or reads out of bounds; whatever opens is traced.
+//! hangs or reads out of bounds; whatever opens is traced, and rendered small with
+//! every effect its shading data calls for.
 //!
 //! The first byte picks how the rest is used: odd, as a whole file; even, as an archive
 //! wrapped in a correct header (so mutations get past the checksums to bytecheck and
@@ -34,4 +35,12 @@ fuzz_target!(|data: &[u8]| {
             let _ = t.occluded(&r);
         }
     }
+    let frame = octrace_runtime::raysets::Frame::from_bounds(b.mesh_lo, b.mesh_hi);
+    let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 6, 4);
+    let options = octrace_runtime::render::effects::RenderOptions {
+        soft_samples: 2,
+        max_depth: 3,
+        ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
+    };
+    let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {}).0.to_image();
 });

@@ -22,6 +22,9 @@ pub(crate) struct Args {
     /// with every effect (mirror, glass, blended pane, area light, hard and soft shadows).
     #[arg(long, value_enum, default_value_t = DemoScene::Bunny)]
     pub scene: DemoScene,
+    /// Also keep the baked scene there (to render it again with other options).
+    #[arg(long)]
+    pub save_scene: Option<std::path::PathBuf>,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,20 +35,37 @@ pub(crate) enum DemoScene {
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     match args.scene {
-        DemoScene::Bunny => bunny(&args.output.unwrap_or_else(|| "demo.png".into())),
-        DemoScene::Effects => effects(&args.output.unwrap_or_else(|| "effects.png".into())),
+        DemoScene::Bunny => bunny(&args.output.unwrap_or_else(|| "demo.png".into()), args.save_scene.as_deref()),
+        DemoScene::Effects => effects(&args.output.unwrap_or_else(|| "effects.png".into()), args.save_scene.as_deref()),
     }
 }
 
+/// Writes the baked scene where `--save-scene` says, else into a temporary folder
+/// (which the returned guard removes).
+fn write_scene(
+    scene: &octrace_format::BakedScene,
+    name: &str,
+    save: Option<&std::path::Path>,
+    bake_us: u64,
+) -> anyhow::Result<(std::path::PathBuf, u64, Option<tempfile::TempDir>)> {
+    let (path, dir) = match save {
+        Some(p) => (p.to_path_buf(), None),
+        None => {
+            let dir = tempfile::tempdir()?;
+            (dir.path().join(name), Some(dir))
+        }
+    };
+    let bytes = scene.write(&path, bake_us)?;
+    Ok((path, bytes, dir))
+}
+
 /// Bakes the effects scene, lists its effects, renders it with all of them.
-fn effects(output: &std::path::Path) -> anyhow::Result<()> {
+fn effects(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::Result<()> {
     let mesh = octrace_bake::procedural::effects_scene();
     let progress = super::bake::Progress::new();
     let (scene, bake_time) = super::bake::bake_mesh(&mesh, &BuildParams::auto(), &progress)?;
     progress.finish();
-    let dir = tempfile::tempdir()?;
-    let path = dir.path().join("effects.oct");
-    let bytes = scene.write(&path, bake_time.as_micros() as u64)?;
+    let (path, bytes, _dir) = write_scene(&scene, "effects.oct", save, bake_time.as_micros() as u64)?;
     let scene = crate::open::open_scene(&path)?;
     let report = super::inspect::Report::new(&scene.view(), scene.file().expect("from a file").header(), bytes)?;
     crate::out!("{}", report.text("effects.oct"));
@@ -79,15 +99,13 @@ fn effects(output: &std::path::Path) -> anyhow::Result<()> {
 }
 
 /// Bakes, inspects, renders and measures the bunny.
-fn bunny(output: &std::path::Path) -> anyhow::Result<()> {
+fn bunny(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::Result<()> {
     let obj = zstd::stream::decode_all(BUNNY)?;
     let mesh = Mesh::from_bytes(&obj, MeshFormat::Obj, "bunny.obj".as_ref(), None)?;
     let progress = super::bake::Progress::new();
     let (scene, bake_time) = super::bake::bake_mesh(&mesh, &BuildParams::auto(), &progress)?;
     progress.finish();
-    let dir = tempfile::tempdir()?;
-    let path = dir.path().join("bunny.oct");
-    let bytes = scene.write(&path, bake_time.as_micros() as u64)?;
+    let (path, bytes, _dir) = write_scene(&scene, "bunny.oct", save, bake_time.as_micros() as u64)?;
     crate::out!("baked the bunny in {:.2} s: {} -> {}", bake_time.as_secs_f64(), thousands(bytes), crate::show(&path));
     let scene = crate::open::open_scene(&path)?;
     let file = scene.file().expect("from a file");

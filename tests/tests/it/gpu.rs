@@ -164,3 +164,29 @@ fn inside_origins_and_untraceable_rays_match_the_cpu() {
     assert!(got.last().unwrap().is_some(), "an axis-parallel ray from outside hits the blob");
     assert!(cpu.iter().take(100_000).all(Option::is_some), "every inside ray of a closed blob hits it");
 }
+
+/// The effects renderer with every wave traced on the GPU gives the CPU's image: the
+/// same rays of every kind (up to the last bits of a few hit distances), the same
+/// pixels within a step of 8-bit colour.
+#[test]
+fn effects_render_on_the_gpu_matches_the_cpu() {
+    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    let Some(ctx) = gpu("effects_render_on_the_gpu_matches_the_cpu") else { return };
+    let mesh = octrace_bake::procedural::effects_scene();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let c = &scene.shading().cameras[0];
+    let eye = glam::DVec3::from(c.position.map(f64::from));
+    let camera = raysets::Camera::look_at(eye, eye + glam::DVec3::from(c.forward.map(f64::from)), 40.0, 96, 72);
+    let options = RenderOptions { soft_samples: 4, ..RenderOptions::for_scene(scene.shading()) };
+    let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let (g, gc) = render_effects_gpu(&scene, &tracer, &camera, &options).unwrap();
+    let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
+    assert_eq!(gc.get(RayKind::Primary), cc.get(RayKind::Primary));
+    for kind in RayKind::ALL {
+        let (a, b) = (cc.get(kind) as f64, gc.get(kind) as f64);
+        assert!(a > 0.0 && (a - b).abs() <= 1e-3 * a, "{}: cpu {a}, gpu {b}", kind.name());
+    }
+    let (a, b) = (cpu.to_image(), g.to_image());
+    let off = a.rgb.iter().zip(&b.rgb).filter(|(x, y)| x.abs_diff(**y) > 1).count();
+    assert!(off * 200 <= a.rgb.len(), "{off} of {} channels differ by more than 1", a.rgb.len());
+}

@@ -325,60 +325,11 @@ fn gltf_samples_load_with_their_materials() {
     }
 }
 
-/// A glTF with the extensions the renderer reads: lights, transmission, IOR, emissive
-/// strength, alpha modes, a camera; normals and texture coordinates.
-fn extensions_gltf() -> String {
-    let positions: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-    let normals: [[f32; 3]; 3] = [[0.0, 0.0, 1.0]; 3];
-    let uvs: [[f32; 2]; 3] = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
-    let mut buf: Vec<u8> = positions.iter().flatten().flat_map(|c| c.to_le_bytes()).collect();
-    buf.extend(normals.iter().flatten().flat_map(|c| c.to_le_bytes()));
-    buf.extend(uvs.iter().flatten().flat_map(|c| c.to_le_bytes()));
-    let b64 = octrace_tests::base64(&buf);
-    let prim = |material: usize| {
-        format!(r#"{{"attributes":{{"POSITION":0,"NORMAL":1,"TEXCOORD_0":2}},"material":{material}}}"#)
-    };
-    format!(
-        r#"{{"asset":{{"version":"2.0"}},
-        "extensionsUsed":["KHR_lights_punctual","KHR_materials_transmission","KHR_materials_ior","KHR_materials_emissive_strength"],
-        "extensions":{{"KHR_lights_punctual":{{"lights":[
-            {{"name":"sun","type":"directional","color":[1,0.9,0.8],"intensity":3}},
-            {{"name":"spot","type":"spot","intensity":50,"range":20,"spot":{{"innerConeAngle":0.2,"outerConeAngle":0.5}}}}]}}}},
-        "scene":0,"scenes":[{{"nodes":[0,1,2,3,4,5,6,7]}}],
-        "nodes":[{{"mesh":0}},{{"mesh":1,"translation":[2,0,0]}},{{"mesh":2,"translation":[4,0,0]}},
-                 {{"mesh":3,"translation":[6,0,0]}},{{"mesh":4,"translation":[8,0,0]}},
-                 {{"extensions":{{"KHR_lights_punctual":{{"light":0}}}},"rotation":[-0.7071068,0,0,0.7071068]}},
-                 {{"extensions":{{"KHR_lights_punctual":{{"light":1}}}},"translation":[0,5,0]}},
-                 {{"camera":0,"translation":[0,1,10]}}],
-        "cameras":[{{"name":"cam","type":"perspective","perspective":{{"yfov":0.8,"aspectRatio":1.5,"znear":0.1}}}}],
-        "materials":[
-            {{"name":"chrome","pbrMetallicRoughness":{{"metallicFactor":1,"roughnessFactor":0.05}}}},
-            {{"name":"glass","pbrMetallicRoughness":{{"metallicFactor":0,"roughnessFactor":0}},
-              "extensions":{{"KHR_materials_transmission":{{"transmissionFactor":0.9}},"KHR_materials_ior":{{"ior":1.33}}}}}},
-            {{"name":"neon","emissiveFactor":[1,0.5,0],"extensions":{{"KHR_materials_emissive_strength":{{"emissiveStrength":4}}}}}},
-            {{"name":"leaves","alphaMode":"MASK","alphaCutoff":0.6,"pbrMetallicRoughness":{{"baseColorFactor":[0,1,0,0.3]}}}},
-            {{"name":"smoke","alphaMode":"BLEND","pbrMetallicRoughness":{{"baseColorFactor":[1,1,1,0.5]}}}}],
-        "meshes":[{{"primitives":[{p0}]}},{{"primitives":[{p1}]}},{{"primitives":[{p2}]}},{{"primitives":[{p3}]}},{{"primitives":[{p4}]}}],
-        "buffers":[{{"byteLength":{len},"uri":"data:application/octet-stream;base64,{b64}"}}],
-        "bufferViews":[{{"buffer":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":36}},{{"buffer":0,"byteOffset":72,"byteLength":24}}],
-        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
-                     {{"bufferView":1,"componentType":5126,"count":3,"type":"VEC3"}},
-                     {{"bufferView":2,"componentType":5126,"count":3,"type":"VEC2"}}]}}"#,
-        p0 = prim(0),
-        p1 = prim(1),
-        p2 = prim(2),
-        p3 = prim(3),
-        p4 = prim(4),
-        len = buf.len(),
-    )
-}
-
 #[test]
 fn gltf_extensions_give_materials_lights_cameras_and_effects() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ext.gltf");
-    std::fs::write(&path, extensions_gltf()).unwrap();
-    let mesh = Mesh::load(&path).unwrap();
+    // tests/data/extensions.gltf: five triangles, one a material (chrome, glass, neon,
+    // leaves, smoke), a directional and a spot light, a camera, NORMAL and TEXCOORD_0.
+    let mesh = Mesh::load(data("extensions.gltf")).unwrap();
     assert_eq!(mesh.triangles.len(), 5);
     assert_eq!(mesh.material_ids, vec![0, 1, 2, 3, 4]);
     let names: Vec<&str> = mesh.materials.iter().map(|m| m.name.as_str()).collect();
