@@ -101,6 +101,19 @@ impl Camera {
         Camera { eye, u, s, w, tan_half_fov: (fov_deg / 2.0 * (std::f64::consts::PI / 180.0)).tan(), width, height }
     }
 
+    /// A camera of the scene file (`Shading::cameras`): its position, direction and up
+    /// vector, with a vertical field of view of `fov_deg` degrees (the file's is
+    /// `yfov`, in radians).
+    pub fn from_scene(c: &octrace_format::Camera, fov_deg: f64, width: u32, height: u32) -> Camera {
+        let eye = DVec3::from(c.position.map(f64::from));
+        let mut cam = Camera::look_at(eye, eye + DVec3::from(c.forward.map(f64::from)), fov_deg, width, height);
+        // The file's up vector, not the world's +y.
+        let up = DVec3::from(c.up.map(f64::from)).normalize();
+        cam.u = up.cross(cam.w).normalize();
+        cam.s = cam.w.cross(cam.u);
+        cam
+    }
+
     /// The standard camera of the `primary` set, 1024 x 1024: eye `c + 2.7 r v` with
     /// `v = normalize(0.35, 0.25, 1)`, looking at `c`, 45 degrees.
     pub fn standard(frame: &Frame) -> Camera {

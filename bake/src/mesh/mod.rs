@@ -102,12 +102,7 @@ impl Mesh {
 /// The unit normal of a triangle's plane (counter-clockwise winding), or zero for a
 /// degenerate one.
 pub fn face_normal(t: &[[f32; 3]; 3]) -> [f32; 3] {
-    let d = |i: usize, a: usize| t[i][a] as f64 - t[0][a] as f64;
-    let n = [
-        d(1, 1) * d(2, 2) - d(1, 2) * d(2, 1),
-        d(1, 2) * d(2, 0) - d(1, 0) * d(2, 2),
-        d(1, 0) * d(2, 1) - d(1, 1) * d(2, 0),
-    ];
+    let n = edge_cross(t);
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     if len > 0.0 && len.is_finite() {
         n.map(|c| (c / len) as f32)
@@ -214,4 +209,16 @@ fn decompress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
         ));
     }
     Ok(out)
+}
+
+/// The cross product of a triangle's edges from its first vertex, in `f64`: products
+/// of `f32` values are exact there, so it is zero exactly when the edges (each rounded
+/// once) are collinear.
+pub(crate) fn edge_cross(t: &[[f32; 3]; 3]) -> [f64; 3] {
+    let d = |i: usize, a: usize| t[i][a] as f64 - t[0][a] as f64;
+    [
+        d(1, 1) * d(2, 2) - d(1, 2) * d(2, 1),
+        d(1, 2) * d(2, 0) - d(1, 0) * d(2, 2),
+        d(1, 0) * d(2, 1) - d(1, 1) * d(2, 0),
+    ]
 }

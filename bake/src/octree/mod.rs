@@ -48,10 +48,7 @@ impl BakeStage {
 /// of `f32` values are exact in `f64`, so this is exact collinearity up to the single
 /// rounding of each difference.
 pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
-    let d = |i: usize, a: usize| t[i][a] as f64 - t[0][a] as f64;
-    let (e1, e2) = ([d(1, 0), d(1, 1), d(1, 2)], [d(2, 0), d(2, 1), d(2, 2)]);
-    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
-    n == [0.0; 3]
+    crate::mesh::edge_cross(t) == [0.0; 3]
 }
 
 /// The smallest root edge: `2^-100`, so that cells at the deepest level the format

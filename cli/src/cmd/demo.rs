@@ -70,14 +70,7 @@ fn effects(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::
     let report = super::inspect::Report::new(&scene.view(), scene.file().expect("from a file").header(), bytes)?;
     crate::out!("{}", report.text("effects.oct"));
     let c = &scene.shading().cameras[0];
-    let mut camera = Camera::look_at(
-        glam::DVec3::from(c.position.map(f64::from)),
-        glam::DVec3::from(c.position.map(f64::from)) + glam::DVec3::from(c.forward.map(f64::from)),
-        (c.yfov as f64).to_degrees(),
-        800,
-        600,
-    );
-    camera.width = 800;
+    let camera = Camera::from_scene(c, (c.yfov as f64).to_degrees(), 800, 600);
     let options = RenderOptions::for_scene(scene.shading());
     let bar = super::render::RowsBar::new(camera.height);
     let t = Instant::now();

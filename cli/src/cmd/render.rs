@@ -294,14 +294,7 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
             None => args.width,
         });
         let fov = args.fov.unwrap_or((c.yfov as f64).to_degrees());
-        let eye = DVec3::from(c.position.map(f64::from));
-        let target = eye + DVec3::from(c.forward.map(f64::from));
-        let mut cam = Camera::look_at(eye, target, fov, args.width, height);
-        // The file's up vector, not the world's +y.
-        let up = DVec3::from(c.up.map(f64::from)).normalize();
-        cam.u = up.cross(cam.w).normalize();
-        cam.s = cam.w.cross(cam.u);
-        return Ok(cam);
+        return Ok(Camera::from_scene(c, fov, args.width, height));
     }
     let height = args.height.unwrap_or(args.width);
     Ok(match (args.eye, args.target, args.fov) {

@@ -17,7 +17,7 @@ use super::lighting::{self, Emitters, PLAIN};
 use super::Image;
 use crate::raysets::Camera;
 use crate::scene::Scene;
-use crate::spawn::spawn;
+use crate::spawn::{face_normal, spawn, SpawnPoint};
 use crate::{Hit, Ray};
 
 /// A set of [`Effect`]s.
@@ -425,11 +425,11 @@ impl<'a> Context<'a> {
     /// The light `task` receives from its hit that needs no further ray, and the rays
     /// that bring the rest.
     fn shade(&self, task: &Task, hit: &Hit, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) -> Vec3 {
-        let tri = self.view.triangle(hit.prim);
+        // The hit point, normal and offset, once for every ray that leaves this hit.
+        let at = SpawnPoint::new(&self.view.triangle(hit.prim), hit);
         let m = self.material(hit.prim);
         let dir = task.ray.dir.normalize();
-        let [a, b, c] = tri.map(Vec3::from);
-        let mut ng = (b - a).cross(c - a).normalize_or_zero();
+        let mut ng = at.normal();
         let entering = ng.dot(dir) < 0.0;
         if !entering {
             ng = -ng;
@@ -439,7 +439,7 @@ impl<'a> Context<'a> {
         let coverage = if self.has(Effect::Alpha) { m.coverage() } else { 1.0 };
         if coverage < 1.0 && can_continue {
             next.push(Task {
-                ray: spawn(&tri, hit, task.ray.dir, f32::INFINITY),
+                ray: at.ray(task.ray.dir, f32::INFINITY),
                 weight: task.weight * (1.0 - coverage),
                 depth: task.depth + 1,
                 kind: RayKind::Alpha,
@@ -468,13 +468,13 @@ impl<'a> Context<'a> {
                     return;
                 }
                 if self.has(Effect::Shadows) {
-                    let ray = spawn(&tri, hit, to, tmax);
+                    let ray = at.ray(to, tmax);
                     shadows.push(ShadowTask { ray, pixel: task.pixel, value, kind, layers: 0 });
                 } else {
                     radiance += value;
                 }
             };
-            let p = crate::spawn::hit_point(&tri, hit).0;
+            let p = at.point();
             for l in &self.view.shading.lights {
                 if let Some((to, tmax, incident)) = lighting::punctual(l, p) {
                     light(to, tmax, incident, RayKind::Shadow);
@@ -485,7 +485,7 @@ impl<'a> Context<'a> {
             }
         }
         if can_continue {
-            self.secondary(task, hit, &tri, m, (n, ng, dir), entering, weight, next);
+            self.secondary(task, &at, m, (n, ng, dir), entering, weight, next);
         }
         radiance
     }
@@ -509,8 +509,7 @@ impl<'a> Context<'a> {
             };
             let to = y - p;
             let d2 = to.length_squared();
-            let ny = (b - a).cross(c - a).normalize_or_zero();
-            let cos_y = ny.dot(to).abs() / d2.sqrt();
+            let cos_y = face_normal(&tri).dot(to).abs() / d2.sqrt();
             if d2 > 0.0 && cos_y > 0.0 {
                 let kind = if soft { RayKind::SoftShadow } else { RayKind::Shadow };
                 light(to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
@@ -523,8 +522,7 @@ impl<'a> Context<'a> {
     fn secondary(
         &self,
         task: &Task,
-        hit: &Hit,
-        tri: &[[f32; 3]; 3],
+        at: &SpawnPoint,
         m: &Material,
         (n, ng, dir): (Vec3, Vec3, Vec3),
         entering: bool,
@@ -533,7 +531,7 @@ impl<'a> Context<'a> {
     ) {
         let mut push = |d: Vec3, w: Vec3, kind: RayKind| {
             if w.max_element() >= VISIBLE_WEIGHT {
-                let ray = spawn(tri, hit, d, f32::INFINITY);
+                let ray = at.ray(d, f32::INFINITY);
                 next.push(Task { ray, pixel: task.pixel, weight: w, depth: task.depth + 1, kind });
             }
         };

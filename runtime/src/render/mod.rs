@@ -128,8 +128,7 @@ fn compose(
         .map(|(i, (hit, stats))| {
             let ray = pixel_ray(camera, i as u32);
             let normal = hit.map(|hit| {
-                let t = view.triangle(hit.prim).map(Vec3::from);
-                let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+                let n = crate::spawn::face_normal(&view.triangle(hit.prim));
                 if n.dot(ray.dir) > 0.0 {
                     -n
                 } else {

@@ -174,9 +174,7 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     let Some(ctx) = gpu("effects_render_on_the_gpu_matches_the_cpu") else { return };
     let mesh = octrace_bake::procedural::effects_scene();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
-    let c = &scene.shading().cameras[0];
-    let eye = glam::DVec3::from(c.position.map(f64::from));
-    let camera = raysets::Camera::look_at(eye, eye + glam::DVec3::from(c.forward.map(f64::from)), 40.0, 96, 72);
+    let camera = raysets::Camera::from_scene(&scene.shading().cameras[0], 40.0, 96, 72);
     let options = RenderOptions { soft_samples: 4, ..RenderOptions::for_scene(scene.shading()) };
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
     let (g, gc) = render_effects_gpu(&scene, &tracer, &camera, &options).unwrap();
