@@ -70,7 +70,9 @@ pub(crate) struct Args {
     /// Print the summary and the rays per kind as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Trace on the GPU (Vulkan; Mesa's lavapipe without a GPU): the same image.
+    /// Render on the GPU (Vulkan; Mesa's lavapipe without a GPU): the same image. In
+    /// shaded mode, tracing and shading run in one kernel compiled for the effects in
+    /// play.
     #[arg(long)]
     pub gpu: bool,
 }
@@ -146,7 +148,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let gpu = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
-        eprintln!("tracing on {}", gpu.describe());
+        eprintln!("rendering on {}", gpu.describe());
         Some((gpu, tracer))
     } else {
         None

@@ -24,7 +24,11 @@
 //! # Ok(()) }
 //! ```
 
+mod render;
+
 use std::time::{Duration, Instant};
+
+pub use render::{GpuRenderer, MAX_GPU_DEPTH};
 
 use crate::ray::{Hit, Ray};
 use crate::Scene;
@@ -46,6 +50,9 @@ pub enum GpuError {
     /// The scene does not fit the adapter's limits.
     #[error("the scene does not fit this GPU: {0}")]
     TooLarge(String),
+    /// A request the GPU path does not serve.
+    #[error("not on the GPU: {0}")]
+    Unsupported(String),
 }
 
 /// The GPU result type.
@@ -231,7 +238,7 @@ impl GpuTracer {
         }
         let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
         let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
-        let source = shader_source(chunks as usize, chunk_words, f64_edges);
+        let source = shader_source(scene_buffers.len(), chunk_words, f64_edges);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("octrace trace"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -409,27 +416,82 @@ impl GpuTracer {
 
             let t = Instant::now();
             let bytes = (part.len() * std::mem::size_of::<HitOut>()) as u64;
-            let mut encoder = self.device.create_command_encoder(&Default::default());
-            encoder.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, bytes);
-            self.queue.submit([encoder.finish()]);
-            let slice = readback.slice(..bytes);
-            let (send, receive) = std::sync::mpsc::channel();
-            slice.map_async(wgpu::MapMode::Read, move |r| {
-                let _ = send.send(r);
-            });
-            self.wait()?;
-            receive
-                .recv()
-                .map_err(|e| GpuError::Device(e.to_string()))?
-                .map_err(|e| GpuError::Device(e.to_string()))?;
-            {
-                let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
-                out.extend_from_slice(bytemuck::cast_slice(&mapped));
-            }
-            readback.unmap();
+            out.extend(self.read_back_into::<HitOut>(&hit_buffer, &readback, bytes)?);
             timings.download += t.elapsed();
         }
         Ok((out, timings))
+    }
+
+    /// The kernel's source for this scene's bindings.
+    fn source(&self) -> String {
+        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges)
+    }
+
+    /// A bind group for the tracing layout with the scene's buffers (and empty rays
+    /// and hits: for kernels that trace rays of their own making).
+    fn scene_bind_group(&self) -> wgpu::BindGroup {
+        use wgpu::BufferUsages as U;
+        let buffer = |label, size, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let params = buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+        self.queue.write_buffer(&params, 0, bytemuck::bytes_of(&self.params));
+        let rays = buffer("octrace no rays", std::mem::size_of::<Ray>() as u64, U::STORAGE);
+        let hits = buffer("octrace no hits", std::mem::size_of::<HitOut>() as u64, U::STORAGE);
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: rays.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: hits.as_entire_binding() },
+        ];
+        for (k, b) in self.scene_buffers.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: 3 + k as u32, resource: b.as_entire_binding() });
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("octrace scene"),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+
+    /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
+    fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("octrace readback"),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        self.read_back_into(buffer, &readback, bytes)
+    }
+
+    /// The first `bytes` of `buffer`, through `readback` (a mappable buffer).
+    fn read_back_into<T: bytemuck::Pod>(
+        &self,
+        buffer: &wgpu::Buffer,
+        readback: &wgpu::Buffer,
+        bytes: u64,
+    ) -> GpuResult<Vec<T>> {
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, readback, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        let slice = readback.slice(..bytes);
+        let (send, receive) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = send.send(r);
+        });
+        self.wait()?;
+        receive.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
+        let out = {
+            let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
+            bytemuck::cast_slice(&mapped).to_vec()
+        };
+        readback.unmap();
+        Ok(out)
     }
 
     fn wait(&self) -> GpuResult<()> {
@@ -575,18 +637,24 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
 mod tests {
     use super::*;
 
-    /// The generated kernel parses and validates (naga, no device needed) for one
-    /// binding and for a split scene, with and without f64.
+    /// The generated kernels (tracing, and rendering on top of it) parse and validate
+    /// (naga, no device needed) for one binding and for a split scene, with and
+    /// without f64.
     #[test]
     fn the_kernel_source_is_valid_wgsl() {
         for (chunks, f64_edges) in [(1, false), (1, true), (3, false), (5, true)] {
-            let source = shader_source(chunks, 1 << 10, f64_edges);
-            let module =
-                naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)));
-            let caps = if f64_edges { naga::valid::Capabilities::FLOAT64 } else { naga::valid::Capabilities::empty() };
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps)
-                .validate(&module)
-                .unwrap_or_else(|e| panic!("{chunks} chunks, f64 {f64_edges}: {}", e.emit_to_string(&source)));
+            let trace = shader_source(chunks, 1 << 10, f64_edges);
+            for source in [trace.clone(), render::render_source(&trace, 6)] {
+                validate(&source, f64_edges, chunks);
+            }
         }
+    }
+
+    fn validate(source: &str, f64_edges: bool, chunks: usize) {
+        let module = naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{}", e.emit_to_string(source)));
+        let caps = if f64_edges { naga::valid::Capabilities::FLOAT64 } else { naga::valid::Capabilities::empty() };
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps)
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{chunks} chunks, f64 {f64_edges}: {}", e.emit_to_string(source)));
     }
 }

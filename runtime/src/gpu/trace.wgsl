@@ -203,8 +203,8 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
 }
 
 // Visits the current leaf: its triangles, then the neighbour to go on to. Sets
-// `done` when the walk is over.
-fn step(wk: ptr<function, Walk>) {
+// `done` when the walk is over; with `any`, at the first hit.
+fn step(wk: ptr<function, Walk>, any: bool) {
     (*wk).steps += 1u;
     if (*wk).steps > params.max_steps {
         (*wk).best.flags |= 1u;
@@ -230,7 +230,7 @@ fn step(wk: ptr<function, Walk>) {
             (*wk).best.v = h.z;
             (*wk).best.leaf = box_index;
             (*wk).best.prim = tri;
-            if ANY_HIT {
+            if any {
                 (*wk).done = true;
                 return;
             }
@@ -443,6 +443,23 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
     return wk;
 }
 
+// The nearest hit of a ray in [tmin, tmax] (with `any`, any hit), with the walk's
+// counts in `steps` and `flags`.
+fn trace(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> HitOut {
+    var wk = begin(o, d, tmin, tmax);
+    // Bounded by max_steps (step() stops the walk there).
+    loop {
+        if wk.done {
+            break;
+        }
+        step(&wk, any);
+    }
+    var out = wk.best;
+    out.steps = wk.steps;
+    out.flags = (out.flags & 1u) | (min(wk.tests, 0x7FFFFFFFu) << 1u);
+    return out;
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
@@ -451,16 +468,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let r0 = rays[2u * i];
     let r1 = rays[2u * i + 1u];
-    var wk = begin(r0.xyz, r1.xyz, r0.w, r1.w);
-    // Bounded by max_steps (step() stops the walk there).
-    loop {
-        if wk.done {
-            break;
-        }
-        step(&wk);
-    }
-    var out = wk.best;
-    out.steps = wk.steps;
-    out.flags = (out.flags & 1u) | (min(wk.tests, 0x7FFFFFFFu) << 1u);
-    hits[i] = out;
+    hits[i] = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
 }

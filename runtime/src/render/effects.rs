@@ -18,7 +18,7 @@ use super::Image;
 use crate::raysets::Camera;
 use crate::scene::Scene;
 use crate::spawn::{face_normal, spawn, SpawnPoint};
-use crate::{Hit, Ray};
+use crate::{Hit, Ray, Tracer};
 
 /// A set of [`Effect`]s.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -115,6 +115,10 @@ impl RayCounts {
     /// Rays of every kind together.
     pub fn total(&self) -> u64 {
         self.0.iter().sum()
+    }
+
+    pub(crate) fn from_array(counts: [u64; 6]) -> RayCounts {
+        RayCounts(counts)
     }
 
     fn add(&mut self, kind: RayKind, n: u64) {
@@ -217,40 +221,11 @@ struct ShadowTask {
     layers: u32,
 }
 
-/// Traces waves of rays: the CPU tracer or the GPU.
-trait Backend {
-    type Error;
-    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error>;
-    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error>;
-}
-
-impl Backend for crate::Tracer<'_> {
-    type Error = std::convert::Infallible;
-
-    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error> {
-        let mut out = vec![None; rays.len()];
-        self.intersect_batch(rays, &mut out);
-        Ok(out)
-    }
-
-    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error> {
-        let mut out = vec![false; rays.len()];
-        self.occluded_batch(rays, &mut out);
-        Ok(out)
-    }
-}
-
-#[cfg(feature = "gpu")]
-impl Backend for crate::gpu::GpuTracer {
-    type Error = crate::gpu::GpuError;
-
-    fn intersect(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, Self::Error> {
-        crate::gpu::GpuTracer::intersect(self, rays)
-    }
-
-    fn occluded(&self, rays: &[Ray]) -> Result<Vec<bool>, Self::Error> {
-        crate::gpu::GpuTracer::occluded(self, rays)
-    }
+/// The nearest hits of a wave of rays (the CPU's batch walk).
+fn intersect(tracer: &Tracer<'_>, rays: &[Ray]) -> Vec<Option<Hit>> {
+    let mut out = vec![None; rays.len()];
+    tracer.intersect_batch(rays, &mut out);
+    out
 }
 
 /// Rows a CPU work item renders.
@@ -291,7 +266,7 @@ pub fn render_effects(
             let rows = tile * TILE_ROWS..((tile + 1) * TILE_ROWS).min(camera.height);
             let n = rows.len() as u32;
             let pixels = rows.start * camera.width..rows.end * camera.width;
-            let Ok(out) = ctx.run(&tracer, pixels);
+            let out = ctx.run(&tracer, pixels);
             progress(rows_done.fetch_add(n, Ordering::Relaxed) + n);
             out
         })
@@ -305,8 +280,9 @@ pub fn render_effects(
     (Radiance { width: camera.width, height: camera.height, pixels }, counts)
 }
 
-/// [`render_effects`] with every wave traced on the GPU (the whole image a wave):
-/// the same image, up to the last bits of hit distances.
+/// [`render_effects`] on the GPU, tracing and shading in one kernel made for the
+/// options' effects ([`GpuRenderer`](crate::gpu::GpuRenderer)): the same image up to
+/// rounding, the same rays.
 ///
 /// # Errors
 /// The GPU's errors.
@@ -317,9 +293,7 @@ pub fn render_effects_gpu(
     camera: &Camera,
     options: &RenderOptions,
 ) -> crate::gpu::GpuResult<(Radiance, RayCounts)> {
-    let ctx = Context::new(scene.view(), camera, options);
-    let (pixels, counts) = ctx.run(gpu, 0..camera.width * camera.height)?;
-    Ok((Radiance { width: camera.width, height: camera.height, pixels }, counts))
+    crate::gpu::GpuRenderer::new(gpu, scene, options)?.render(camera)
 }
 
 impl<'a> Context<'a> {
@@ -334,7 +308,7 @@ impl<'a> Context<'a> {
     }
 
     /// Renders pixels `pixels` (row-major indices) wave by wave.
-    fn run<B: Backend>(&self, backend: &B, pixels: std::ops::Range<u32>) -> Result<(Vec<Vec3>, RayCounts), B::Error> {
+    fn run(&self, tracer: &Tracer<'_>, pixels: std::ops::Range<u32>) -> (Vec<Vec3>, RayCounts) {
         let first = pixels.start;
         let mut out = vec![Vec3::ZERO; pixels.len()];
         let mut counts = RayCounts::default();
@@ -353,7 +327,7 @@ impl<'a> Context<'a> {
                 counts.add(t.kind, 1);
             }
             let rays: Vec<Ray> = wave.iter().map(|t| t.ray).collect();
-            let hits = backend.intersect(&rays)?;
+            let hits = intersect(tracer, &rays);
             let (mut next, mut shadows) = (Vec::new(), Vec::new());
             for (task, hit) in wave.iter().zip(hits) {
                 let radiance = match hit {
@@ -362,38 +336,40 @@ impl<'a> Context<'a> {
                 };
                 out[(task.pixel - first) as usize] += radiance;
             }
-            self.trace_shadows(backend, shadows, &mut out, first, &mut counts)?;
+            self.trace_shadows(tracer, shadows, &mut out, first, &mut counts);
             wave = next;
         }
-        Ok((out, counts))
+        (out, counts)
     }
 
     /// Traces shadow rays and adds the light of those that get through. With the alpha
     /// or refraction effects, a shadow ray that meets a cut-out, blended or
     /// transmissive surface goes on past it, dimmed by what the surface lets through.
-    fn trace_shadows<B: Backend>(
+    fn trace_shadows(
         &self,
-        backend: &B,
+        tracer: &Tracer<'_>,
         mut shadows: Vec<ShadowTask>,
         out: &mut [Vec3],
         first: u32,
         counts: &mut RayCounts,
-    ) -> Result<(), B::Error> {
+    ) {
         while !shadows.is_empty() {
             for s in &shadows {
                 counts.add(s.kind, 1);
             }
             let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
             if !self.has(Effect::Alpha) && !self.has(Effect::Refraction) {
-                for (s, blocked) in shadows.iter().zip(backend.occluded(&rays)?) {
+                let mut blocked = vec![false; rays.len()];
+                tracer.occluded_batch(&rays, &mut blocked);
+                for (s, blocked) in shadows.iter().zip(blocked) {
                     if !blocked {
                         out[(s.pixel - first) as usize] += s.value;
                     }
                 }
-                return Ok(());
+                return;
             }
             let mut next = Vec::new();
-            for (s, hit) in shadows.iter().zip(backend.intersect(&rays)?) {
+            for (s, hit) in shadows.iter().zip(intersect(tracer, &rays)) {
                 let Some(hit) = hit else {
                     out[(s.pixel - first) as usize] += s.value;
                     continue;
@@ -407,7 +383,6 @@ impl<'a> Context<'a> {
             }
             shadows = next;
         }
-        Ok(())
     }
 
     /// What a shadow ray keeps of its light past a surface of `m`: what the alpha
@@ -464,7 +439,8 @@ impl<'a> Context<'a> {
                     return;
                 }
                 let value = weight * lighting::reflectance(m, transmits, n, v, l) * incident * cos;
-                if value.max_element() <= 0.0 {
+                // Below f32's normal range is nothing: GPUs flush it to zero.
+                if value.max_element() < f32::MIN_POSITIVE {
                     return;
                 }
                 if self.has(Effect::Shadows) {
@@ -545,17 +521,16 @@ impl<'a> Context<'a> {
                 d - 2.0 * d.dot(ng) * ng
             }
         };
-        let reflects = self.has(Effect::Reflection);
+        // What the surface reflects as a mirror: glass's Fresnel share (all of it under
+        // total internal reflection) and a polished material's mirror colour, one ray.
+        let mut reflected = Vec3::ZERO;
         if self.has(Effect::Refraction) && m.transmission > 0.0 {
             let t = m.transmission.clamp(0.0, 1.0);
             let eta = if entering { 1.0 / m.ior } else { m.ior };
             let cos_i = -dir.dot(n);
             let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
             if k < 0.0 {
-                // Total internal reflection.
-                if reflects {
-                    push(reflect(dir), weight * t, RayKind::Reflection);
-                }
+                reflected += weight * t;
             } else {
                 let cos_t = k.sqrt();
                 let fresnel = lighting::fresnel(cos_i, cos_t, eta);
@@ -563,16 +538,11 @@ impl<'a> Context<'a> {
                 if refracted.dot(ng) < 0.0 {
                     push(refracted, weight * t * (1.0 - fresnel) * lighting::base(m), RayKind::Refraction);
                 }
-                if reflects {
-                    push(reflect(dir), weight * t * fresnel, RayKind::Reflection);
-                }
+                reflected += weight * t * fresnel;
             }
         }
-        if reflects {
-            let mirror = Vec3::from(m.mirror());
-            if mirror.max_element() >= VISIBLE_WEIGHT {
-                push(reflect(dir), weight * mirror, RayKind::Reflection);
-            }
+        if self.has(Effect::Reflection) {
+            push(reflect(dir), reflected + weight * lighting::mirror(m), RayKind::Reflection);
         }
     }
 

@@ -4,10 +4,10 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use octrace_format::{Light, LightKind, Material, SceneView, DIELECTRIC_F0};
+use octrace_format::{Light, LightKind, Material, SceneView, DIELECTRIC_F0, VISIBLE_WEIGHT};
 
 /// The material of a triangle with none (a mesh without materials): white, diffuse.
-pub(super) static PLAIN: Material = Material {
+pub(crate) static PLAIN: Material = Material {
     name: String::new(),
     base_color: [1.0; 4],
     metallic: 0.0,
@@ -22,24 +22,35 @@ pub(super) static PLAIN: Material = Material {
 };
 
 /// The base colour of a material, without alpha.
-pub(super) fn base(m: &Material) -> Vec3 {
+pub(crate) fn base(m: &Material) -> Vec3 {
     Vec3::new(m.base_color[0], m.base_color[1], m.base_color[2]).clamp(Vec3::ZERO, Vec3::ONE)
 }
 
 /// The diffuse albedo of `m`: its base colour, less what a smooth metal reflects as a
 /// mirror (`metallic * (1 - roughness)^2`: a rough metal scatters its colour like a
 /// diffuse surface, a polished one only mirrors) and less what it transmits.
-pub(super) fn albedo(m: &Material, transmits: bool) -> Vec3 {
+pub(crate) fn albedo(m: &Material, transmits: bool) -> Vec3 {
     let gloss = (1.0 - m.roughness.clamp(0.0, 1.0)).powi(2);
     let metal = if m.illum.is_some() { 0.0 } else { m.metallic.clamp(0.0, 1.0) * gloss };
     let transmission = if transmits { m.transmission.clamp(0.0, 1.0) } else { 0.0 };
     base(m) * (1.0 - metal) * (1.0 - transmission)
 }
 
+/// The mirror colour of `m` ([`Material::mirror`]), zero where it is too weak to see
+/// ([`VISIBLE_WEIGHT`]).
+pub(crate) fn mirror(m: &Material) -> Vec3 {
+    let mirror = Vec3::from(m.mirror());
+    if mirror.max_element() >= VISIBLE_WEIGHT {
+        mirror
+    } else {
+        Vec3::ZERO
+    }
+}
+
 /// Fresnel reflectance of a dielectric interface for unpolarised light: `cos_i` the
 /// cosine of incidence, `cos_t` of transmission, `eta` the ratio of the indices
 /// (incident over transmitted). Zero when the indices are equal.
-pub(super) fn fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
+pub(crate) fn fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
     let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     (0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
@@ -47,7 +58,7 @@ pub(super) fn fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
 
 /// The fraction of light a transmissive material lets a shadow ray through (at normal
 /// incidence, ignoring the bending: Whitted's transparent shadows).
-pub(super) fn shadow_transmittance(m: &Material) -> Vec3 {
+pub(crate) fn shadow_transmittance(m: &Material) -> Vec3 {
     let f0 = ((1.0 - m.ior) / (1.0 + m.ior)).powi(2);
     base(m) * m.transmission.clamp(0.0, 1.0) * (1.0 - f0)
 }
@@ -60,16 +71,19 @@ pub(super) fn shadow_transmittance(m: &Material) -> Vec3 {
 /// glTF materials: the highlight's colour is the metallic-roughness `F0` scaled by
 /// `(1 - roughness)^2`, its exponent `2 / roughness^4 - 2`. MTL materials: `Ks` and
 /// `Ns` (`illum` 2 and up).
-pub(super) fn reflectance(m: &Material, transmits: bool, n: Vec3, v: Vec3, l: Vec3) -> Vec3 {
+pub(crate) fn reflectance(m: &Material, transmits: bool, n: Vec3, v: Vec3, l: Vec3) -> Vec3 {
     let kd = albedo(m, transmits);
     let (ks, e) = highlight(m);
     let h = (v + l).normalize_or_zero();
-    let spec = if ks == Vec3::ZERO { Vec3::ZERO } else { ks * (e + 8.0) / (8.0 * PI) * n.dot(h).max(0.0).powf(e) };
+    // A lobe below f32's normal range is zero (GPUs flush it; the GPU kernel does the same).
+    let lobe = n.dot(h).max(0.0).powf(e);
+    let lobe = if lobe >= f32::MIN_POSITIVE { lobe } else { 0.0 };
+    let spec = if ks == Vec3::ZERO { Vec3::ZERO } else { ks * (e + 8.0) / (8.0 * PI) * lobe };
     kd / PI + spec
 }
 
 /// Colour and exponent of a material's highlight.
-fn highlight(m: &Material) -> (Vec3, f32) {
+pub(crate) fn highlight(m: &Material) -> (Vec3, f32) {
     let r = m.roughness.clamp(0.0, 1.0);
     let exponent = |alpha: f32| (2.0 / alpha.max(1e-2).powi(2) - 2.0).clamp(1.0, 1e4);
     match m.illum {
@@ -86,7 +100,7 @@ fn highlight(m: &Material) -> (Vec3, f32) {
 /// (from `p`; the light at `t = 1`, or at infinity), the farthest `t` a shadow ray
 /// should look, and the incident radiance (glTF's units: candela over distance
 /// squared, lux for directional lights; the spec's range window and spot falloff).
-pub(super) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
+pub(crate) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
     let colour = Vec3::from(light.color) * light.intensity;
     if light.kind == LightKind::Directional {
         return Some((-Vec3::from(light.direction), f32::INFINITY, colour));
@@ -110,16 +124,17 @@ pub(super) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
 }
 
 /// The scene's emissive triangles, chosen by area for sampling.
-pub(super) struct Emitters {
+pub(crate) struct Emitters {
     /// Stored triangle index and emitted radiance of each emitter.
     triangles: Vec<(u32, Vec3)>,
-    /// Running sum of the areas, ending at the total.
-    cumulative: Vec<f64>,
+    /// Running sum of the areas (summed in `f64`, each rounded to `f32`, the GPU's
+    /// copy), ending at the total.
+    cumulative: Vec<f32>,
 }
 
 impl Emitters {
     /// The emissive triangles of `view` (triangles whose material emits).
-    pub(super) fn of(view: &SceneView<'_>) -> Emitters {
+    pub(crate) fn of(view: &SceneView<'_>) -> Emitters {
         let mut triangles = Vec::new();
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
@@ -129,52 +144,64 @@ impl Emitters {
             if area > 0.0 {
                 total += area as f64;
                 triangles.push((prim, Vec3::from(m.emissive)));
-                cumulative.push(total);
+                cumulative.push(total as f32);
             }
         }
         Emitters { triangles, cumulative }
     }
 
     /// Whether the scene has area lights.
-    pub(super) fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }
 
     /// Total emitting area.
-    pub(super) fn area(&self) -> f32 {
-        self.cumulative.last().copied().unwrap_or(0.0) as f32
+    pub(crate) fn area(&self) -> f32 {
+        self.cumulative.last().copied().unwrap_or(0.0)
     }
 
     /// The emitter that `u` in `[0, 1)` falls on when the emitters are laid end to
     /// end by area: its triangle and radiance.
-    pub(super) fn pick(&self, u: f32) -> (u32, Vec3) {
-        let target = u as f64 * self.cumulative.last().copied().unwrap_or(0.0);
+    pub(crate) fn pick(&self, u: f32) -> (u32, Vec3) {
+        let target = u * self.area();
         let i = self.cumulative.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
         self.triangles[i]
+    }
+
+    /// Each emitter's triangle, radiance and running area sum, in pick order.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (u32, Vec3, f32)> + '_ {
+        self.triangles.iter().zip(&self.cumulative).map(|(&(prim, e), &c)| (prim, e, c))
     }
 }
 
 /// A triangle's area.
-pub(super) fn area(t: &[[f32; 3]; 3]) -> f32 {
+pub(crate) fn area(t: &[[f32; 3]; 3]) -> f32 {
     let [a, b, c] = t.map(Vec3::from);
     0.5 * (b - a).cross(c - a).length()
 }
 
 /// A point of triangle `t`, uniform in area, from two uniform numbers.
-pub(super) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> Vec3 {
+pub(crate) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> Vec3 {
     let [a, b, c] = t.map(Vec3::from);
     let s = u.sqrt();
     a * (1.0 - s) + b * (s * (1.0 - v)) + c * (s * v)
 }
 
-/// Uniform numbers in `[0, 1)` that depend only on their inputs (SplitMix64), so an
-/// image does not depend on the thread count or the order pixels are done in.
-pub(super) fn uniform2(pixel: u32, depth: u32, sample: u32) -> (f32, f32) {
-    let mut z =
-        (u64::from(pixel) << 32 | u64::from(depth) << 16 | u64::from(sample)).wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    let unit = |bits: u64| (bits >> 40) as f32 / (1u64 << 24) as f32;
-    (unit(z), unit(z << 24))
+/// Uniform numbers in `[0, 1)` that depend only on their inputs, so an image does not
+/// depend on the thread count or the order pixels are done in. 32-bit integer hashing
+/// only (Wellons' `lowbias32`), so the GPU kernel draws the same numbers.
+pub(crate) fn uniform2(pixel: u32, depth: u32, sample: u32) -> (f32, f32) {
+    let a = hash32(sample.wrapping_add(hash32(depth.wrapping_add(hash32(pixel)))));
+    let b = hash32(a);
+    let unit = |bits: u32| (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+    (unit(a), unit(b))
+}
+
+/// Chris Wellons' `lowbias32` integer hash.
+fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
 }

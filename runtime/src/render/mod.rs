@@ -4,7 +4,7 @@
 //! written as PNG.
 
 pub mod effects;
-mod lighting;
+pub(crate) mod lighting;
 
 use std::path::Path;
 

@@ -1,0 +1,335 @@
+//! The effects renderer on the GPU: tracing and shading in one WGSL kernel
+//! (`render.wgsl`), specialised per effect set with override constants.
+
+use glam::Vec3;
+use octrace_format::{Effect, LightKind, Material};
+
+use super::{GpuError, GpuResult, GpuTracer, WORKGROUP};
+use crate::raysets::Camera;
+use crate::render::effects::{EffectSet, Radiance, RayCounts, RenderOptions};
+use crate::render::lighting::{self, Emitters, PLAIN};
+use crate::scene::Scene;
+use crate::spawn::gamma;
+
+/// The deepest ray tree the kernel's private stack holds (`--max-depth`).
+pub const MAX_GPU_DEPTH: u32 = 31;
+/// Pixels a dispatch renders at most.
+const PIXELS_PER_DISPATCH: u32 = 1 << 20;
+/// Words of a material record (`material` in render.wgsl).
+const MATERIAL_WORDS: usize = 28;
+/// Words of a light record (`punctual` in render.wgsl).
+const LIGHT_WORDS: usize = 16;
+
+/// The kernel's uniform block (`RenderParams` in render.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct RenderParams {
+    eye: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+    back: [f32; 4],
+    width: u32,
+    height: u32,
+    first_pixel: u32,
+    pixel_count: u32,
+    max_depth: u32,
+    soft_samples: u32,
+    light_count: u32,
+    emitter_count: u32,
+    o_materials: u32,
+    o_lights: u32,
+    o_emitters: u32,
+    o_material_ids: u32,
+    o_normals: u32,
+    has_material_ids: u32,
+    has_normals: u32,
+    plain_material: u32,
+    emitter_area: f32,
+    pad: [u32; 3],
+}
+
+/// Renders one scene with one set of options on the GPU, shading included: the image
+/// of [`render_effects`](crate::render::effects::render_effects), up to rounding.
+///
+/// The pipeline is made for the options' effect set: each effect is an override
+/// constant of the kernel, and an effect the set leaves out is compiled away.
+///
+/// # Example
+/// ```no_run
+/// use octrace_runtime::gpu::{GpuContext, GpuRenderer, GpuTracer};
+/// use octrace_runtime::raysets::Camera;
+/// use octrace_runtime::render::effects::RenderOptions;
+/// use octrace_runtime::Scene;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let scene = Scene::open("effects.oct")?;
+/// let gpu = GpuContext::new()?;
+/// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+/// let renderer = GpuRenderer::new(&tracer, &scene, &RenderOptions::for_scene(scene.shading()))?;
+/// let camera = Camera::from_scene(&scene.shading().cameras[0], 40.0, 640, 480);
+/// let (radiance, counts) = renderer.render(&camera)?;
+/// radiance.to_image().write_png("effects.png")?;
+/// println!("{} rays", counts.total());
+/// # Ok(()) }
+/// ```
+#[derive(Debug)]
+pub struct GpuRenderer<'t> {
+    tracer: &'t GpuTracer,
+    pipeline: wgpu::ComputePipeline,
+    scene_group: wgpu::BindGroup,
+    render_layout: wgpu::BindGroupLayout,
+    shade: wgpu::Buffer,
+    params: RenderParams,
+}
+
+impl<'t> GpuRenderer<'t> {
+    /// Uploads what shading needs besides the tracer's arrays (materials, lights,
+    /// emitters, and the file's material ids and normals as they are) and makes the
+    /// pipeline for `options`.
+    ///
+    /// # Errors
+    /// [`GpuError::Unsupported`] for `max_depth` above [`MAX_GPU_DEPTH`];
+    /// [`GpuError::TooLarge`] when the shading data exceed one storage binding;
+    /// [`GpuError::Device`] for a refused resource.
+    pub fn new(tracer: &'t GpuTracer, scene: &Scene, options: &RenderOptions) -> GpuResult<GpuRenderer<'t>> {
+        if options.max_depth > MAX_GPU_DEPTH {
+            return Err(GpuError::Unsupported(format!(
+                "the GPU renders ray trees at most {MAX_GPU_DEPTH} deep; {} asked for",
+                options.max_depth
+            )));
+        }
+        let device = &tracer.device;
+        let (words, mut params) = shading_words(scene);
+        let limits = device.limits();
+        let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if 4 * words.len() as u64 > limit {
+            return Err(GpuError::TooLarge(format!(
+                "{} MB of shading data (materials, lights, material ids, normals); one binding holds {} MB",
+                4 * words.len() / 1_000_000,
+                limit / 1_000_000
+            )));
+        }
+        params.max_depth = options.max_depth;
+        params.soft_samples = options.soft_samples.max(1);
+        let shade = storage_buffer(device, "octrace shading", 4 * words.len() as u64, wgpu::BufferUsages::COPY_DST);
+        tracer.queue.write_buffer(&shade, 0, bytemuck::cast_slice(&words));
+
+        let source = render_source(&tracer.source(), options.max_depth);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("octrace render"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let render_layout = render_layout(device);
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("octrace render"),
+            bind_group_layouts: &[Some(&tracer.layout), Some(&render_layout)],
+            immediate_size: 0,
+        });
+        let constants = overrides(options.effects, params.light_count == 0 && params.emitter_count == 0);
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("octrace render"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("render"),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+            cache: None,
+        });
+        let scene_group = tracer.scene_bind_group();
+        Ok(GpuRenderer { tracer, pipeline, scene_group, render_layout, shade, params })
+    }
+
+    /// Renders through `camera`: the radiance of every pixel and the rays traced per
+    /// kind.
+    ///
+    /// # Errors
+    /// [`GpuError::Device`] if the device is lost or a buffer cannot be read.
+    pub fn render(&self, camera: &Camera) -> GpuResult<(Radiance, RayCounts)> {
+        let device = &self.tracer.device;
+        let queue = &self.tracer.queue;
+        let total = camera.width * camera.height;
+        let batch = total.clamp(1, PIXELS_PER_DISPATCH);
+        use wgpu::BufferUsages as U;
+        let out_bytes = 16 * u64::from(batch);
+        let count_bytes = 4 * 12;
+        let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("octrace render params"),
+            size: std::mem::size_of::<RenderParams>() as u64,
+            usage: U::UNIFORM | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let out = storage_buffer(device, "octrace radiance", out_bytes, U::COPY_SRC);
+        let counts = storage_buffer(device, "octrace ray counts", count_bytes, U::COPY_SRC | U::COPY_DST);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("octrace render"),
+            layout: &self.render_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: self.shade.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
+            ],
+        });
+        let to4 = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        let mut params = RenderParams {
+            eye: to4(camera.eye, camera.tan_half_fov),
+            right: to4(camera.u, f64::from(camera.width) / f64::from(camera.height)),
+            up: to4(camera.s, 0.0),
+            back: to4(camera.w, 0.0),
+            width: camera.width,
+            height: camera.height,
+            ..self.params
+        };
+        let mut pixels = Vec::with_capacity(total as usize);
+        let mut sums = [0u64; 6];
+        let mut first = 0;
+        while first < total {
+            let n = (total - first).min(batch);
+            params.first_pixel = first;
+            params.pixel_count = n;
+            queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+            let mut encoder = device.create_command_encoder(&Default::default());
+            encoder.clear_buffer(&counts, 0, None);
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.scene_group, &[]);
+                pass.set_bind_group(1, &group, &[]);
+                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+            }
+            queue.submit([encoder.finish()]);
+            let radiance: Vec<[f32; 4]> = self.tracer.read_back(&out, 16 * u64::from(n))?;
+            pixels.extend(radiance.iter().map(|p| Vec3::new(p[0], p[1], p[2])));
+            let c: Vec<u32> = self.tracer.read_back(&counts, count_bytes)?;
+            for (k, s) in sums.iter_mut().enumerate() {
+                *s += u64::from(c[2 * k]) | u64::from(c[2 * k + 1]) << 32;
+            }
+            first += n;
+        }
+        let radiance = Radiance { width: camera.width, height: camera.height, pixels };
+        Ok((radiance, RayCounts::from_array(sums)))
+    }
+}
+
+/// The pipeline constants for `effects` (`SHADOWS`, ... in render.wgsl).
+fn overrides(effects: EffectSet, headlight: bool) -> Vec<(&'static str, f64)> {
+    let flag = |b: bool| if b { 1.0 } else { 0.0 };
+    let mut constants: Vec<(&'static str, f64)> = [
+        ("SHADOWS", Effect::Shadows),
+        ("SOFT_SHADOWS", Effect::SoftShadows),
+        ("REFLECTION", Effect::Reflection),
+        ("REFRACTION", Effect::Refraction),
+        ("ALPHA", Effect::Alpha),
+    ]
+    .into_iter()
+    .map(|(name, e)| (name, flag(effects.contains(e))))
+    .collect();
+    constants.push(("HEADLIGHT", flag(headlight)));
+    constants
+}
+
+/// The words of the kernel's `shade` binding, and the parameters that locate them.
+fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams) {
+    let view = scene.view();
+    let shading = view.shading;
+    let mut words: Vec<u32> = Vec::new();
+    let mut params = RenderParams::default();
+    let f = |words: &mut Vec<u32>, v: &[f32]| words.extend(v.iter().map(|x| x.to_bits()));
+    params.o_materials = 0;
+    for m in shading.materials.iter().chain([&PLAIN]) {
+        let before = words.len();
+        f(&mut words, &material_record(m));
+        debug_assert_eq!(words.len() - before, MATERIAL_WORDS);
+    }
+    params.plain_material = shading.materials.len() as u32;
+    params.o_lights = words.len() as u32;
+    for l in &shading.lights {
+        let kind = match l.kind {
+            LightKind::Point => 0,
+            LightKind::Spot => 1,
+            LightKind::Directional => 2,
+        };
+        let colour = Vec3::from(l.color) * l.intensity;
+        words.extend([kind, l.range.to_bits(), l.outer_cone.cos().to_bits(), l.inner_cone.cos().to_bits()]);
+        for v in [colour.to_array(), l.position, l.direction] {
+            f(&mut words, &[v[0], v[1], v[2], 0.0]);
+        }
+    }
+    debug_assert_eq!(words.len() - params.o_lights as usize, LIGHT_WORDS * shading.lights.len());
+    params.light_count = shading.lights.len() as u32;
+    let emitters = Emitters::of(&view);
+    params.o_emitters = words.len() as u32;
+    for (_, emitted, running) in emitters.iter() {
+        f(&mut words, &[emitted.x, emitted.y, emitted.z, running]);
+    }
+    words.extend(emitters.iter().map(|(prim, _, _)| prim));
+    params.emitter_count = emitters.iter().count() as u32;
+    params.emitter_area = emitters.area();
+    params.o_material_ids = words.len() as u32;
+    params.has_material_ids = u32::from(!view.material_ids.is_empty());
+    words.extend_from_slice(view.material_ids);
+    params.o_normals = words.len() as u32;
+    params.has_normals = u32::from(!view.normals.is_empty());
+    f(&mut words, view.normals);
+    if words.is_empty() {
+        words.push(0);
+    }
+    (words, params)
+}
+
+/// A material's record: the values shading derives from it, computed here by the
+/// CPU's functions so both sides use the same numbers.
+fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
+    let (ks, exponent) = lighting::highlight(m);
+    let parts: [(Vec3, f32); 7] = [
+        (Vec3::from(m.emissive), m.coverage()),
+        (lighting::albedo(m, false), m.transmission.clamp(0.0, 1.0)),
+        (lighting::albedo(m, true), m.ior),
+        (ks, exponent),
+        (lighting::base(m), 0.0),
+        (lighting::mirror(m), 0.0),
+        (lighting::shadow_transmittance(m), 0.0),
+    ];
+    let mut record = [0.0; MATERIAL_WORDS];
+    for (i, (v, w)) in parts.iter().enumerate() {
+        record[4 * i..4 * i + 4].copy_from_slice(&[v.x, v.y, v.z, *w]);
+    }
+    record
+}
+
+fn storage_buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(4),
+        usage: wgpu::BufferUsages::STORAGE | usage,
+        mapped_at_creation: false,
+    })
+}
+
+fn render_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    };
+    use wgpu::BufferBindingType as B;
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("octrace render"),
+        entries: &[
+            entry(0, B::Uniform),
+            entry(1, B::Storage { read_only: true }),
+            entry(2, B::Storage { read_only: false }),
+            entry(3, B::Storage { read_only: false }),
+        ],
+    })
+}
+
+/// The render kernel's source: the tracing kernel's (`trace`), the constants the
+/// host fixes, render.wgsl.
+pub(super) fn render_source(trace: &str, max_depth: u32) -> String {
+    format!(
+        "{trace}\nconst STACK_SIZE: u32 = {}u;\nconst GAMMA_7: f32 = {:e}f;\n{}",
+        2 * max_depth + 1,
+        gamma(7),
+        include_str!("render.wgsl")
+    )
+}
