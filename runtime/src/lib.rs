@@ -7,7 +7,9 @@
 //! cube-map entry, exit face from Plücker signs, neighbour from two more signs.
 //! [`reference::Reference`] is the `f64` brute-force oracle the tests compare with.
 //! With the `gpu` feature (on by default), `gpu::GpuTracer` runs the same walk in a
-//! wgpu compute kernel on Vulkan, from the same bytes, with the same answers.
+//! wgpu compute kernel on Vulkan, from the same bytes, with the same answers, and
+//! `gpu::GpuRenderer` renders the effects of [`render::effects`] there, shading
+//! included.
 //!
 //! # Example
 //! ```

@@ -6,6 +6,10 @@
 //! origins inside the scene, the watertight triangle test. Its answers are the CPU's
 //! (the tests compare every ray of the standard sets).
 //!
+//! [`GpuRenderer`] renders the effects renderer's image in one kernel on top of that
+//! walk, tracing and shading, compiled for the effects in play (WGSL override
+//! constants): the CPU's image and ray counts.
+//!
 //! The backend is Vulkan, asked for explicitly: a machine without a Vulkan driver gets
 //! [`GpuError::NoAdapter`], not a silent fallback. Without a GPU, Mesa's software
 //! driver (lavapipe; Debian's `mesa-vulkan-drivers`) runs the same kernel on the CPU.

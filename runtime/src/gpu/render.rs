@@ -93,7 +93,7 @@ impl<'t> GpuRenderer<'t> {
     pub fn new(tracer: &'t GpuTracer, scene: &Scene, options: &RenderOptions) -> GpuResult<GpuRenderer<'t>> {
         if options.max_depth > MAX_GPU_DEPTH {
             return Err(GpuError::Unsupported(format!(
-                "the GPU renders ray trees at most {MAX_GPU_DEPTH} deep; {} asked for",
+                "the GPU renders ray trees at most {MAX_GPU_DEPTH} deep; {} asked for (the CPU renders any depth)",
                 options.max_depth
             )));
         }

@@ -195,6 +195,10 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
         same_image(&cpu.to_image(), &g.to_image());
     }
     assert!(all.effects.iter().count() == Effect::ALL.len(), "the scene calls for every effect");
+    // Deeper trees than the kernel's stack holds are refused, not cut short.
+    let deep = RenderOptions { max_depth: octrace_runtime::gpu::MAX_GPU_DEPTH + 1, ..all };
+    let err = octrace_runtime::gpu::GpuRenderer::new(&tracer, &scene, &deep).unwrap_err();
+    assert!(err.to_string().contains("at most 31 deep"), "{err}");
     // No lights: the headlight, primary rays only.
     let sphere = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
     let scene = Scene::from_baked(octrace_bake::bake(&sphere, &Default::default()).unwrap()).unwrap();
