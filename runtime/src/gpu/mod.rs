@@ -370,32 +370,13 @@ impl GpuTracer {
         let batch = rays.len().min(RAYS_PER_DISPATCH);
         let ray_bytes = (batch * std::mem::size_of::<Ray>()) as u64;
         let hit_bytes = (batch * std::mem::size_of::<HitOut>()) as u64;
-        let buffer = |label, size, usage| {
-            self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
         use wgpu::BufferUsages as U;
-        let ray_buffer = buffer("octrace rays", ray_bytes, U::STORAGE | U::COPY_DST);
-        let hit_buffer = buffer("octrace hits", hit_bytes, U::STORAGE | U::COPY_SRC);
-        let readback = buffer("octrace readback", hit_bytes, U::MAP_READ | U::COPY_DST);
-        let params_buffer = buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
-        let mut entries = vec![
-            wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: ray_buffer.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: hit_buffer.as_entire_binding() },
-        ];
-        for (k, b) in self.scene_buffers.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: 3 + k as u32, resource: b.as_entire_binding() });
-        }
-        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("octrace trace"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let ray_buffer = self.buffer("octrace rays", ray_bytes, U::STORAGE | U::COPY_DST);
+        let hit_buffer = self.buffer("octrace hits", hit_bytes, U::STORAGE | U::COPY_SRC);
+        let readback = self.buffer("octrace readback", hit_bytes, U::MAP_READ | U::COPY_DST);
+        let params_buffer =
+            self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+        let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
         let pipeline = if any { &self.any } else { &self.nearest };
         for part in rays.chunks(RAYS_PER_DISPATCH) {
             let t = Instant::now();
@@ -435,18 +416,15 @@ impl GpuTracer {
     /// and hits: for kernels that trace rays of their own making).
     fn scene_bind_group(&self) -> wgpu::BindGroup {
         use wgpu::BufferUsages as U;
-        let buffer = |label, size, usage| {
-            self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let params = buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+        let params = self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
         self.queue.write_buffer(&params, 0, bytemuck::bytes_of(&self.params));
-        let rays = buffer("octrace no rays", std::mem::size_of::<Ray>() as u64, U::STORAGE);
-        let hits = buffer("octrace no hits", std::mem::size_of::<HitOut>() as u64, U::STORAGE);
+        let rays = self.buffer("octrace no rays", std::mem::size_of::<Ray>() as u64, U::STORAGE);
+        let hits = self.buffer("octrace no hits", std::mem::size_of::<HitOut>() as u64, U::STORAGE);
+        self.bind_group(&params, &rays, &hits)
+    }
+
+    /// The tracing layout's bind group: parameters, rays, hits, the scene's buffers.
+    fn bind_group(&self, params: &wgpu::Buffer, rays: &wgpu::Buffer, hits: &wgpu::Buffer) -> wgpu::BindGroup {
         let mut entries = vec![
             wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
             wgpu::BindGroupEntry { binding: 1, resource: rays.as_entire_binding() },
@@ -456,20 +434,26 @@ impl GpuTracer {
             entries.push(wgpu::BindGroupEntry { binding: 3 + k as u32, resource: b.as_entire_binding() });
         }
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("octrace scene"),
+            label: Some("octrace trace"),
             layout: &self.layout,
             entries: &entries,
         })
     }
 
+    /// A buffer of `size` bytes (at least 4) for `usage`.
+    fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(4),
+            usage,
+            mapped_at_creation: false,
+        })
+    }
+
     /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
-        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("octrace readback"),
-            size: bytes.max(4),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let readback =
+            self.buffer("octrace readback", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
         self.read_back_into(buffer, &readback, bytes)
     }
 
@@ -652,6 +636,39 @@ mod tests {
                 validate(&source, f64_edges, chunks);
             }
         }
+    }
+
+    /// The structs the host writes or reads have the WGSL layout: the same size,
+    /// and every member at the Rust field's offset.
+    #[test]
+    fn host_structs_match_the_kernels() {
+        use std::mem::{offset_of, size_of};
+        let source = render::render_source(&shader_source(1, 1 << 10, false), 6);
+        let module = naga::front::wgsl::parse_str(&source).expect("valid");
+        let layout = |name: &str| {
+            let ty = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name).1;
+            let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+            (members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect::<Vec<_>>(), span)
+        };
+        let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
+            let (members, span) = layout(name);
+            assert_eq!(*span as usize, size, "{name}'s size");
+            for (field, offset) in offsets {
+                let found = members.iter().find(|(m, _)| m == field).unwrap_or_else(|| panic!("{name}.{field}"));
+                assert_eq!(found.1, *offset, "{name}.{field}");
+            }
+        };
+        check("HitOut", size_of::<HitOut>(), &[("t", offset_of!(HitOut, t)), ("flags", offset_of!(HitOut, flags))]);
+        check(
+            "Params",
+            size_of::<Params>(),
+            &[
+                ("o_octree", offset_of!(Params, offsets)),
+                ("root_lo", offset_of!(Params, root_lo)),
+                ("box_hi", offset_of!(Params, box_hi)),
+            ],
+        );
+        check("RenderParams", size_of::<render::RenderParams>(), &render::RenderParams::OFFSETS);
     }
 
     fn validate(source: &str, f64_edges: bool, chunks: usize) {

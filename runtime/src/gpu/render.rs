@@ -23,7 +23,7 @@ const LIGHT_WORDS: usize = 16;
 /// The kernel's uniform block (`RenderParams` in render.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-struct RenderParams {
+pub(super) struct RenderParams {
     eye: [f32; 4],
     right: [f32; 4],
     up: [f32; 4],
@@ -46,6 +46,19 @@ struct RenderParams {
     plain_material: u32,
     emitter_area: f32,
     pad: [u32; 3],
+}
+
+#[cfg(test)]
+impl RenderParams {
+    /// Members of the WGSL struct and the Rust fields' offsets, for the layout test.
+    pub(super) const OFFSETS: [(&'static str, usize); 6] = [
+        ("eye", std::mem::offset_of!(RenderParams, eye)),
+        ("back", std::mem::offset_of!(RenderParams, back)),
+        ("width", std::mem::offset_of!(RenderParams, width)),
+        ("o_materials", std::mem::offset_of!(RenderParams, o_materials)),
+        ("plain_material", std::mem::offset_of!(RenderParams, plain_material)),
+        ("emitter_area", std::mem::offset_of!(RenderParams, emitter_area)),
+    ];
 }
 
 /// Renders one scene with one set of options on the GPU, shading included: the image
@@ -98,6 +111,7 @@ impl<'t> GpuRenderer<'t> {
             )));
         }
         let device = &tracer.device;
+        use wgpu::BufferUsages as U;
         let (words, mut params) = shading_words(scene);
         let limits = device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
@@ -110,7 +124,7 @@ impl<'t> GpuRenderer<'t> {
         }
         params.max_depth = options.max_depth;
         params.soft_samples = options.soft_samples.max(1);
-        let shade = storage_buffer(device, "octrace shading", 4 * words.len() as u64, wgpu::BufferUsages::COPY_DST);
+        let shade = tracer.buffer("octrace shading", 4 * words.len() as u64, U::STORAGE | U::COPY_DST);
         tracer.queue.write_buffer(&shade, 0, bytemuck::cast_slice(&words));
 
         let source = render_source(&tracer.source(), options.max_depth);
@@ -150,14 +164,10 @@ impl<'t> GpuRenderer<'t> {
         use wgpu::BufferUsages as U;
         let out_bytes = 16 * u64::from(batch);
         let count_bytes = 4 * 12;
-        let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("octrace render params"),
-            size: std::mem::size_of::<RenderParams>() as u64,
-            usage: U::UNIFORM | U::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let out = storage_buffer(device, "octrace radiance", out_bytes, U::COPY_SRC);
-        let counts = storage_buffer(device, "octrace ray counts", count_bytes, U::COPY_SRC | U::COPY_DST);
+        let params_size = std::mem::size_of::<RenderParams>() as u64;
+        let params_buffer = self.tracer.buffer("octrace render params", params_size, U::UNIFORM | U::COPY_DST);
+        let out = self.tracer.buffer("octrace radiance", out_bytes, U::STORAGE | U::COPY_SRC);
+        let counts = self.tracer.buffer("octrace ray counts", count_bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("octrace render"),
             layout: &self.render_layout,
@@ -293,15 +303,6 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
         record[4 * i..4 * i + 4].copy_from_slice(&[v.x, v.y, v.z, *w]);
     }
     record
-}
-
-fn storage_buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(4),
-        usage: wgpu::BufferUsages::STORAGE | usage,
-        mapped_at_creation: false,
-    })
 }
 
 fn render_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
