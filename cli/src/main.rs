@@ -5,6 +5,8 @@
 mod cmd;
 mod open;
 mod output;
+#[cfg(feature = "obvhs")]
+mod peer;
 
 use std::process::ExitCode;
 
@@ -52,6 +54,9 @@ enum Command {
     Bench(cmd::bench::Args),
     /// Bake the bunny this build carries, inspect it, render demo.png, measure it.
     Demo(cmd::demo::Args),
+    /// What accuracy costs in time: each accuracy knob's Mrays/s next to its error
+    /// against the f64 oracle, written to report.md and report.json.
+    Report(cmd::report::Args),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +71,7 @@ fn main() -> ExitCode {
         Command::Verify(a) => cmd::verify::run(a),
         Command::Soak(a) => cmd::soak::run(a),
         Command::Demo(a) => cmd::demo::run(a),
+        Command::Report(a) => cmd::report::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

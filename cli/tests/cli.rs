@@ -497,3 +497,32 @@ fn trace_and_render_on_the_gpu_give_the_cpus_files() {
         "the images differ"
     );
 }
+
+#[test]
+fn report_measures_every_knob_and_writes_markdown_and_json() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    let quick = ["--runs", "1", "--sample", "64", "--leak-rays", "2000", "--max-rays", "4096"];
+    let out = ok(dir.path(), &[&["report", "cube.obj", "-o", "rep", "--json"][..], &quick].concat());
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let mesh = &json["meshes"][0];
+    assert_eq!((mesh["name"].as_str(), mesh["triangles"].as_u64()), (Some("cube.obj"), Some(13)));
+    let rows = mesh["rows"].as_array().unwrap();
+    let knobs: Vec<&str> = rows.iter().map(|r| r["knob"].as_str().unwrap()).collect();
+    for knob in ["defaults", "triangle test", "bake margin", "depth limit", "leaf target", "peer"] {
+        assert!(knobs.contains(&knob), "{knob} missing from {knobs:?}");
+    }
+    for row in rows {
+        assert_eq!(row["mrays"].as_array().unwrap().len(), 3, "{row}");
+        assert!(row["mrays"].as_array().unwrap().iter().all(|m| m.as_f64().unwrap() > 0.0), "{row}");
+        assert_eq!(row["errors"]["compared"], 3 * 64, "{row}");
+        assert!(row["leak_rays"].as_u64().unwrap() > 4 * 2000, "{row}");
+    }
+    // The watertight configurations: no wrong hit, no leak.
+    for row in rows.iter().filter(|r| r["knob"] != "peer" && r["knob"] != "triangle test") {
+        assert_eq!((row["errors"]["wrong"].as_u64(), row["leaks_per_million"].as_f64()), (Some(0), Some(0.0)), "{row}");
+    }
+    let md = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
+    assert!(md.contains("## cube.obj (13 triangles)") && md.contains("| defaults | watertight f32"), "{md}");
+    assert!(dir.path().join("rep/report.json").exists());
+}

@@ -142,7 +142,13 @@ impl Reference {
     /// Compares a tracer's nearest hit `got` (distance, input triangle id, and
     /// barycentrics `u`, `v`) for `ray` with the oracle's; see [`Agreement`].
     pub fn compare(&self, ray: &Ray, got: Option<(f32, u32, f32, f32)>) -> Agreement {
-        let want = self.intersect(ray);
+        self.compare_with(ray, self.intersect(ray), got)
+    }
+
+    /// [`Reference::compare`] with the oracle's answer for `ray` already known
+    /// (`want`, from [`Reference::intersect`]): for comparing several tracers with
+    /// one oracle pass.
+    pub fn compare_with(&self, ray: &Ray, want: Option<ReferenceHit>, got: Option<(f32, u32, f32, f32)>) -> Agreement {
         let same = |want: Option<ReferenceHit>| match (got, want) {
             (None, None) => true,
             (Some((t, id, _, _)), Some(w)) => {

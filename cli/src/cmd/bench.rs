@@ -132,7 +132,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let tracer = loaded.scene.tracer().with_triangle_test(test);
     let threads = crate::with_threads(args.threads, rayon::current_num_threads)?;
     #[cfg(feature = "obvhs")]
-    let peer = (!args.no_peer).then(|| peer::Peer::build(&view));
+    let peer = (!args.no_peer).then(|| crate::peer::Peer::build(&view));
     #[cfg(not(feature = "obvhs"))]
     let peer: Option<()> = None;
     let want = |s: SetChoice| args.set == s || args.set == SetChoice::All;
@@ -162,7 +162,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 }
 
 #[cfg(feature = "obvhs")]
-type PeerRef<'a> = Option<&'a peer::Peer>;
+type PeerRef<'a> = Option<&'a crate::peer::Peer>;
 #[cfg(not(feature = "obvhs"))]
 type PeerRef<'a> = Option<&'a ()>;
 
@@ -437,62 +437,6 @@ mod gpu {
                     "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,
                 })).collect::<Vec<_>>(),
             })
-        }
-    }
-}
-
-#[cfg(feature = "obvhs")]
-mod peer {
-    //! obvhs's CWBVH on the scene's triangles, the bench's comparison peer.
-    use std::time::{Duration, Instant};
-
-    use glam::Vec3A;
-    use obvhs::cwbvh::builder::build_cwbvh_from_tris;
-    use obvhs::cwbvh::CwBvh;
-    use obvhs::ray::{Ray as ORay, RayHit};
-    use obvhs::triangle::Triangle;
-    use obvhs::BvhBuildParams;
-    use octrace_runtime::Ray;
-
-    pub(crate) struct Peer {
-        bvh: CwBvh,
-        /// Triangles in the BVH's primitive order, so a leaf reads them in sequence.
-        tris: Vec<Triangle>,
-        pub build_time: Duration,
-    }
-
-    impl Peer {
-        pub(crate) fn build(view: &octrace_format::SceneView<'_>) -> Peer {
-            let tris: Vec<Triangle> = (0..view.triangle_count() as u32)
-                .map(|t| {
-                    let [a, b, c] = view.triangle(t).map(Vec3A::from);
-                    Triangle { v0: a, v1: b, v2: c }
-                })
-                .collect();
-            let t = Instant::now();
-            let mut core = Duration::ZERO;
-            let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut core);
-            let build_time = t.elapsed();
-            let tris = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
-            Peer { bvh, tris, build_time }
-        }
-
-        /// Traces a batch on this thread; returns (hits or occluded, sum of t).
-        pub(crate) fn trace(&self, rays: &[Ray], occlusion: bool) -> (usize, f64) {
-            let (mut n, mut sum) = (0, 0.0);
-            for r in rays {
-                let ray = ORay::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
-                if occlusion {
-                    n += !self.bvh.ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray)) as usize;
-                } else {
-                    let mut hit = RayHit::none();
-                    if self.bvh.ray_traverse(ray, &mut hit, |ray, id| self.tris[id].intersect(ray)) {
-                        n += 1;
-                        sum += hit.t as f64;
-                    }
-                }
-            }
-            (n, sum)
         }
     }
 }

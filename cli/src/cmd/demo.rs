@@ -11,7 +11,7 @@ use crate::output::thousands;
 
 /// The Stanford bunny (69,451 triangles), zstd-compressed OBJ, built into the binary
 /// so the demo runs from anywhere.
-const BUNNY: &[u8] = include_bytes!("../../../assets/bunny.obj.zst");
+pub(crate) const BUNNY: &[u8] = include_bytes!("../../../assets/bunny.obj.zst");
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {

@@ -6,6 +6,7 @@ pub(crate) mod demo;
 pub(crate) mod inspect;
 pub(crate) mod rays;
 pub(crate) mod render;
+pub(crate) mod report;
 pub(crate) mod soak;
 pub(crate) mod trace;
 pub(crate) mod verify;

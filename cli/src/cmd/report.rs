@@ -1,0 +1,649 @@
+//! `octrace report`: what accuracy costs in time, one knob at a time.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use octrace_bake::octree::ResolvedParams;
+use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
+use octrace_runtime::raysets::{self, Frame};
+use octrace_runtime::reference::{Agreement, Reference, ReferenceHit, EDGE_BARYCENTRIC, TIE_RELATIVE_T};
+use octrace_runtime::{Hit, Ray, Scene, Tracer, TriangleTest};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::output::thousands;
+
+/// Measure what accuracy costs in time: one accuracy knob at a time, Mrays/s next to
+/// the error against the f64 brute-force oracle. Writes report.md and report.json.
+///
+/// For each mesh (default: the bunny this build carries, and
+/// ../shared/meshes/dragon.obj when it is there) each knob is turned from the
+/// defaults in turn: the triangle test (watertight or Möller-Trumbore, f32), the bake
+/// margin, the depth limit, the leaf target. Each configuration is baked (time,
+/// bytes, leaves, references per triangle) and traced on the three standard ray sets
+/// (shared/bench/RAYS.md) on one thread, the median of --runs; its answers on --sample
+/// rays of each set are compared with the oracle's (wrong hits, largest |Δt|/t). Leaks
+/// per million: rays from inside `octrace soak`'s closed solids that get out, baked and
+/// traced with the same configuration. obvhs's CWBVH traces the same rays as a
+/// reference point.
+///
+///   octrace report                     # the bunny (and the dragon beside the repository)
+///   octrace report scene.glb -o out    # any mesh
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// Meshes (OBJ, glTF, GLB, optionally .zst) or .oct files (their triangles are
+    /// baked again for each configuration).
+    pub inputs: Vec<PathBuf>,
+    /// Folder for report.md and report.json (created if missing).
+    #[arg(short, long, default_value = "report")]
+    pub output: PathBuf,
+    /// Timed runs per figure (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Rays of each set compared with the f64 oracle (spread evenly over the set).
+    #[arg(long, default_value_t = 2000)]
+    pub sample: usize,
+    /// Random rays per closed solid for the leak count (rays at every vertex and edge
+    /// midpoint come on top).
+    #[arg(long, default_value_t = 100_000)]
+    pub leak_rays: usize,
+    /// Trace at most this many rays of each set (every k-th ray; default: the whole
+    /// sets), for a quick look.
+    #[arg(long)]
+    pub max_rays: Option<usize>,
+    /// Also print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One accuracy knob turned from the defaults.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Knob {
+    Defaults,
+    MollerTrumbore,
+    Margin(f32),
+    Depth(i32),
+    LeafSize(u32),
+}
+
+/// The configurations of the report, in its order.
+const KNOBS: [Knob; 9] = [
+    Knob::Defaults,
+    Knob::MollerTrumbore,
+    Knob::Margin(0.0),
+    Knob::Margin(1.0 / 65536.0),
+    Knob::Depth(-2),
+    Knob::Depth(-1),
+    Knob::Depth(1),
+    Knob::LeafSize(8),
+    Knob::LeafSize(32),
+];
+
+impl Knob {
+    fn group(self) -> &'static str {
+        match self {
+            Knob::Defaults => "defaults",
+            Knob::MollerTrumbore => "triangle test",
+            Knob::Margin(_) => "bake margin",
+            Knob::Depth(_) => "depth limit",
+            Knob::LeafSize(_) => "leaf target",
+        }
+    }
+
+    fn setting(self, base: &ResolvedParams) -> String {
+        match self {
+            Knob::Defaults => format!(
+                "watertight f32, margin {}, depth {}, leaf {}",
+                power_of_two(base.margin),
+                base.max_depth,
+                base.leaf_size
+            ),
+            Knob::MollerTrumbore => "Möller-Trumbore f32".into(),
+            Knob::Margin(m) => power_of_two(m),
+            Knob::Depth(_) | Knob::LeafSize(_) => {
+                let p = self.params(base).resolve(0);
+                if let Knob::Depth(_) = self {
+                    p.max_depth.to_string()
+                } else {
+                    p.leaf_size.to_string()
+                }
+            }
+        }
+    }
+
+    /// The bake parameters: `base` (a mesh's automatic ones) with this knob turned.
+    fn params(self, base: &ResolvedParams) -> BuildParams {
+        let mut p =
+            BuildParams { max_depth: Some(base.max_depth), leaf_size: Some(base.leaf_size), margin: base.margin };
+        match self {
+            Knob::Margin(m) => p.margin = m,
+            Knob::Depth(d) => p.max_depth = Some(base.max_depth.saturating_add_signed(d).max(1)),
+            Knob::LeafSize(n) => p.leaf_size = Some(n),
+            Knob::Defaults | Knob::MollerTrumbore => {}
+        }
+        p
+    }
+
+    fn test(self) -> TriangleTest {
+        if self == Knob::MollerTrumbore {
+            TriangleTest::MollerTrumbore
+        } else {
+            TriangleTest::Watertight
+        }
+    }
+}
+
+/// `2^-20` for a power of two, `0` for zero, else the number.
+fn power_of_two(x: f32) -> String {
+    if x == 0.0 {
+        return "0".into();
+    }
+    let e = x.log2();
+    if e == e.round() {
+        format!("2^{}", e as i32)
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// The standard sets of one mesh, the sample indices and the oracle's answers there.
+struct Sets {
+    /// (name, rays, occlusion?)
+    sets: Vec<(&'static str, Vec<Ray>, bool)>,
+    samples: Vec<Vec<usize>>,
+    /// The oracle's nearest hit (empty for occlusion sets) and occlusion per sample.
+    nearest: Vec<Vec<Option<ReferenceHit>>>,
+    occluded: Vec<Vec<bool>>,
+    reference: Reference,
+}
+
+/// Errors of one configuration against the oracle.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+struct Errors {
+    /// Rays compared.
+    compared: usize,
+    /// Wrong answers (not explained by a tie or an edge).
+    wrong: usize,
+    /// Different answers within rounding: two triangles at one distance, a hit on an
+    /// edge, an origin on a surface.
+    ties: usize,
+    /// Largest |Δt|/t where both found the same triangle.
+    max_relative_dt: f64,
+}
+
+/// One row of a mesh's table.
+#[derive(Debug, Serialize)]
+struct Row {
+    knob: &'static str,
+    setting: String,
+    bake_seconds: f64,
+    bytes: u64,
+    leaves: u64,
+    references_per_triangle: f64,
+    /// Single-threaded Mrays/s per set (primary, incoherent, shadow), medians.
+    mrays: Vec<f64>,
+    errors: Errors,
+    /// Rays leaked from inside closed solids, per million, and rays shot.
+    leaks_per_million: f64,
+    leak_rays: usize,
+}
+
+#[derive(Debug, Serialize)]
+struct MeshReport {
+    name: String,
+    triangles: usize,
+    sets: Vec<(&'static str, usize)>,
+    rows: Vec<Row>,
+}
+
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
+    anyhow::ensure!(args.sample >= 1, "--sample must be at least 1");
+    let meshes = inputs(&args)?;
+    let steps = (meshes.len() * (KNOBS.len() + 1) + KNOBS.len() + 1) as u64;
+    let bar = Bar::new(steps);
+    let leaks = leak_table(&args, &bar)?;
+    let mut reports = Vec::new();
+    for (name, mesh) in &meshes {
+        reports.push(mesh_report(name, mesh, &args, &leaks, &bar)?);
+    }
+    bar.finish();
+    std::fs::create_dir_all(&args.output)?;
+    let md = markdown(&reports, &args);
+    let json = serde_json::to_string_pretty(&serde_json::json!({ "meshes": reports, "runs": args.runs }))?;
+    // Whole files or none (a temporary file renamed into place).
+    octrace_format::write_atomically(&args.output.join("report.md"), &[md.as_bytes()])?;
+    octrace_format::write_atomically(&args.output.join("report.json"), &[json.as_bytes()])?;
+    if args.json {
+        crate::out!("{json}");
+    } else {
+        crate::out!("{md}");
+        crate::out!("wrote {} and report.json", crate::show(&args.output.join("report.md")));
+    }
+    Ok(())
+}
+
+/// The meshes to report on: those given, else the bunny and the shared dragon.
+fn inputs(args: &Args) -> anyhow::Result<Vec<(String, Mesh)>> {
+    let name = |p: &Path| p.file_name().map_or_else(|| crate::show(p), |n| n.to_string_lossy().into_owned());
+    if args.inputs.is_empty() {
+        let obj = zstd::stream::decode_all(super::demo::BUNNY)?;
+        let mut out = vec![("bunny".to_string(), Mesh::from_bytes(&obj, MeshFormat::Obj, "bunny.obj".as_ref(), None)?)];
+        let dragon = Path::new("../shared/meshes/dragon.obj");
+        if dragon.exists() {
+            out.push(("dragon".to_string(), Mesh::load(dragon)?));
+        }
+        return Ok(out);
+    }
+    args.inputs
+        .iter()
+        .map(|p| {
+            let mesh = if super::bake::is_scene(p) {
+                let scene = crate::open::open_scene(p)?;
+                let view = scene.view();
+                // Input order, so triangle ids stay those of the file.
+                let mut tris = vec![[[0.0f32; 3]; 3]; view.triangle_ids.iter().max().map_or(0, |&m| m as usize + 1)];
+                for prim in 0..view.triangle_count() as u32 {
+                    tris[view.triangle_ids[prim as usize] as usize] = view.triangle(prim);
+                }
+                Mesh::from_triangles(tris)
+            } else {
+                Mesh::load(p)?
+            };
+            Ok((name(p), mesh))
+        })
+        .collect()
+}
+
+/// Leaks per million rays from inside the closed solids, for each knob (and obvhs).
+fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
+    let solids = procedural::closed_solids();
+    let rays: Vec<Vec<Ray>> = solids
+        .iter()
+        .map(|s| s.leak_rays(args.leak_rays, 1).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect())
+        .collect();
+    let total: usize = rays.iter().map(Vec::len).sum();
+    let per_million = |leaks: usize| leaks as f64 * 1e6 / total.max(1) as f64;
+    let mut out = Vec::new();
+    for knob in KNOBS {
+        bar.step(&format!("leaks: {} {}", knob.group(), knob.setting(&BuildParams::auto().resolve(1))));
+        let mut leaks = 0;
+        for (solid, rays) in solids.iter().zip(&rays) {
+            let base = BuildParams::auto().resolve(solid.mesh.triangles.len());
+            let scene = Scene::from_baked(bake(&solid.mesh, &knob.params(&base))?)?;
+            let tracer = scene.tracer().with_triangle_test(knob.test());
+            let mut hits = vec![None; rays.len()];
+            tracer.par_intersect_batch(rays, &mut hits);
+            leaks += hits.iter().filter(|h| h.is_none()).count();
+        }
+        out.push((per_million(leaks), total));
+    }
+    bar.step("leaks: obvhs");
+    #[cfg(feature = "obvhs")]
+    {
+        let mut leaks = 0;
+        for (solid, rays) in solids.iter().zip(&rays) {
+            let scene = Scene::from_baked(bake(&solid.mesh, &BuildParams::auto())?)?;
+            let peer = crate::peer::Peer::build(&scene.view());
+            leaks += rays.par_iter().filter(|r| peer.nearest(r).is_none()).count();
+        }
+        out.push((per_million(leaks), total));
+    }
+    Ok(out)
+}
+
+fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar: &Bar) -> anyhow::Result<MeshReport> {
+    let base = BuildParams::auto().resolve(mesh.triangles.len());
+    let dir = tempfile::tempdir()?;
+    let mut rows = Vec::new();
+    let mut sets: Option<Sets> = None;
+    for (k, knob) in KNOBS.into_iter().enumerate() {
+        bar.step(&format!("{name}: {} {}", knob.group(), knob.setting(&base)));
+        let t = Instant::now();
+        let baked = bake(mesh, &knob.params(&base))?;
+        let bake_time = t.elapsed();
+        let path = dir.path().join(format!("{k}.oct"));
+        let bytes = baked.write(&path, bake_time.as_micros() as u64)?;
+        let scene = Scene::from_baked(baked)?;
+        let view = scene.view();
+        let stats = octrace_format::stats::SceneStatistics::compute(&view)?;
+        let tracer = scene.tracer().with_triangle_test(knob.test());
+        // The sets and the oracle's answers come from the defaults' scene, once.
+        let sets = match &mut sets {
+            Some(s) => s,
+            None => {
+                bar.message(&format!("{name}: the f64 oracle on {} rays of each set", thousands(args.sample as u64)));
+                sets.insert(standard_sets(&scene, args.sample, args.max_rays))
+            }
+        };
+        let (mrays, errors) = trace_config(sets, args.runs, |rays, occlusion| answers(&tracer, rays, occlusion));
+        let (leaks_per_million, leak_rays) = leaks[k];
+        rows.push(Row {
+            knob: knob.group(),
+            setting: knob.setting(&base),
+            bake_seconds: bake_time.as_secs_f64(),
+            bytes,
+            leaves: stats.leaves,
+            references_per_triangle: stats.triangle_references as f64 / stats.triangles.max(1) as f64,
+            mrays,
+            errors,
+            leaks_per_million,
+            leak_rays,
+        });
+    }
+    let sets = sets.expect("at least one configuration");
+    bar.step(&format!("{name}: obvhs"));
+    #[cfg(feature = "obvhs")]
+    {
+        let scene = Scene::from_baked(bake(mesh, &BuildParams::auto())?)?;
+        let view = scene.view();
+        let peer = crate::peer::Peer::build(&view);
+        let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| {
+            rays.iter()
+                .map(|r| {
+                    if occlusion {
+                        Answer::Occluded(peer.occluded(r))
+                    } else {
+                        // obvhs reports no barycentrics: the oracle's decide edge ties.
+                        Answer::Nearest(
+                            peer.nearest(r).map(|(t, prim)| (t, view.triangle_ids[prim as usize], 0.3, 0.3)),
+                        )
+                    }
+                })
+                .collect()
+        });
+        let (leaks_per_million, leak_rays) = leaks[KNOBS.len()];
+        rows.push(Row {
+            knob: "peer",
+            setting: "obvhs CWBVH (Möller-Trumbore f32)".into(),
+            bake_seconds: peer.build_time.as_secs_f64(),
+            bytes: 0,
+            leaves: 0,
+            references_per_triangle: 0.0,
+            mrays,
+            errors,
+            leaks_per_million,
+            leak_rays,
+        });
+    }
+    Ok(MeshReport {
+        name: name.to_string(),
+        triangles: mesh.triangles.len(),
+        sets: sets.sets.iter().map(|(n, r, _)| (*n, r.len())).collect(),
+        rows,
+    })
+}
+
+/// A tracer's answer for one ray.
+#[derive(Clone, Copy, Debug)]
+enum Answer {
+    /// Distance, input triangle id, barycentrics.
+    Nearest(Option<(f32, u32, f32, f32)>),
+    Occluded(bool),
+}
+
+fn answers(tracer: &Tracer<'_>, rays: &[Ray], occlusion: bool) -> Vec<Answer> {
+    if occlusion {
+        let mut out = vec![false; rays.len()];
+        tracer.occluded_batch(rays, &mut out);
+        out.into_iter().map(Answer::Occluded).collect()
+    } else {
+        let mut out: Vec<Option<Hit>> = vec![None; rays.len()];
+        tracer.intersect_batch(rays, &mut out);
+        out.into_iter().map(|h| Answer::Nearest(h.map(|h| (h.t, h.triangle, h.u, h.v)))).collect()
+    }
+}
+
+/// The standard sets of `scene` (shadow rays from its primary hits), a sample of each,
+/// and the oracle's answers on the samples.
+fn standard_sets(scene: &Scene, sample: usize, max_rays: Option<usize>) -> Sets {
+    let view = scene.view();
+    let frame = Frame::from_bounds(view.bounds.mesh_lo, view.bounds.mesh_hi);
+    let primary = raysets::primary(&frame);
+    let mut hits = vec![None; primary.len()];
+    scene.tracer().par_intersect_batch(&primary, &mut hits);
+    let shadow = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))));
+    let thin = |rays: Vec<Ray>| match max_rays {
+        Some(n) if n < rays.len() => {
+            let n = n.max(1);
+            (0..n).map(|i| rays[i * rays.len() / n]).collect()
+        }
+        _ => rays,
+    };
+    let sets = vec![
+        ("primary", thin(primary), false),
+        ("incoherent", thin(raysets::incoherent(&frame, 1_000_000)), false),
+        ("shadow", thin(shadow), true),
+    ];
+    let reference = Reference::from_view(&view);
+    let samples: Vec<Vec<usize>> = sets
+        .iter()
+        .map(|(_, rays, _)| {
+            let n = sample.min(rays.len());
+            (0..n).map(|i| i * rays.len() / n.max(1)).collect()
+        })
+        .collect();
+    let nearest = sets
+        .iter()
+        .zip(&samples)
+        .map(
+            |((_, rays, occ), s)| {
+                if *occ {
+                    Vec::new()
+                } else {
+                    s.par_iter().map(|&i| reference.intersect(&rays[i])).collect()
+                }
+            },
+        )
+        .collect();
+    let occluded = sets
+        .iter()
+        .zip(&samples)
+        .map(
+            |((_, rays, occ), s)| {
+                if *occ {
+                    s.par_iter().map(|&i| reference.occluded(&rays[i])).collect()
+                } else {
+                    Vec::new()
+                }
+            },
+        )
+        .collect();
+    Sets { sets, samples, nearest, occluded, reference }
+}
+
+/// Mrays/s (one thread, median of `runs`) on each set and the errors of the last
+/// run's answers on the samples.
+fn trace_config(sets: &Sets, runs: usize, trace: impl Fn(&[Ray], bool) -> Vec<Answer>) -> (Vec<f64>, Errors) {
+    let mut mrays = Vec::new();
+    let mut errors = Errors::default();
+    for (s, (_, rays, occlusion)) in sets.sets.iter().enumerate() {
+        let mut times = Vec::new();
+        let mut last = Vec::new();
+        for _ in 0..runs {
+            let t = Instant::now();
+            last = trace(rays, *occlusion);
+            times.push(t.elapsed());
+        }
+        times.sort();
+        mrays.push(rays.len() as f64 / times[times.len() / 2].max(Duration::from_nanos(1)).as_secs_f64() / 1e6);
+        for (j, &i) in sets.samples[s].iter().enumerate() {
+            let ray = &rays[i];
+            let agreement = match last[i] {
+                Answer::Nearest(got) => {
+                    let want = sets.nearest[s][j];
+                    let a = sets.reference.compare_with(ray, want, got);
+                    if let (Agreement::Same, Some(g), Some(w)) = (a, got, want) {
+                        if g.1 == w.triangle && w.t > 0.0 {
+                            errors.max_relative_dt = errors.max_relative_dt.max((g.0 as f64 - w.t).abs() / w.t);
+                        }
+                    }
+                    a
+                }
+                Answer::Occluded(got) => occlusion_agreement(&sets.reference, ray, got, sets.occluded[s][j]),
+            };
+            errors.compared += 1;
+            match agreement {
+                Agreement::Same => {}
+                Agreement::Tie => errors.ties += 1,
+                Agreement::Different => errors.wrong += 1,
+            }
+        }
+    }
+    (mrays, errors)
+}
+
+/// Whether an occlusion answer agrees with the oracle's: a different answer is a tie
+/// when the oracle's nearest blocker lies on a triangle's edge or at the segment's end.
+fn occlusion_agreement(reference: &Reference, ray: &Ray, got: bool, want: bool) -> Agreement {
+    if got == want {
+        return Agreement::Same;
+    }
+    let at_end = |t: f64| (t - ray.tmax as f64).abs() <= TIE_RELATIVE_T * (ray.tmax as f64).abs();
+    match reference.intersect(ray) {
+        Some(w) if w.u.min(w.v).min(1.0 - w.u - w.v) <= EDGE_BARYCENTRIC || at_end(w.t) => Agreement::Tie,
+        _ => Agreement::Different,
+    }
+}
+
+/// report.md.
+fn markdown(reports: &[MeshReport], args: &Args) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# What accuracy costs: octrace report\n");
+    let _ = writeln!(
+        s,
+        "octrace {} on {} ({} threads available; the figures are single-threaded), {} UTC. \
+         Mrays/s: median of {} runs on the standard sets of shared/bench/RAYS.md. Errors: each \
+         configuration's answers on {} rays of each set against the f64 brute-force oracle \
+         (`runtime::reference`); \"wrong\" excludes ties within rounding (two triangles at one \
+         distance, hits on an edge, origins on a surface). Leaks: rays from inside `octrace \
+         soak`'s four closed solids ({} random rays each, plus every vertex and edge midpoint) \
+         that hit nothing, baked and traced with the same configuration.\n",
+        env!("CARGO_PKG_VERSION"),
+        machine(),
+        rayon::current_num_threads(),
+        today(),
+        args.runs,
+        thousands(args.sample as u64),
+        thousands(args.leak_rays as u64),
+    );
+    if let Some(n) = args.max_rays {
+        let _ = writeln!(s, "Quick run: at most {} rays of each set (every k-th ray).\n", thousands(n as u64));
+    }
+    for r in reports {
+        let _ = writeln!(s, "## {} ({} triangles)\n", r.name, thousands(r.triangles as u64));
+        let _ = writeln!(
+            s,
+            "| knob | setting | bake s | MB | leaves | refs / tri | primary | incoherent | shadow | wrong / rays | ties | max \\|Δt\\|/t | leaks / M rays (solids) |"
+        );
+        let _ =
+            writeln!(s, "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+        for row in &r.rows {
+            let peer = row.knob == "peer";
+            let dash = |x: String| if peer { "—".to_string() } else { x };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.2} | {} | {} | {} | {} | {} / {} | {} | {:.1e} | {:.1} |",
+                row.knob,
+                row.setting,
+                row.bake_seconds,
+                dash(format!("{:.1}", row.bytes as f64 / 1e6)),
+                dash(thousands(row.leaves)),
+                dash(format!("{:.2}", row.references_per_triangle)),
+                row.mrays.iter().map(|m| format!("{m:.2}")).collect::<Vec<_>>().join(" | "),
+                row.errors.wrong,
+                thousands(row.errors.compared as u64),
+                row.errors.ties,
+                row.errors.max_relative_dt,
+                row.leaks_per_million,
+            );
+        }
+        let _ = writeln!(s, "\nPareto front (no other configuration as fast on all three sets with no more wrong hits and leaks): {}.\n", pareto(&r.rows).join(", "));
+    }
+    s
+}
+
+/// The rows no other row dominates: at least as fast on every set, with no more
+/// wrong hits and leaks, and better in one.
+fn pareto(rows: &[Row]) -> Vec<String> {
+    let error = |r: &Row| (r.errors.wrong, r.leaks_per_million);
+    let dominates = |a: &Row, b: &Row| {
+        let faster = a.mrays.iter().zip(&b.mrays).all(|(x, y)| x >= y);
+        let (ea, eb) = (error(a), error(b));
+        let no_worse = ea.0 <= eb.0 && ea.1 <= eb.1;
+        let strictly = a.mrays.iter().zip(&b.mrays).any(|(x, y)| x > y) || ea.0 < eb.0 || ea.1 < eb.1;
+        faster && no_worse && strictly
+    };
+    rows.iter()
+        .filter(|b| !rows.iter().any(|a| dominates(a, b)))
+        .map(|r| format!("{} ({})", r.knob, r.setting))
+        .collect()
+}
+
+/// The processor's name, from /proc/cpuinfo where there is one.
+fn machine() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|c| {
+            c.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string())
+}
+
+/// Today's date (UTC), `YYYY-MM-DD`.
+fn today() -> String {
+    let days =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs() / 86_400) as i64;
+    // Howard Hinnant's civil_from_days.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
+/// A progress bar over the report's steps, on a terminal.
+struct Bar(Option<indicatif::ProgressBar>);
+
+impl Bar {
+    fn new(steps: u64) -> Bar {
+        use std::io::IsTerminal as _;
+        Bar(std::io::stderr().is_terminal().then(|| {
+            let bar = indicatif::ProgressBar::new(steps);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed:>4} {msg}")
+                    .expect("valid template"),
+            );
+            bar
+        }))
+    }
+
+    /// Starts the next step.
+    fn step(&self, what: &str) {
+        if let Some(b) = &self.0 {
+            b.inc(1);
+            b.set_message(what.to_string());
+        }
+    }
+
+    fn message(&self, what: &str) {
+        if let Some(b) = &self.0 {
+            b.set_message(what.to_string());
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.0 {
+            b.finish_and_clear();
+        }
+    }
+}
