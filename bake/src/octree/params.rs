@@ -62,18 +62,20 @@ impl BuildParams {
     /// Fixes the automatic choices for a mesh of `triangles` triangles.
     ///
     /// Depth: a surface mesh fills about `4^d` cells at depth `d`, so reaching about
-    /// `leaf_size` triangles a cell takes `log4(n / leaf_size)` levels; two more let
-    /// dense regions go finer than the average:
-    /// `max_depth = clamp(ceil(log4(n / leaf_size)) + 2, 1, 16)`.
-    /// With the default leaf target this gives 9 for the bunny (the paper used 8) and
-    /// 10 for the dragon (the paper used 11). Havran's kd-tree rule (seed 003), `1.2 ln n + 2` binary levels, gives 19 for
+    /// `leaf_size` triangles a cell takes `log4(n / leaf_size)` levels:
+    /// `max_depth = clamp(ceil(log4(n / leaf_size)), 1, 16)`.
+    /// With the default leaf target this gives 7 for the bunny (the paper used 8) and
+    /// 8 for the dragon (the paper used 11). Letting dense regions go two levels finer
+    /// (the previous rule, `+ 2`) doubled the dragon's file (117 MB against
+    /// 61 MB) and traced no faster: `octrace report` and `octrace bench`, BENCHMARKS.md
+    /// "What accuracy costs". Havran's kd-tree rule (seed 003), `1.2 ln n + 2` binary levels, gives 19 for
     /// the dragon: 6.3 octree levels, far too shallow because it counts all
     /// subdivisions, not just those around the surface.
     pub fn resolve(&self, triangles: usize) -> ResolvedParams {
         let leaf_size = self.leaf_size.unwrap_or(DEFAULT_LEAF_SIZE).max(1);
         let max_depth = self.max_depth.unwrap_or_else(|| {
             let ratio = (triangles as f64 / leaf_size as f64).max(1.0);
-            let levels = (ratio.log2() / 2.0).ceil() as u32 + 2;
+            let levels = (ratio.log2() / 2.0).ceil() as u32;
             levels.clamp(1, AUTO_DEPTH_LIMIT)
         });
         ResolvedParams { max_depth: max_depth.min(octrace_format::layout::MAX_LEVEL), leaf_size, margin: self.margin }
@@ -92,8 +94,8 @@ mod tests {
 
     #[test]
     fn automatic_depth_matches_the_documented_values() {
-        assert_eq!(BuildParams::auto().resolve(69_451).max_depth, 9);
-        assert_eq!(BuildParams::auto().resolve(871_414).max_depth, 10);
-        assert_eq!(BuildParams::auto().resolve(1).max_depth, 2);
+        assert_eq!(BuildParams::auto().resolve(69_451).max_depth, 7);
+        assert_eq!(BuildParams::auto().resolve(871_414).max_depth, 8);
+        assert_eq!(BuildParams::auto().resolve(1).max_depth, 1);
     }
 }
