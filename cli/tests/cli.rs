@@ -509,7 +509,7 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     assert_eq!((mesh["name"].as_str(), mesh["triangles"].as_u64()), (Some("cube.obj"), Some(13)));
     let rows = mesh["rows"].as_array().unwrap();
     let knobs: Vec<&str> = rows.iter().map(|r| r["knob"].as_str().unwrap()).collect();
-    for knob in ["defaults", "triangle test", "bake margin", "depth limit", "leaf target", "peer"] {
+    for knob in ["defaults", "triangle test", "exit face", "bake margin", "depth limit", "leaf target", "peer"] {
         assert!(knobs.contains(&knob), "{knob} missing from {knobs:?}");
     }
     for row in rows {

@@ -36,7 +36,7 @@ pub mod render;
 mod scene;
 pub mod spawn;
 
-pub use cpu::{Tracer, TriangleTest, WalkStats};
+pub use cpu::{ExitTest, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};
 pub use scene::Scene;

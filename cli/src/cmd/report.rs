@@ -9,7 +9,7 @@ use octrace_bake::octree::ResolvedParams;
 use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::{Agreement, Reference, ReferenceHit, EDGE_BARYCENTRIC, TIE_RELATIVE_T};
-use octrace_runtime::{Hit, Ray, Scene, Tracer, TriangleTest};
+use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -20,8 +20,9 @@ use crate::output::thousands;
 ///
 /// For each mesh (default: the bunny this build carries, and
 /// ../shared/meshes/dragon.obj when it is there) each knob is turned from the
-/// defaults in turn: the triangle test (watertight or Möller-Trumbore, f32), the bake
-/// margin, the depth limit, the leaf target. Each configuration is baked (time,
+/// defaults in turn: the triangle test (watertight f32, Möller-Trumbore f32 or f64),
+/// the exit-face test (Plücker signs or slab distances), the bake margin, the depth
+/// limit, the leaf target. Each configuration is baked (time,
 /// bytes, leaves, references per triangle) and traced on the three standard ray sets
 /// (shared/bench/RAYS.md) on one thread, the median of --runs; its answers on --sample
 /// rays of each set are compared with the oracle's (wrong hits, largest |Δt|/t). Leaks
@@ -63,15 +64,19 @@ pub(crate) struct Args {
 enum Knob {
     Defaults,
     MollerTrumbore,
+    F64,
+    SlabExit,
     Margin(f32),
     Depth(i32),
     LeafSize(u32),
 }
 
 /// The configurations of the report, in its order.
-const KNOBS: [Knob; 9] = [
+const KNOBS: [Knob; 11] = [
     Knob::Defaults,
     Knob::MollerTrumbore,
+    Knob::F64,
+    Knob::SlabExit,
     Knob::Margin(0.0),
     Knob::Margin(1.0 / 65536.0),
     Knob::Depth(-2),
@@ -85,7 +90,8 @@ impl Knob {
     fn group(self) -> &'static str {
         match self {
             Knob::Defaults => "defaults",
-            Knob::MollerTrumbore => "triangle test",
+            Knob::MollerTrumbore | Knob::F64 => "triangle test",
+            Knob::SlabExit => "exit face",
             Knob::Margin(_) => "bake margin",
             Knob::Depth(_) => "depth limit",
             Knob::LeafSize(_) => "leaf target",
@@ -95,12 +101,14 @@ impl Knob {
     fn setting(self, base: &ResolvedParams) -> String {
         match self {
             Knob::Defaults => format!(
-                "watertight f32, margin {}, depth {}, leaf {}",
+                "watertight f32, Plücker exit, margin {}, depth {}, leaf {}",
                 power_of_two(base.margin),
                 base.max_depth,
                 base.leaf_size
             ),
             Knob::MollerTrumbore => "Möller-Trumbore f32".into(),
+            Knob::F64 => "Möller-Trumbore f64".into(),
+            Knob::SlabExit => "slab distances".into(),
             Knob::Margin(m) => power_of_two(m),
             Knob::Depth(_) | Knob::LeafSize(_) => {
                 let p = self.params(base).resolve(0);
@@ -121,17 +129,30 @@ impl Knob {
             Knob::Margin(m) => p.margin = m,
             Knob::Depth(d) => p.max_depth = Some(base.max_depth.saturating_add_signed(d).max(1)),
             Knob::LeafSize(n) => p.leaf_size = Some(n),
-            Knob::Defaults | Knob::MollerTrumbore => {}
+            Knob::Defaults | Knob::MollerTrumbore | Knob::F64 | Knob::SlabExit => {}
         }
         p
     }
 
     fn test(self) -> TriangleTest {
-        if self == Knob::MollerTrumbore {
-            TriangleTest::MollerTrumbore
-        } else {
-            TriangleTest::Watertight
+        match self {
+            Knob::MollerTrumbore => TriangleTest::MollerTrumbore,
+            Knob::F64 => TriangleTest::F64,
+            _ => TriangleTest::Watertight,
         }
+    }
+
+    fn exit(self) -> ExitTest {
+        if self == Knob::SlabExit {
+            ExitTest::Slab
+        } else {
+            ExitTest::Plucker
+        }
+    }
+
+    /// `scene`'s tracer with this knob's tests.
+    fn tracer(self, scene: &Scene) -> Tracer<'_> {
+        scene.tracer().with_triangle_test(self.test()).with_exit_test(self.exit())
     }
 }
 
@@ -273,7 +294,7 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
         for (solid, rays) in solids.iter().zip(&rays) {
             let base = BuildParams::auto().resolve(solid.mesh.triangles.len());
             let scene = Scene::from_baked(bake(&solid.mesh, &knob.params(&base))?)?;
-            let tracer = scene.tracer().with_triangle_test(knob.test());
+            let tracer = knob.tracer(&scene);
             let mut hits = vec![None; rays.len()];
             tracer.par_intersect_batch(rays, &mut hits);
             leaks += hits.iter().filter(|h| h.is_none()).count();
@@ -309,7 +330,7 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
         let scene = Scene::from_baked(baked)?;
         let view = scene.view();
         let stats = octrace_format::stats::SceneStatistics::compute(&view)?;
-        let tracer = scene.tracer().with_triangle_test(knob.test());
+        let tracer = knob.tracer(&scene);
         // The sets and the oracle's answers come from the defaults' scene, once.
         let sets = match &mut sets {
             Some(s) => s,

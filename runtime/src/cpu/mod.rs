@@ -7,7 +7,7 @@ mod traverse;
 mod triangle;
 pub mod watertight;
 
-pub use traverse::{mesh_box, root_corners, LocateGrid, Tracer, TriangleTest, WalkStats};
+pub use traverse::{mesh_box, root_corners, ExitTest, LocateGrid, Tracer, TriangleTest, WalkStats};
 
 use rayon::prelude::*;
 
@@ -31,8 +31,14 @@ mod scalar_batch {
     pub(super) fn to_walk(_: &Tracer<'_>, w: &Walk) -> Walk {
         w.clone()
     }
+    /// The scalar step reads the tests from the tracer: `TEST` and `SLAB` serve the
+    /// SIMD steps' signature only.
     #[inline(always)]
-    pub(super) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut Walk, s: &mut WalkStats) -> bool {
+    pub(super) fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
+        t: &Tracer<'_>,
+        w: &mut Walk,
+        s: &mut WalkStats,
+    ) -> bool {
         t.step::<ANY>(w, s)
     }
 }
@@ -46,12 +52,17 @@ impl Tracer<'_> {
     /// Nearest hits of a batch, on this thread (several rays in flight, interleaved).
     pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        self.interleaved::<false>(rays, |i, h| out[i] = h);
+        let done = |i: usize, h: Option<Hit>| out[i] = h;
+        traverse::with_tests!(self; false; Self::interleaved; self, rays, done);
     }
 
     /// Walks `rays` with up to [`IN_FLIGHT`] in progress, one step each in turn;
     /// `done(i, answer)` receives each ray's answer.
-    fn interleaved<const ANY: bool>(&self, rays: &[Ray], mut done: impl FnMut(usize, Option<Hit>)) {
+    fn interleaved<const ANY: bool, const TEST: u8, const SLAB: bool>(
+        &self,
+        rays: &[Ray],
+        mut done: impl FnMut(usize, Option<Hit>),
+    ) {
         let mut stats = WalkStats::default();
         let mut next = 0;
         // The next ray that needs a walk; rays that cannot hit are answered at once.
@@ -71,7 +82,7 @@ impl Tracer<'_> {
         while active > 0 {
             for slot in slots.iter_mut() {
                 let Some((i, w)) = slot else { continue };
-                if step::<ANY>(self, w, &mut stats) {
+                if step::<ANY, TEST, SLAB>(self, w, &mut stats) {
                     done(*i, w.best);
                     *slot = start(&mut done);
                     active -= slot.is_none() as usize;
@@ -89,7 +100,8 @@ impl Tracer<'_> {
     /// Occlusion of a batch, on this thread (several rays in flight, interleaved).
     pub fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        self.interleaved::<true>(rays, |i, h| out[i] = h.is_some());
+        let done = |i: usize, h: Option<Hit>| out[i] = h.is_some();
+        traverse::with_tests!(self; true; Self::interleaved; self, rays, done);
     }
 
     /// Occlusion of a batch, on all threads of the current rayon pool.

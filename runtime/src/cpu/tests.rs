@@ -82,8 +82,10 @@ fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
     let rays = random_rays(5, 20_000, lo, hi);
     for params in [BuildParams::auto(), BuildParams { max_depth: Some(7), leaf_size: Some(2), ..BuildParams::auto() }] {
         let (scene, _) = scene_of(&mesh, params);
-        for test in [crate::TriangleTest::Watertight, crate::TriangleTest::MollerTrumbore] {
-            let t = scene.tracer().with_triangle_test(test);
+        let tests = [crate::TriangleTest::Watertight, crate::TriangleTest::MollerTrumbore, crate::TriangleTest::F64];
+        let configs = tests.into_iter().map(|t| (t, crate::ExitTest::Plucker));
+        for (test, exit) in configs.chain([(crate::TriangleTest::Watertight, crate::ExitTest::Slab)]) {
+            let t = scene.tracer().with_triangle_test(test).with_exit_test(exit);
             let mut batch = vec![None; rays.len()];
             t.intersect_batch(&rays, &mut batch);
             let mut occluded = vec![false; rays.len()];
@@ -93,6 +95,42 @@ fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
                 assert_eq!(t.intersect(r), scalar, "ray {r:?}");
                 assert_eq!(batch[i], scalar, "batch, ray {r:?}");
                 assert_eq!(occluded[i], t.occluded_scalar(r), "occluded, ray {r:?}");
+            }
+        }
+    }
+}
+
+/// The report's other knobs — the `f64` triangle test, the slab exit-face test —
+/// give the oracle's answers too (ties on edges aside, where `f64` Möller-Trumbore
+/// is not watertight).
+#[test]
+fn the_f64_test_and_the_slab_exit_agree_with_the_oracle() {
+    let meshes = [
+        ("sphere", procedural::sphere([0.1, 0.2, -0.3], 1.5, 20, 28)),
+        ("soup", procedural::soup(5, 3000, 8.0, 0.8)),
+        ("cube", procedural::cube([-1.0, -0.5, -2.0], [1.0, 0.5, 2.0], 5)),
+    ];
+    let configs = [
+        (crate::TriangleTest::F64, crate::ExitTest::Plucker),
+        (crate::TriangleTest::Watertight, crate::ExitTest::Slab),
+    ];
+    for (name, mesh) in &meshes {
+        let (lo, hi) = bounds(mesh);
+        let rays = random_rays(23, 3000, lo, hi);
+        for params in
+            [BuildParams::auto(), BuildParams { max_depth: Some(6), leaf_size: Some(2), ..BuildParams::auto() }]
+        {
+            let (scene, oracle) = scene_of(mesh, params);
+            for (test, exit) in configs {
+                let tracer = scene.tracer().with_triangle_test(test).with_exit_test(exit);
+                let wrong = rays
+                    .iter()
+                    .filter(|r| {
+                        let got = tracer.intersect(r).map(|h| (h.t, h.triangle, h.u, h.v));
+                        oracle.compare(r, got) == Agreement::Different
+                    })
+                    .count();
+                assert_eq!(wrong, 0, "{name} {params:?} {test:?} {exit:?}");
             }
         }
     }

@@ -29,7 +29,7 @@ use octrace_format::layout::{
 use octrace_format::SceneView;
 
 use super::tables::{exit_code, octant, EXIT_FACE};
-pub(crate) use super::triangle::{intersect, TriRay};
+pub(crate) use super::triangle::{intersect, intersect_f64, TriRay};
 use super::watertight::Shear;
 use crate::ray::{Hit, Ray};
 
@@ -50,6 +50,7 @@ pub struct Tracer<'a> {
     max_depth: u32,
     max_steps: u32,
     test: TriangleTest,
+    exit: ExitTest,
     /// The top levels of point location as a grid, when the scene has one.
     grid: Option<&'a LocateGrid>,
 }
@@ -61,9 +62,46 @@ pub enum TriangleTest {
     /// share an edge (the default).
     #[default]
     Watertight,
-    /// Möller & Trumbore: a little cheaper; a ray through a shared edge can, rarely,
-    /// miss both triangles.
+    /// Möller & Trumbore: a ray through a shared edge can, rarely, miss both
+    /// triangles.
     MollerTrumbore,
+    /// Möller & Trumbore in `f64` (the oracle's arithmetic, `reference::intersect_f64`,
+    /// on the `f32` ray and vertices): the slowest; for measuring what `f32` costs.
+    F64,
+}
+
+/// [`TriangleTest`]s as the const parameters of the SIMD step.
+pub(crate) const TEST_WATERTIGHT: u8 = 0;
+pub(crate) const TEST_MOLLER_TRUMBORE: u8 = 1;
+pub(crate) const TEST_F64: u8 = 2;
+
+/// `with_tests!(tracer; ANY; f; args)` calls `f::<ANY, TEST, SLAB>(args)` with the
+/// tracer's triangle and exit tests as const generics: one dispatch a call, none a step.
+macro_rules! with_tests {
+    ($tracer:expr; $any:tt; $($f:ident)::+; $($args:expr),*) => {{
+        use $crate::cpu::traverse::{ExitTest as E, TriangleTest as T, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+        match ($tracer.triangle_test(), $tracer.exit_test()) {
+            (T::Watertight, E::Plucker) => $($f)::+::<$any, TEST_WATERTIGHT, false>($($args),*),
+            (T::Watertight, E::Slab) => $($f)::+::<$any, TEST_WATERTIGHT, true>($($args),*),
+            (T::MollerTrumbore, E::Plucker) => $($f)::+::<$any, TEST_MOLLER_TRUMBORE, false>($($args),*),
+            (T::MollerTrumbore, E::Slab) => $($f)::+::<$any, TEST_MOLLER_TRUMBORE, true>($($args),*),
+            (T::F64, E::Plucker) => $($f)::+::<$any, TEST_F64, false>($($args),*),
+            (T::F64, E::Slab) => $($f)::+::<$any, TEST_F64, true>($($args),*),
+        }
+    }};
+}
+pub(crate) use with_tests;
+
+/// How a walk picks the face it leaves a leaf by.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ExitTest {
+    /// The paper's: the signs of three Plücker products with the edges at the exit
+    /// corner, a 3-bit code into a table (the default).
+    #[default]
+    Plucker,
+    /// Slab distances: the nearest of the three planes at the exit corner, compared
+    /// (ties to the lowest axis). For measuring what the Plücker test buys.
+    Slab,
 }
 
 /// What a walk did, for the cells view and for statistics.
@@ -173,6 +211,7 @@ impl<'a> Tracer<'a> {
             max_steps: 9 * (1u32 << max_depth) + 64,
             view,
             test: TriangleTest::default(),
+            exit: ExitTest::default(),
             grid: None,
         }
     }
@@ -194,6 +233,17 @@ impl<'a> Tracer<'a> {
         self.test
     }
 
+    /// The same tracer with another exit-face test.
+    pub fn with_exit_test(mut self, exit: ExitTest) -> Self {
+        self.exit = exit;
+        self
+    }
+
+    /// The exit-face test in use.
+    pub fn exit_test(&self) -> ExitTest {
+        self.exit
+    }
+
     /// Tests one triangle (nine floats) with the tracer's triangle test.
     #[inline(always)]
     pub(crate) fn hit_triangle(
@@ -207,6 +257,7 @@ impl<'a> Tracer<'a> {
         match self.test {
             TriangleTest::Watertight => shear.intersect(t, tmin, tmax),
             TriangleTest::MollerTrumbore => intersect(tri, t, tmin, tmax),
+            TriangleTest::F64 => intersect_f64(tri, t, tmin, tmax),
         }
     }
 
@@ -261,7 +312,7 @@ impl<'a> Tracer<'a> {
     fn walk<const ANY: bool>(&self, ray: &Ray, stats: &mut WalkStats) -> Option<Hit> {
         let w = self.begin(ray)?;
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        return super::simd::sse2::walk::<ANY>(self, &w, stats);
+        return with_tests!(self; ANY; super::simd::sse2::walk; self, &w, stats);
         #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
         {
             let mut w = w;
@@ -395,7 +446,7 @@ impl<'a> Tracer<'a> {
             "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
         );
         let mut face = w.exits[exit_code(off, w.d)] as usize;
-        if w.d[face >> 1] == 0.0 {
+        if w.d[face >> 1] == 0.0 || self.exit == ExitTest::Slab {
             face = exit_along_moving_axes(off, w.d, w.inv);
         }
         let axis = face >> 1;

@@ -49,3 +49,14 @@ pub(crate) fn intersect(r: &TriRay, t: &[f32], tmin: f32, tmax: f32) -> Option<(
     let dist = dot(e2, q) * inv;
     (dist >= tmin && dist <= tmax).then_some((dist, u, v))
 }
+
+/// [`intersect`] in `f64`: the oracle's test (`reference::intersect_f64`) on the ray
+/// and vertices widened exactly; the distance is compared with `[tmin, tmax]` in
+/// `f64`, then rounded (rounding keeps it within, since the bounds are `f32`).
+#[inline]
+pub(crate) fn intersect_f64(r: &TriRay, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let v = |i: usize| glam::DVec3::new(f64::from(t[i]), f64::from(t[i + 1]), f64::from(t[i + 2]));
+    let wide = |a: [f32; 3]| glam::DVec3::new(f64::from(a[0]), f64::from(a[1]), f64::from(a[2]));
+    let (dist, u, v) = crate::reference::intersect_f64(wide(r.o), wide(r.d), &[v(0), v(3), v(6)])?;
+    (dist >= f64::from(tmin) && dist <= f64::from(tmax)).then_some((dist as f32, u as f32, v as f32))
+}

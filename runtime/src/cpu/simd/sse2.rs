@@ -6,7 +6,10 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
-use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer, TriangleTest, WalkStats};
+use crate::cpu::traverse::{
+    exit_along_moving_axes, intersect_f64, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
+    TEST_MOLLER_TRUMBORE,
+};
 use crate::cpu::watertight::Shear;
 use crate::ray::Hit;
 
@@ -214,20 +217,28 @@ fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
 /// Visits the walk's current leaf and moves to the next; returns whether the walk is
 /// over (its answer is then in `w.best`). The scalar `Tracer::step` documents each
 /// stage; this is the same computation, three lanes at a time.
+///
+/// `TEST` is the triangle test (`TEST_*` of `traverse`) and `SLAB` the slab exit-face
+/// test, fixed at compile time so the default's step carries no test of either.
 #[target_feature(enable = "sse2")]
 #[inline]
-pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut WalkStats) -> bool {
+pub(crate) fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
+    t: &Tracer<'_>,
+    w: &mut SseWalk,
+    stats: &mut WalkStats,
+) -> bool {
     let v = t.view();
     let a = w.address as usize;
     // 1. Triangles.
-    let (shear, o, d, watertight) = (w.shear_sse, w.o, w.d, t.triangle_test() == TriangleTest::Watertight);
+    let (shear, o, d, d_s) = (w.shear_sse, w.o, w.d, w.d_s);
     let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-    let test = |tri: &[f32], tmin: f32, tmax: f32| {
-        if watertight {
-            shear.intersect(tri, tmin, tmax)
-        } else {
-            intersect_sse(o, d, tri, tmin, tmax)
+    let test = |tri: &[f32], tmin: f32, tmax: f32| match TEST {
+        TEST_MOLLER_TRUMBORE => intersect_sse(o, d, tri, tmin, tmax),
+        TEST_F64 => {
+            let o: [f32; 4] = bytemuck::cast(o);
+            intersect_f64(&TriRay { o: [o[0], o[1], o[2]], d: d_s }, tri, tmin, tmax)
         }
+        _ => shear.intersect(tri, tmin, tmax),
     };
     let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, test) else {
         return true;
@@ -241,7 +252,7 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
     let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
     let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
     let mut face = w.exits[code] as usize;
-    if w.d_s[face >> 1] == 0.0 {
+    if w.d_s[face >> 1] == 0.0 || SLAB {
         let off_s: [f32; 4] = bytemuck::cast(off);
         face = exit_along_moving_axes([off_s[0], off_s[1], off_s[2]], w.d_s, w.inv_s);
     }
@@ -286,13 +297,17 @@ pub(crate) fn step<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut
 }
 
 /// Walks one ray to its end.
-pub(crate) fn walk<const ANY: bool>(t: &Tracer<'_>, start: &RayWalk, stats: &mut WalkStats) -> Option<Hit> {
+pub(crate) fn walk<const ANY: bool, const TEST: u8, const SLAB: bool>(
+    t: &Tracer<'_>,
+    start: &RayWalk,
+    stats: &mut WalkStats,
+) -> Option<Hit> {
     // SAFETY: SSE2 is enabled at compile time for this module
     // (`cfg(target_feature = "sse2")` in `simd/mod.rs`), so the target-feature
     // functions run on a processor that has it.
     unsafe {
         let mut w = SseWalk::from_scalar(start, t.root_lo());
-        while !step::<ANY>(t, &mut w, stats) {}
+        while !step::<ANY, TEST, SLAB>(t, &mut w, stats) {}
         w.best
     }
 }
@@ -318,7 +333,11 @@ fn prefetch(words: &[u32], at: u32) {
 
 /// One step in SSE form.
 #[inline(always)]
-pub(crate) fn step_safe<const ANY: bool>(t: &Tracer<'_>, w: &mut SseWalk, stats: &mut WalkStats) -> bool {
+pub(crate) fn step_safe<const ANY: bool, const TEST: u8, const SLAB: bool>(
+    t: &Tracer<'_>,
+    w: &mut SseWalk,
+    stats: &mut WalkStats,
+) -> bool {
     // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
-    unsafe { step::<ANY>(t, w, stats) }
+    unsafe { step::<ANY, TEST, SLAB>(t, w, stats) }
 }
