@@ -25,6 +25,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod bvh;
 pub mod cpu;
 mod error;
 #[cfg(feature = "gpu")]

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use octrace_bake::octree::ResolvedParams;
 use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
+use octrace_runtime::bvh::{Bvh, BvhBuild};
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::{Agreement, Reference, ReferenceHit, EDGE_BARYCENTRIC, TIE_RELATIVE_T};
 use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
@@ -219,6 +220,19 @@ struct MeshReport {
     rows: Vec<Row>,
     /// The paper's Tables 1 and 3 at its depth, for the bunny and the dragon.
     paper: Vec<PaperRow>,
+    /// The seeds' BVH builds on the same rays.
+    baselines: Vec<BaselineRow>,
+}
+
+/// A baseline structure's row: build, cost model, speed and errors.
+#[derive(Debug, Serialize)]
+struct BaselineRow {
+    structure: String,
+    build_seconds: f64,
+    nodes: usize,
+    sah_cost: f64,
+    mrays: Vec<f64>,
+    errors: Errors,
 }
 
 /// One row of the paper's Table 1 (leaves without and with the 2:1 constraint) and
@@ -282,7 +296,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(args.sample >= 1, "--sample must be at least 1");
     let meshes = inputs(&args)?;
-    let steps = (meshes.len() * (KNOBS.len() + 1) + KNOBS.len() + 1) as u64;
+    let steps = (meshes.len() * (KNOBS.len() + 2) + KNOBS.len() + 1) as u64;
     let bar = Bar::new(steps);
     let leaks = leak_table(&args, &bar)?;
     let mut reports = Vec::new();
@@ -448,6 +462,8 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
             leak_rays,
         });
     }
+    bar.step(&format!("{name}: the seeds' BVH builds"));
+    let baselines = baselines(&scene_triangles(mesh)?, &sets, args.runs);
     bar.message(&format!("{name}: the paper's tables"));
     let paper = paper_rows(name, mesh)?;
     Ok(MeshReport {
@@ -456,7 +472,52 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
         sets: sets.sets.iter().map(|(n, r, _)| (*n, r.len())).collect(),
         rows,
         paper,
+        baselines,
     })
+}
+
+/// Triangles and their input ids.
+type Triangles = (Vec<[[f32; 3]; 3]>, Vec<u32>);
+
+/// The stored triangles of `mesh`'s default bake and their input ids: what the
+/// baselines are built on (degenerate triangles left out, as the octree does).
+fn scene_triangles(mesh: &Mesh) -> anyhow::Result<Triangles> {
+    let scene = Scene::from_baked(bake(mesh, &BuildParams::auto())?)?;
+    let view = scene.view();
+    let tris = (0..view.triangle_count() as u32).map(|p| view.triangle(p)).collect();
+    Ok((tris, view.triangle_ids.to_vec()))
+}
+
+/// The seeds' BVH builds (seed 001) on the same triangles, rays and triangle test.
+fn baselines((tris, ids): &Triangles, sets: &Sets, runs: usize) -> Vec<BaselineRow> {
+    BvhBuild::ALL
+        .into_iter()
+        .map(|build| {
+            let t = Instant::now();
+            let bvh = Bvh::build(tris, ids, build);
+            let build_seconds = t.elapsed().as_secs_f64();
+            let (mrays, errors) =
+                trace_config(sets, runs, |rays, occlusion| {
+                    rays.iter()
+                        .map(|r| {
+                            if occlusion {
+                                Answer::Occluded(bvh.occluded(r))
+                            } else {
+                                Answer::Nearest(bvh.intersect(r))
+                            }
+                        })
+                        .collect()
+                });
+            BaselineRow {
+                structure: format!("BVH, {}", build.name()),
+                build_seconds,
+                nodes: bvh.node_count(),
+                sah_cost: bvh.sah_cost(),
+                mrays,
+                errors,
+            }
+        })
+        .collect()
 }
 
 /// A tracer's answer for one ray.
@@ -644,11 +705,50 @@ fn markdown(reports: &[MeshReport], args: &Args) -> String {
             );
         }
         let _ = writeln!(s, "\nPareto front (no other configuration as fast on all three sets with no more wrong hits and leaks): {}.\n", pareto(&r.rows).join(", "));
+        baseline_table(&mut s, r);
         if !r.paper.is_empty() {
             paper_tables(&mut s, &r.paper);
         }
     }
     s
+}
+
+/// The seeds' baselines beside the octree's defaults.
+fn baseline_table(s: &mut String, r: &MeshReport) {
+    let _ = writeln!(
+        s,
+        "The seeds' baselines (seed 001's BVH builds; stack traversal, near child first; the same watertight \
+         triangle test, rays and oracle; one thread):\n"
+    );
+    let _ = writeln!(s, "| structure | build s | nodes | SAH cost | primary | incoherent | shadow | wrong / rays |");
+    let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+    let mrays = |m: &[f64]| m.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(" | ");
+    if let Some(o) = r.rows.first() {
+        let _ = writeln!(
+            s,
+            "| octree ({}) | {:.2} | {} leaves | — | {} | {} / {} |",
+            o.setting,
+            o.bake_seconds,
+            thousands(o.leaves),
+            mrays(&o.mrays),
+            o.errors.wrong,
+            thousands(o.errors.compared as u64)
+        );
+    }
+    for b in &r.baselines {
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {} | {:.1} | {} | {} / {} |",
+            b.structure,
+            b.build_seconds,
+            thousands(b.nodes as u64),
+            b.sah_cost,
+            mrays(&b.mrays),
+            b.errors.wrong,
+            thousands(b.errors.compared as u64)
+        );
+    }
+    let _ = writeln!(s);
 }
 
 /// The paper's Tables 1 and 3, ours beside the published figures.
