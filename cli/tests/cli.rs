@@ -522,15 +522,20 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     for row in rows.iter().filter(|r| r["knob"] != "peer" && r["knob"] != "triangle test") {
         assert_eq!((row["errors"]["wrong"].as_u64(), row["leaks_per_million"].as_f64()), (Some(0), Some(0.0)), "{row}");
     }
-    // The seeds' four BVH builds, on the same rays, with the watertight test: no wrong hit.
+    // The seeds' four BVH builds and the kd-tree, on the same rays, with the
+    // watertight test: no wrong hit.
     let baselines = mesh["baselines"].as_array().unwrap();
-    assert_eq!(baselines.len(), 4);
+    assert_eq!(baselines.len(), 5);
+    assert!(baselines[4]["structure"].as_str().unwrap().starts_with("SAH kd-tree"));
     for b in baselines {
-        assert!(b["structure"].as_str().unwrap().starts_with("BVH, ") && b["sah_cost"].as_f64().unwrap() > 0.0, "{b}");
+        assert!(b["sah_cost"].as_f64().unwrap() > 0.0, "{b}");
         assert_eq!((b["errors"]["compared"].as_u64(), b["errors"]["wrong"].as_u64()), (Some(3 * 64), Some(0)), "{b}");
     }
     let md = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
     assert!(md.contains("## cube.obj (13 triangles)") && md.contains("| defaults | watertight f32"), "{md}");
-    assert!(md.contains("| BVH, SAH, 16 bins |"), "{md}");
+    assert!(
+        md.contains("| BVH, SAH, 16 bins |") && md.contains("| SAH kd-tree, Havran's depth and failures |"),
+        "{md}"
+    );
     assert!(dir.path().join("rep/report.json").exists());
 }

@@ -30,6 +30,7 @@ pub mod cpu;
 mod error;
 #[cfg(feature = "gpu")]
 pub mod gpu;
+pub mod kdtree;
 mod ray;
 pub mod raysets;
 pub mod reference;

@@ -8,6 +8,7 @@ use glam::Vec3;
 use octrace_bake::octree::ResolvedParams;
 use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
 use octrace_runtime::bvh::{Bvh, BvhBuild};
+use octrace_runtime::kdtree::KdTree;
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::{Agreement, Reference, ReferenceHit, EDGE_BARYCENTRIC, TIE_RELATIVE_T};
 use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
@@ -488,9 +489,10 @@ fn scene_triangles(mesh: &Mesh) -> anyhow::Result<Triangles> {
     Ok((tris, view.triangle_ids.to_vec()))
 }
 
-/// The seeds' BVH builds (seed 001) on the same triangles, rays and triangle test.
+/// The seeds' BVH builds (seed 001) and SAH kd-tree (seed 003) on the same
+/// triangles, rays and triangle test.
 fn baselines((tris, ids): &Triangles, sets: &Sets, runs: usize) -> Vec<BaselineRow> {
-    BvhBuild::ALL
+    let mut rows: Vec<BaselineRow> = BvhBuild::ALL
         .into_iter()
         .map(|build| {
             let t = Instant::now();
@@ -517,7 +519,24 @@ fn baselines((tris, ids): &Triangles, sets: &Sets, runs: usize) -> Vec<BaselineR
                 errors,
             }
         })
-        .collect()
+        .collect();
+    let t = Instant::now();
+    let tree = KdTree::build(tris, ids);
+    let build_seconds = t.elapsed().as_secs_f64();
+    let (mrays, errors) = trace_config(sets, runs, |rays, occlusion| {
+        rays.iter()
+            .map(|r| if occlusion { Answer::Occluded(tree.occluded(r)) } else { Answer::Nearest(tree.intersect(r)) })
+            .collect()
+    });
+    rows.push(BaselineRow {
+        structure: "SAH kd-tree, Havran's depth and failures".into(),
+        build_seconds,
+        nodes: tree.node_count(),
+        sah_cost: tree.sah_cost(),
+        mrays,
+        errors,
+    });
+    rows
 }
 
 /// A tracer's answer for one ray.
@@ -717,8 +736,8 @@ fn markdown(reports: &[MeshReport], args: &Args) -> String {
 fn baseline_table(s: &mut String, r: &MeshReport) {
     let _ = writeln!(
         s,
-        "The seeds' baselines (seed 001's BVH builds; stack traversal, near child first; the same watertight \
-         triangle test, rays and oracle; one thread):\n"
+        "The seeds' baselines (seed 001's BVH builds, stack traversal near child first; seed 003's SAH kd-tree, \
+         stack traversal front to back; the same watertight triangle test, rays and oracle; one thread):\n"
     );
     let _ = writeln!(s, "| structure | build s | nodes | SAH cost | primary | incoherent | shadow | wrong / rays |");
     let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
