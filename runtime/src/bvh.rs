@@ -313,7 +313,8 @@ fn partition(order: &mut [u32], left: impl Fn(u32) -> bool) -> usize {
     mid
 }
 
-fn tri_bounds(t: &[[f32; 3]; 3]) -> ([f32; 3], [f32; 3]) {
+/// A triangle's bounding box.
+pub(crate) fn tri_bounds(t: &[[f32; 3]; 3]) -> ([f32; 3], [f32; 3]) {
     let lo = [0, 1, 2].map(|a| t[0][a].min(t[1][a]).min(t[2][a]));
     let hi = [0, 1, 2].map(|a| t[0][a].max(t[1][a]).max(t[2][a]));
     (lo, hi)
@@ -332,7 +333,7 @@ fn union(boxes: impl IntoIterator<Item = ([f32; 3], [f32; 3])>) -> ([f32; 3], [f
 }
 
 /// Surface area (0 for an empty box).
-fn area(lo: [f32; 3], hi: [f32; 3]) -> f64 {
+pub(crate) fn area(lo: [f32; 3], hi: [f32; 3]) -> f64 {
     let e = [0, 1, 2].map(|a| f64::from(hi[a] - lo[a]).max(0.0));
     2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
 }

@@ -23,6 +23,7 @@
 //! assert!((t - 4.0).abs() < 0.01);
 //! ```
 
+use crate::bvh::{area, tri_bounds};
 use crate::cpu::watertight::Shear;
 use crate::ray::Ray;
 
@@ -73,15 +74,7 @@ impl KdTree {
     /// If `ids` and `triangles` differ in length.
     pub fn build(triangles: &[[[f32; 3]; 3]], ids: &[u32]) -> KdTree {
         assert_eq!(triangles.len(), ids.len(), "one id a triangle");
-        let boxes: Vec<([f32; 3], [f32; 3])> = triangles
-            .iter()
-            .map(|t| {
-                (
-                    [0, 1, 2].map(|a| t[0][a].min(t[1][a]).min(t[2][a])),
-                    [0, 1, 2].map(|a| t[0][a].max(t[1][a]).max(t[2][a])),
-                )
-            })
-            .collect();
+        let boxes: Vec<([f32; 3], [f32; 3])> = triangles.iter().map(tri_bounds).collect();
         let (lo, hi) = boxes.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(l, h), b| {
             ([0, 1, 2].map(|a| l[a].min(b.0[a])), [0, 1, 2].map(|a| h[a].max(b.1[a])))
         });
@@ -263,12 +256,6 @@ impl Builder<'_> {
         self.subdivide(right, rb, depth - 1, failures);
         self.nodes[index] = Node::Inner { axis: axis as u8, split: p, second };
     }
-}
-
-/// Surface area.
-fn area(lo: [f32; 3], hi: [f32; 3]) -> f64 {
-    let e = [0, 1, 2].map(|a| f64::from(hi[a] - lo[a]).max(0.0));
-    2.0 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
 }
 
 #[cfg(test)]
