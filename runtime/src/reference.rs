@@ -168,10 +168,30 @@ impl Reference {
                 return Agreement::Tie;
             }
         }
-        let on_edge = |u: f64, v: f64| u.min(v).min(1.0 - u - v) <= EDGE_BARYCENTRIC;
         if got.is_some_and(|g| on_edge(g.2 as f64, g.3 as f64)) || want.is_some_and(|w| on_edge(w.u, w.v)) {
             return Agreement::Tie;
         }
         Agreement::Different
     }
+
+    /// Compares a tracer's occlusion answer `got` for `ray` with the oracle's,
+    /// `want` (from [`Reference::occluded`]): a different answer is a tie when the
+    /// oracle's nearest blocker lies on a triangle's edge or at the segment's end
+    /// (within rounding of either).
+    pub fn compare_occluded_with(&self, ray: &Ray, want: bool, got: bool) -> Agreement {
+        if got == want {
+            return Agreement::Same;
+        }
+        let tmax = f64::from(ray.tmax);
+        match self.intersect(ray) {
+            Some(w) if on_edge(w.u, w.v) || (w.t - tmax).abs() <= TIE_RELATIVE_T * tmax.abs() => Agreement::Tie,
+            _ => Agreement::Different,
+        }
+    }
+}
+
+/// Whether barycentrics `(u, v)` lie within [`EDGE_BARYCENTRIC`] of the triangle's
+/// boundary.
+fn on_edge(u: f64, v: f64) -> bool {
+    u.min(v).min(1.0 - u - v) <= EDGE_BARYCENTRIC
 }

@@ -10,7 +10,7 @@ use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
 use octrace_runtime::bvh::{Bvh, BvhBuild};
 use octrace_runtime::kdtree::KdTree;
 use octrace_runtime::raysets::{self, Frame};
-use octrace_runtime::reference::{Agreement, Reference, ReferenceHit, EDGE_BARYCENTRIC, TIE_RELATIVE_T};
+use octrace_runtime::reference::{Agreement, Reference, ReferenceHit};
 use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -112,14 +112,8 @@ impl Knob {
             Knob::F64 => "Möller-Trumbore f64".into(),
             Knob::SlabExit => "slab distances".into(),
             Knob::Margin(m) => power_of_two(m),
-            Knob::Depth(_) | Knob::LeafSize(_) => {
-                let p = self.params(base).resolve(0);
-                if let Knob::Depth(_) = self {
-                    p.max_depth.to_string()
-                } else {
-                    p.leaf_size.to_string()
-                }
-            }
+            Knob::Depth(_) => self.params(base).resolve(0).max_depth.to_string(),
+            Knob::LeafSize(_) => self.params(base).resolve(0).leaf_size.to_string(),
         }
     }
 
@@ -297,7 +291,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(args.sample >= 1, "--sample must be at least 1");
     let meshes = inputs(&args)?;
-    let steps = (meshes.len() * (KNOBS.len() + 2) + KNOBS.len() + 1) as u64;
+    // Per mesh: the defaults' bake, each knob, obvhs, the baselines; then the leak
+    // table's knobs and obvhs.
+    let steps = (meshes.len() * (KNOBS.len() + 3) + KNOBS.len() + 1) as u64;
     let bar = Bar::new(steps);
     let leaks = leak_table(&args, &bar)?;
     let mut reports = Vec::new();
@@ -389,37 +385,55 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
     Ok(out)
 }
 
+/// A configuration's bake: the scene, how long it took, the file's bytes, its
+/// statistics.
+struct Baked {
+    scene: Scene,
+    seconds: f64,
+    bytes: u64,
+    stats: octrace_format::stats::SceneStatistics,
+}
+
+/// Bakes `mesh` with `params`, writes it (for its size) into `dir` as `name`.
+fn bake_timed(mesh: &Mesh, params: &BuildParams, dir: &Path, name: &str) -> anyhow::Result<Baked> {
+    let t = Instant::now();
+    let baked = bake(mesh, params)?;
+    let bake_time = t.elapsed();
+    let bytes = baked.write(dir.join(name), bake_time.as_micros() as u64)?;
+    let scene = Scene::from_baked(baked)?;
+    let stats = octrace_format::stats::SceneStatistics::compute(&scene.view())?;
+    Ok(Baked { scene, seconds: bake_time.as_secs_f64(), bytes, stats })
+}
+
 fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar: &Bar) -> anyhow::Result<MeshReport> {
     let base = BuildParams::auto().resolve(mesh.triangles.len());
     let dir = tempfile::tempdir()?;
+    // The defaults' bake serves every knob that leaves the bake as it is (the
+    // triangle and exit tests), the standard sets and the oracle, obvhs and the
+    // baselines.
+    bar.step(&format!("{name}: the defaults' bake"));
+    let defaults = bake_timed(mesh, &Knob::Defaults.params(&base), dir.path(), "defaults.oct")?;
+    bar.message(&format!("{name}: the f64 oracle on {} rays of each set", thousands(args.sample as u64)));
+    let sets = standard_sets(&defaults.scene, args.sample, args.max_rays);
     let mut rows = Vec::new();
-    let mut sets: Option<Sets> = None;
     for (k, knob) in KNOBS.into_iter().enumerate() {
         bar.step(&format!("{name}: {} {}", knob.group(), knob.setting(&base)));
-        let t = Instant::now();
-        let baked = bake(mesh, &knob.params(&base))?;
-        let bake_time = t.elapsed();
-        let path = dir.path().join(format!("{k}.oct"));
-        let bytes = baked.write(&path, bake_time.as_micros() as u64)?;
-        let scene = Scene::from_baked(baked)?;
-        let view = scene.view();
-        let stats = octrace_format::stats::SceneStatistics::compute(&view)?;
-        let tracer = knob.tracer(&scene);
-        // The sets and the oracle's answers come from the defaults' scene, once.
-        let sets = match &mut sets {
-            Some(s) => s,
-            None => {
-                bar.message(&format!("{name}: the f64 oracle on {} rays of each set", thousands(args.sample as u64)));
-                sets.insert(standard_sets(&scene, args.sample, args.max_rays))
-            }
+        let params = knob.params(&base);
+        let own = if params == Knob::Defaults.params(&base) {
+            None
+        } else {
+            Some(bake_timed(mesh, &params, dir.path(), &format!("{k}.oct"))?)
         };
-        let (mrays, errors) = trace_config(sets, args.runs, |rays, occlusion| answers(&tracer, rays, occlusion));
+        let baked = own.as_ref().unwrap_or(&defaults);
+        let tracer = knob.tracer(&baked.scene);
+        let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| answers(&tracer, rays, occlusion));
         let (leaks_per_million, leak_rays) = leaks[k];
+        let stats = &baked.stats;
         rows.push(Row {
             knob: knob.group(),
             setting: knob.setting(&base),
-            bake_seconds: bake_time.as_secs_f64(),
-            bytes,
+            bake_seconds: baked.seconds,
+            bytes: baked.bytes,
             leaves: stats.leaves,
             references_per_triangle: stats.triangle_references as f64 / stats.triangles.max(1) as f64,
             mrays,
@@ -428,26 +442,15 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
             leak_rays,
         });
     }
-    let sets = sets.expect("at least one configuration");
+    let view = defaults.scene.view();
     bar.step(&format!("{name}: obvhs"));
     #[cfg(feature = "obvhs")]
     {
-        let scene = Scene::from_baked(bake(mesh, &BuildParams::auto())?)?;
-        let view = scene.view();
         let peer = crate::peer::Peer::build(&view);
+        // obvhs reports no barycentrics: the oracle's decide edge ties.
+        let nearest = |r: &Ray| peer.nearest(r).map(|(t, prim)| (t, view.triangle_ids[prim as usize], 0.3, 0.3));
         let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| {
-            rays.iter()
-                .map(|r| {
-                    if occlusion {
-                        Answer::Occluded(peer.occluded(r))
-                    } else {
-                        // obvhs reports no barycentrics: the oracle's decide edge ties.
-                        Answer::Nearest(
-                            peer.nearest(r).map(|(t, prim)| (t, view.triangle_ids[prim as usize], 0.3, 0.3)),
-                        )
-                    }
-                })
-                .collect()
+            answers_by(rays, occlusion, nearest, |r| peer.occluded(r))
         });
         let (leaks_per_million, leak_rays) = leaks[KNOBS.len()];
         rows.push(Row {
@@ -463,8 +466,17 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
             leak_rays,
         });
     }
-    bar.step(&format!("{name}: the seeds' BVH builds"));
-    let baselines = baselines(&scene_triangles(mesh)?, &sets, args.runs);
+    bar.step(&format!("{name}: the seeds' BVH builds and kd-tree"));
+    // The stored triangles and their input ids (degenerate ones left out, as the
+    // octree does).
+    let tris: Vec<[[f32; 3]; 3]> = (0..view.triangle_count() as u32).map(|p| view.triangle(p)).collect();
+    let ids = view.triangle_ids;
+    let mut baselines: Vec<BaselineRow> = BvhBuild::ALL
+        .into_iter()
+        .map(|build| baseline_row(format!("BVH, {}", build.name()), || Bvh::build(&tris, ids, build), &sets, args.runs))
+        .collect();
+    let kd_tree = || KdTree::build(&tris, ids);
+    baselines.push(baseline_row("SAH kd-tree, Havran's depth and failures".into(), kd_tree, &sets, args.runs));
     bar.message(&format!("{name}: the paper's tables"));
     let paper = paper_rows(name, mesh)?;
     Ok(MeshReport {
@@ -477,66 +489,62 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
     })
 }
 
-/// Triangles and their input ids.
-type Triangles = (Vec<[[f32; 3]; 3]>, Vec<u32>);
-
-/// The stored triangles of `mesh`'s default bake and their input ids: what the
-/// baselines are built on (degenerate triangles left out, as the octree does).
-fn scene_triangles(mesh: &Mesh) -> anyhow::Result<Triangles> {
-    let scene = Scene::from_baked(bake(mesh, &BuildParams::auto())?)?;
-    let view = scene.view();
-    let tris = (0..view.triangle_count() as u32).map(|p| view.triangle(p)).collect();
-    Ok((tris, view.triangle_ids.to_vec()))
+/// What the report asks of a baseline structure.
+trait Baseline {
+    fn nearest(&self, ray: &Ray) -> Option<(f32, u32, f32, f32)>;
+    fn occluded(&self, ray: &Ray) -> bool;
+    fn nodes(&self) -> usize;
+    fn sah_cost(&self) -> f64;
 }
 
-/// The seeds' BVH builds (seed 001) and SAH kd-tree (seed 003) on the same
-/// triangles, rays and triangle test.
-fn baselines((tris, ids): &Triangles, sets: &Sets, runs: usize) -> Vec<BaselineRow> {
-    let mut rows: Vec<BaselineRow> = BvhBuild::ALL
-        .into_iter()
-        .map(|build| {
-            let t = Instant::now();
-            let bvh = Bvh::build(tris, ids, build);
-            let build_seconds = t.elapsed().as_secs_f64();
-            let (mrays, errors) =
-                trace_config(sets, runs, |rays, occlusion| {
-                    rays.iter()
-                        .map(|r| {
-                            if occlusion {
-                                Answer::Occluded(bvh.occluded(r))
-                            } else {
-                                Answer::Nearest(bvh.intersect(r))
-                            }
-                        })
-                        .collect()
-                });
-            BaselineRow {
-                structure: format!("BVH, {}", build.name()),
-                build_seconds,
-                nodes: bvh.node_count(),
-                sah_cost: bvh.sah_cost(),
-                mrays,
-                errors,
-            }
-        })
-        .collect();
+impl Baseline for Bvh {
+    fn nearest(&self, ray: &Ray) -> Option<(f32, u32, f32, f32)> {
+        self.intersect(ray)
+    }
+    fn occluded(&self, ray: &Ray) -> bool {
+        Bvh::occluded(self, ray)
+    }
+    fn nodes(&self) -> usize {
+        self.node_count()
+    }
+    fn sah_cost(&self) -> f64 {
+        Bvh::sah_cost(self)
+    }
+}
+
+impl Baseline for KdTree {
+    fn nearest(&self, ray: &Ray) -> Option<(f32, u32, f32, f32)> {
+        self.intersect(ray)
+    }
+    fn occluded(&self, ray: &Ray) -> bool {
+        KdTree::occluded(self, ray)
+    }
+    fn nodes(&self) -> usize {
+        self.node_count()
+    }
+    fn sah_cost(&self) -> f64 {
+        KdTree::sah_cost(self)
+    }
+}
+
+/// A baseline's row: `build` timed, then traced on the sets.
+fn baseline_row<B: Baseline>(structure: String, build: impl FnOnce() -> B, sets: &Sets, runs: usize) -> BaselineRow {
     let t = Instant::now();
-    let tree = KdTree::build(tris, ids);
+    let b = build();
     let build_seconds = t.elapsed().as_secs_f64();
-    let (mrays, errors) = trace_config(sets, runs, |rays, occlusion| {
-        rays.iter()
-            .map(|r| if occlusion { Answer::Occluded(tree.occluded(r)) } else { Answer::Nearest(tree.intersect(r)) })
-            .collect()
-    });
-    rows.push(BaselineRow {
-        structure: "SAH kd-tree, Havran's depth and failures".into(),
-        build_seconds,
-        nodes: tree.node_count(),
-        sah_cost: tree.sah_cost(),
-        mrays,
-        errors,
-    });
-    rows
+    let (mrays, errors) =
+        trace_config(sets, runs, |rays, occlusion| answers_by(rays, occlusion, |r| b.nearest(r), |r| b.occluded(r)));
+    BaselineRow { structure, build_seconds, nodes: b.nodes(), sah_cost: b.sah_cost(), mrays, errors }
+}
+
+/// The answers of a structure traced ray by ray.
+fn answers_by(
+    rays: &[Ray],
+    occlusion: bool,
+    nearest: impl Fn(&Ray) -> Option<(f32, u32, f32, f32)>,
+    occluded: impl Fn(&Ray) -> bool,
+) -> Vec<Answer> {
+    rays.iter().map(|r| if occlusion { Answer::Occluded(occluded(r)) } else { Answer::Nearest(nearest(r)) }).collect()
 }
 
 /// A tracer's answer for one ray.
@@ -569,10 +577,7 @@ fn standard_sets(scene: &Scene, sample: usize, max_rays: Option<usize>) -> Sets 
     scene.tracer().par_intersect_batch(&primary, &mut hits);
     let shadow = raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))));
     let thin = |rays: Vec<Ray>| match max_rays {
-        Some(n) if n < rays.len() => {
-            let n = n.max(1);
-            (0..n).map(|i| rays[i * rays.len() / n]).collect()
-        }
+        Some(n) if n < rays.len() => spread(rays.len(), n).map(|i| rays[i]).collect(),
         _ => rays,
     };
     let sets = vec![
@@ -581,13 +586,7 @@ fn standard_sets(scene: &Scene, sample: usize, max_rays: Option<usize>) -> Sets 
         ("shadow", thin(shadow), true),
     ];
     let reference = Reference::from_view(&view);
-    let samples: Vec<Vec<usize>> = sets
-        .iter()
-        .map(|(_, rays, _)| {
-            let n = sample.min(rays.len());
-            (0..n).map(|i| i * rays.len() / n.max(1)).collect()
-        })
-        .collect();
+    let samples: Vec<Vec<usize>> = sets.iter().map(|(_, rays, _)| spread(rays.len(), sample).collect()).collect();
     let nearest = sets
         .iter()
         .zip(&samples)
@@ -615,6 +614,12 @@ fn standard_sets(scene: &Scene, sample: usize, max_rays: Option<usize>) -> Sets 
         )
         .collect();
     Sets { sets, samples, nearest, occluded, reference }
+}
+
+/// `n` indices (at least one, at most `len`) spread evenly over `0..len`.
+fn spread(len: usize, n: usize) -> impl Iterator<Item = usize> {
+    let n = n.max(1).min(len);
+    (0..n).map(move |i| i * len / n)
 }
 
 /// Mrays/s (one thread, median of `runs`) on each set and the errors of the last
@@ -645,7 +650,7 @@ fn trace_config(sets: &Sets, runs: usize, trace: impl Fn(&[Ray], bool) -> Vec<An
                     }
                     a
                 }
-                Answer::Occluded(got) => occlusion_agreement(&sets.reference, ray, got, sets.occluded[s][j]),
+                Answer::Occluded(got) => sets.reference.compare_occluded_with(ray, sets.occluded[s][j], got),
             };
             errors.compared += 1;
             match agreement {
@@ -656,19 +661,6 @@ fn trace_config(sets: &Sets, runs: usize, trace: impl Fn(&[Ray], bool) -> Vec<An
         }
     }
     (mrays, errors)
-}
-
-/// Whether an occlusion answer agrees with the oracle's: a different answer is a tie
-/// when the oracle's nearest blocker lies on a triangle's edge or at the segment's end.
-fn occlusion_agreement(reference: &Reference, ray: &Ray, got: bool, want: bool) -> Agreement {
-    if got == want {
-        return Agreement::Same;
-    }
-    let at_end = |t: f64| (t - ray.tmax as f64).abs() <= TIE_RELATIVE_T * (ray.tmax as f64).abs();
-    match reference.intersect(ray) {
-        Some(w) if w.u.min(w.v).min(1.0 - w.u - w.v) <= EDGE_BARYCENTRIC || at_end(w.t) => Agreement::Tie,
-        _ => Agreement::Different,
-    }
 }
 
 /// report.md.
