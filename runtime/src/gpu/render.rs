@@ -112,7 +112,7 @@ impl<'t> GpuRenderer<'t> {
         }
         let device = &tracer.device;
         use wgpu::BufferUsages as U;
-        let (words, mut params) = shading_words(scene);
+        let (words, mut params, headlight) = shading_words(scene);
         let limits = device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
@@ -138,7 +138,7 @@ impl<'t> GpuRenderer<'t> {
             bind_group_layouts: &[Some(&tracer.layout), Some(&render_layout)],
             immediate_size: 0,
         });
-        let constants = overrides(options.effects, params.light_count == 0 && params.emitter_count == 0);
+        let constants = overrides(options.effects, headlight);
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("octrace render"),
             layout: Some(&pipeline_layout),
@@ -236,8 +236,9 @@ fn overrides(effects: EffectSet, headlight: bool) -> Vec<(&'static str, f64)> {
     constants
 }
 
-/// The words of the kernel's `shade` binding, and the parameters that locate them.
-fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams) {
+/// The words of the kernel's `shade` binding, the parameters that locate them, and
+/// whether the scene is lit by the headlight.
+fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     let view = scene.view();
     let shading = view.shading;
     let mut words: Vec<u32> = Vec::new();
@@ -282,7 +283,8 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams) {
     if words.is_empty() {
         words.push(0);
     }
-    (words, params)
+    let headlight = emitters.need_headlight(&shading.lights);
+    (words, params, headlight)
 }
 
 /// A material's record: the values shading derives from it, computed here by the

@@ -299,7 +299,7 @@ pub fn render_effects_gpu(
 impl<'a> Context<'a> {
     fn new(view: SceneView<'a>, camera: &'a Camera, options: &RenderOptions) -> Context<'a> {
         let emitters = Emitters::of(&view);
-        let headlight = view.shading.lights.is_empty() && emitters.is_empty();
+        let headlight = emitters.need_headlight(&view.shading.lights);
         Context { view, camera, options: *options, emitters, headlight }
     }
 

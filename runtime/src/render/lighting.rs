@@ -150,6 +150,12 @@ impl Emitters {
         Emitters { triangles, cumulative }
     }
 
+    /// Whether a scene with `lights` and these emitters is lit by the headlight
+    /// instead: it has neither (the CPU renderer and the GPU kernel both ask this).
+    pub(crate) fn need_headlight(&self, lights: &[Light]) -> bool {
+        lights.is_empty() && self.is_empty()
+    }
+
     /// Whether the scene has area lights.
     pub(crate) fn is_empty(&self) -> bool {
         self.triangles.is_empty()
