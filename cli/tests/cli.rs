@@ -538,4 +538,15 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
         "{md}"
     );
     assert!(dir.path().join("rep/report.json").exists());
+    // The chart: two panels for the one mesh, a point per configuration in its knob's
+    // colour (Möller-Trumbore's red among them), text drawn.
+    let png = png::Decoder::new(std::io::Cursor::new(std::fs::read(dir.path().join("rep/report.png")).unwrap()));
+    let mut reader = png.read_info().unwrap();
+    let mut rgb = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut rgb).unwrap();
+    assert_eq!((info.width, info.height, info.color_type), (1280, 440, png::ColorType::Rgb));
+    let pixels: Vec<&[u8]> = rgb.chunks(3).collect();
+    let count = |f: &dyn Fn(&[u8]) -> bool| pixels.iter().filter(|p| f(p)).count();
+    assert!(count(&|p| p == [214, 39, 40]) > 2 * 40, "the triangle test's points");
+    assert!(count(&|p| p[0] < 64 && p[1] < 64 && p[2] < 64) > 2000, "text and axes");
 }

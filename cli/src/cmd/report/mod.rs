@@ -1,5 +1,7 @@
 //! `octrace report`: what accuracy costs in time, one knob at a time.
 
+mod chart;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -18,7 +20,8 @@ use serde::Serialize;
 use crate::output::thousands;
 
 /// Measure what accuracy costs in time: one accuracy knob at a time, Mrays/s next to
-/// the error against the f64 brute-force oracle. Writes report.md and report.json.
+/// the error against the f64 brute-force oracle. Writes report.md, report.json and
+/// report.png (error against Mrays/s, one point per configuration).
 ///
 /// For each mesh (default: the bunny this build carries, and
 /// ../shared/meshes/dragon.obj when it is there) each knob is turned from the
@@ -39,7 +42,7 @@ pub(crate) struct Args {
     /// Meshes (OBJ, glTF, GLB, optionally .zst) or .oct files (their triangles are
     /// baked again for each configuration).
     pub inputs: Vec<PathBuf>,
-    /// Folder for report.md and report.json (created if missing).
+    /// Folder for report.md, report.json and report.png (created if missing).
     #[arg(short, long, default_value = "report")]
     pub output: PathBuf,
     /// Timed runs per figure (the median is reported).
@@ -307,11 +310,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     // Whole files or none (a temporary file renamed into place).
     octrace_format::write_atomically(&args.output.join("report.md"), &[md.as_bytes()])?;
     octrace_format::write_atomically(&args.output.join("report.json"), &[json.as_bytes()])?;
+    octrace_format::write_atomically(&args.output.join("report.png"), &[&chart::png(&reports)?])?;
     if args.json {
         crate::out!("{json}");
     } else {
         crate::out!("{md}");
-        crate::out!("wrote {} and report.json", crate::show(&args.output.join("report.md")));
+        crate::out!("wrote {}, report.json and report.png", crate::show(&args.output.join("report.md")));
     }
     Ok(())
 }
