@@ -37,6 +37,7 @@ pub mod reference;
 pub mod render;
 mod scene;
 pub mod spawn;
+pub mod unconstrained;
 
 pub use cpu::{ExitTest, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};

@@ -143,35 +143,8 @@ pub fn bake_with_progress(
     progress: &(dyn Fn(BakeStage) + Sync),
 ) -> Result<BakedScene> {
     progress(BakeStage::Prepare);
-    let name = std::path::Path::new("mesh");
-    if mesh.triangles.is_empty() {
-        return Err(Error::EmptyScene { path: name.into() });
-    }
-    mesh.check_attributes(name)?;
-    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    for (i, t) in mesh.triangles.iter().enumerate() {
-        for v in t {
-            crate::mesh::check_finite(*v, name, || format!("triangle {i}"))?;
-            for a in 0..3 {
-                lo[a] = lo[a].min(v[a]);
-                hi[a] = hi[a].max(v[a]);
-            }
-        }
-    }
-    let ids: Vec<u32> =
-        (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
-    let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
-    let (root_lo, root_size) = root_cube(lo, hi)?;
-    let mut resolved = params.resolve(kept.len());
-    resolved.max_depth = resolved.max_depth.min(precision_depth(root_lo, root_size));
-    let builder = Builder {
-        triangles: &kept,
-        root_lo,
-        root_size,
-        margin: resolved.margin as f64 * root_size as f64,
-        max_depth: resolved.max_depth,
-        leaf_size: resolved.leaf_size as usize,
-    };
+    let Prepared { lo, hi, ids, kept, root_lo, root_size, resolved } = prepare(mesh, params)?;
+    let builder = builder(&kept, root_lo, root_size, &resolved);
 
     progress(BakeStage::Build);
     let mut root: Node = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
@@ -229,4 +202,101 @@ pub fn bake_with_progress(
         root: arrays.root,
         shading,
     })
+}
+
+/// What every build starts from.
+struct Prepared {
+    /// The mesh's bounds.
+    lo: [f32; 3],
+    hi: [f32; 3],
+    /// Input index of each kept (non-degenerate) triangle, and the triangles.
+    ids: Vec<u32>,
+    kept: Vec<[[f32; 3]; 3]>,
+    root_lo: [f32; 3],
+    root_size: f32,
+    resolved: ResolvedParams,
+}
+
+/// Checks the mesh, sorts out degenerate triangles, finds the root cube and resolves
+/// the parameters.
+fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
+    let name = std::path::Path::new("mesh");
+    if mesh.triangles.is_empty() {
+        return Err(Error::EmptyScene { path: name.into() });
+    }
+    mesh.check_attributes(name)?;
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        for v in t {
+            crate::mesh::check_finite(*v, name, || format!("triangle {i}"))?;
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+    }
+    let ids: Vec<u32> =
+        (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
+    let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
+    let (root_lo, root_size) = root_cube(lo, hi)?;
+    let mut resolved = params.resolve(kept.len());
+    resolved.max_depth = resolved.max_depth.min(precision_depth(root_lo, root_size));
+    Ok(Prepared { lo, hi, ids, kept, root_lo, root_size, resolved })
+}
+
+fn builder<'a>(kept: &'a [[[f32; 3]; 3]], root_lo: [f32; 3], root_size: f32, resolved: &ResolvedParams) -> Builder<'a> {
+    Builder {
+        triangles: kept,
+        root_lo,
+        root_size,
+        margin: resolved.margin as f64 * root_size as f64,
+        max_depth: resolved.max_depth,
+        leaf_size: resolved.leaf_size as usize,
+    }
+}
+
+/// The octree as subdivision leaves it: no 2:1 constraint, no face links. The paper's
+/// "unconstrained" tree (its Table 1), which it left to future work to traverse;
+/// `octrace_runtime::unconstrained` walks it, so that `octrace report` can measure
+/// what the constraint costs and buys. Not a file format: built in memory.
+#[derive(Clone, Debug)]
+pub struct Unbalanced {
+    /// The root cube, as [`bake`] chooses it.
+    pub root_lo: [f32; 3],
+    /// Its edge (a power of two).
+    pub root_size: f32,
+    /// The parameters used (the depth limit as resolved).
+    pub params: ResolvedParams,
+    /// The non-degenerate triangles, in input order.
+    pub triangles: Vec<[[f32; 3]; 3]>,
+    /// The input index of each of `triangles`.
+    pub ids: Vec<u32>,
+    /// The leaves, depth first in octant order: `(level, cell, triangles)`, the cell in
+    /// integer coordinates at its level and the triangles as indices into `triangles`.
+    pub leaves: Vec<(u32, [u32; 3], Vec<u32>)>,
+}
+
+/// Builds the octree [`bake`] would build, but stops before the 2:1 constraint.
+///
+/// # Errors
+/// As [`bake`].
+///
+/// # Example
+/// ```
+/// use octrace_bake::octree::build_unbalanced;
+/// use octrace_bake::{procedural, BuildParams};
+/// let mesh = procedural::sphere([0.0; 3], 1.0, 16, 24);
+/// let tree = build_unbalanced(&mesh, &BuildParams::auto())?;
+/// let scene = octrace_bake::bake(&mesh, &BuildParams::auto())?;
+/// assert_eq!(tree.leaves.len() as u64, scene.stats.leaves_before_balance);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn build_unbalanced(mesh: &Mesh, params: &BuildParams) -> Result<Unbalanced> {
+    let Prepared { ids, kept, root_lo, root_size, resolved, .. } = prepare(mesh, params)?;
+    let builder = builder(&kept, root_lo, root_size, &resolved);
+    let root = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
+    let mut leaves = Vec::with_capacity(root.leaf_count());
+    root.for_each_leaf((0, [0; 3]), &mut |(level, cell), tris| leaves.push((level, cell, tris.to_vec())));
+    drop(root);
+    Ok(Unbalanced { root_lo, root_size, params: resolved, triangles: kept, ids, leaves })
 }

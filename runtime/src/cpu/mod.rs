@@ -7,6 +7,7 @@ mod traverse;
 mod triangle;
 pub mod watertight;
 
+pub(crate) use traverse::{box_slack, clip, exit_along_moving_axes, point_at, BOX_T_SLACK};
 pub use traverse::{mesh_box, root_corners, ExitTest, LocateGrid, Tracer, TriangleTest, WalkStats};
 
 use rayon::prelude::*;

@@ -541,7 +541,7 @@ pub fn root_corners(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
 /// `None` if it misses. Zero components are handled explicitly: `0 * inf` never
 /// happens.
 #[inline(always)]
-fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
+pub(crate) fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
     let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
     for a in 0..3 {
         let (lo, hi) = (lo[a], hi[a]);
@@ -717,6 +717,6 @@ pub(crate) fn exit_along_moving_axes(off: [f32; 3], d: [f32; 3], inv: [f32; 3]) 
 }
 
 #[inline(always)]
-fn point_at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
+pub(crate) fn point_at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
     [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]]
 }

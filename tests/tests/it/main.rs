@@ -8,3 +8,4 @@ mod hard_cases;
 mod mesh;
 mod raysets;
 mod render;
+mod unconstrained;
