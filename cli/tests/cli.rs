@@ -509,7 +509,9 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     assert_eq!((mesh["name"].as_str(), mesh["triangles"].as_u64()), (Some("cube.obj"), Some(13)));
     let rows = mesh["rows"].as_array().unwrap();
     let knobs: Vec<&str> = rows.iter().map(|r| r["knob"].as_str().unwrap()).collect();
-    for knob in ["defaults", "triangle test", "exit face", "bake margin", "depth limit", "leaf target", "peer"] {
+    for knob in
+        ["defaults", "triangle test", "exit face", "bake margin", "depth limit", "leaf target", "peer", "octree"]
+    {
         assert!(knobs.contains(&knob), "{knob} missing from {knobs:?}");
     }
     for row in rows {
@@ -522,6 +524,14 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     for row in rows.iter().filter(|r| r["knob"] != "peer" && r["knob"] != "triangle test") {
         assert_eq!((row["errors"]["wrong"].as_u64(), row["leaks_per_million"].as_f64()), (Some(0), Some(0.0)), "{row}");
     }
+    // The paper's tree and the unconstrained one, walked (a tree of one leaf here:
+    // the unconstrained tests have the uneven trees).
+    let octree: Vec<&serde_json::Value> = rows.iter().filter(|r| r["knob"] == "octree").collect();
+    assert_eq!(octree.len(), 2);
+    assert!(octree[1]["setting"].as_str().unwrap().starts_with("unconstrained"));
+    assert!(octree[1]["leaves"].as_u64() <= octree[0]["leaves"].as_u64(), "{octree:?}");
+    let balance = &mesh["balance"];
+    assert!(balance["unconstrained_leaves_per_ray"].as_f64().unwrap() > 0.0, "{balance}");
     // The seeds' four BVH builds and the kd-tree, on the same rays, with the
     // watertight test: no wrong hit.
     let baselines = mesh["baselines"].as_array().unwrap();
@@ -533,6 +543,10 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     }
     let md = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
     assert!(md.contains("## cube.obj (13 triangles)") && md.contains("| defaults | watertight f32"), "{md}");
+    assert!(
+        md.contains("| octree | unconstrained, ropes, scalar step |") && md.contains("2:1 balanced against"),
+        "{md}"
+    );
     assert!(
         md.contains("| BVH, SAH, 16 bins |") && md.contains("| SAH kd-tree, Havran's depth and failures |"),
         "{md}"

@@ -7,12 +7,13 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use octrace_bake::octree::ResolvedParams;
+use octrace_bake::octree::{build_unbalanced, ResolvedParams};
 use octrace_bake::{bake, procedural, BuildParams, Mesh, MeshFormat};
 use octrace_runtime::bvh::{Bvh, BvhBuild};
 use octrace_runtime::kdtree::KdTree;
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::{Agreement, Reference, ReferenceHit};
+use octrace_runtime::unconstrained::UnconstrainedOctree;
 use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -32,8 +33,10 @@ use crate::output::thousands;
 /// (shared/bench/RAYS.md) on one thread, the median of --runs; its answers on --sample
 /// rays of each set are compared with the oracle's (wrong hits, largest |Δt|/t). Leaks
 /// per million: rays from inside `octrace soak`'s closed solids that get out, baked and
-/// traced with the same configuration. obvhs's CWBVH traces the same rays as a
-/// reference point.
+/// traced with the same configuration. The paper's 2:1-balanced tree is walked
+/// against the same tree without the constraint (ropes to the node across each face,
+/// the median-line tests once per level below it), scalar steps both. obvhs's CWBVH,
+/// the seeds' BVH builds and SAH kd-tree trace the same rays as reference points.
 ///
 ///   octrace report                     # the bunny (and the dragon beside the repository)
 ///   octrace report scene.glb -o out    # any mesh
@@ -216,6 +219,8 @@ struct MeshReport {
     triangles: usize,
     sets: Vec<(&'static str, usize)>,
     rows: Vec<Row>,
+    /// The balanced and unconstrained walks compared.
+    balance: BalanceStats,
     /// The paper's Tables 1 and 3 at its depth, for the bunny and the dragon.
     paper: Vec<PaperRow>,
     /// The seeds' BVH builds on the same rays.
@@ -296,7 +301,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let meshes = inputs(&args)?;
     // Per mesh: the defaults' bake, each knob, obvhs, the baselines; then the leak
     // table's knobs and obvhs.
-    let steps = (meshes.len() * (KNOBS.len() + 3) + KNOBS.len() + 1) as u64;
+    let steps = (meshes.len() * (KNOBS.len() + 4) + KNOBS.len() + 1) as u64;
     let bar = Bar::new(steps);
     let leaks = leak_table(&args, &bar)?;
     let mut reports = Vec::new();
@@ -352,8 +357,20 @@ fn inputs(args: &Args) -> anyhow::Result<Vec<(String, Mesh)>> {
         .collect()
 }
 
-/// Leaks per million rays from inside the closed solids, for each knob (and obvhs).
-fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
+/// Leaks per million rays from inside the closed solids, and rays shot.
+type LeakRate = (f64, usize);
+
+/// Leak rates: each knob, obvhs (with the feature), the balanced tree's scalar step,
+/// the unconstrained tree.
+struct Leaks {
+    knobs: Vec<LeakRate>,
+    peer: Option<LeakRate>,
+    scalar: LeakRate,
+    unconstrained: LeakRate,
+}
+
+/// Leaks per million rays from inside the closed solids, for each configuration.
+fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Leaks> {
     let solids = procedural::closed_solids();
     let rays: Vec<Vec<Ray>> = solids
         .iter()
@@ -361,7 +378,7 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
         .collect();
     let total: usize = rays.iter().map(Vec::len).sum();
     let per_million = |leaks: usize| leaks as f64 * 1e6 / total.max(1) as f64;
-    let mut out = Vec::new();
+    let mut knobs = Vec::new();
     for knob in KNOBS {
         bar.step(&format!("leaks: {} {}", knob.group(), knob.setting(&BuildParams::auto().resolve(1))));
         let mut leaks = 0;
@@ -373,20 +390,34 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Vec<(f64, usize)>> {
             tracer.par_intersect_batch(rays, &mut hits);
             leaks += hits.iter().filter(|h| h.is_none()).count();
         }
-        out.push((per_million(leaks), total));
+        knobs.push((per_million(leaks), total));
     }
-    bar.step("leaks: obvhs");
-    #[cfg(feature = "obvhs")]
-    {
-        let mut leaks = 0;
-        for (solid, rays) in solids.iter().zip(&rays) {
-            let scene = Scene::from_baked(bake(&solid.mesh, &BuildParams::auto())?)?;
-            let peer = crate::peer::Peer::build(&scene.view());
-            leaks += rays.par_iter().filter(|r| peer.nearest(r).is_none()).count();
+    bar.step("leaks: obvhs, the scalar step, the unconstrained tree");
+    let (mut peer, mut scalar, mut unconstrained) = (0, 0, 0);
+    for (solid, rays) in solids.iter().zip(&rays) {
+        let scene = Scene::from_baked(bake(&solid.mesh, &BuildParams::auto())?)?;
+        #[cfg(feature = "obvhs")]
+        {
+            let obvhs = crate::peer::Peer::build(&scene.view());
+            peer += rays.par_iter().filter(|r| obvhs.nearest(r).is_none()).count();
         }
-        out.push((per_million(leaks), total));
+        let tracer = scene.tracer();
+        scalar += rays.par_iter().filter(|r| tracer.intersect_scalar(r).is_none()).count();
+        let tree = unconstrained_tree(&solid.mesh, &BuildParams::auto())?;
+        unconstrained += rays.par_iter().filter(|r| tree.intersect(r).is_none()).count();
     }
-    Ok(out)
+    Ok(Leaks {
+        knobs,
+        peer: cfg!(feature = "obvhs").then(|| (per_million(peer), total)),
+        scalar: (per_million(scalar), total),
+        unconstrained: (per_million(unconstrained), total),
+    })
+}
+
+/// The octree `bake` would build, without the 2:1 constraint, with ropes.
+fn unconstrained_tree(mesh: &Mesh, params: &BuildParams) -> anyhow::Result<UnconstrainedOctree> {
+    let t = build_unbalanced(mesh, params)?;
+    Ok(UnconstrainedOctree::build(t.root_lo, t.root_size, &t.leaves, &t.triangles, &t.ids))
 }
 
 /// A configuration's bake: the scene, how long it took, the file's bytes, its
@@ -409,7 +440,7 @@ fn bake_timed(mesh: &Mesh, params: &BuildParams, dir: &Path, name: &str) -> anyh
     Ok(Baked { scene, seconds: bake_time.as_secs_f64(), bytes, stats })
 }
 
-fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar: &Bar) -> anyhow::Result<MeshReport> {
+fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &Leaks, bar: &Bar) -> anyhow::Result<MeshReport> {
     let base = BuildParams::auto().resolve(mesh.triangles.len());
     let dir = tempfile::tempdir()?;
     // The defaults' bake serves every knob that leaves the bake as it is (the
@@ -431,7 +462,7 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
         let baked = own.as_ref().unwrap_or(&defaults);
         let tracer = knob.tracer(&baked.scene);
         let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| answers(&tracer, rays, occlusion));
-        let (leaks_per_million, leak_rays) = leaks[k];
+        let (leaks_per_million, leak_rays) = leaks.knobs[k];
         let stats = &baked.stats;
         rows.push(Row {
             knob: knob.group(),
@@ -456,7 +487,7 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
         let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| {
             answers_by(rays, occlusion, nearest, |r| peer.occluded(r))
         });
-        let (leaks_per_million, leak_rays) = leaks[KNOBS.len()];
+        let (leaks_per_million, leak_rays) = leaks.peer.unwrap_or_default();
         rows.push(Row {
             knob: "peer",
             setting: "obvhs CWBVH (Möller-Trumbore f32)".into(),
@@ -470,6 +501,9 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
             leak_rays,
         });
     }
+    bar.step(&format!("{name}: 2:1 balanced against unconstrained"));
+    let (octree_rows, balance) = balance_rows(mesh, &base, &defaults, &sets, args.runs, leaks)?;
+    rows.extend(octree_rows);
     bar.step(&format!("{name}: the seeds' BVH builds and kd-tree"));
     // The stored triangles and their input ids (degenerate ones left out, as the
     // octree does).
@@ -488,9 +522,95 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &[(f64, usize)], bar
         triangles: mesh.triangles.len(),
         sets: sets.sets.iter().map(|(n, r, _)| (*n, r.len())).collect(),
         rows,
+        balance,
         paper,
         baselines,
     })
+}
+
+/// How the balanced and the unconstrained walks go, per ray of the incoherent set.
+#[derive(Debug, Serialize)]
+struct BalanceStats {
+    rays: usize,
+    balanced_leaves_per_ray: f64,
+    balanced_tests_per_ray: f64,
+    unconstrained_leaves_per_ray: f64,
+    unconstrained_tests_per_ray: f64,
+    /// Levels descended below ropes per ray, and the most in one step.
+    descents_per_ray: f64,
+    deepest_descent: u32,
+}
+
+/// What the 2:1 constraint costs and buys: the balanced tree's scalar step against
+/// the unconstrained tree's walk (ropes, then the median-line tests once per level),
+/// with the same triangle test on the same rays: two rows, and walk statistics.
+fn balance_rows(
+    mesh: &Mesh,
+    base: &ResolvedParams,
+    defaults: &Baked,
+    sets: &Sets,
+    runs: usize,
+    leaks: &Leaks,
+) -> anyhow::Result<(Vec<Row>, BalanceStats)> {
+    let tracer = defaults.scene.tracer();
+    let as_tuple = |h: Hit| (h.t, h.triangle, h.u, h.v);
+    let (mrays, errors) = trace_config(sets, runs, |rays, occlusion| {
+        answers_by(rays, occlusion, |r| tracer.intersect_scalar(r).map(as_tuple), |r| tracer.occluded_scalar(r))
+    });
+    let stats = &defaults.stats;
+    let triangles = stats.triangles.max(1) as f64;
+    let balanced = Row {
+        knob: "octree",
+        setting: "2:1 balanced (the paper), scalar step".into(),
+        bake_seconds: defaults.seconds,
+        bytes: defaults.bytes,
+        leaves: stats.leaves,
+        references_per_triangle: stats.triangle_references as f64 / triangles,
+        mrays,
+        errors,
+        leaks_per_million: leaks.scalar.0,
+        leak_rays: leaks.scalar.1,
+    };
+    let t = Instant::now();
+    let tree = unconstrained_tree(mesh, &Knob::Defaults.params(base))?;
+    let seconds = t.elapsed().as_secs_f64();
+    let (mrays, errors) = trace_config(sets, runs, |rays, occlusion| {
+        answers_by(rays, occlusion, |r| tree.intersect(r), |r| tree.occluded(r))
+    });
+    let unconstrained = Row {
+        knob: "octree",
+        setting: "unconstrained, ropes, scalar step".into(),
+        bake_seconds: seconds,
+        bytes: tree.memory_bytes() as u64,
+        leaves: tree.leaf_count() as u64,
+        references_per_triangle: tree.references() as f64 / triangles,
+        mrays,
+        errors,
+        leaks_per_million: leaks.unconstrained.0,
+        leak_rays: leaks.unconstrained.1,
+    };
+    let rays = &sets.sets[1].1;
+    let (mut b_leaves, mut b_tests, mut u_leaves, mut u_tests, mut descents, mut deepest) =
+        (0u64, 0u64, 0u64, 0u64, 0u64, 0);
+    for r in rays {
+        let (_, b) = tracer.intersect_with_stats(r);
+        let (_, u) = tree.intersect_with_stats(r);
+        (b_leaves, b_tests) = (b_leaves + b.leaves as u64, b_tests + b.triangle_tests as u64);
+        (u_leaves, u_tests) = (u_leaves + u.leaves as u64, u_tests + u.triangle_tests as u64);
+        descents += u.descents as u64;
+        deepest = deepest.max(u.deepest_descent);
+    }
+    let per_ray = |x: u64| x as f64 / rays.len().max(1) as f64;
+    let balance = BalanceStats {
+        rays: rays.len(),
+        balanced_leaves_per_ray: per_ray(b_leaves),
+        balanced_tests_per_ray: per_ray(b_tests),
+        unconstrained_leaves_per_ray: per_ray(u_leaves),
+        unconstrained_tests_per_ray: per_ray(u_tests),
+        descents_per_ray: per_ray(descents),
+        deepest_descent: deepest,
+    };
+    Ok((vec![balanced, unconstrained], balance))
 }
 
 /// What the report asks of a baseline structure.
@@ -720,6 +840,21 @@ fn markdown(reports: &[MeshReport], args: &Args) -> String {
             );
         }
         let _ = writeln!(s, "\nPareto front (no other configuration as fast on all three sets with no more wrong hits and leaks): {}.\n", pareto(&r.rows).join(", "));
+        let b = &r.balance;
+        let _ = writeln!(
+            s,
+            "2:1 balanced against unconstrained (the \"octree\" rows; scalar steps both, the unconstrained \
+             tree's MB in memory without boxes or cube map): on the {} incoherent rays, a walk visits {:.1} \
+             leaves and runs {:.1} triangle tests in the balanced tree, {:.1} leaves and {:.1} tests in the \
+             unconstrained one, which descends {:.2} levels a ray below its ropes (at most {} in one step).\n",
+            thousands(b.rays as u64),
+            b.balanced_leaves_per_ray,
+            b.balanced_tests_per_ray,
+            b.unconstrained_leaves_per_ray,
+            b.unconstrained_tests_per_ray,
+            b.descents_per_ray,
+            b.deepest_descent,
+        );
         baseline_table(&mut s, r);
         if !r.paper.is_empty() {
             paper_tables(&mut s, &r.paper);
