@@ -5,6 +5,10 @@
 mod cmd;
 mod open;
 mod output;
+// Bindings to a C library: the CLI's only unsafe code, behind its feature.
+#[cfg(feature = "embree")]
+#[allow(unsafe_code)]
+mod embree;
 #[cfg(feature = "obvhs")]
 mod peer;
 

@@ -524,6 +524,14 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     for row in rows.iter().filter(|r| r["knob"] != "peer" && r["knob"] != "triangle test") {
         assert_eq!((row["errors"]["wrong"].as_u64(), row["leaks_per_million"].as_f64()), (Some(0), Some(0.0)), "{row}");
     }
+    // Embree, in its two modes, where this build has it: the oracle's answers.
+    let embree: Vec<&serde_json::Value> =
+        rows.iter().filter(|r| r["setting"].as_str().unwrap().starts_with("Embree")).collect();
+    assert_eq!(embree.len(), if cfg!(feature = "embree") { 2 } else { 0 }, "{knobs:?}");
+    for row in embree {
+        assert_eq!(row["errors"]["wrong"].as_u64(), Some(0), "{row}");
+        assert!(row["mrays"].as_array().unwrap().iter().all(|m| m.as_f64().unwrap() > 0.0), "{row}");
+    }
     // The paper's tree and the unconstrained one, walked (a tree of one leaf here:
     // the unconstrained tests have the uneven trees).
     let octree: Vec<&serde_json::Value> = rows.iter().filter(|r| r["knob"] == "octree").collect();

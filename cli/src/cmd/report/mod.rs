@@ -36,7 +36,8 @@ use crate::output::thousands;
 /// traced with the same configuration. The paper's 2:1-balanced tree is walked
 /// against the same tree without the constraint (ropes to the node across each face,
 /// the median-line tests once per level below it), scalar steps both. obvhs's CWBVH,
-/// the seeds' BVH builds and SAH kd-tree trace the same rays as reference points.
+/// Embree (built with `--features embree`, fast and robust modes), the seeds' BVH
+/// builds and SAH kd-tree trace the same rays as reference points.
 ///
 ///   octrace report                     # the bunny (and the dragon beside the repository)
 ///   octrace report scene.glb -o out    # any mesh
@@ -299,8 +300,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(args.sample >= 1, "--sample must be at least 1");
     let meshes = inputs(&args)?;
-    // Per mesh: the defaults' bake, each knob, obvhs, the baselines; then the leak
-    // table's knobs and obvhs.
+    // Per mesh: the defaults' bake, each knob, the peers, the octree rows, the
+    // baselines; then the leak table's knobs and the rest.
     let steps = (meshes.len() * (KNOBS.len() + 4) + KNOBS.len() + 1) as u64;
     let bar = Bar::new(steps);
     let leaks = leak_table(&args, &bar)?;
@@ -360,11 +361,11 @@ fn inputs(args: &Args) -> anyhow::Result<Vec<(String, Mesh)>> {
 /// Leaks per million rays from inside the closed solids, and rays shot.
 type LeakRate = (f64, usize);
 
-/// Leak rates: each knob, obvhs (with the feature), the balanced tree's scalar step,
+/// Leak rates: each knob, each peer of this build, the balanced tree's scalar step,
 /// the unconstrained tree.
 struct Leaks {
     knobs: Vec<LeakRate>,
-    peer: Option<LeakRate>,
+    peers: Vec<LeakRate>,
     scalar: LeakRate,
     unconstrained: LeakRate,
 }
@@ -392,14 +393,16 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Leaks> {
         }
         knobs.push((per_million(leaks), total));
     }
-    bar.step("leaks: obvhs, the scalar step, the unconstrained tree");
-    let (mut peer, mut scalar, mut unconstrained) = (0, 0, 0);
+    bar.step("leaks: the peers, the scalar step, the unconstrained tree");
+    let (mut peers, mut scalar, mut unconstrained) = (Vec::new(), 0, 0);
     for (solid, rays) in solids.iter().zip(&rays) {
         let scene = Scene::from_baked(bake(&solid.mesh, &BuildParams::auto())?)?;
-        #[cfg(feature = "obvhs")]
-        {
-            let obvhs = crate::peer::Peer::build(&scene.view());
-            peer += rays.par_iter().filter(|r| obvhs.nearest(r).is_none()).count();
+        for (k, peer) in build_peers(&scene.view())?.iter().enumerate() {
+            let leaks = rays.par_iter().filter(|r| peer.nearest(r).is_none()).count();
+            if peers.len() <= k {
+                peers.push(0);
+            }
+            peers[k] += leaks;
         }
         let tracer = scene.tracer();
         scalar += rays.par_iter().filter(|r| tracer.intersect_scalar(r).is_none()).count();
@@ -408,10 +411,75 @@ fn leak_table(args: &Args, bar: &Bar) -> anyhow::Result<Leaks> {
     }
     Ok(Leaks {
         knobs,
-        peer: cfg!(feature = "obvhs").then(|| (per_million(peer), total)),
+        peers: peers.into_iter().map(|leaks| (per_million(leaks), total)).collect(),
         scalar: (per_million(scalar), total),
         unconstrained: (per_million(unconstrained), total),
     })
+}
+
+/// A peer's nearest hit: distance, stored triangle, barycentrics where the library
+/// gives them.
+type PeerHit = (f32, u32, Option<(f32, f32)>);
+
+/// A peer library on the same triangles.
+trait Peer: Sync {
+    fn name(&self) -> &'static str;
+    fn build_seconds(&self) -> f64;
+    fn nearest(&self, r: &Ray) -> Option<PeerHit>;
+    fn occluded(&self, r: &Ray) -> bool;
+}
+
+#[cfg(feature = "obvhs")]
+impl Peer for crate::peer::Peer {
+    fn name(&self) -> &'static str {
+        "obvhs CWBVH (Möller-Trumbore f32)"
+    }
+    fn build_seconds(&self) -> f64 {
+        self.build_time.as_secs_f64()
+    }
+    fn nearest(&self, r: &Ray) -> Option<PeerHit> {
+        crate::peer::Peer::nearest(self, r).map(|(t, prim)| (t, prim, None))
+    }
+    fn occluded(&self, r: &Ray) -> bool {
+        crate::peer::Peer::occluded(self, r)
+    }
+}
+
+#[cfg(feature = "embree")]
+impl Peer for crate::embree::Embree {
+    fn name(&self) -> &'static str {
+        if self.robust {
+            "Embree 3 BVH, robust mode"
+        } else {
+            "Embree 3 BVH, fast mode"
+        }
+    }
+    fn build_seconds(&self) -> f64 {
+        self.build_time.as_secs_f64()
+    }
+    fn nearest(&self, r: &Ray) -> Option<PeerHit> {
+        crate::embree::Embree::nearest(self, r).map(|(t, prim, u, v)| (t, prim, Some((u, v))))
+    }
+    fn occluded(&self, r: &Ray) -> bool {
+        crate::embree::Embree::occluded(self, r)
+    }
+}
+
+/// The peers this build has (cargo features `obvhs`, on by default, and `embree`),
+/// built on the view's triangles.
+// Pushes under features: some builds push nothing, others one or three.
+#[allow(clippy::vec_init_then_push)]
+fn build_peers(view: &octrace_format::SceneView<'_>) -> anyhow::Result<Vec<Box<dyn Peer>>> {
+    #[allow(unused_mut)]
+    let mut peers: Vec<Box<dyn Peer>> = Vec::new();
+    #[cfg(feature = "obvhs")]
+    peers.push(Box::new(crate::peer::Peer::build(view)));
+    #[cfg(feature = "embree")]
+    for robust in [false, true] {
+        peers.push(Box::new(crate::embree::Embree::build(view, robust)?));
+    }
+    let _ = view;
+    Ok(peers)
 }
 
 /// The octree `bake` would build, without the 2:1 constraint, with ropes.
@@ -478,20 +546,23 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &Leaks, bar: &Bar) -
         });
     }
     let view = defaults.scene.view();
-    bar.step(&format!("{name}: obvhs"));
-    #[cfg(feature = "obvhs")]
-    {
-        let peer = crate::peer::Peer::build(&view);
-        // obvhs reports no barycentrics: the oracle's decide edge ties.
-        let nearest = |r: &Ray| peer.nearest(r).map(|(t, prim)| (t, view.triangle_ids[prim as usize], 0.3, 0.3));
+    bar.step(&format!("{name}: the peers"));
+    for (peer, &(leaks_per_million, leak_rays)) in build_peers(&view)?.iter().zip(&leaks.peers) {
+        // Stored triangle → input id. A peer without barycentrics gives the centre's:
+        // the oracle then decides edge ties.
+        let nearest = |r: &Ray| {
+            peer.nearest(r).map(|(t, prim, uv)| {
+                let (u, v) = uv.unwrap_or((0.3, 0.3));
+                (t, view.triangle_ids[prim as usize], u, v)
+            })
+        };
         let (mrays, errors) = trace_config(&sets, args.runs, |rays, occlusion| {
             answers_by(rays, occlusion, nearest, |r| peer.occluded(r))
         });
-        let (leaks_per_million, leak_rays) = leaks.peer.unwrap_or_default();
         rows.push(Row {
             knob: "peer",
-            setting: "obvhs CWBVH (Möller-Trumbore f32)".into(),
-            bake_seconds: peer.build_time.as_secs_f64(),
+            setting: peer.name().into(),
+            bake_seconds: peer.build_seconds(),
             bytes: 0,
             leaves: 0,
             references_per_triangle: 0.0,
@@ -810,6 +881,13 @@ fn markdown(reports: &[MeshReport], args: &Args) -> String {
     );
     if let Some(n) = args.max_rays {
         let _ = writeln!(s, "Quick run: at most {} rays of each set (every k-th ray).\n", thousands(n as u64));
+    }
+    if !cfg!(feature = "embree") {
+        let _ = writeln!(
+            s,
+            "Embree: not in this build (`cargo build --release -p octrace --features embree`, with Debian's \
+             libembree-dev installed, adds it in fast and robust modes).\n"
+        );
     }
     for r in reports {
         let _ = writeln!(s, "## {} ({} triangles)\n", r.name, thousands(r.triangles as u64));

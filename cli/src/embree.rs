@@ -1,0 +1,214 @@
+//! Embree 3 (Debian's `libembree-dev`) on the scene's triangles: the second peer of
+//! `report`, behind the `embree` cargo feature. Hand-written bindings to the eleven
+//! calls used, from Embree 3.13's headers (`rtcore_ray.h`, `rtcore_common.h`).
+//!
+//! Scenes are built with Embree's default (medium) quality on all cores, in its fast
+//! mode or with `RTC_SCENE_FLAG_ROBUST` ("avoid optimizations that reduce arithmetic
+//! accuracy": its watertight mode); rays are traced one at a time (`rtcIntersect1`,
+//! `rtcOccluded1`) with an incoherent context, on the calling thread, as the octree
+//! traces them.
+
+use std::ffi::{c_char, c_void, CStr};
+use std::time::{Duration, Instant};
+
+use octrace_runtime::Ray;
+
+type Device = *mut c_void;
+type Scene = *mut c_void;
+type Geometry = *mut c_void;
+
+/// `RTC_GEOMETRY_TYPE_TRIANGLE`, `RTC_BUFFER_TYPE_INDEX` / `_VERTEX`,
+/// `RTC_FORMAT_UINT3` / `_FLOAT3`, `RTC_INVALID_GEOMETRY_ID`.
+const GEOMETRY_TRIANGLE: u32 = 0;
+const BUFFER_INDEX: u32 = 0;
+const BUFFER_VERTEX: u32 = 1;
+const FORMAT_UINT3: u32 = 0x5003;
+const FORMAT_FLOAT3: u32 = 0x9003;
+const INVALID_ID: u32 = u32::MAX;
+/// `RTC_SCENE_FLAG_ROBUST`.
+const SCENE_FLAG_ROBUST: u32 = 1 << 2;
+
+/// `RTCIntersectContext` with `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and no minimum width
+/// (Debian's build, `rtcore_config.h`).
+#[repr(C)]
+struct IntersectContext {
+    flags: u32,
+    filter: *const c_void,
+    inst_id: [u32; 1],
+}
+
+/// `RTCRay`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcRay {
+    org: [f32; 3],
+    tnear: f32,
+    dir: [f32; 3],
+    time: f32,
+    tfar: f32,
+    mask: u32,
+    id: u32,
+    flags: u32,
+}
+
+/// `RTCHit`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcHit {
+    ng: [f32; 3],
+    u: f32,
+    v: f32,
+    prim_id: u32,
+    geom_id: u32,
+    inst_id: [u32; 1],
+}
+
+/// `RTCRayHit`.
+#[repr(C)]
+struct RtcRayHit {
+    ray: RtcRay,
+    hit: RtcHit,
+}
+
+#[link(name = "embree3")]
+extern "C" {
+    fn rtcNewDevice(config: *const c_char) -> Device;
+    fn rtcReleaseDevice(device: Device);
+    fn rtcGetDeviceError(device: Device) -> u32;
+    fn rtcNewScene(device: Device) -> Scene;
+    fn rtcReleaseScene(scene: Scene);
+    fn rtcSetSceneFlags(scene: Scene, flags: u32);
+    fn rtcNewGeometry(device: Device, kind: u32) -> Geometry;
+    fn rtcSetNewGeometryBuffer(
+        geometry: Geometry,
+        kind: u32,
+        slot: u32,
+        format: u32,
+        stride: usize,
+        count: usize,
+    ) -> *mut c_void;
+    fn rtcCommitGeometry(geometry: Geometry);
+    fn rtcAttachGeometry(scene: Scene, geometry: Geometry) -> u32;
+    fn rtcReleaseGeometry(geometry: Geometry);
+    fn rtcCommitScene(scene: Scene);
+    fn rtcIntersect1(scene: Scene, context: *mut IntersectContext, rayhit: *mut RtcRayHit);
+    fn rtcOccluded1(scene: Scene, context: *mut IntersectContext, ray: *mut RtcRay);
+}
+
+/// An Embree device and a committed scene of one triangle mesh.
+pub(crate) struct Embree {
+    device: Device,
+    scene: Scene,
+    pub build_time: Duration,
+    /// Built with `RTC_SCENE_FLAG_ROBUST`.
+    pub robust: bool,
+}
+
+// SAFETY: Embree's documentation allows rtcIntersect1 / rtcOccluded1 on a committed
+// scene from any number of threads at once; nothing else is called after the build
+// but the releases in `drop`, which takes the value.
+unsafe impl Send for Embree {}
+// SAFETY: as for Send: queries on a committed scene are thread-safe.
+unsafe impl Sync for Embree {}
+
+impl Embree {
+    /// Builds Embree's BVH over the view's stored triangles (primitive ids are the
+    /// view's triangle indices), in robust mode if `robust`.
+    pub(crate) fn build(view: &octrace_format::SceneView<'_>, robust: bool) -> anyhow::Result<Embree> {
+        let n = view.triangle_count();
+        anyhow::ensure!(n > 0 && n <= u32::MAX as usize / 3, "Embree: {n} triangles");
+        let config: &CStr = c"verbose=0";
+        // SAFETY: a valid C string; a null device is checked.
+        let device = unsafe { rtcNewDevice(config.as_ptr()) };
+        anyhow::ensure!(!device.is_null(), "Embree: no device (libembree3 could not start)");
+        let t = Instant::now();
+        // SAFETY: the device is valid; every pointer returned is checked before use,
+        // and the buffers Embree allocates hold `n` items of the strides given.
+        let scene = unsafe {
+            let scene = rtcNewScene(device);
+            if !scene.is_null() && robust {
+                rtcSetSceneFlags(scene, SCENE_FLAG_ROBUST);
+            }
+            let geometry = rtcNewGeometry(device, GEOMETRY_TRIANGLE);
+            let vertices = rtcSetNewGeometryBuffer(geometry, BUFFER_VERTEX, 0, FORMAT_FLOAT3, 12, 3 * n) as *mut f32;
+            let indices = rtcSetNewGeometryBuffer(geometry, BUFFER_INDEX, 0, FORMAT_UINT3, 12, n) as *mut u32;
+            if scene.is_null() || geometry.is_null() || vertices.is_null() || indices.is_null() {
+                let error = rtcGetDeviceError(device);
+                rtcReleaseDevice(device);
+                anyhow::bail!("Embree: cannot make the scene (error {error})");
+            }
+            let vertices = std::slice::from_raw_parts_mut(vertices, 9 * n);
+            let indices = std::slice::from_raw_parts_mut(indices, 3 * n);
+            for t in 0..n {
+                vertices[9 * t..9 * t + 9].copy_from_slice(&view.triangle(t as u32).concat());
+                indices[3 * t..3 * t + 3].copy_from_slice(&[3 * t as u32, 3 * t as u32 + 1, 3 * t as u32 + 2]);
+            }
+            rtcCommitGeometry(geometry);
+            rtcAttachGeometry(scene, geometry);
+            rtcReleaseGeometry(geometry);
+            rtcCommitScene(scene);
+            scene
+        };
+        let build_time = t.elapsed();
+        // SAFETY: the device is valid.
+        let error = unsafe { rtcGetDeviceError(device) };
+        let embree = Embree { device, scene, build_time, robust };
+        anyhow::ensure!(error == 0, "Embree: the build failed (error {error})");
+        Ok(embree)
+    }
+
+    fn ray(r: &Ray) -> RtcRay {
+        RtcRay {
+            org: r.origin.to_array(),
+            tnear: r.tmin,
+            dir: r.dir.to_array(),
+            time: 0.0,
+            tfar: r.tmax,
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        }
+    }
+
+    fn context() -> IntersectContext {
+        IntersectContext { flags: 0, filter: std::ptr::null(), inst_id: [INVALID_ID] }
+    }
+
+    /// The nearest hit of `r`: distance, stored triangle (view order), barycentrics of
+    /// the second and third vertices.
+    pub(crate) fn nearest(&self, r: &Ray) -> Option<(f32, u32, f32, f32)> {
+        if !r.is_traceable() {
+            return None;
+        }
+        let hit =
+            RtcHit { ng: [0.0; 3], u: 0.0, v: 0.0, prim_id: INVALID_ID, geom_id: INVALID_ID, inst_id: [INVALID_ID] };
+        let mut rayhit = RtcRayHit { ray: Self::ray(r), hit };
+        let mut context = Self::context();
+        // SAFETY: a committed scene, a valid context and an aligned ray/hit record.
+        unsafe { rtcIntersect1(self.scene, &mut context, &mut rayhit) };
+        let h = rayhit.hit;
+        (h.geom_id != INVALID_ID).then_some((rayhit.ray.tfar, h.prim_id, h.u, h.v))
+    }
+
+    /// Whether anything blocks `r`.
+    pub(crate) fn occluded(&self, r: &Ray) -> bool {
+        if !r.is_traceable() {
+            return false;
+        }
+        let mut ray = Self::ray(r);
+        let mut context = Self::context();
+        // SAFETY: a committed scene, a valid context and an aligned ray.
+        unsafe { rtcOccluded1(self.scene, &mut context, &mut ray) };
+        ray.tfar == f32::NEG_INFINITY
+    }
+}
+
+impl Drop for Embree {
+    fn drop(&mut self) {
+        // SAFETY: both were made by `build` and are released once.
+        unsafe {
+            rtcReleaseScene(self.scene);
+            rtcReleaseDevice(self.device);
+        }
+    }
+}
