@@ -48,7 +48,14 @@ impl Point {
 fn label(row: &Row) -> String {
     match row.knob {
         "defaults" => "defaults".into(),
-        "peer" => row.setting.split(' ').next().unwrap_or("peer").into(),
+        // "obvhs CWBVH (...)" → "obvhs", "Embree 3 BVH, fast mode" → "Embree fast".
+        "peer" => {
+            let name = row.setting.split(' ').next().unwrap_or("peer");
+            match row.setting.rsplit_once(", ") {
+                Some((_, mode)) => format!("{name} {}", mode.trim_end_matches(" mode")),
+                None => name.into(),
+            }
+        }
         "bake margin" => format!("margin {}", row.setting),
         "depth limit" => format!("depth {}", row.setting),
         "leaf target" => format!("leaf {}", row.setting),
@@ -137,6 +144,7 @@ where
         .y_desc(y_name)
         .label_style((FAMILY, 12))
         .axis_desc_style((FAMILY, 13))
+        .x_labels(12)
         .x_label_formatter(&|v| format!("{v:.2}"))
         .y_label_formatter(&|v| if is_floor(v) { "0".into() } else { format!("{v:.0e}") })
         .draw()?;
