@@ -431,3 +431,23 @@ fn regression_sphere_poles_are_closed() {
         assert!((hit.t - if o == Vec3::ZERO { 1.0 } else { 3.0 }).abs() < 1e-6, "{hit:?}");
     }
 }
+
+/// Regression, found by `octrace report`'s leak table: this ray, from inside the
+/// sphere of `closed_solids` and aimed exactly at its north pole (where 64 triangles
+/// meet), escaped the sphere baked with a margin of 0: near a cell boundary the walk's
+/// rounding can route a ray into the neighbouring leaf, and without the margin that
+/// leaf does not list the triangles that only touch it at the pole. The default margin
+/// (2^-20 of the root) lists them there, so the walk finds the pole.
+#[test]
+fn regression_ray_at_a_pole_needs_the_bake_margin() {
+    let solid = procedural::closed_solids().into_iter().find(|s| s.name == "sphere").unwrap();
+    let o = Vec3::from([3197658959u32, 3206394743, 1059844790].map(f32::from_bits));
+    let d = Vec3::from([1053530754u32, 1068843042, 3200142290].map(f32::from_bits));
+    assert!((o + d).distance(Vec3::new(0.1, 0.8, 0.3)) < 1e-6, "aimed at the pole");
+    let s = scene(&solid.mesh, None, 16);
+    assert_eq!(s.view().params.margin, octrace_bake::octree::DEFAULT_MARGIN);
+    let ray = Ray::new(o, d);
+    let hit = s.intersect(&ray).expect("the ray at the pole hits the sphere");
+    assert!((hit.t - 1.0).abs() < 1e-5, "{hit:?}");
+    assert_ne!(oracle(&solid.mesh).compare(&ray, Some((hit.t, hit.triangle, hit.u, hit.v))), Agreement::Different);
+}
