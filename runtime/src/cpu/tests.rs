@@ -73,7 +73,8 @@ fn procedural_meshes_agree_with_the_oracle() {
 }
 
 /// The SIMD step (where the build has one) gives the scalar step's answers bit for
-/// bit: the same operations in the same order.
+/// bit: the same operations in the same order; compiled for x86-64-v3 or for the
+/// baseline alike.
 #[test]
 fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
     let mut mesh = procedural::soup(21, 4000, 6.0, 0.6);
@@ -84,8 +85,10 @@ fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
         let (scene, _) = scene_of(&mesh, params);
         let tests = [crate::TriangleTest::Watertight, crate::TriangleTest::MollerTrumbore, crate::TriangleTest::F64];
         let configs = tests.into_iter().map(|t| (t, crate::ExitTest::Plucker));
-        for (test, exit) in configs.chain([(crate::TriangleTest::Watertight, crate::ExitTest::Slab)]) {
-            let t = scene.tracer().with_triangle_test(test).with_exit_test(exit);
+        let configs = configs.chain([(crate::TriangleTest::Watertight, crate::ExitTest::Slab)]);
+        for ((test, exit), v3) in configs.flat_map(|c| [(c, true), (c, false)]) {
+            let t = scene.tracer().with_triangle_test(test).with_exit_test(exit).with_x86_64_v3(v3);
+            assert!(v3 || !t.uses_x86_64_v3(), "off means the baseline");
             let mut batch = vec![None; rays.len()];
             t.intersect_batch(&rays, &mut batch);
             let mut occluded = vec![false; rays.len()];

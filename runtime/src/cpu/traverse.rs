@@ -53,6 +53,9 @@ pub struct Tracer<'a> {
     exit: ExitTest,
     /// The top levels of point location as a grid, when the scene has one.
     grid: Option<&'a LocateGrid>,
+    /// Whether the walks run the code compiled for x86-64-v3 (where the processor
+    /// has it).
+    v3: bool,
 }
 
 /// The ray/triangle test a tracer uses.
@@ -142,6 +145,28 @@ pub(crate) struct RayWalk {
     steps: u32,
 }
 
+/// A step's triangle test, for [`Tracer::visit_leaf`]: a trait rather than a closure
+/// so that it is inlined (`inline(always)`) into the step, in whatever target
+/// features the step is compiled with.
+pub(crate) trait LeafTest {
+    /// The hit `(t, u, v)` of the triangle (nine floats) in `[tmin, tmax]`.
+    fn hit(&self, tri: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)>;
+}
+
+/// The scalar step's test: the tracer's.
+struct ScalarTest<'t, 'a> {
+    tracer: &'t Tracer<'a>,
+    shear: Shear,
+    tri: TriRay,
+}
+
+impl LeafTest for ScalarTest<'_, '_> {
+    #[inline(always)]
+    fn hit(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.tracer.hit_triangle(&self.shear, &self.tri, t, tmin, tmax)
+    }
+}
+
 /// The parts of a walk's state that [`Tracer::visit_leaf`] updates.
 pub(crate) struct LeafVisit<'w> {
     pub steps: &'w mut u32,
@@ -213,7 +238,22 @@ impl<'a> Tracer<'a> {
             test: TriangleTest::default(),
             exit: ExitTest::default(),
             grid: None,
+            v3: wider_simd_available(),
         }
+    }
+
+    /// The same tracer with or without the walk compiled for x86-64-v3 (AVX2, BMI;
+    /// on by default where the processor has it, and never where it does not). Both
+    /// give the same answers bit for bit; off runs the SSE2 baseline, for tests and
+    /// comparisons.
+    pub fn with_x86_64_v3(mut self, on: bool) -> Self {
+        self.v3 = on && wider_simd_available();
+        self
+    }
+
+    /// Whether the walks run the code compiled for x86-64-v3.
+    pub fn uses_x86_64_v3(&self) -> bool {
+        self.v3
     }
 
     /// The same tracer locating points with `grid` (built for this scene).
@@ -389,7 +429,7 @@ impl<'a> Tracer<'a> {
         address: u32,
         walk: &mut LeafVisit<'_>,
         stats: &mut WalkStats,
-        test: impl Fn(&[f32], f32, f32) -> Option<(f32, f32, f32)>,
+        test: &impl LeafTest,
     ) -> Option<(u32, u32)> {
         let v = &self.view;
         stats.leaves += 1;
@@ -405,7 +445,7 @@ impl<'a> Tracer<'a> {
         stats.triangle_tests += count;
         for &tri in refs {
             let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-            if let Some((t, u, vv)) = test(data, walk.tmin, *walk.t_best) {
+            if let Some((t, u, vv)) = test.hit(data, walk.tmin, *walk.t_best) {
                 *walk.t_best = t;
                 *walk.best =
                     Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
@@ -425,10 +465,9 @@ impl<'a> Tracer<'a> {
         let lo = self.root_lo;
         let a = w.address as usize;
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-        let (shear, tri_ray) = (w.shear, TriRay { o: w.o, d: w.d });
+        let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d } };
         let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-        let test = |t: &[f32], tmin: f32, tmax: f32| self.hit_triangle(&shear, &tri_ray, t, tmin, tmax);
-        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut visit, stats, test) else {
+        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut visit, stats, &test) else {
             return true;
         };
         // 2. The exit corner from the cell (the same bits as the stored box: an
@@ -509,6 +548,14 @@ impl<'a> Tracer<'a> {
     }
 }
 
+/// Whether this processor runs the walks compiled for x86-64-v3.
+fn wider_simd_available() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    return super::x86_64_v3();
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    false
+}
+
 /// Relative slack on the distance where a ray leaves the mesh box: f32 distances far
 /// from the origin carry a relative error of a few ulps (2^-21); this is 32 times that.
 pub(crate) const BOX_T_SLACK: f32 = 1.0 / (1 << 16) as f32;
@@ -564,6 +611,7 @@ pub(crate) fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Opti
 
 impl Tracer<'_> {
     /// Finest-grid coordinates of a point, clamped into the root.
+    #[inline(always)]
     fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
         let last = ((1u64 << self.max_depth) - 1) as f64;
         // Clamped to [0, last] first, so truncation is the floor; NaN clamps to 0.
@@ -580,6 +628,7 @@ impl Tracer<'_> {
 
     /// The leaf holding point `p`: its address, level and cell. With a locate grid,
     /// one load replaces the top levels of the descent.
+    #[inline(always)]
     fn locate_cell(&self, p: [f32; 3]) -> (u32, u32, [u32; 3]) {
         let q = self.grid_coords(p);
         match self.grid {
@@ -593,6 +642,7 @@ impl Tracer<'_> {
 
     /// Descends from `word` (a node at `level`) to the leaf holding finest-grid cell
     /// `q`: its address, level and cell.
+    #[inline(always)]
     fn descend(&self, word: u32, level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
         let (address, level) = descend_to(&self.view, word, level, q, self.max_depth);
         let shift = self.max_depth.saturating_sub(level).min(31);
@@ -601,6 +651,7 @@ impl Tracer<'_> {
 
     /// The leaf a ray from outside enters first (address, level, cell): the cube-map
     /// texel under its entry point holds that leaf, or the node to descend from.
+    #[inline(always)]
     fn enter_through_cube_map(&self, o: [f32; 3], d: [f32; 3], t: f32, axis: usize) -> (u32, u32, [u32; 3]) {
         let mut q = self.grid_coords(point_at(o, d, t));
         let high = d[axis] < 0.0;
@@ -634,6 +685,7 @@ impl Tracer<'_> {
 /// finest-grid cell `q` until a leaf or level `stop`: (the word there, its level). A
 /// valid tree has no internal node at `max_depth`; a hostile one (on the trusted path)
 /// stops there too, so the descent is bounded whatever the file.
+#[inline(always)]
 fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32) -> (u32, u32) {
     while let NodeRef::Internal(i) = NodeRef::decode(word) {
         if level >= stop {

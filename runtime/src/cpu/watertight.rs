@@ -22,6 +22,7 @@ pub struct Shear {
 
 impl Shear {
     /// The shear of a ray (direction not zero).
+    #[inline(always)]
     pub fn new(o: [f32; 3], d: [f32; 3]) -> Shear {
         let a = d.map(f32::abs);
         let kz = if a[0] >= a[1] && a[0] >= a[2] {

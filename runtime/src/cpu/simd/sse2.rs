@@ -7,7 +7,7 @@ use std::arch::x86_64::*;
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use crate::cpu::traverse::{
-    exit_along_moving_axes, intersect_f64, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
+    exit_along_moving_axes, intersect_f64, LeafTest, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
     TEST_MOLLER_TRUMBORE,
 };
 use crate::cpu::watertight::Shear;
@@ -200,6 +200,29 @@ impl ShearSse {
     }
 }
 
+/// The SSE step's triangle test, `TEST` fixed at compile time.
+struct SseTest<const TEST: u8> {
+    shear: ShearSse,
+    o: __m128,
+    d: __m128,
+    d_s: [f32; 3],
+}
+
+impl<const TEST: u8> LeafTest for SseTest<TEST> {
+    #[inline(always)]
+    fn hit(&self, tri: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        match TEST {
+            // SAFETY: SSE2 is enabled at compile time for this module.
+            TEST_MOLLER_TRUMBORE => unsafe { intersect_sse(self.o, self.d, tri, tmin, tmax) },
+            TEST_F64 => {
+                let o: [f32; 4] = bytemuck::cast(self.o);
+                intersect_f64(&TriRay { o: [o[0], o[1], o[2]], d: self.d_s }, tri, tmin, tmax)
+            }
+            _ => self.shear.intersect(tri, tmin, tmax),
+        }
+    }
+}
+
 /// The lanes equal to `axis`, all ones.
 #[target_feature(enable = "sse2")]
 fn axis_mask(axis: usize) -> __m128i {
@@ -220,84 +243,118 @@ fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
 ///
 /// `TEST` is the triangle test (`TEST_*` of `traverse`) and `SLAB` the slab exit-face
 /// test, fixed at compile time so the default's step carries no test of either.
-#[target_feature(enable = "sse2")]
-#[inline]
-pub(crate) fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
+///
+/// No `target_feature` attribute, so that it is inlined (`inline(always)`) into the
+/// batch loop, which `cpu` compiles twice: for the x86-64 baseline, and with AVX2
+/// where the processor has it (same operations, VEX encodings and more registers).
+///
+/// # Safety
+/// SSE2 must be available: it is enabled at compile time for this module
+/// (`simd/mod.rs`).
+#[inline(always)]
+pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     w: &mut SseWalk,
     stats: &mut WalkStats,
 ) -> bool {
-    let v = t.view();
-    let a = w.address as usize;
-    // 1. Triangles.
-    let (shear, o, d, d_s) = (w.shear_sse, w.o, w.d, w.d_s);
-    let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-    let test = |tri: &[f32], tmin: f32, tmax: f32| match TEST {
-        TEST_MOLLER_TRUMBORE => intersect_sse(o, d, tri, tmin, tmax),
-        TEST_F64 => {
-            let o: [f32; 4] = bytemuck::cast(o);
-            intersect_f64(&TriRay { o: [o[0], o[1], o[2]], d: d_s }, tri, tmin, tmax)
+    // SAFETY: SSE2 is enabled at compile time for this module (the caller's contract).
+    unsafe {
+        let v = t.view();
+        let a = w.address as usize;
+        // 1. Triangles.
+        let test = SseTest::<TEST> { shear: w.shear_sse, o: w.o, d: w.d, d_s: w.d_s };
+        let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
+        let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, &test) else {
+            return true;
+        };
+        // 2. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
+        let size = _mm_set1_ps(t.cell_size(w.level));
+        let lo = w.lo;
+        let cellf = _mm_cvtepi32_ps(w.cell);
+        let off = _mm_sub_ps(_mm_add_ps(_mm_mul_ps(_mm_add_ps(cellf, w.high), size), lo), w.o);
+        let off_yzx = _mm_shuffle_ps::<0b11_00_10_01>(off, off);
+        let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
+        let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
+        let mut face = w.exits[code] as usize;
+        if w.d_s[face >> 1] == 0.0 || SLAB {
+            let off_s: [f32; 4] = bytemuck::cast(off);
+            face = exit_along_moving_axes([off_s[0], off_s[1], off_s[2]], w.d_s, w.inv_s);
         }
-        _ => shear.intersect(tri, tmin, tmax),
-    };
-    let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, test) else {
-        return true;
-    };
-    // 2. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
-    let size = _mm_set1_ps(t.cell_size(w.level));
-    let lo = w.lo;
-    let cellf = _mm_cvtepi32_ps(w.cell);
-    let off = _mm_sub_ps(_mm_add_ps(_mm_mul_ps(_mm_add_ps(cellf, w.high), size), lo), w.o);
-    let off_yzx = _mm_shuffle_ps::<0b11_00_10_01>(off, off);
-    let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
-    let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
-    let mut face = w.exits[code] as usize;
-    if w.d_s[face >> 1] == 0.0 || SLAB {
-        let off_s: [f32; 4] = bytemuck::cast(off);
-        face = exit_along_moving_axes([off_s[0], off_s[1], off_s[2]], w.d_s, w.inv_s);
+        let axis = face >> 1;
+        let mask = axis_mask(axis);
+        let off_a = broadcast_lane(off, mask);
+        // 3. Stop when the best hit is inside this leaf, or past tmax.
+        let t_exit = _mm_cvtss_f32(off_a) * w.inv_s[axis];
+        if (w.best.is_some() && w.t_best <= t_exit) || t_exit >= w.tmax {
+            return true;
+        }
+        // 4. The neighbour.
+        let n = (ncount >> (4 * face)) & 0xF;
+        if n == 0 {
+            return true;
+        }
+        let d_a = broadcast_lane(w.d, mask);
+        let half = _mm_mul_ps(_mm_set1_ps(0.5), size);
+        let mid = _mm_add_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(cellf, cellf), _mm_set1_ps(1.0)), half), lo);
+        let ps = _mm_sub_ps(_mm_mul_ps(off_a, w.d), _mm_mul_ps(_mm_sub_ps(mid, w.o), d_a));
+        let negative_a = face & 1 == 0;
+        let sides = ((_mm_movemask_ps(_mm_cmpgt_ps(ps, _mm_setzero_ps())) as u32) ^ if negative_a { 7 } else { 0 }) & 7;
+        let quadrant = (sides & ((1 << axis) - 1)) | ((sides >> (axis + 1)) << axis);
+        let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
+        w.address = v.octree[link];
+        // The next record is this ray's next load, after the other rays in flight have
+        // stepped: ask for it now.
+        prefetch(v.octree, w.address);
+        // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
+        let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
+        let finer = n >> 2;
+        let up = if negative_a { -1 } else { 1 };
+        let across = _mm_add_epi32(w.cell, _mm_and_si128(mask, _mm_set1_epi32(up)));
+        let child_bits = (sides & !(1 << axis)) | ((negative_a as u32) << axis);
+        let lane_bits = _mm_setr_epi32(1, 2, 4, 8);
+        let bits = _mm_srli_epi32::<31>(_mm_cmpeq_epi32(
+            _mm_and_si128(_mm_set1_epi32(child_bits as i32), lane_bits),
+            lane_bits,
+        ));
+        let shifted = _mm_or_si128(_mm_slli_epi32::<1>(across), bits);
+        w.cell = _mm_srl_epi32(shifted, _mm_cvtsi32_si128((1 + coarser - finer) as i32));
+        w.level = (w.level + finer).wrapping_sub(coarser);
+        false
     }
-    let axis = face >> 1;
-    let mask = axis_mask(axis);
-    let off_a = broadcast_lane(off, mask);
-    // 3. Stop when the best hit is inside this leaf, or past tmax.
-    let t_exit = _mm_cvtss_f32(off_a) * w.inv_s[axis];
-    if (w.best.is_some() && w.t_best <= t_exit) || t_exit >= w.tmax {
-        return true;
-    }
-    // 4. The neighbour.
-    let n = (ncount >> (4 * face)) & 0xF;
-    if n == 0 {
-        return true;
-    }
-    let d_a = broadcast_lane(w.d, mask);
-    let half = _mm_mul_ps(_mm_set1_ps(0.5), size);
-    let mid = _mm_add_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(cellf, cellf), _mm_set1_ps(1.0)), half), lo);
-    let ps = _mm_sub_ps(_mm_mul_ps(off_a, w.d), _mm_mul_ps(_mm_sub_ps(mid, w.o), d_a));
-    let negative_a = face & 1 == 0;
-    let sides = ((_mm_movemask_ps(_mm_cmpgt_ps(ps, _mm_setzero_ps())) as u32) ^ if negative_a { 7 } else { 0 }) & 7;
-    let quadrant = (sides & ((1 << axis) - 1)) | ((sides >> (axis + 1)) << axis);
-    let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
-    w.address = v.octree[link];
-    // The next record is this ray's next load, after the other rays in flight have
-    // stepped: ask for it now.
-    prefetch(v.octree, w.address);
-    // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
-    let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
-    let finer = n >> 2;
-    let up = if negative_a { -1 } else { 1 };
-    let across = _mm_add_epi32(w.cell, _mm_and_si128(mask, _mm_set1_epi32(up)));
-    let child_bits = (sides & !(1 << axis)) | ((negative_a as u32) << axis);
-    let lane_bits = _mm_setr_epi32(1, 2, 4, 8);
-    let bits =
-        _mm_srli_epi32::<31>(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(child_bits as i32), lane_bits), lane_bits));
-    let shifted = _mm_or_si128(_mm_slli_epi32::<1>(across), bits);
-    w.cell = _mm_srl_epi32(shifted, _mm_cvtsi32_si128((1 + coarser - finer) as i32));
-    w.level = (w.level + finer).wrapping_sub(coarser);
-    false
 }
 
 /// Walks one ray to its end.
+///
+/// Where the processor has x86-64-v3's features, the walk compiled for them runs (as
+/// the batch loop in `cpu` does).
 pub(crate) fn walk<const ANY: bool, const TEST: u8, const SLAB: bool>(
+    t: &Tracer<'_>,
+    start: &RayWalk,
+    stats: &mut WalkStats,
+) -> Option<Hit> {
+    if t.uses_x86_64_v3() {
+        // SAFETY: the processor has the features (`uses_x86_64_v3` is never true
+        // where it does not).
+        return unsafe { walk_v3::<ANY, TEST, SLAB>(t, start, stats) };
+    }
+    walk_loop::<ANY, TEST, SLAB>(t, start, stats)
+}
+
+/// [`walk`] compiled for x86-64-v3 (the batch loop's features in `cpu`).
+///
+/// # Safety
+/// The processor must have the features.
+#[target_feature(enable = "avx2,bmi1,bmi2,fma,lzcnt,popcnt")]
+unsafe fn walk_v3<const ANY: bool, const TEST: u8, const SLAB: bool>(
+    t: &Tracer<'_>,
+    start: &RayWalk,
+    stats: &mut WalkStats,
+) -> Option<Hit> {
+    walk_loop::<ANY, TEST, SLAB>(t, start, stats)
+}
+
+#[inline(always)]
+fn walk_loop<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     start: &RayWalk,
     stats: &mut WalkStats,
@@ -313,6 +370,7 @@ pub(crate) fn walk<const ANY: bool, const TEST: u8, const SLAB: bool>(
 }
 
 /// Starts a walk in SSE form (and asks for its first leaf's record).
+#[inline(always)]
 pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
     // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
     let w = unsafe { SseWalk::from_scalar(start, t.root_lo()) };
