@@ -43,29 +43,40 @@ pub(crate) struct SseWalk {
 }
 
 impl SseWalk {
-    /// The SSE form of a scalar walk's starting state.
-    #[target_feature(enable = "sse2")]
+    /// The SSE form of a scalar walk's starting state. (No `target_feature`: inlined
+    /// into the batch loop in whatever features it is compiled with.)
+    #[inline(always)]
     pub(crate) fn from_scalar(w: &RayWalk, root_lo: [f32; 3]) -> SseWalk {
-        let v3 = |a: [f32; 3]| _mm_setr_ps(a[0], a[1], a[2], 0.0);
+        // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
+        unsafe { Self::from_scalar_sse2(w, root_lo) }
+    }
+
+    #[inline(always)]
+    unsafe fn from_scalar_sse2(w: &RayWalk, root_lo: [f32; 3]) -> SseWalk {
+        // SAFETY: the caller's.
+        let v3 = |a: [f32; 3]| unsafe { _mm_setr_ps(a[0], a[1], a[2], 0.0) };
         let (o, d) = (w.o(), w.d());
-        SseWalk {
-            o: v3(o),
-            d: v3(d),
-            d_yzx: _mm_setr_ps(d[1], d[2], d[0], 0.0),
-            high: v3(w.high().map(|h| h as f32)),
-            lo: v3(root_lo),
-            cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
-            d_s: d,
-            inv_s: w.inv(),
-            shear_sse: ShearSse::new(&w.shear()),
-            exits: w.exits(),
-            tmin: w.tmin(),
-            tmax: w.tmax(),
-            address: w.address(),
-            level: w.level(),
-            best: None,
-            t_best: w.t_best(),
-            steps: 0,
+        // SAFETY: the caller's.
+        unsafe {
+            SseWalk {
+                o: v3(o),
+                d: v3(d),
+                d_yzx: _mm_setr_ps(d[1], d[2], d[0], 0.0),
+                high: v3(w.high().map(|h| h as f32)),
+                lo: v3(root_lo),
+                cell: _mm_setr_epi32(w.cell()[0] as i32, w.cell()[1] as i32, w.cell()[2] as i32, 0),
+                d_s: d,
+                inv_s: w.inv(),
+                shear_sse: ShearSse::new(&w.shear()),
+                exits: w.exits(),
+                tmin: w.tmin(),
+                tmax: w.tmax(),
+                address: w.address(),
+                level: w.level(),
+                best: None,
+                t_best: w.t_best(),
+                steps: 0,
+            }
         }
     }
 }
@@ -135,18 +146,23 @@ pub(crate) struct ShearSse {
 }
 
 impl ShearSse {
-    #[target_feature(enable = "sse2")]
-    pub(crate) fn new(shear: &Shear) -> ShearSse {
+    /// # Safety
+    /// SSE2 must be available (it is enabled at compile time for this module).
+    #[inline(always)]
+    pub(crate) unsafe fn new(shear: &Shear) -> ShearSse {
         let k = shear.axes();
         let [sx, sy, sz] = shear.scales();
         let o = shear.origin();
-        ShearSse {
-            o: [_mm_set1_ps(o[0]), _mm_set1_ps(o[1]), _mm_set1_ps(o[2])],
-            k: k.map(|a| a as u8),
-            sx: _mm_set1_ps(sx),
-            sy: _mm_set1_ps(sy),
-            sz: _mm_set1_ps(sz),
-            scalar: *shear,
+        // SAFETY: the caller's.
+        unsafe {
+            ShearSse {
+                o: [_mm_set1_ps(o[0]), _mm_set1_ps(o[1]), _mm_set1_ps(o[2])],
+                k: k.map(|a| a as u8),
+                sx: _mm_set1_ps(sx),
+                sy: _mm_set1_ps(sy),
+                sz: _mm_set1_ps(sz),
+                scalar: *shear,
+            }
         }
     }
 
@@ -372,8 +388,7 @@ fn walk_loop<const ANY: bool, const TEST: u8, const SLAB: bool>(
 /// Starts a walk in SSE form (and asks for its first leaf's record).
 #[inline(always)]
 pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
-    // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
-    let w = unsafe { SseWalk::from_scalar(start, t.root_lo()) };
+    let w = SseWalk::from_scalar(start, t.root_lo());
     prefetch(t.view().octree, w.address);
     w
 }
