@@ -222,6 +222,8 @@ struct MeshReport {
     rows: Vec<Row>,
     /// The balanced and unconstrained walks compared.
     balance: BalanceStats,
+    /// Whether the octree's SIMD walk ran its x86-64-v3 build.
+    x86_64_v3: bool,
     /// The paper's Tables 1 and 3 at its depth, for the bunny and the dragon.
     paper: Vec<PaperRow>,
     /// The seeds' BVH builds on the same rays.
@@ -594,6 +596,7 @@ fn mesh_report(name: &str, mesh: &Mesh, args: &Args, leaks: &Leaks, bar: &Bar) -
         sets: sets.sets.iter().map(|(n, r, _)| (*n, r.len())).collect(),
         rows,
         balance,
+        x86_64_v3: defaults.scene.tracer().uses_x86_64_v3(),
         paper,
         baselines,
     })
@@ -891,6 +894,12 @@ fn markdown(reports: &[MeshReport], args: &Args) -> String {
     }
     for r in reports {
         let _ = writeln!(s, "## {} ({} triangles)\n", r.name, thousands(r.triangles as u64));
+        let _ = writeln!(
+            s,
+            "The octree's walk ran its {} build; the seeds' structures, the scalar steps and obvhs are \
+             compiled for the x86-64 baseline, Embree picks its own.\n",
+            if r.x86_64_v3 { "x86-64-v3 (AVX2)" } else { "baseline (SSE2)" }
+        );
         let _ = writeln!(
             s,
             "| knob | setting | bake s | MB | leaves | refs / tri | primary | incoherent | shadow | wrong / rays | ties | max \\|Δt\\|/t | leaks / M rays (solids) |"
