@@ -115,7 +115,7 @@ impl Tracer<'_> {
             for slot in slots.iter_mut() {
                 let Some((i, w)) = slot else { continue };
                 if step::<ANY, TEST, SLAB>(self, w, &mut stats) {
-                    done(*i, w.best);
+                    done(*i, self.answer(w.best));
                     *slot = self.start_next(rays, &mut next, &mut done);
                     active -= slot.is_none() as usize;
                 }

@@ -151,6 +151,32 @@ pub(crate) struct RayWalk {
 pub(crate) trait LeafTest {
     /// The hit `(t, u, v)` of the triangle (nine floats) in `[tmin, tmax]`.
     fn hit(&self, tri: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)>;
+
+    /// How many triangles [`LeafTest::batch`] takes at once; 0 where it does not.
+    #[inline(always)]
+    fn batch_size(&self) -> usize {
+        0
+    }
+
+    /// Tests the stored triangles `refs` (1 to `batch_size`) of `triangles` at once:
+    /// the answer a test of one after the other would keep.
+    #[inline(always)]
+    fn batch<const ANY: bool>(&self, _triangles: &[f32], _refs: &[u32], _tmin: f32, _tmax: f32) -> Batch {
+        Batch::OneByOne
+    }
+}
+
+/// What a batch of triangles tested at once answered ([`LeafTest::batch`]).
+pub(crate) enum Batch {
+    /// No triangle hit within `[tmin, tmax]`.
+    Miss,
+    /// The hit that testing the triangles one after another would keep (the nearest;
+    /// of equal ones the last, since a test accepts `t <= t_best`; for an any-hit
+    /// query the first): index in the batch, `t`, `u`, `v`.
+    Hit(usize, f32, f32, f32),
+    /// Test these one by one (an edge function rounded to zero, which the scalar test
+    /// decides in f64; an index out of range; no batch form).
+    OneByOne,
 }
 
 /// The scalar step's test: the tracer's.
@@ -321,7 +347,7 @@ impl<'a> Tracer<'a> {
     pub fn intersect_scalar(&self, ray: &Ray) -> Option<Hit> {
         let mut w = self.begin(ray)?;
         while !self.step::<false>(&mut w, &mut WalkStats::default()) {}
-        w.best
+        self.answer(w.best)
     }
 
     /// [`Tracer::occluded`] on the portable scalar step.
@@ -357,7 +383,7 @@ impl<'a> Tracer<'a> {
         {
             let mut w = w;
             while !self.step::<ANY>(&mut w, stats) {}
-            w.best
+            self.answer(w.best)
         }
     }
 
@@ -443,18 +469,67 @@ impl<'a> Tracer<'a> {
         let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
         let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
         stats.triangle_tests += count;
-        for &tri in refs {
-            let data = &v.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-            if let Some((t, u, vv)) = test.hit(data, walk.tmin, *walk.t_best) {
-                *walk.t_best = t;
-                *walk.best =
-                    Some(Hit { t, triangle: v.triangle_ids[tri as usize], u, v: vv, leaf: box_index, prim: tri });
-                if ANY {
-                    return None;
+        let size = test.batch_size();
+        if size == 0 {
+            return (!self.one_by_one::<ANY>(refs, box_index, walk, test)).then_some((box_index, ncount));
+        }
+        for chunk in refs.chunks(size) {
+            match test.batch::<ANY>(v.triangles, chunk, walk.tmin, *walk.t_best) {
+                Batch::Miss => {}
+                Batch::Hit(i, t, u, vv) => {
+                    self.keep(walk, chunk[i], box_index, (t, u, vv));
+                    if ANY {
+                        return None;
+                    }
+                }
+                Batch::OneByOne => {
+                    if self.one_by_one::<ANY>(chunk, box_index, walk, test) {
+                        return None;
+                    }
                 }
             }
         }
         Some((box_index, ncount))
+    }
+
+    /// Tests the stored triangles `refs` one after another, keeping the nearest hit;
+    /// returns whether an any-hit query is answered.
+    #[inline(always)]
+    fn one_by_one<const ANY: bool>(
+        &self,
+        refs: &[u32],
+        box_index: u32,
+        walk: &mut LeafVisit<'_>,
+        test: &impl LeafTest,
+    ) -> bool {
+        for &tri in refs {
+            let data = &self.view.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+            if let Some(hit) = test.hit(data, walk.tmin, *walk.t_best) {
+                self.keep(walk, tri, box_index, hit);
+                if ANY {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Makes stored triangle `tri`'s hit `(t, u, v)` the walk's best (its `triangle`
+    /// is set by [`Tracer::answer`]).
+    #[inline(always)]
+    fn keep(&self, walk: &mut LeafVisit<'_>, tri: u32, box_index: u32, (t, u, v): (f32, f32, f32)) {
+        *walk.t_best = t;
+        // The input id is looked up when the walk ends (`answer`): a later hit may
+        // replace this one, and an any-hit query needs none. Ask for it now.
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        super::simd::sse2::prefetch(self.view.triangle_ids, tri);
+        *walk.best = Some(Hit { t, triangle: u32::MAX, u, v, leaf: box_index, prim: tri });
+    }
+
+    /// A finished walk's answer, its triangle named by its input id.
+    #[inline(always)]
+    pub(crate) fn answer(&self, best: Option<Hit>) -> Option<Hit> {
+        best.map(|h| Hit { triangle: self.view.triangle_ids[h.prim as usize], ..h })
     }
 
     /// Visits the walk's current leaf and moves to the next; returns whether the walk

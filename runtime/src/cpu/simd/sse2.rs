@@ -6,9 +6,10 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
+use super::avx2;
 use crate::cpu::traverse::{
-    exit_along_moving_axes, intersect_f64, LeafTest, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
-    TEST_MOLLER_TRUMBORE,
+    exit_along_moving_axes, intersect_f64, Batch, LeafTest, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
+    TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT,
 };
 use crate::cpu::watertight::Shear;
 use crate::ray::Hit;
@@ -225,6 +226,9 @@ struct SseTest<const TEST: u8> {
     o: __m128,
     d: __m128,
     d_s: [f32; 3],
+    /// Whether the watertight test runs eight triangles at once (`avx2::hit8`):
+    /// where the walk runs its x86-64-v3 build.
+    wide: bool,
 }
 
 impl<const TEST: u8> LeafTest for SseTest<TEST> {
@@ -239,6 +243,22 @@ impl<const TEST: u8> LeafTest for SseTest<TEST> {
             }
             _ => self.shear.intersect(tri, tmin, tmax),
         }
+    }
+
+    #[inline(always)]
+    fn batch_size(&self) -> usize {
+        if TEST == TEST_WATERTIGHT && self.wide {
+            avx2::LANES
+        } else {
+            0
+        }
+    }
+
+    #[inline(always)]
+    fn batch<const ANY: bool>(&self, triangles: &[f32], refs: &[u32], tmin: f32, tmax: f32) -> Batch {
+        // SAFETY: `wide` is set only where the processor has AVX2 (the tracer's
+        // x86-64-v3 walk); `batch_size` is 0 otherwise and the step does not call this.
+        unsafe { avx2::hit8::<ANY>(&self.shear.scalar, triangles, refs, tmin, tmax) }
     }
 }
 
@@ -281,7 +301,7 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         let v = t.view();
         let a = w.address as usize;
         // 1. Triangles.
-        let test = SseTest::<TEST> { shear: w.shear_sse, o: w.o, d: w.d, d_s: w.d_s };
+        let test = SseTest::<TEST> { shear: w.shear_sse, o: w.o, d: w.d, d_s: w.d_s, wide: t.uses_x86_64_v3() };
         let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
         let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, &test) else {
             return true;
@@ -323,7 +343,11 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         w.address = v.octree[link];
         // The next record is this ray's next load, after the other rays in flight have
         // stepped: ask for it now.
+        // A record is 16 to 112 bytes; its links spill onto the next cache line when
+        // it starts late in one: ask for the line 60 bytes on too (dragon incoherent
+        // rays 6 % faster, the other sets unchanged).
         prefetch(v.octree, w.address);
+        prefetch(v.octree, w.address + 15);
         // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
         let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
         let finer = n >> 2;
@@ -384,7 +408,7 @@ fn walk_loop<const ANY: bool, const TEST: u8, const SLAB: bool>(
     unsafe {
         let mut w = SseWalk::from_scalar(start, t.root_lo());
         while !step::<ANY, TEST, SLAB>(t, &mut w, stats) {}
-        w.best
+        t.answer(w.best)
     }
 }
 
@@ -399,7 +423,7 @@ pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
 /// Asks for the cache line of `words[at]`, if `at` is in range (a hint: no load, no
 /// fault).
 #[inline(always)]
-fn prefetch(words: &[u32], at: u32) {
+pub(crate) fn prefetch(words: &[u32], at: u32) {
     if let Some(word) = words.get(at as usize) {
         // SAFETY: a prefetch reads nothing architecturally; the address is that of a
         // live element, and SSE (which has PREFETCHT0) is enabled for this module.

@@ -1,0 +1,322 @@
+//! The watertight triangle test on eight triangles at once (AVX2): a leaf's
+//! triangles, one a lane. Each lane runs the scalar test's operations in its order
+//! (`watertight::Shear::intersect`; no fused multiply-adds), so each lane's answer
+//! has the scalar answer's bits; the batch then picks the answer a test of one
+//! triangle after another would have kept.
+//!
+//! Only the batch loop and single-ray walk compiled for x86-64-v3 call it (where it
+//! is inlined); elsewhere the step tests one triangle at a time.
+
+use std::arch::x86_64::*;
+
+use crate::cpu::traverse::Batch;
+use crate::cpu::watertight::Shear;
+
+/// Triangles a batch.
+pub(crate) const LANES: usize = 8;
+
+/// Floats a stored triangle (three vertices).
+const FLOATS: usize = 9;
+
+/// Two triangles' floats `off..off + 4` in one register (`lo` low, `hi` high).
+///
+/// # Safety
+/// AVX must be available (where this is inlined); both reads in bounds.
+#[inline(always)]
+unsafe fn pair(lo: *const f32, hi: *const f32) -> __m256 {
+    // SAFETY: the caller's.
+    unsafe { _mm256_set_m128(_mm_loadu_ps(hi), _mm_loadu_ps(lo)) }
+}
+
+/// Floats `off..off + 4` of eight triangles, one row of eight a float: a 4 x 4
+/// transpose in each half (triangles 0-3 low, 4-7 high).
+///
+/// # Safety
+/// AVX must be available (where this is inlined); the reads in bounds.
+#[inline(always)]
+unsafe fn transpose(p: &[*const f32; LANES], off: usize) -> [__m256; 4] {
+    // SAFETY: the caller's.
+    unsafe {
+        let r0 = pair(p[0].add(off), p[4].add(off));
+        let r1 = pair(p[1].add(off), p[5].add(off));
+        let r2 = pair(p[2].add(off), p[6].add(off));
+        let r3 = pair(p[3].add(off), p[7].add(off));
+        let t0 = _mm256_unpacklo_ps(r0, r1);
+        let t1 = _mm256_unpackhi_ps(r0, r1);
+        let t2 = _mm256_unpacklo_ps(r2, r3);
+        let t3 = _mm256_unpackhi_ps(r2, r3);
+        [
+            _mm256_shuffle_ps::<0b01_00_01_00>(t0, t2),
+            _mm256_shuffle_ps::<0b11_10_11_10>(t0, t2),
+            _mm256_shuffle_ps::<0b01_00_01_00>(t1, t3),
+            _mm256_shuffle_ps::<0b11_10_11_10>(t1, t3),
+        ]
+    }
+}
+
+/// The lanes (of the first `used` bits) where `m` is set.
+///
+/// # Safety
+/// AVX must be available (where this is inlined).
+#[inline(always)]
+unsafe fn lanes(m: __m256, used: u32) -> u32 {
+    // SAFETY: the caller's.
+    unsafe { _mm256_movemask_ps(m) as u32 & used }
+}
+
+/// `a[k] - s * a[kz]`: a sheared coordinate of a vertex, eight lanes.
+///
+/// # Safety
+/// AVX must be available (where this is inlined).
+#[inline(always)]
+unsafe fn shear_axis(a: &[__m256; 3], k: usize, kz: usize, s: __m256) -> __m256 {
+    // SAFETY: the caller's.
+    unsafe { _mm256_sub_ps(a[k], _mm256_mul_ps(s, a[kz])) }
+}
+
+/// Whether any of three lanes' compares holds: `cmp(u) | cmp(v) | cmp(w)`.
+///
+/// # Safety
+/// AVX must be available (where this is inlined).
+#[inline(always)]
+unsafe fn any3<const CMP: i32>(u: __m256, v: __m256, w: __m256, x: __m256) -> __m256 {
+    // SAFETY: the caller's.
+    unsafe {
+        _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps::<CMP>(u, x), _mm256_cmp_ps::<CMP>(v, x)), _mm256_cmp_ps::<CMP>(w, x))
+    }
+}
+
+/// Tests the triangles `refs` (1 to [`LANES`]) of `triangles` against the sheared
+/// ray. For the nearest hit (`ANY` false), the answer is the last of the nearest
+/// hits in `refs` order (a one-by-one test accepts `t <= t_best`, so a later tie
+/// wins); for any hit, the first hit in order.
+///
+/// No `target_feature` attribute, so that it is inlined (`inline(always)`) into the
+/// x86-64-v3 step, which has AVX2.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[inline(always)]
+pub(crate) unsafe fn hit8<const ANY: bool>(
+    shear: &Shear,
+    triangles: &[f32],
+    refs: &[u32],
+    tmin: f32,
+    tmax: f32,
+) -> Batch {
+    debug_assert!((1..=LANES).contains(&refs.len()));
+    // Each lane's triangle; unused lanes repeat the last (and are masked out).
+    let stored = triangles.len() / FLOATS;
+    let last = refs.len() - 1;
+    let mut p = [triangles.as_ptr(); LANES];
+    for (lane, slot) in p.iter_mut().enumerate() {
+        let tri = refs[lane.min(last)] as usize;
+        if tri >= stored {
+            return Batch::OneByOne;
+        }
+        // SAFETY: `tri * 9 + 9 <= triangles.len()`.
+        *slot = unsafe { slot.add(tri * FLOATS) };
+    }
+    // SAFETY: AVX2 is the caller's; each pointer has nine floats to read.
+    unsafe {
+        // Vertex coordinates, one row of eight a coordinate.
+        let [x0, y0, z0, x1] = transpose(&p, 0);
+        let [y1, z1, x2, y2] = transpose(&p, 4);
+        let z2 = _mm256_setr_ps(
+            *p[0].add(8),
+            *p[1].add(8),
+            *p[2].add(8),
+            *p[3].add(8),
+            *p[4].add(8),
+            *p[5].add(8),
+            *p[6].add(8),
+            *p[7].add(8),
+        );
+        // Relative to the origin, then sheared along the ray's axes.
+        let o = shear.origin();
+        let (ox, oy, oz) = (_mm256_set1_ps(o[0]), _mm256_set1_ps(o[1]), _mm256_set1_ps(o[2]));
+        let a = [_mm256_sub_ps(x0, ox), _mm256_sub_ps(y0, oy), _mm256_sub_ps(z0, oz)];
+        let b = [_mm256_sub_ps(x1, ox), _mm256_sub_ps(y1, oy), _mm256_sub_ps(z1, oz)];
+        let c = [_mm256_sub_ps(x2, ox), _mm256_sub_ps(y2, oy), _mm256_sub_ps(z2, oz)];
+        let [kx, ky, kz] = shear.axes();
+        let [sx, sy, sz] = shear.scales();
+        let (sx, sy, sz) = (_mm256_set1_ps(sx), _mm256_set1_ps(sy), _mm256_set1_ps(sz));
+        let (ax, ay) = (shear_axis(&a, kx, kz, sx), shear_axis(&a, ky, kz, sy));
+        let (bx, by) = (shear_axis(&b, kx, kz, sx), shear_axis(&b, ky, kz, sy));
+        let (cx, cy) = (shear_axis(&c, kx, kz, sx), shear_axis(&c, ky, kz, sy));
+        // Edge functions, as the scalar test.
+        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let used = (1u32 << refs.len()) - 1;
+        let zero = _mm256_setzero_ps();
+        if lanes(any3::<_CMP_EQ_OQ>(u, v, w, zero), used) != 0 {
+            return Batch::OneByOne;
+        }
+        let mixed = _mm256_and_ps(any3::<_CMP_LT_OQ>(u, v, w, zero), any3::<_CMP_GT_OQ>(u, v, w, zero));
+        let inside = used & !lanes(mixed, used);
+        if inside == 0 {
+            return Batch::Miss;
+        }
+        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+        let scaled = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, a[kz])), _mm256_mul_ps(v, _mm256_mul_ps(sz, b[kz]))),
+            _mm256_mul_ps(w, _mm256_mul_ps(sz, c[kz])),
+        );
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+        let dist = _mm256_mul_ps(scaled, inv);
+        let in_range = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(dist, _mm256_set1_ps(tmin)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(dist, _mm256_set1_ps(tmax)),
+        );
+        let hits = inside & lanes(_mm256_andnot_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), in_range), used);
+        if hits == 0 {
+            return Batch::Miss;
+        }
+        let d: [f32; LANES] = std::mem::transmute(dist);
+        let lane = if ANY {
+            hits.trailing_zeros() as usize
+        } else {
+            // The nearest distance among the hits, then the last lane that has it.
+            let mut nearest = f32::INFINITY;
+            for (l, &t) in d.iter().enumerate() {
+                if hits >> l & 1 != 0 && t < nearest {
+                    nearest = t;
+                }
+            }
+            let ties = lanes(_mm256_cmp_ps::<_CMP_EQ_OQ>(dist, _mm256_set1_ps(nearest)), hits);
+            31 - ties.leading_zeros() as usize
+        };
+        let v: [f32; LANES] = std::mem::transmute(_mm256_mul_ps(v, inv));
+        let w: [f32; LANES] = std::mem::transmute(_mm256_mul_ps(w, inv));
+        Batch::Hit(lane, d[lane], v[lane], w[lane])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What testing `refs` one after another keeps: `(index, t, u, v)`.
+    fn one_by_one(
+        shear: &Shear,
+        tris: &[f32],
+        refs: &[u32],
+        any: bool,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mut best = None;
+        let mut t_best = tmax;
+        for (i, &r) in refs.iter().enumerate() {
+            if let Some((t, u, v)) = shear.intersect(&tris[r as usize * 9..][..9], tmin, t_best) {
+                best = Some((i, t, u, v));
+                t_best = t;
+                if any {
+                    break;
+                }
+            }
+        }
+        best
+    }
+
+    /// A little xorshift, enough for test data.
+    fn rng(seed: &mut u64) -> f32 {
+        *seed ^= *seed << 13;
+        *seed ^= *seed >> 7;
+        *seed ^= *seed << 17;
+        (*seed >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn eight_at_once_keeps_what_one_after_another_keeps() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 here: the batch test never runs on this processor");
+            return;
+        }
+        // Triangles on an integer grid in the plane z = 2 (two a square, sharing
+        // edges and vertices), copies of some of them (exact ties), and random ones.
+        let mut tris: Vec<f32> = Vec::new();
+        for y in 0..4 {
+            for x in 0..4 {
+                let (x, y) = (x as f32, y as f32);
+                tris.extend([x, y, 2.0, x + 1.0, y, 2.0, x + 1.0, y + 1.0, 2.0]);
+                tris.extend([x, y, 2.0, x + 1.0, y + 1.0, 2.0, x, y + 1.0, 2.0]);
+            }
+        }
+        let copies = tris[..9 * 8].to_vec();
+        tris.extend(copies);
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..64 {
+            for _ in 0..9 {
+                tris.push(rng(&mut seed) * 4.0);
+            }
+        }
+        let count = tris.len() / 9;
+        let (mut batches, mut hits, mut ties, mut fallbacks) = (0, 0, 0, 0);
+        for ray in 0..3000 {
+            // Rays through grid vertices and edges (edge functions of exactly zero)
+            // and through random points, in random directions.
+            let target = if ray % 3 == 0 {
+                [(ray % 5) as f32, (ray / 5 % 5) as f32, 2.0]
+            } else if ray % 3 == 1 {
+                [(ray % 5) as f32 + 0.5, (ray / 5 % 5) as f32, 2.0]
+            } else {
+                [rng(&mut seed) * 4.0, rng(&mut seed) * 4.0, 2.0 + rng(&mut seed)]
+            };
+            let d = [rng(&mut seed) - 0.5, rng(&mut seed) - 0.5, if ray % 2 == 0 { 1.0 } else { -1.0 }];
+            let o = [target[0] - 3.0 * d[0], target[1] - 3.0 * d[1], target[2] - 3.0 * d[2]];
+            let shear = Shear::new(o, d);
+            for _ in 0..4 {
+                let n = 1 + (rng(&mut seed) * LANES as f32) as usize;
+                let mut refs: Vec<u32> =
+                    (0..n).map(|_| (rng(&mut seed) * count as f32) as u32 % count as u32).collect();
+                if ray % 2 == 0 {
+                    refs[n / 2] = refs[0]; // a triangle twice: an exact tie
+                }
+                let tmax = if ray % 7 == 0 { 2.5 } else { f32::INFINITY };
+                for any in [false, true] {
+                    let expect = one_by_one(&shear, &tris, &refs, any, 0.0, tmax);
+                    // SAFETY: the processor has AVX2 (checked above).
+                    let got = unsafe {
+                        if any {
+                            hit8::<true>(&shear, &tris, &refs, 0.0, tmax)
+                        } else {
+                            hit8::<false>(&shear, &tris, &refs, 0.0, tmax)
+                        }
+                    };
+                    batches += 1;
+                    match got {
+                        Batch::Miss => assert_eq!(expect, None, "ray {ray}, refs {refs:?}"),
+                        Batch::Hit(i, t, u, v) => {
+                            assert_eq!(Some((i, t, u, v)), expect, "ray {ray}, refs {refs:?}, any {any}");
+                            hits += 1;
+                            ties += refs
+                                .iter()
+                                .enumerate()
+                                .filter(|&(j, _)| {
+                                    j != i
+                                        && shear
+                                            .intersect(&tris[refs[j] as usize * 9..][..9], 0.0, tmax)
+                                            .is_some_and(|h| h.0 == t)
+                                })
+                                .count()
+                                .min(1);
+                        }
+                        Batch::OneByOne => fallbacks += 1,
+                    }
+                }
+            }
+        }
+        // The cases that matter were met: hits, exact ties, zero edge functions.
+        assert!(
+            hits > 1000 && ties > 100 && fallbacks > 100,
+            "{batches} batches: {hits} hits, {ties} ties, {fallbacks} one by one"
+        );
+        // An index past the triangles is left to the one-by-one path.
+        // SAFETY: the processor has AVX2.
+        let past =
+            unsafe { hit8::<false>(&Shear::new([0.0; 3], [0.0, 0.0, 1.0]), &tris, &[0, count as u32], 0.0, 1.0) };
+        assert!(matches!(past, Batch::OneByOne));
+    }
+}
