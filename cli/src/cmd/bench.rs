@@ -15,7 +15,9 @@ use crate::output::{mb, thousands};
 /// is the median (with min and max) of --runs timed runs of tracing alone, single
 /// threaded and on all threads, with a checksum (rays that hit, sum of hit distances).
 /// obvhs's CWBVH, built on the same triangles, traces the same rays in the same runs,
-/// interleaved, and the ratio octrace / obvhs is printed.
+/// interleaved, and the ratio octrace / obvhs is printed: the median of the runs'
+/// ratios, each run timing octrace then obvhs on one thread back to back, which holds
+/// steadier than a ratio of medians on a shared machine.
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// A .oct scene, or a mesh to bake first.
@@ -117,6 +119,9 @@ struct SetResult {
     hits: usize,
     sum_t: f64,
     peer: Option<(Spread, usize, f64)>,
+    /// octrace / obvhs: the median of the runs' ratios (each run times the two one
+    /// after the other, so a slow spell of a shared machine slows both).
+    ratio: Option<f64>,
     /// The answers of the last run: nearest hits, or (for occlusion) whether each
     /// ray is occluded; what the GPU's answers are compared with.
     nearest: Vec<Option<Hit>>,
@@ -208,6 +213,8 @@ fn measure(
         all.push(mrays(d));
     }
     let (n, sum_t) = if occlusion { (occluded.iter().filter(|&&o| o).count(), 0.0) } else { hit_sums(&hits) };
+    let ratio = (!peer_runs.is_empty() && !rays.is_empty())
+        .then(|| Spread::of(single.iter().zip(&peer_runs).map(|(o, p)| o / p).collect()).median);
     Ok(SetResult {
         name,
         rays: rays.len(),
@@ -216,6 +223,7 @@ fn measure(
         hits: n,
         sum_t,
         peer: (!peer_runs.is_empty()).then(|| (Spread::of(peer_runs), peer_sum.0, peer_sum.1)),
+        ratio,
         nearest: if occlusion { Vec::new() } else { hits },
         occluded: if occlusion { occluded } else { Vec::new() },
     })
@@ -244,7 +252,7 @@ fn report(
                     "mrays_single": r.single, "mrays_all_threads": r.all,
                     "hits": r.hits, "sum_t": r.sum_t,
                     "obvhs_cwbvh_single": r.peer.map(|p| json!({ "mrays": p.0, "hits": p.1, "sum_t": p.2 })),
-                    "ratio_single": r.peer.filter(|_| r.rays > 0).map(|p| r.single.median / p.0.median),
+                    "ratio_single": r.ratio,
                 })
             })
             .collect();
@@ -287,10 +295,7 @@ fn report(
     let fmt = |s: &Spread| format!("{:.2} ({:.2}-{:.2})", s.median, s.min, s.max);
     for r in results {
         let peer = r.peer.map_or("-".into(), |p| fmt(&p.0));
-        let ratio = match r.peer {
-            Some(p) if r.rays > 0 => format!("{:.2}x", r.single.median / p.0.median),
-            _ => "-".into(),
-        };
+        let ratio = r.ratio.map_or("-".into(), |q| format!("{q:.2}x"));
         let check = checksum(r.name, r.hits, r.sum_t);
         let peer_check = r.peer.map_or(String::new(), |p| format!(" (obvhs {})", thousands(p.1 as u64)));
         crate::out!(
