@@ -9,14 +9,13 @@
 
 use std::arch::x86_64::*;
 
+use octrace_format::layout::TRIANGLE_FLOATS;
+
 use crate::cpu::traverse::Batch;
 use crate::cpu::watertight::Shear;
 
 /// Triangles a batch.
 pub(crate) const LANES: usize = 8;
-
-/// Floats a stored triangle (three vertices).
-const FLOATS: usize = 9;
 
 /// Two triangles' floats `off..off + 4` in one register (`lo` low, `hi` high).
 ///
@@ -106,7 +105,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
 ) -> Batch {
     debug_assert!((1..=LANES).contains(&refs.len()));
     // Each lane's triangle; unused lanes repeat the last (and are masked out).
-    let stored = triangles.len() / FLOATS;
+    let stored = triangles.len() / TRIANGLE_FLOATS;
     let last = refs.len() - 1;
     let mut p = [triangles.as_ptr(); LANES];
     for (lane, slot) in p.iter_mut().enumerate() {
@@ -115,7 +114,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
             return Batch::OneByOne;
         }
         // SAFETY: `tri * 9 + 9 <= triangles.len()`.
-        *slot = unsafe { slot.add(tri * FLOATS) };
+        *slot = unsafe { slot.add(tri * TRIANGLE_FLOATS) };
     }
     // SAFETY: AVX2 is the caller's; each pointer has nine floats to read.
     unsafe {
