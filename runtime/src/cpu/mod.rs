@@ -76,6 +76,11 @@ impl Tracer<'_> {
     ) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         if self.uses_x86_64_v3() {
+            if !SLAB && simd::lanes::fits(self) {
+                // SAFETY: the processor has the features (as below), and the arrays
+                // fit the gathers.
+                return unsafe { simd::lanes::trace::<ANY, TEST>(self, rays, done) };
+            }
             // SAFETY: the processor has these features (`uses_x86_64_v3` is never
             // true where it does not).
             return unsafe { self.interleaved_v3::<ANY, TEST, SLAB>(rays, done) };

@@ -195,7 +195,6 @@ impl LeafTest for ScalarTest<'_, '_> {
 
 /// The parts of a walk's state that [`Tracer::visit_leaf`] updates.
 pub(crate) struct LeafVisit<'w> {
-    pub steps: &'w mut u32,
     pub tmin: f32,
     pub t_best: &'w mut f32,
     pub best: &'w mut Option<Hit>,
@@ -392,6 +391,12 @@ impl<'a> Tracer<'a> {
         self.root_lo
     }
 
+    /// Cell edges by level (32 of them: a level masked to five bits indexes it).
+    #[inline(always)]
+    pub(crate) fn cell_sizes(&self) -> &[f32; 32] {
+        &self.sizes
+    }
+
     /// The edge of a cell at `level` (masked into the table: a hostile level cannot
     /// index out of bounds).
     #[inline(always)]
@@ -453,25 +458,41 @@ impl<'a> Tracer<'a> {
     pub(crate) fn visit_leaf<const ANY: bool>(
         &self,
         address: u32,
+        steps: &mut u32,
         walk: &mut LeafVisit<'_>,
         stats: &mut WalkStats,
         test: &impl LeafTest,
     ) -> Option<(u32, u32)> {
         let v = &self.view;
         stats.leaves += 1;
-        *walk.steps += 1;
-        if *walk.steps > self.max_steps {
+        *steps += 1;
+        if *steps > self.max_steps {
             stats.stopped_at_bound = true;
             return None;
         }
         let a = address as usize;
         let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
         let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
-        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
         stats.triangle_tests += count;
+        (!self.test_leaf::<ANY>(count, offset, box_index, walk, test)).then_some((box_index, ncount))
+    }
+
+    /// Tests a leaf's `count` triangles (references from `offset` on), keeping the
+    /// nearest hit in `[tmin, t_best]`; returns whether an any-hit query is answered.
+    #[inline(always)]
+    pub(crate) fn test_leaf<const ANY: bool>(
+        &self,
+        count: u32,
+        offset: u32,
+        box_index: u32,
+        walk: &mut LeafVisit<'_>,
+        test: &impl LeafTest,
+    ) -> bool {
+        let v = &self.view;
+        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
         let size = test.batch_size();
         if size == 0 {
-            return (!self.one_by_one::<ANY>(refs, box_index, walk, test)).then_some((box_index, ncount));
+            return self.one_by_one::<ANY>(refs, box_index, walk, test);
         }
         for chunk in refs.chunks(size) {
             match test.batch::<ANY>(v.triangles, chunk, walk.tmin, *walk.t_best) {
@@ -479,17 +500,17 @@ impl<'a> Tracer<'a> {
                 Batch::Hit(i, t, u, vv) => {
                     self.keep(walk, chunk[i], box_index, (t, u, vv));
                     if ANY {
-                        return None;
+                        return true;
                     }
                 }
                 Batch::OneByOne => {
                     if self.one_by_one::<ANY>(chunk, box_index, walk, test) {
-                        return None;
+                        return true;
                     }
                 }
             }
         }
-        Some((box_index, ncount))
+        false
     }
 
     /// Tests the stored triangles `refs` one after another, keeping the nearest hit;
@@ -541,8 +562,9 @@ impl<'a> Tracer<'a> {
         let a = w.address as usize;
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
         let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d } };
-        let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut visit, stats, &test) else {
+        let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
+        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test)
+        else {
             return true;
         };
         // 2. The exit corner from the cell (the same bits as the stored box: an

@@ -221,16 +221,16 @@ impl ShearSse {
 }
 
 /// The SSE step's triangle test, `TEST` fixed at compile time.
-struct SseTest<'w, const TEST: u8> {
+pub(crate) struct SseTest<'w, const TEST: u8> {
     /// Borrowed from the walk: a copy cost 29 instructions a step (callgrind), 3-7 %
     /// of the time.
-    shear: &'w ShearSse,
-    o: __m128,
-    d: __m128,
-    d_s: [f32; 3],
+    pub(crate) shear: &'w ShearSse,
+    pub(crate) o: __m128,
+    pub(crate) d: __m128,
+    pub(crate) d_s: [f32; 3],
     /// Whether the watertight test runs eight triangles at once (`avx2::hit8`):
     /// where the walk runs its x86-64-v3 build.
-    wide: bool,
+    pub(crate) wide: bool,
 }
 
 impl<const TEST: u8> LeafTest for SseTest<'_, TEST> {
@@ -304,8 +304,8 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         let a = w.address as usize;
         // 1. Triangles.
         let test = SseTest::<TEST> { shear: &w.shear_sse, o: w.o, d: w.d, d_s: w.d_s, wide: t.uses_x86_64_v3() };
-        let mut visit = LeafVisit { steps: &mut w.steps, tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-        let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut visit, stats, &test) else {
+        let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
+        let Some((_, ncount)) = t.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test) else {
             return true;
         };
         // 2. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
