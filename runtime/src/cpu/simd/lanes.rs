@@ -317,6 +317,14 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group) -
         if full != 0 {
             let mut counts = U8::default();
             sti(&mut counts, count);
+            // Ask for every leaf's triangle references first: their loads overlap.
+            let mut ask = full;
+            while ask != 0 {
+                let lane = ask.trailing_zeros() as usize;
+                ask &= ask - 1;
+                let offset = octree[v.address.0[lane] as usize + 1] as usize;
+                _mm_prefetch::<_MM_HINT_T0>(t.view().tri_refs.as_ptr().wrapping_add(offset).cast());
+            }
             while full != 0 {
                 let lane = full.trailing_zeros() as usize;
                 full &= full - 1;
