@@ -85,6 +85,33 @@ unsafe fn any3<const CMP: i32>(u: __m256, v: __m256, w: __m256, x: __m256) -> __
     }
 }
 
+/// Asks for the stored triangles `refs` of `triangles` (the line each starts in),
+/// eight references at a time.
+///
+/// # Safety
+/// AVX2 must be available (where this is inlined).
+#[inline(always)]
+pub(crate) unsafe fn prefetch_triangles(triangles: &[f32], refs: &[u32]) {
+    let base = triangles.as_ptr();
+    for chunk in refs.chunks(LANES) {
+        // SAFETY: AVX2 is the caller's; the masked load reads `chunk` only, and a
+        // prefetch reads nothing architecturally (any address will do: a hostile
+        // index only asks for a useless line).
+        unsafe {
+            let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            let used = _mm256_set1_epi32(((1u32 << chunk.len()) - 1) as i32);
+            let in_use = _mm256_cmpeq_epi32(_mm256_and_si256(used, bit), bit);
+            let tri = _mm256_maskload_epi32(chunk.as_ptr().cast(), in_use);
+            // Unused lanes ask for triangle 0's line again: cheaper than a branch.
+            let floats = _mm256_add_epi32(_mm256_slli_epi32::<3>(tri), tri);
+            let at: [u32; LANES] = std::mem::transmute(floats);
+            for o in at {
+                _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(o as usize).cast());
+            }
+        }
+    }
+}
+
 /// Tests the triangles `refs` (1 to [`LANES`]) of `triangles` against the sheared
 /// ray. For the nearest hit (`ANY` false), the answer is the last of the nearest
 /// hits in `refs` order (a one-by-one test accepts `t <= t_best`, so a later tie

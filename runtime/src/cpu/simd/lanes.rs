@@ -17,6 +17,7 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
+use super::avx2;
 use super::sse2::{prefetch, ShearSse, SseTest};
 use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer};
 use crate::ray::{Hit, Ray};
@@ -79,6 +80,24 @@ struct Group {
     active: u32,
 }
 
+/// Leaves whose triangles were asked for lately, by record address (a direct-mapped
+/// filter): coherent rays visit the same leaves one after another, and asking again
+/// for lines already in the cache costs more than it saves.
+#[derive(Debug)]
+struct Recent([u32; RECENT]);
+
+/// Entries of [`Recent`].
+const RECENT: usize = 64;
+
+impl Recent {
+    /// Records `address`; returns whether it was not there.
+    #[inline(always)]
+    fn insert(&mut self, address: u32) -> bool {
+        let slot = &mut self.0[(address.wrapping_mul(0x9E37_79B1) >> 26) as usize];
+        std::mem::replace(slot, address) != address
+    }
+}
+
 /// Whether the tracer's arrays suit the lanes' gathers (signed 32-bit indices).
 pub(crate) fn fits(t: &Tracer<'_>) -> bool {
     t.view().octree.len() <= i32::MAX as usize
@@ -98,6 +117,7 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
 ) {
     debug_assert!(fits(t) && t.uses_x86_64_v3());
     let mut groups: [Group; GROUPS] = Default::default();
+    let mut recent = Recent([u32::MAX; RECENT]);
     let mut next = 0;
     for g in groups.iter_mut() {
         for lane in 0..LANES {
@@ -110,7 +130,7 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
                 continue;
             }
             // SAFETY: AVX2 is this function's; `fits` is the caller's.
-            let mut ended = unsafe { step::<ANY, TEST>(t, g) };
+            let mut ended = unsafe { step::<ANY, TEST>(t, g, &mut recent) };
             while ended != 0 {
                 let lane = ended.trailing_zeros() as usize;
                 ended &= ended - 1;
@@ -285,7 +305,7 @@ unsafe fn pick(x: __m256, y: __m256, z: __m256, is0: __m256, is1: __m256) -> __m
 /// # Safety
 /// AVX2 must be available (inlined into `trace`); [`fits`] must hold.
 #[inline(always)]
-unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group) -> u32 {
+unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, recent: &mut Recent) -> u32 {
     let octree = t.view().octree;
     let (v, walks, active) = (&mut g.v, &mut g.walks, g.active);
     // SAFETY: AVX2 is the caller's. Every gather is masked to lanes whose index was
@@ -324,6 +344,25 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group) -
                 ask &= ask - 1;
                 let offset = octree[v.address.0[lane] as usize + 1] as usize;
                 _mm_prefetch::<_MM_HINT_T0>(t.view().tri_refs.as_ptr().wrapping_add(offset).cast());
+            }
+            // Then for their triangles, all in flight before the first test waits:
+            // dragon incoherent rays 1.14-1.18x (9 paired rounds), the other sets
+            // unchanged. Not for a leaf asked for lately (coherent rays: its lines
+            // are in the cache, and asking again cost bunny primary rays 5 % more
+            // instructions), nor for an any-hit query, which often stops at its
+            // first triangle (dragon shadow rays 0.90x).
+            let mut ask = if ANY { 0 } else { full };
+            while ask != 0 {
+                let lane = ask.trailing_zeros() as usize;
+                ask &= ask - 1;
+                let a = v.address.0[lane] as usize;
+                if !recent.insert(a as u32) {
+                    continue;
+                }
+                let (count, offset) = (octree[a] as usize, octree[a + 1] as usize);
+                if let Some(refs) = t.view().tri_refs.get(offset..offset.saturating_add(count)) {
+                    avx2::prefetch_triangles(t.view().triangles, refs);
+                }
             }
             while full != 0 {
                 let lane = full.trailing_zeros() as usize;
