@@ -86,14 +86,15 @@ struct Group {
 #[derive(Debug)]
 struct Recent([u32; RECENT]);
 
-/// Entries of [`Recent`].
-const RECENT: usize = 64;
+/// Entries of [`Recent`] (a power of two; 64 caught fewer of the primary rays'
+/// repeats: 3-9 % slower on them).
+const RECENT: usize = 1024;
 
 impl Recent {
     /// Records `address`; returns whether it was not there.
     #[inline(always)]
     fn insert(&mut self, address: u32) -> bool {
-        let slot = &mut self.0[(address.wrapping_mul(0x9E37_79B1) >> 26) as usize];
+        let slot = &mut self.0[(address.wrapping_mul(0x9E37_79B1) >> (32 - RECENT.trailing_zeros())) as usize];
         std::mem::replace(slot, address) != address
     }
 }
