@@ -51,9 +51,10 @@ mod scalar_batch {
     }
 }
 
-/// Rays in flight at once in the batch calls. A walk is a chain of dependent loads
-/// (each leaf's record gives the next address), so one ray leaves the core waiting on
-/// memory; stepping several rays in turn lets their loads overlap.
+/// Rays in flight at once in the batch calls' one-at-a-time loop (the lanes of
+/// `simd::lanes` keep sixteen). A walk is a chain of dependent loads (each leaf's
+/// record gives the next address), so one ray leaves the core waiting on memory;
+/// stepping several rays in turn lets their loads overlap.
 const IN_FLIGHT: usize = 8;
 
 impl Tracer<'_> {
@@ -65,10 +66,13 @@ impl Tracer<'_> {
     }
 
     /// Walks `rays` with up to [`IN_FLIGHT`] in progress, one step each in turn;
-    /// `done(i, answer)` receives each ray's answer. Where the processor has AVX2, the
-    /// same loop compiled for x86-64-v3 (VEX encodings, three-operand forms: the same
-    /// operations, so the same bits) runs instead of the baseline's: 15-35 % faster
-    /// (BENCHMARKS.md, "Tracing").
+    /// `done(i, answer)` receives each ray's answer. Where the processor has AVX2,
+    /// sixteen walks step eight at a time in the lanes of vector registers
+    /// (`simd::lanes`; the same operations, so the same bits): 1.4-1.6x on primary
+    /// and shadow rays (BENCHMARKS.md, "Tracing"). The slab exit test, a
+    /// measuring knob, keeps the one-walk-at-a-time loop, compiled for x86-64-v3
+    /// there (VEX encodings, three-operand forms: 15-35 % faster than the
+    /// baseline's).
     fn interleaved<const ANY: bool, const TEST: u8, const SLAB: bool>(
         &self,
         rays: &[Ray],
