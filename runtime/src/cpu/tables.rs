@@ -35,6 +35,22 @@ pub const EXIT_FACE: [[u8; 8]; 8] = [
     [0, 2, 4, 4, 0, 2, 0, 0],
 ];
 
+/// The rows of [`EXIT_FACE`] packed four bits a code (code `c` in bits `4c..4c + 4`),
+/// for the vector step's lane-by-lane lookup.
+pub(crate) const EXIT_ROWS: [u32; 8] = {
+    let mut rows = [0u32; 8];
+    let mut oct = 0;
+    while oct < 8 {
+        let mut code = 0;
+        while code < 8 {
+            rows[oct] |= (EXIT_FACE[oct][code] as u32) << (4 * code);
+            code += 1;
+        }
+        oct += 1;
+    }
+    rows
+};
+
 /// The exit code of a ray in a cell: the three Plücker sign bits.
 #[inline(always)]
 pub fn exit_code(a: [f32; 3], d: [f32; 3]) -> usize {

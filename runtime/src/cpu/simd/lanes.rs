@@ -19,6 +19,7 @@ use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2;
 use super::sse2::{prefetch, ShearSse, SseTest};
+use crate::cpu::tables::{octant, EXIT_ROWS};
 use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer};
 use crate::ray::{Hit, Ray};
 
@@ -187,7 +188,7 @@ fn start(v: &mut Vectors, lane: usize, index: usize, w: &RayWalk) -> Walk {
     v.tmax.0[lane] = w.tmax();
     v.t_best.0[lane] = w.t_best();
     v.steps.0[lane] = 0;
-    v.exits.0[lane] = w.exits().iter().enumerate().fold(0, |row, (code, &face)| row | (face as u32) << (4 * code));
+    v.exits.0[lane] = EXIT_ROWS[octant(d)];
     // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
     unsafe {
         Walk {
@@ -478,11 +479,10 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
         sti(&mut v.address, next);
         // Ask for the next records now: the other group steps before they are read.
         // (A record's links spill onto the next line when it starts late in one.)
-        let mut going = active & !ended;
-        while going != 0 {
-            let lane = going.trailing_zeros() as usize;
-            going &= going - 1;
-            let record = octree.as_ptr().wrapping_add(v.address.0[lane] as usize);
+        // Every lane, without a branch: a finished walk's lane asks for a line it
+        // no longer needs, which costs less than picking the lanes out.
+        for &address in &v.address.0 {
+            let record = octree.as_ptr().wrapping_add(address as usize);
             _mm_prefetch::<_MM_HINT_T0>(record.cast());
             _mm_prefetch::<_MM_HINT_T0>(record.wrapping_add(15).cast());
         }
