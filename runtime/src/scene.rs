@@ -146,7 +146,9 @@ impl Scene {
         self.tracer().occluded(ray)
     }
 
-    /// Nearest hits of many rays, on all cores.
+    /// Nearest hits of many rays, on all cores: each core walks sixteen rays at a time
+    /// (eight a vector where the processor has AVX2), so that their loads overlap:
+    /// faster than [`Scene::intersect`] ray by ray, with the same answers.
     pub fn intersect_all(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
         let mut out = vec![None; rays.len()];
         self.tracer().par_intersect_batch(rays, &mut out);
