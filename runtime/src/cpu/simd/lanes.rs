@@ -4,10 +4,12 @@
 //! A step of one walk is about 190 instructions when its leaf is empty (three steps
 //! in four on the standard sets), nearly all of them the per-axis arithmetic of the
 //! exit face, the neighbour and the next cell. Here that arithmetic runs on eight
-//! walks in one pass, each walk in its own lane; the records are read with gathers
-//! (eight loads in flight, as the interleaved loop had them), and only the walks
-//! whose leaf holds triangles leave the registers to test them (`Tracer::test_leaf`,
-//! as every step does). A walk that ends hands its lane to the next ray at once.
+//! walks in one pass, each walk in its own lane; the records are read with gathers,
+//! and only the walks whose leaf holds triangles leave the registers to test them
+//! (`Tracer::test_leaf`, as every step does). A walk that ends hands its lane to the
+//! next ray at once. Two groups of eight step in turn, each asking for its next
+//! records (and its leaves' references and triangles) ahead, so that one group's
+//! loads are in flight while the other steps.
 //!
 //! Each lane computes what the SSE step (`sse2::step`) computes, with the same
 //! operations in the same order (no fused multiply-adds), so each walk visits the
@@ -332,7 +334,7 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
         };
         let ok = _mm256_and_si256(_mm256_and_si256(act, within), record_in);
         let count = _mm256_mask_i32gather_epi32::<4>(zero, base, address, ok);
-        let ncount = _mm256_mask_i32gather_epi32::<4>(zero, base.add(3), address, ok);
+        let ncount = _mm256_mask_i32gather_epi32::<4>(zero, base.wrapping_add(3), address, ok);
         let mut ended = active & !bits(ok);
         // 2. Triangles, walk by walk, where the leaf has some.
         let mut full = bits(ok) & !bits(_mm256_cmpeq_epi32(count, zero));
