@@ -85,6 +85,29 @@ unsafe fn any3<const CMP: i32>(u: __m256, v: __m256, w: __m256, x: __m256) -> __
     }
 }
 
+/// All ones in the lanes of `b`'s set bits (bit `i` for lane `i`).
+///
+/// # Safety
+/// AVX2 must be available (where this is inlined).
+#[inline(always)]
+pub(crate) unsafe fn mask_of(b: u32) -> __m256i {
+    // SAFETY: the caller's.
+    unsafe {
+        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(b as i32), lane_bits), lane_bits)
+    }
+}
+
+/// All ones in the lanes where `x <= limit`, as unsigned words.
+///
+/// # Safety
+/// AVX2 must be available (where this is inlined).
+#[inline(always)]
+pub(crate) unsafe fn at_most(x: __m256i, limit: __m256i) -> __m256i {
+    // SAFETY: the caller's.
+    unsafe { _mm256_cmpeq_epi32(_mm256_max_epu32(x, limit), limit) }
+}
+
 /// Asks for the stored triangles `refs` of `triangles` (the line each starts in),
 /// eight references at a time.
 ///
@@ -98,9 +121,7 @@ pub(crate) unsafe fn prefetch_triangles(triangles: &[f32], refs: &[u32]) {
         // prefetch reads nothing architecturally (any address will do: a hostile
         // index only asks for a useless line).
         unsafe {
-            let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-            let used = _mm256_set1_epi32(((1u32 << chunk.len()) - 1) as i32);
-            let in_use = _mm256_cmpeq_epi32(_mm256_and_si256(used, bit), bit);
+            let in_use = mask_of((1u32 << chunk.len()) - 1);
             let tri = _mm256_maskload_epi32(chunk.as_ptr().cast(), in_use);
             // Unused lanes ask for triangle 0's line again: cheaper than a branch.
             let floats = _mm256_add_epi32(_mm256_slli_epi32::<3>(tri), tri);
@@ -141,7 +162,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         let inside = unsafe {
             let limit = _mm256_set1_epi32(limit.min(u32::MAX as usize) as i32);
             let tri = _mm256_loadu_si256(full.as_ptr().cast());
-            _mm256_movemask_epi8(_mm256_cmpeq_epi32(_mm256_max_epu32(tri, limit), limit)) == -1
+            _mm256_movemask_epi8(at_most(tri, limit)) == -1
         };
         if !inside {
             return Batch::OneByOne;

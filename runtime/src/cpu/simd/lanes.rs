@@ -19,7 +19,7 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
-use super::avx2;
+use super::avx2::{self, at_most, mask_of};
 use super::sse2::{prefetch, ShearSse, SseTest};
 use crate::cpu::tables::{octant, EXIT_ROWS};
 use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer};
@@ -281,21 +281,6 @@ unsafe fn bits(m: __m256i) -> u32 {
     // SAFETY: AVX is the caller's.
     unsafe { _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32 }
 }
-/// All ones in the lanes of `b`'s set bits.
-#[inline(always)]
-unsafe fn mask_of(b: u32) -> __m256i {
-    // SAFETY: AVX2 is the caller's.
-    unsafe {
-        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(b as i32), lane_bits), lane_bits)
-    }
-}
-/// `x <= limit` as unsigned words.
-#[inline(always)]
-unsafe fn at_most(x: __m256i, limit: __m256i) -> __m256i {
-    // SAFETY: AVX2 is the caller's.
-    unsafe { _mm256_cmpeq_epi32(_mm256_max_epu32(x, limit), limit) }
-}
 /// Lane by lane, `x` where the axis is 0, `y` where it is 1, else `z`.
 #[inline(always)]
 unsafe fn pick(x: __m256, y: __m256, z: __m256, is0: __m256, is1: __m256) -> __m256 {
@@ -363,7 +348,7 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
                 if !recent.insert(a as u32) {
                     continue;
                 }
-                let (count, offset) = (octree[a] as usize, octree[a + 1] as usize);
+                let (count, offset) = (counts.0[lane] as usize, octree[a + 1] as usize);
                 if let Some(refs) = t.view().tri_refs.get(offset..offset.saturating_add(count)) {
                     avx2::prefetch_triangles(t.view().triangles, refs);
                 }
