@@ -341,8 +341,7 @@ impl UnconstrainedOctree {
         let (lo, size) = (self.root_lo, self.sizes[leaf.level as usize]);
         let off = [0, 1, 2].map(|k| (lo[k] + (leaf.cell[k] + w.high[k]) as f32 * size) - w.o[k]);
         let mut face = w.exits[exit_code(off, w.d)] as usize;
-        let axis = face >> 1;
-        if w.d[axis] == 0.0 {
+        if w.d.contains(&0.0) {
             face = exit_along_moving_axes(off, w.d, w.inv);
         }
         let axis = face >> 1;

@@ -20,8 +20,11 @@
 //! `EXIT_FACE[octant][code]` is the face whose axis leaves first. Two codes per octant
 //! are cyclic (x before y before z before x): exact arithmetic never produces them,
 //! rounding might, and they map to the octant's x face, a face the ray can leave by.
-//! A zero direction component is never chosen while the origin lies inside the cell
-//! along that axis, since its product then has the sign that says "later".
+//! A zero direction component is never chosen while the origin lies strictly inside the
+//! cell along that axis, since its product then has the sign that says "later"; on the
+//! cell's plane both its products are zero and the code says nothing, so the walks
+//! decide every ray with a zero component by slab distances instead
+//! (`traverse::exit_along_moving_axes` states the rule).
 
 /// Exit face by direction octant and Plücker sign code.
 pub const EXIT_FACE: [[u8; 8]; 8] = [

@@ -130,6 +130,9 @@ pub(crate) struct RayWalk {
     high: [u32; 3],
     /// Exit-face row of the ray's octant.
     exits: &'static [u8; 8],
+    /// Whether a direction component is zero (`+0.0` or `-0.0`): the exit face is
+    /// then decided by [`exit_along_moving_axes`], never by the table.
+    flat: bool,
     tmin: f32,
     /// Where the walk stops: the ray's `tmax`, or sooner where it leaves the mesh box.
     tmax: f32,
@@ -438,6 +441,7 @@ impl<'a> Tracer<'a> {
             inv: [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]],
             high: [!d[0].is_sign_negative() as u32, !d[1].is_sign_negative() as u32, !d[2].is_sign_negative() as u32],
             exits: &EXIT_FACE[octant(d)],
+            flat: d.contains(&0.0),
             shear: Shear::new(o, d),
             tmin: ray.tmin,
             tmax: t_stop,
@@ -581,8 +585,10 @@ impl<'a> Tracer<'a> {
                 .is_none_or(|b| (0..3).all(|k| b[k + 3 * w.high[k] as usize] - w.o[k] == off[k])),
             "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
         );
+        // (A ray with a zero direction component leaves by the slab rule: see
+        // `exit_along_moving_axes` for why the table cannot serve it.)
         let mut face = w.exits[exit_code(off, w.d)] as usize;
-        if w.d[face >> 1] == 0.0 || self.exit == ExitTest::Slab {
+        if w.flat || self.exit == ExitTest::Slab {
             face = exit_along_moving_axes(off, w.d, w.inv);
         }
         let axis = face >> 1;
@@ -861,10 +867,33 @@ impl LocateGrid {
     }
 }
 
-/// The exit face when the table chose an axis the ray does not move along. That
-/// happens only when the ray lies exactly in a cell face plane of such an axis: the
-/// products are then zero and say nothing. The nearest exit among the axes the ray
-/// moves along is the answer (ties to the lowest axis). Rare: off the hot path.
+/// The exit face of a ray with a zero direction component (`+0.0` or `-0.0`): the
+/// nearest exit among the axes the ray moves along, ties to the lowest axis. Every
+/// walk (scalar, SSE, the eight lanes, both WGSL kernels) decides such rays here and
+/// never by the Plücker table.
+///
+/// # The rule, and why the table cannot serve these rays
+/// A ray with `d[k] = ±0` never leaves a cell across a `k` face: its `k` coordinate is
+/// `o[k]` all along, so `t_k` is infinite. It belongs to the cell the walk is in even
+/// when `o[k]` lies exactly on one of that cell's `k` planes (point location puts a
+/// point on a plane in the cell above it; a step puts it on either side, by the
+/// median-line signs), since boxes are closed and a triangle through the plane is
+/// listed on both sides. Only the moving axes compete, and the nearest exit among them
+/// is the face.
+///
+/// The table cannot say so. Its products with axis `k` are `P = a_i d_k - a_k d_i`,
+/// and when the ray lies in the plane of the exit corner (`a_k = 0`: `o[k]` on the low
+/// plane with `-0.0`, or on the high plane with `+0.0`), both products with `k` are
+/// zero. Both bits then read "not positive", which orders `k` before one of the other
+/// axes and after the other: with a third comparison the code can be cyclic, and a
+/// cyclic code maps to the octant's x face, which may be the later exit. The walk then
+/// skips the cells it should have crossed first, and rays in cell planes leaked
+/// through closed meshes (3-49 % of them in y and z planes; x planes were spared
+/// because a cyclic code's x face is checked against a zero `d[0]`). Testing the
+/// table's face for a zero component is not enough for that reason: the decision for
+/// these rays is taken here whatever the table says.
+///
+/// Rare (a direction component exactly zero): off the hot path.
 #[cold]
 #[inline(never)]
 pub(crate) fn exit_along_moving_axes(off: [f32; 3], d: [f32; 3], inv: [f32; 3]) -> usize {

@@ -249,7 +249,9 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let p_zx = off.z * d.x - off.x * d.z;
     let code = select(0u, 1u, p_xy > 0.0) | select(0u, 2u, p_yz > 0.0) | select(0u, 4u, p_zx > 0.0);
     var face = ((*wk).row >> (3u * code)) & 7u;
-    if component(d, face >> 1u) == 0.0 {
+    // A zero direction component: the slab rule, never the table (exit_along_moving_axes
+    // in traverse.rs says why).
+    if d.x == 0.0 || d.y == 0.0 || d.z == 0.0 {
         face = exit_along_moving_axes(off, d, (*wk).inv);
     }
     let axis = face >> 1u;
@@ -287,8 +289,8 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     (*wk).level = level + finer - coarser;
 }
 
-// The exit face when the table chose an axis the ray does not move along: the nearest
-// exit among the axes it moves along (ties to the lowest axis).
+// The exit face of a ray with a zero direction component: the nearest exit among the
+// axes it moves along (ties to the lowest axis).
 fn exit_along_moving_axes(off: vec3<f32>, d: vec3<f32>, inv: vec3<f32>) -> u32 {
     var best_t = inf();
     var best_axis = 0u;

@@ -389,11 +389,13 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
         let code = _mm256_or_si256(_mm256_or_si256(positive(p[0], 1), positive(p[1], 2)), positive(p[2], 4));
         let mut face =
             _mm256_and_si256(_mm256_srlv_epi32(ldi(&v.exits), _mm256_slli_epi32::<2>(code)), _mm256_set1_epi32(0xF));
-        // The table's face is on an axis the ray does not move along only when the
-        // ray lies in a cell's face plane (rare): the scalar rule decides.
-        let axis = _mm256_srli_epi32::<1>(face);
-        let d_face = pick(d[0], d[1], d[2], is(axis, 0), is(axis, 1));
-        let flat = bits(_mm256_castps_si256(_mm256_cmp_ps::<_CMP_EQ_OQ>(d_face, zf))) & active;
+        // A ray with a zero direction component (rare) leaves by the scalar slab
+        // rule, whatever the table says (`traverse::exit_along_moving_axes`).
+        let zeros = _mm256_or_ps(
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(d[0], zf), _mm256_cmp_ps::<_CMP_EQ_OQ>(d[1], zf)),
+            _mm256_cmp_ps::<_CMP_EQ_OQ>(d[2], zf),
+        );
+        let flat = bits(_mm256_castps_si256(zeros)) & active;
         if flat != 0 {
             let mut faces = U8::default();
             sti(&mut faces, face);

@@ -30,7 +30,8 @@ pub(crate) struct SseWalk {
     /// Scalar direction and inverse, for the exit distance along the chosen axis.
     d_s: [f32; 3],
     inv_s: [f32; 3],
-    /// Whether a direction component is zero (then the table's face is checked).
+    /// Whether a direction component is zero (then the slab rule decides the exit,
+    /// `traverse::exit_along_moving_axes`).
     any_zero: bool,
     /// The ray's shear for the watertight test, in three-lane form.
     shear_sse: ShearSse,
@@ -317,7 +318,7 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         let p = _mm_sub_ps(_mm_mul_ps(off, w.d_yzx), _mm_mul_ps(off_yzx, w.d));
         let code = (_mm_movemask_ps(_mm_cmpgt_ps(p, _mm_setzero_ps())) & 7) as usize;
         let mut face = w.exits[code] as usize;
-        if (w.any_zero && w.d_s[face >> 1] == 0.0) || SLAB {
+        if w.any_zero || SLAB {
             let off_s: [f32; 4] = bytemuck::cast(off);
             face = exit_along_moving_axes([off_s[0], off_s[1], off_s[2]], w.d_s, w.inv_s);
         }
