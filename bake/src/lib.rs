@@ -21,6 +21,7 @@
 
 pub mod effects;
 mod error;
+pub mod hard_rays;
 pub mod mesh;
 pub mod octree;
 pub mod procedural;

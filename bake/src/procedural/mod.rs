@@ -3,6 +3,10 @@
 
 use crate::mesh::Mesh;
 
+mod solids;
+
+pub use solids::{closed_solids, ClosedSolid};
+
 fn mesh(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
     Mesh::from_triangles(triangles)
 }
@@ -160,72 +164,6 @@ impl SplitMix {
     /// Uniform in `[0, 1)`.
     pub fn unit(&mut self) -> f32 {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
-/// A closed mesh and a sampler of points strictly inside it, for leak tests: every ray
-/// from such a point must hit the mesh.
-pub struct ClosedSolid {
-    /// A short name.
-    pub name: &'static str,
-    /// The closed mesh.
-    pub mesh: Mesh,
-    /// A random point well inside.
-    pub inside: fn(&mut SplitMix) -> [f32; 3],
-}
-
-/// The closed solids of the leak tests and `octrace soak`: a sphere, a torus, a box
-/// and a bumpy blob, each with a few thousand triangles.
-pub fn closed_solids() -> Vec<ClosedSolid> {
-    vec![
-        ClosedSolid {
-            name: "sphere",
-            mesh: sphere([0.1, -0.2, 0.3], 1.0, 48, 64),
-            inside: |r| [0.1 + (r.unit() - 0.5), -0.2 + (r.unit() - 0.5), 0.3 + (r.unit() - 0.5)],
-        },
-        ClosedSolid {
-            name: "torus",
-            mesh: torus([0.0; 3], 1.0, 0.3, 64, 32),
-            inside: |r| {
-                let a = std::f32::consts::TAU * r.unit();
-                let k = 1.0 + 0.2 * (r.unit() - 0.5);
-                [a.cos() * k, 0.2 * (r.unit() - 0.5), a.sin() * k]
-            },
-        },
-        ClosedSolid {
-            name: "box",
-            mesh: cube([-1.0, -0.5, -2.0], [1.0, 0.5, 2.0], 8),
-            inside: |r| [r.unit() * 1.9 - 0.95, r.unit() * 0.9 - 0.45, r.unit() * 3.9 - 1.95],
-        },
-        ClosedSolid {
-            name: "blob",
-            mesh: blob(64, 96),
-            inside: |r| [(r.unit() - 0.5) * 0.8, (r.unit() - 0.5) * 0.8, (r.unit() - 0.5) * 0.8],
-        },
-    ]
-}
-
-impl ClosedSolid {
-    /// Rays that must all hit the solid, as `(origin, direction)`: `random` rays from
-    /// inside points in uniform directions, then, for every triangle, rays from an
-    /// inside point aimed exactly at its three vertices and three edge midpoints.
-    pub fn leak_rays(&self, random: usize, seed: u64) -> Vec<([f32; 3], [f32; 3])> {
-        let mut rng = SplitMix(seed);
-        let mut rays = Vec::with_capacity(random + 6 * self.mesh.triangles.len());
-        for _ in 0..random {
-            let z = 1.0 - 2.0 * rng.unit();
-            let phi = std::f32::consts::TAU * rng.unit();
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            rays.push(((self.inside)(&mut rng), [r * phi.cos(), r * phi.sin(), z]));
-        }
-        for [a, b, c] in &self.mesh.triangles {
-            let o = (self.inside)(&mut rng);
-            let mid = |p: &[f32; 3], q: &[f32; 3]| [(p[0] + q[0]) * 0.5, (p[1] + q[1]) * 0.5, (p[2] + q[2]) * 0.5];
-            for target in [*a, *b, *c, mid(a, b), mid(b, c), mid(c, a)] {
-                rays.push((o, [target[0] - o[0], target[1] - o[1], target[2] - o[2]]));
-            }
-        }
-        rays
     }
 }
 
