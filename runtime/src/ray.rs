@@ -48,7 +48,10 @@ impl Ray {
 /// The nearest hit of a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
-    /// Distance along the ray, in units of its direction.
+    /// Distance along the ray, in units of its direction: with the watertight test
+    /// (the default), the exact distance to the hit triangle's plane rounded to `f32`,
+    /// within one ulp whatever the triangle's shape (`cpu::watertight::plane_distance`
+    /// states the bound).
     pub t: f32,
     /// The hit triangle's index in the input mesh.
     pub triangle: u32,

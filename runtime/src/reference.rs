@@ -131,12 +131,26 @@ pub enum Agreement {
 
 /// Two hits this close in distance (relative) are a tie between triangles.
 pub const TIE_RELATIVE_T: f64 = 1e-5;
-/// A hit this close to a triangle's boundary (smallest barycentric coordinate) is on
-/// its edge, within the rounding of an `f32` test.
-pub const EDGE_BARYCENTRIC: f64 = 1e-5;
+/// A hit this close to a triangle's boundary is on its edge, within the rounding of an
+/// `f32` test: this many `f32` spacings (`2^-24`, relative) of the largest distance
+/// from the ray's origin to the triangle's vertices. (An `f32` test works on vertices
+/// relative to the origin, rounded there; in barycentric terms the tolerance is this
+/// over the triangle's altitude, which is large for small triangles seen from afar.)
+pub const EDGE_SPACINGS: f64 = 16.0;
 /// Distances below this many `f32` spacings of the origin's largest coordinate are
 /// zero: the origin lies on the triangle within rounding.
 pub const ZERO_T_SPACINGS: f32 = 8.0;
+
+/// The bound the octree tracer's distances keep (`cpu::watertight::plane_distance`):
+/// the exact distance to the hit triangle's plane rounded to `f32`, so within one ulp,
+/// which is at most `2^-23 |t|`; this allows two (the oracle's own `f64` rounding is
+/// far below one) ...
+pub const DISTANCE_RELATIVE: f64 = 1.0 / (1u64 << 22) as f64;
+/// ... plus this much times the largest distance of the triangle's vertices from the
+/// origin (over `|d|`): where `t` is tiny against the triangle (a ray starting on or
+/// next to it), the `f64` products' rounding, relative to the vertices' distances, is
+/// what remains.
+pub const DISTANCE_ABSOLUTE: f64 = 1.0 / (1u64 << 40) as f64;
 
 impl Reference {
     /// Compares a tracer's nearest hit `got` (distance, input triangle id, and
@@ -148,6 +162,13 @@ impl Reference {
     /// [`Reference::compare`] with the oracle's answer for `ray` already known
     /// (`want`, from [`Reference::intersect`]): for comparing several tracers with
     /// one oracle pass.
+    ///
+    /// A different answer is a tie only where rounding decides it, as the oracle sees
+    /// it (never by the tracer's own barycentrics): the tracer missed the oracle's hit
+    /// and that hit lies within [`EDGE_SPACINGS`] of its triangle's boundary; or
+    /// the tracer hit a triangle nearer than the oracle's (or where the oracle hits
+    /// nothing) that the oracle rejected by less than that; or the hit is at distance
+    /// zero (the ray starts on a triangle).
     pub fn compare_with(&self, ray: &Ray, want: Option<ReferenceHit>, got: Option<(f32, u32, f32, f32)>) -> Agreement {
         let same = |want: Option<ReferenceHit>| match (got, want) {
             (None, None) => true,
@@ -168,10 +189,27 @@ impl Reference {
                 return Agreement::Tie;
             }
         }
-        if got.is_some_and(|g| on_edge(g.2 as f64, g.3 as f64)) || want.is_some_and(|w| on_edge(w.u, w.v)) {
-            return Agreement::Tie;
+        // The tracer's triangle, nearer than the oracle's answer: rejected by the
+        // oracle within rounding of its boundary?
+        let nearer_on_edge =
+            |(t, id, _, _): (f32, u32, f32, f32)| want.is_none_or(|w| (t as f64) < w.t) && self.on_edge(ray, id);
+        let tie = match (got, want) {
+            (None, Some(w)) => self.on_edge(ray, w.triangle),
+            (Some(g), None) => nearer_on_edge(g),
+            (Some(g), Some(w)) => {
+                if (g.0 as f64) < w.t {
+                    nearer_on_edge(g)
+                } else {
+                    self.on_edge(ray, w.triangle)
+                }
+            }
+            (None, None) => false,
+        };
+        if tie {
+            Agreement::Tie
+        } else {
+            Agreement::Different
         }
-        Agreement::Different
     }
 
     /// Compares a tracer's occlusion answer `got` for `ray` with the oracle's,
@@ -184,14 +222,88 @@ impl Reference {
         }
         let tmax = f64::from(ray.tmax);
         match self.intersect(ray) {
-            Some(w) if on_edge(w.u, w.v) || (w.t - tmax).abs() <= TIE_RELATIVE_T * tmax.abs() => Agreement::Tie,
+            Some(w) if self.on_edge(ray, w.triangle) || (w.t - tmax).abs() <= TIE_RELATIVE_T * tmax.abs() => {
+                Agreement::Tie
+            }
             _ => Agreement::Different,
         }
     }
+
+    /// Compares a tracer's any-hit answer `got` (the occluder it found: distance and
+    /// input triangle id, or `None`) with the oracle's, whatever the nearest hits are.
+    /// A different answer is a tie only where rounding decides it: every blocker the
+    /// oracle finds lies on its triangle's boundary or at an end of the segment, or the
+    /// tracer's occluder is one the oracle rejected within rounding.
+    pub fn compare_occluder(&self, ray: &Ray, got: Option<(f32, u32)>) -> Agreement {
+        let want = self.occluded(ray);
+        if got.is_some() == want {
+            return Agreement::Same;
+        }
+        let at_end = |t: f64| {
+            let near = |end: f32| (t - end as f64).abs() <= TIE_RELATIVE_T * (end as f64).abs().max(1e-30);
+            near(ray.tmin) || near(ray.tmax)
+        };
+        let tie = match got {
+            None => self.hits(ray).all(|h| self.on_edge(ray, h.triangle) || at_end(h.t)),
+            Some((t, id)) => at_end(t as f64) || self.on_edge(ray, id),
+        };
+        if tie {
+            Agreement::Tie
+        } else {
+            Agreement::Different
+        }
+    }
+
+    /// Whether the ray passes within [`EDGE_SPACINGS`] of triangle `id`'s boundary
+    /// (inside or outside it), by the oracle's arithmetic: where an `f32` test may
+    /// decide either way. Distances are measured across the ray (in the triangle
+    /// projected along it, as the watertight test sees it): a ray nearly parallel to a
+    /// triangle that passes next to a vertex meets the plane far from it.
+    pub fn on_edge(&self, ray: &Ray, id: u32) -> bool {
+        let Some(i) = self.ids.iter().position(|&x| x == id) else { return false };
+        let tri = &self.triangles[i];
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3().normalize());
+        let Some((_, u, v)) = plane_hit_f64(o, d, tri) else { return false };
+        // The barycentrics survive the projection along the ray; each times the
+        // projected triangle's altitude onto the edge opposite its vertex (twice its
+        // area, |n.d|, over the edge's projected length) is a signed distance.
+        let area2 = (tri[1] - tri[0]).cross(tri[2] - tri[0]).dot(d).abs();
+        let altitude = |p: DVec3, q: DVec3| {
+            let e = q - p;
+            area2 / (e.length_squared() - e.dot(d) * e.dot(d)).max(0.0).sqrt()
+        };
+        let distances = [(1.0 - u - v) * altitude(tri[1], tri[2]), u * altitude(tri[2], tri[0]), v * altitude(tri[0], tri[1])];
+        let nearest = distances.iter().copied().fold(f64::INFINITY, f64::min);
+        let far = tri.iter().map(|p| (*p - o).length()).fold(0.0, f64::max);
+        nearest.abs() <= EDGE_SPACINGS * f64::from(f32::EPSILON) * 0.5 * far
+    }
+
+    /// How far a tracer's distance `t` for `ray` on triangle `id` is from the exact
+    /// distance to that triangle's plane (in `f64`), and the bound it must keep
+    /// ([`DISTANCE_RELATIVE`], [`DISTANCE_ABSOLUTE`]): `(|error|, bound)`. `None` if the
+    /// id is unknown or the ray parallel to the plane.
+    pub fn distance_error(&self, ray: &Ray, t: f32, id: u32) -> Option<(f64, f64)> {
+        let i = self.ids.iter().position(|&x| x == id)?;
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+        let tri = &self.triangles[i];
+        let (exact, _, _) = plane_hit_f64(o, d, tri)?;
+        let far = tri.iter().map(|v| (*v - o).length()).fold(0.0, f64::max) / d.length();
+        Some(((t as f64 - exact).abs(), DISTANCE_RELATIVE * exact.abs() + DISTANCE_ABSOLUTE * far))
+    }
 }
 
-/// Whether barycentrics `(u, v)` lie within [`EDGE_BARYCENTRIC`] of the triangle's
-/// boundary.
-fn on_edge(u: f64, v: f64) -> bool {
-    u.min(v).min(1.0 - u - v) <= EDGE_BARYCENTRIC
+/// Möller-Trumbore in `f64` without the range checks: `(t, u, v)` of the ray's point on
+/// the triangle's plane, `None` for a ray parallel to it.
+fn plane_hit_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<(f64, f64, f64)> {
+    let e1 = t[1] - t[0];
+    let e2 = t[2] - t[0];
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 {
+        return None;
+    }
+    let s = o - t[0];
+    let q = s.cross(e1);
+    Some((e2.dot(q) / det, s.dot(p) / det, d.dot(q) / det))
 }
+

@@ -612,13 +612,45 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
               let last = f64((1u << params.max_depth) - 1u);\n    \
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
               return u32(f32(clamp(x, 0.0lf, last)));\n}\n";
+        g += &plane_distance_source("f64");
     } else {
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
+        g += &plane_distance_source("f32");
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
+}
+
+/// `plane_distance(o, d, at)`: where the ray meets the plane of the triangle at word
+/// `at`, as `cpu::watertight::plane_distance` computes it (the same operations in the
+/// same order), in `float` (`f64` where the adapter has it; else `f32`, whose error
+/// grows on long thin triangles): `(t, 1)`, or `(0, 0)` for a ray parallel to the
+/// plane or a distance beyond `f32`'s range.
+fn plane_distance_source(float: &str) -> String {
+    format!(
+        "fn plane_distance(o: vec3<f32>, d: vec3<f32>, at: u32) -> vec2<f32> {{
+    let a = vec3<{float}>({float}(wordf(at)), {float}(wordf(at + 1u)), {float}(wordf(at + 2u)));
+    let b = vec3<{float}>({float}(wordf(at + 3u)), {float}(wordf(at + 4u)), {float}(wordf(at + 5u)));
+    let c = vec3<{float}>({float}(wordf(at + 6u)), {float}(wordf(at + 7u)), {float}(wordf(at + 8u)));
+    let e1 = b - a;
+    let e2 = c - a;
+    let n = vec3<{float}>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    let ao = a - vec3<{float}>({float}(o.x), {float}(o.y), {float}(o.z));
+    let num = ao.x * n.x + ao.y * n.y + ao.z * n.z;
+    let den = {float}(d.x) * n.x + {float}(d.y) * n.y + {float}(d.z) * n.z;
+    if den == {float}(0.0) {{
+        return vec2<f32>(0.0);
+    }}
+    let t = f32(num / den);
+    if !is_finite(t) {{
+        return vec2<f32>(0.0);
+    }}
+    return vec2<f32>(t, 1.0);
+}}
+"
+    )
 }
 
 #[cfg(test)]

@@ -193,10 +193,12 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
     if det == 0.0 {
         return vec4<f32>(0.0);
     }
-    let scaled = u * (s.z * az) + v * (s.z * bz) + w * (s.z * cz);
+    // The distance: where the ray meets the triangle's plane (generated:
+    // cpu::watertight::plane_distance, in f64 where the adapter has it).
+    let plane = plane_distance(o, (*wk).d, at);
+    let dist = plane.x;
     let inv_det = 1.0 / det;
-    let dist = scaled * inv_det;
-    if dist >= tmin && dist <= tmax {
+    if plane.y != 0.0 && dist >= tmin && dist <= tmax {
         return vec4<f32>(dist, v * inv_det, w * inv_det, 1.0);
     }
     return vec4<f32>(0.0);

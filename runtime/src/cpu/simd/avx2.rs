@@ -208,8 +208,8 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         let b = [_mm256_sub_ps(x1, ox), _mm256_sub_ps(y1, oy), _mm256_sub_ps(z1, oz)];
         let c = [_mm256_sub_ps(x2, ox), _mm256_sub_ps(y2, oy), _mm256_sub_ps(z2, oz)];
         let [kx, ky, kz] = shear.axes();
-        let [sx, sy, sz] = shear.scales();
-        let (sx, sy, sz) = (_mm256_set1_ps(sx), _mm256_set1_ps(sy), _mm256_set1_ps(sz));
+        let [sx, sy, _] = shear.scales();
+        let (sx, sy) = (_mm256_set1_ps(sx), _mm256_set1_ps(sy));
         let (ax, ay) = (shear_axis(&a, kx, kz, sx), shear_axis(&a, ky, kz, sy));
         let (bx, by) = (shear_axis(&b, kx, kz, sx), shear_axis(&b, ky, kz, sy));
         let (cx, cy) = (shear_axis(&c, kx, kz, sx), shear_axis(&c, ky, kz, sy));
@@ -228,37 +228,79 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
             return Batch::Miss;
         }
         let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
-        let scaled = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, a[kz])), _mm256_mul_ps(v, _mm256_mul_ps(sz, b[kz]))),
-            _mm256_mul_ps(w, _mm256_mul_ps(sz, c[kz])),
-        );
-        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-        let dist = _mm256_mul_ps(scaled, inv);
-        let in_range = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GE_OQ>(dist, _mm256_set1_ps(tmin)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(dist, _mm256_set1_ps(tmax)),
-        );
-        let hits = inside & lanes(_mm256_andnot_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), in_range), used);
-        if hits == 0 {
+        let inside = inside & !lanes(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), used);
+        if inside == 0 {
             return Batch::Miss;
         }
-        let d: [f32; LANES] = std::mem::transmute(dist);
-        let lane = if ANY {
-            hits.trailing_zeros() as usize
-        } else {
-            // The nearest distance among the hits, then the last lane that has it.
-            let mut nearest = f32::INFINITY;
-            for (l, &t) in d.iter().enumerate() {
-                if hits >> l & 1 != 0 && t < nearest {
-                    nearest = t;
+        // The distances of the triangles the edge functions accept (one or two a batch
+        // at most, mostly none), in f64 as the one-by-one test computes them; the
+        // answer is the one testing one after the other keeps: for an any-hit query
+        // the first in range, else the nearest, of equal ones the last.
+        let (o, d) = (wide(shear.origin()), wide(shear.direction()));
+        let mut best: Option<(usize, f32)> = None;
+        let mut left = inside;
+        let lane_of = |x: __m256, lane: usize| -> f32 { std::mem::transmute::<__m256, [f32; LANES]>(x)[lane] };
+        while left != 0 {
+            let lane = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let tmax = best.map_or(tmax, |b| b.1);
+            let t = plane_distance(o, d, p[lane]);
+            if t >= tmin && t <= tmax {
+                best = Some((lane, t));
+                if ANY {
+                    break;
                 }
             }
-            let ties = lanes(_mm256_cmp_ps::<_CMP_EQ_OQ>(dist, _mm256_set1_ps(nearest)), hits);
-            31 - ties.leading_zeros() as usize
-        };
-        let v: [f32; LANES] = std::mem::transmute(_mm256_mul_ps(v, inv));
-        let w: [f32; LANES] = std::mem::transmute(_mm256_mul_ps(w, inv));
-        Batch::Hit(lane, d[lane], v[lane], w[lane])
+        }
+        let Some((lane, t)) = best else { return Batch::Miss };
+        let inv = 1.0 / lane_of(det, lane);
+        Batch::Hit(lane, t, lane_of(v, lane) * inv, lane_of(w, lane) * inv)
+    }
+}
+
+/// `(x, y, z, 0)` in `f64` lanes.
+///
+/// # Safety
+/// AVX must be available (where this is inlined).
+#[inline(always)]
+unsafe fn wide(v: [f32; 3]) -> __m256d {
+    // SAFETY: the caller's.
+    unsafe { _mm256_setr_pd(v[0] as f64, v[1] as f64, v[2] as f64, 0.0) }
+}
+
+/// `watertight::plane_distance` with the three axes in the lanes of `f64` vectors: the
+/// same operations in the same order, so the same bits, in about a third of the
+/// instructions. `o` and `d` come from [`wide`]; `tri` points at nine floats.
+///
+/// # Safety
+/// AVX2 must be available (where this is inlined), and `tri` readable for nine floats.
+#[inline(always)]
+unsafe fn plane_distance(o: __m256d, d: __m256d, tri: *const f32) -> f32 {
+    // SAFETY: the caller's: nine floats from `tri` (the loads read floats 0-3, 3-6
+    // and 5-8).
+    unsafe {
+        let a = _mm256_cvtps_pd(_mm_loadu_ps(tri));
+        let b = _mm256_cvtps_pd(_mm_loadu_ps(tri.add(3)));
+        // (b.z, c.x, c.y, c.z) turned to (c.x, c.y, c.z, c.z).
+        let c = _mm256_cvtps_pd(_mm_permute_ps::<0b11_11_10_01>(_mm_loadu_ps(tri.add(5))));
+        let (e1, e2) = (_mm256_sub_pd(b, a), _mm256_sub_pd(c, a));
+        // n = e1.yzx * e2.zxy - e1.zxy * e2.yzx: the scalar cross product, lane by lane.
+        let yzx = |v: __m256d| _mm256_permute4x64_pd::<0b11_00_10_01>(v);
+        let zxy = |v: __m256d| _mm256_permute4x64_pd::<0b11_01_00_10>(v);
+        let n = _mm256_sub_pd(_mm256_mul_pd(yzx(e1), zxy(e2)), _mm256_mul_pd(zxy(e1), yzx(e2)));
+        // Lane 3 holds junk: set to -0.0, which adds nothing below (x + -0.0 is x,
+        // the sign of a zero included).
+        let clear = |v: __m256d| _mm256_blend_pd::<0b1000>(v, _mm256_set1_pd(-0.0));
+        let (p, q) = (clear(_mm256_mul_pd(_mm256_sub_pd(a, o), n)), clear(_mm256_mul_pd(d, n)));
+        // (p.x + p.y, q.x + q.y, p.z + -0, q.z + -0), then (x + y) + z for both.
+        let h = _mm256_hadd_pd(p, q);
+        let sums = _mm_add_pd(_mm256_castpd256_pd128(h), _mm256_extractf128_pd::<1>(h));
+        let t = (_mm_cvtsd_f64(sums) / _mm_cvtsd_f64(_mm_unpackhi_pd(sums, sums))) as f32;
+        if t.abs() < f32::INFINITY {
+            t
+        } else {
+            f32::NAN
+        }
     }
 }
 
@@ -396,5 +438,41 @@ mod tests {
             let past = unsafe { hit8::<false>(&shear, &tris, &refs, 0.0, 10.0) };
             assert!(matches!(past, Batch::OneByOne), "index past the end in lane {at}");
         }
+    }
+
+    /// The vector plane distance gives the scalar one's bits (`watertight::
+    /// plane_distance`, the reference): random triangles, slivers and caps, origins on
+    /// their planes (zero numerators of either sign), rays parallel to them.
+    #[test]
+    fn the_vector_plane_distance_is_the_scalar_one() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 here: the vector plane distance never runs on this processor");
+            return;
+        }
+        let mut seed = 0x5EED_0F_u64;
+        let mut checked = 0;
+        for i in 0..200_000 {
+            let mut r = || rng(&mut seed) * 8.0 - 4.0;
+            let a = [r(), r(), r()];
+            let mut tri = [a[0], a[1], a[2], r(), r(), r(), r(), r(), r()];
+            match i % 4 {
+                // A sliver: the third vertex next to the first edge's middle.
+                1 => (0..3).for_each(|k| tri[6 + k] = 0.5 * (tri[k] + tri[3 + k]) + 1e-4 * r()),
+                // Axis-aligned, in the plane z = 1.
+                2 => [2, 5, 8].iter().for_each(|&k| tri[k] = 1.0),
+                _ => {}
+            }
+            let o = if i % 5 == 0 { [tri[0], tri[1], tri[2]] } else { [r(), r(), r()] };
+            let mut d = [r(), r(), r()];
+            if i % 7 == 0 {
+                d[2] = 0.0; // parallel to the z = 1 triangles
+            }
+            let want = crate::cpu::watertight::plane_distance(o, d, &tri);
+            // SAFETY: the processor has AVX2; `tri` holds nine floats.
+            let got = unsafe { plane_distance(wide(o), wide(d), tri.as_ptr()) };
+            assert!(want.to_bits() == got.to_bits() || (want.is_nan() && got.is_nan()), "{tri:?} {o:?} {d:?}: {want} {got}");
+            checked += want.is_finite() as u32;
+        }
+        assert!(checked > 150_000);
     }
 }

@@ -11,7 +11,7 @@ use crate::cpu::traverse::{
     exit_along_moving_axes, intersect_f64, Batch, LeafTest, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
     TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT,
 };
-use crate::cpu::watertight::Shear;
+use crate::cpu::watertight::{plane_distance, Shear};
 use crate::ray::Hit;
 
 /// A walk in progress, in SSE registers' layout (lane 3 unused, zero).
@@ -146,7 +146,6 @@ pub(crate) struct ShearSse {
     k: [u8; 3],
     sx: __m128,
     sy: __m128,
-    sz: __m128,
     scalar: Shear,
 }
 
@@ -156,7 +155,7 @@ impl ShearSse {
     #[inline(always)]
     pub(crate) unsafe fn new(shear: &Shear) -> ShearSse {
         let k = shear.axes();
-        let [sx, sy, sz] = shear.scales();
+        let [sx, sy, _] = shear.scales();
         let o = shear.origin();
         // SAFETY: the caller's.
         unsafe {
@@ -165,7 +164,6 @@ impl ShearSse {
                 k: k.map(|a| a as u8),
                 sx: _mm_set1_ps(sx),
                 sy: _mm_set1_ps(sy),
-                sz: _mm_set1_ps(sz),
                 scalar: *shear,
             }
         }
@@ -212,10 +210,8 @@ impl ShearSse {
             if det == 0.0 {
                 return None;
             }
-            // Scaled distance u * az + v * bz + w * cz, in that order.
-            let scaled = dot(e, _mm_mul_ps(self.sz, pz));
+            let dist = plane_distance(self.scalar.origin(), self.scalar.direction(), t);
             let inv = 1.0 / det;
-            let dist = scaled * inv;
             (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
         }
     }

@@ -7,42 +7,65 @@ use octrace_bake::{bake, procedural, BuildParams, Mesh};
 use octrace_runtime::reference::{Agreement, Reference};
 use octrace_runtime::{Ray, Scene};
 
-fn scene(mesh: &Mesh, depth: Option<u32>, leaf: u32) -> Scene {
+pub(crate) fn scene(mesh: &Mesh, depth: Option<u32>, leaf: u32) -> Scene {
     let p = BuildParams { max_depth: depth, leaf_size: Some(leaf), ..BuildParams::auto() };
     Scene::from_baked(bake(mesh, &p).unwrap()).unwrap()
 }
 
-fn oracle(mesh: &Mesh) -> Reference {
+pub(crate) fn oracle(mesh: &Mesh) -> Reference {
     Reference::in_input_order(mesh.triangles.clone())
 }
 
+mod grid_rays;
+mod slivers;
+
 /// Every ray agrees with the oracle (see `reference::Agreement`: the same answer, or
-/// a tie within rounding), nearest hit and occlusion.
-fn all_agree(name: &str, scene: &Scene, oracle: &Reference, rays: &[Ray]) {
+/// a tie within rounding, as the oracle decides it), nearest hit and occlusion (also
+/// where the nearest hit is a tie); every hit's distance is within the stated bound of
+/// the exact distance to its triangle's plane (`reference::DISTANCE_RELATIVE`); the
+/// batch calls give the one-ray answers bit for bit. Each ray with a zero direction
+/// component is checked with the sign of its zeros flipped too (`+0.0` and `-0.0`
+/// take different exit corners and walks).
+pub(crate) fn all_agree(name: &str, scene: &Scene, oracle: &Reference, rays: &[Ray]) {
+    let flipped = rays.iter().filter(|r| r.dir.to_array().contains(&0.0)).map(|r| {
+        let d = octrace_bake::hard_rays::flip_zero_signs(r.dir.to_array());
+        Ray { dir: Vec3::from(d), ..*r }
+    });
+    let rays: Vec<Ray> = rays.iter().copied().chain(flipped).collect();
     let tracer = scene.tracer();
     let mut bad = Vec::new();
-    for r in rays {
+    for r in &rays {
         let got = tracer.intersect(r);
-        let verdict = oracle.compare(r, got.map(|h| (h.t, h.triangle, h.u, h.v)));
-        let occlusion_differs = tracer.occluded(r) != oracle.occluded(r);
-        if verdict == Agreement::Different || (occlusion_differs && verdict == Agreement::Same) {
+        if oracle.compare(r, got.map(|h| (h.t, h.triangle, h.u, h.v))) == Agreement::Different {
             bad.push(format!("{r:?}: octree {got:?}, oracle {:?}", oracle.intersect(r)));
+        }
+        if let Some(h) = got {
+            if let Some((err, bound)) = oracle.distance_error(r, h.t, h.triangle) {
+                if err > bound {
+                    bad.push(format!("{r:?}: t {} of {h:?} is {err:e} off its plane (bound {bound:e})", h.t));
+                }
+            }
+        }
+        let occluder = tracer.occluder(r);
+        assert_eq!(occluder.is_some(), tracer.occluded(r), "{name}: occluder and occluded, {r:?}");
+        if oracle.compare_occluder(r, occluder.map(|h| (h.t, h.triangle))) == Agreement::Different {
+            bad.push(format!("{r:?}: occluder {occluder:?}, oracle occluded {}", oracle.occluded(r)));
         }
     }
     assert!(bad.is_empty(), "{name}: {} of {} rays disagree; first: {}", bad.len(), rays.len(), bad[0]);
     // The batch calls (eight walks a vector where the processor has AVX2) give the
     // one-ray calls' answers bit for bit.
     let mut hits = vec![None; rays.len()];
-    tracer.intersect_batch(rays, &mut hits);
+    tracer.intersect_batch(&rays, &mut hits);
     let mut occluded = vec![false; rays.len()];
-    tracer.occluded_batch(rays, &mut occluded);
+    tracer.occluded_batch(&rays, &mut occluded);
     for (i, r) in rays.iter().enumerate() {
         assert_eq!(hits[i], tracer.intersect(r), "{name}: batch, {r:?}");
         assert_eq!(occluded[i], tracer.occluded(r), "{name}: batch occluded, {r:?}");
     }
 }
 
-fn test_scene() -> Mesh {
+pub(crate) fn test_scene() -> Mesh {
     let mut m = procedural::sphere([0.0; 3], 1.0, 24, 32);
     m.triangles.extend(procedural::cube([0.5, -1.5, -0.25], [1.5, -0.5, 0.75], 4).triangles);
     m.triangles.extend(procedural::torus([-0.5, 0.8, 0.3], 0.8, 0.2, 24, 12).triangles);
