@@ -272,7 +272,8 @@ impl Reference {
             let e = q - p;
             area2 / (e.length_squared() - e.dot(d) * e.dot(d)).max(0.0).sqrt()
         };
-        let distances = [(1.0 - u - v) * altitude(tri[1], tri[2]), u * altitude(tri[2], tri[0]), v * altitude(tri[0], tri[1])];
+        let distances =
+            [(1.0 - u - v) * altitude(tri[1], tri[2]), u * altitude(tri[2], tri[0]), v * altitude(tri[0], tri[1])];
         let nearest = distances.iter().copied().fold(f64::INFINITY, f64::min);
         let far = tri.iter().map(|p| (*p - o).length()).fold(0.0, f64::max);
         nearest.abs() <= EDGE_SPACINGS * f64::from(f32::EPSILON) * 0.5 * far
@@ -306,4 +307,3 @@ fn plane_hit_f64(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<(f64, f64, f64)> 
     let q = s.cross(e1);
     Some((e2.dot(q) / det, s.dot(p) / det, d.dot(q) / det))
 }
-

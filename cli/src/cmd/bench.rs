@@ -393,7 +393,7 @@ mod gpu {
                 differ,
             });
         }
-        Ok(GpuReport { adapter: gpu.describe(), exact_edges: tracer.exact_edges(), upload, sets: out })
+        Ok(GpuReport { adapter: gpu.describe(), exact_edges: tracer.uses_f64(), upload, sets: out })
     }
 
     /// The same answer: both miss, or hits at the same distance (1e-5 relative).

@@ -314,9 +314,12 @@ impl GpuTracer {
         self.chunk_words
     }
 
-    /// Whether the triangle test's edge functions run in `f64` (exact: watertight
-    /// whatever the compiler fuses) — where the adapter has 64-bit floats.
-    pub fn exact_edges(&self) -> bool {
+    /// Whether the kernel runs its `f64` paths (edge functions, exact and so watertight
+    /// whatever the compiler fuses; point location; hit distances): where the adapter
+    /// has 64-bit floats. Hit distances then keep the
+    /// CPU's bound (`cpu::watertight::plane_distance`); without, they are computed in
+    /// `f32` and long thin triangles lose precision.
+    pub fn uses_f64(&self) -> bool {
         self.f64_edges
     }
 

@@ -217,3 +217,91 @@ fn same_image(a: &octrace_runtime::render::Image, b: &octrace_runtime::render::I
     let off = a.rgb.iter().zip(&b.rgb).filter(|(x, y)| x.abs_diff(**y) > 1).count();
     assert!(off * 200 <= a.rgb.len(), "{off} of {} channels differ by more than 1", a.rgb.len());
 }
+
+/// Rays on the octree's planes from inside the closed solids (`hard_cases::grid_rays`),
+/// at the origin and far from it: none leaks through the kernel either, and every
+/// answer is the CPU's, bit for bit (the kernel's walk follows the same slab rule for
+/// zero components, and its distances are the same f64 plane distances).
+#[test]
+fn rays_on_cell_planes_never_leak_on_the_gpu() {
+    use crate::hard_cases::grid_rays::{solid_rays, PLACEMENTS};
+    let Some(gpu) = gpu("rays_on_cell_planes_never_leak_on_the_gpu") else { return };
+    for (offset, scale) in PLACEMENTS {
+        for solid in octrace_bake::procedural::closed_solids() {
+            let solid = solid.moved(offset, scale);
+            let (scene, _, rays) = solid_rays(&solid, 20_000, 5);
+            let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+            let got = tracer.intersect(&rays).unwrap();
+            let leaks = got.iter().filter(|h| h.is_none()).count();
+            assert_eq!(leaks, 0, "{}: {leaks} of {} rays leaked through the kernel", solid.label(), rays.len());
+            assert!(tracer.occluded(&rays).unwrap().iter().all(|&o| o), "{}: any-hit leaks", solid.label());
+            if tracer.uses_f64() {
+                same_distances(&solid.label(), &rays, &scene.intersect_all(&rays), &got);
+            }
+        }
+    }
+}
+
+/// The two reproductions on the GPU: the bunny ray in a y plane with `-0.0`,
+/// and a camera on a cell plane inside a closed room (no pixel sees through the wall).
+#[test]
+fn in_plane_reproductions_hit_on_the_gpu() {
+    let Some(gpu) = gpu("in_plane_reproductions_hit_on_the_gpu") else { return };
+    let o = Vec3::from([0xbc6bedfau32, 0x3ddd986c, 0x3e99999a].map(f32::from_bits));
+    let rays = [Ray::new(o, Vec3::new(-0.25, -0.0, -1.0)), Ray::new(o, Vec3::new(-0.25, 0.0, -1.0))];
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, bunny_scene()).unwrap();
+    for h in tracer.intersect(&rays).unwrap() {
+        assert_eq!(h.map(|h| h.triangle), Some(38327), "{h:?}");
+    }
+    let room = octrace_bake::procedural::cube([-2.0, -1.0, -3.0], [2.0, 1.5, 3.0], 32);
+    let scene = Scene::from_baked(octrace_bake::bake(&room, &Default::default()).unwrap()).unwrap();
+    let grid = octrace_bake::hard_rays::GridPlanes::of(&scene.view());
+    let y = grid.snap(1, grid.depth, 0.0625) as f64;
+    let camera = raysets::Camera::look_at(glam::DVec3::new(0.3, y, 0.2), glam::DVec3::new(1.3, y, -0.8), 60.0, 96, 101);
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    let missed = tracer.intersect(&camera.rays()).unwrap().iter().filter(|h| h.is_none()).count();
+    assert_eq!(missed, 0, "{missed} pixels see through the wall");
+}
+
+/// The zig-zag polygon of slivers on the GPU: every distance within the CPU's bound of
+/// the exact plane distance (the same bits where the adapter has f64).
+#[test]
+fn slivers_keep_the_distance_bound_on_the_gpu() {
+    let Some(gpu) = gpu("slivers_keep_the_distance_bound_on_the_gpu") else { return };
+    let mesh = crate::hard_cases::slivers::zigzag();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let oracle = octrace_runtime::reference::Reference::in_input_order(mesh.triangles.clone());
+    let mut rng = octrace_bake::procedural::SplitMix(2);
+    let rays: Vec<Ray> = (0..20_000)
+        .map(|_| {
+            let from = Vec3::new(rng.unit() * 1001.0 - 1.0, rng.unit() * 8.0 - 1.0, rng.unit() * 3.0 - 1.5);
+            let to = Vec3::new(rng.unit() * 999.0, rng.unit() * 6.0, 0.0);
+            Ray::new(from, to - from)
+        })
+        .collect();
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    let got = tracer.intersect(&rays).unwrap();
+    let mut hits = 0;
+    for (r, h) in rays.iter().zip(&got) {
+        let Some(h) = h else { continue };
+        hits += 1;
+        let (err, bound) = oracle.distance_error(r, h.t, h.triangle).unwrap();
+        if tracer.uses_f64() {
+            assert!(err <= bound, "{r:?}: {h:?} is {err:e} off its plane (bound {bound:e})");
+        }
+    }
+    assert!(hits > 10_000, "{hits}");
+    if tracer.uses_f64() {
+        same_distances("zigzag", &rays, &scene.intersect_all(&rays), &got);
+    }
+}
+
+/// The CPU's and the kernel's answers hit the same triangles at the same distances,
+/// bit for bit (the barycentrics may differ in their last bits: the kernel's edge
+/// functions are exact in f64, the CPU's rounded in f32).
+fn same_distances(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>]) {
+    for (i, (c, g)) in cpu.iter().zip(gpu).enumerate() {
+        let key = |h: &Option<Hit>| h.map(|h| (h.t.to_bits(), h.triangle));
+        assert_eq!(key(c), key(g), "{name}: ray {i} {:?}: CPU {c:?}, GPU {g:?}", rays[i]);
+    }
+}

@@ -470,7 +470,10 @@ mod tests {
             let want = crate::cpu::watertight::plane_distance(o, d, &tri);
             // SAFETY: the processor has AVX2; `tri` holds nine floats.
             let got = unsafe { plane_distance(wide(o), wide(d), tri.as_ptr()) };
-            assert!(want.to_bits() == got.to_bits() || (want.is_nan() && got.is_nan()), "{tri:?} {o:?} {d:?}: {want} {got}");
+            assert!(
+                want.to_bits() == got.to_bits() || (want.is_nan() && got.is_nan()),
+                "{tri:?} {o:?} {d:?}: {want} {got}"
+            );
             checked += want.is_finite() as u32;
         }
         assert!(checked > 150_000);

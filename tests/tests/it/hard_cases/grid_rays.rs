@@ -141,7 +141,9 @@ fn regression_a_camera_on_a_cell_plane_sees_no_crack() {
     let scene = Scene::from_baked(bake(&room, &BuildParams::auto()).unwrap()).unwrap();
     let grid = GridPlanes::of(&scene.view());
     let y = grid.snap(1, grid.depth, 0.0625);
-    for (eye, target) in [([0.3, y, 0.2], [1.3, y, -0.8]), ([-0.7, y, 0.0], [-0.7, y, 5.0]), ([0.0, y, 0.0], [-4.0, y, 0.0])] {
+    for (eye, target) in
+        [([0.3, y, 0.2], [1.3, y, -0.8]), ([-0.7, y, 0.0], [-0.7, y, 5.0]), ([0.0, y, 0.0], [-4.0, y, 0.0])]
+    {
         let camera = octrace_runtime::raysets::Camera::look_at(
             glam::DVec3::from(eye.map(f64::from)),
             glam::DVec3::from(target.map(f64::from)),

@@ -16,8 +16,8 @@ pub(crate) fn oracle(mesh: &Mesh) -> Reference {
     Reference::in_input_order(mesh.triangles.clone())
 }
 
-mod grid_rays;
-mod slivers;
+pub(crate) mod grid_rays;
+pub(crate) mod slivers;
 
 /// Every ray agrees with the oracle (see `reference::Agreement`: the same answer, or
 /// a tie within rounding, as the oracle decides it), nearest hit and occlusion (also
