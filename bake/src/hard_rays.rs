@@ -63,7 +63,8 @@ pub enum HardKind {
 
 impl HardKind {
     /// Every kind, in order.
-    pub const ALL: [HardKind; 4] = [HardKind::InPlane, HardKind::AlongEdge, HardKind::FromCorner, HardKind::ThroughCorner];
+    pub const ALL: [HardKind; 4] =
+        [HardKind::InPlane, HardKind::AlongEdge, HardKind::FromCorner, HardKind::ThroughCorner];
 
     /// A short name for tables.
     pub fn name(self) -> &'static str {
@@ -210,7 +211,7 @@ fn build(
             for a in 0..3 {
                 d[a] = [1.0, 0.5, 0.25, 0.75][(rng.next_u64() % 4) as usize] * sign(a);
             }
-            if rng.next_u64() % 2 == 0 {
+            if rng.next_u64().is_multiple_of(2) {
                 d[axis] = zero(axis);
             }
             o = [0, 1, 2].map(|a| c[a] - step * d[a]);
