@@ -233,8 +233,14 @@ fn verify_checks_a_file_against_the_oracle() {
     assert!(out.contains("every invariant") && out.contains(" 0 mismatches"), "{out}");
     let json: serde_json::Value =
         serde_json::from_str(&ok(dir.path(), &["verify", "cube.oct", "--rays", "500", "--json"])).unwrap();
-    assert_eq!(json["rays"], 500);
-    assert_eq!(json["mismatches"].as_array().unwrap().len(), 0);
+    let sets = json["sets"].as_array().unwrap();
+    assert_eq!((sets[0]["set"].as_str(), sets[0]["rays"].as_u64()), (Some("random"), Some(500)));
+    assert_eq!((sets[1]["set"].as_str(), sets[1]["rays"].as_u64()), (Some("grid"), Some(250)));
+    for set in sets {
+        assert_eq!(set["mismatches"].as_array().unwrap().len(), 0, "{set}");
+        assert_eq!(set["beyond_distance_bound"].as_array().unwrap().len(), 0, "{set}");
+        assert!(set["max_relative_t_error"].as_f64().unwrap() <= json["distance_bound_relative"].as_f64().unwrap());
+    }
     // A corrupt file fails the invariants.
     let mut bytes = std::fs::read(dir.path().join("cube.oct")).unwrap();
     let at = bytes.len() / 2;
@@ -246,10 +252,17 @@ fn verify_checks_a_file_against_the_oracle() {
 #[test]
 fn soak_counts_no_leaks_with_the_watertight_test() {
     let dir = tempfile::tempdir().unwrap();
-    let out = ok(dir.path(), &["soak", "--rays", "20000"]);
-    for mesh in ["sphere", "torus", "box", "blob"] {
-        let line = out.lines().find(|l| l.starts_with(mesh)).unwrap_or_else(|| panic!("{out}"));
-        assert!(line.contains(" 0 leaks"), "{line}");
+    let out = ok(dir.path(), &["soak", "--rays", "20000", "--grid-rays", "10000"]);
+    for mesh in ["sphere", "torus", "box", "blob", "room"] {
+        for at in ["", "@1e4", "@1e7", "@-3e6"] {
+            for kind in ["random", "grid"] {
+                let line = out
+                    .lines()
+                    .find(|l| l.starts_with(&format!("{mesh}{at} ")) && l.contains(&format!(" {kind} ")))
+                    .unwrap_or_else(|| panic!("no {mesh}{at} {kind} row in {out}"));
+                assert!(line.contains(" 0 leaks"), "{line}");
+            }
+        }
     }
 }
 

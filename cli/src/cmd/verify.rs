@@ -3,8 +3,9 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
+use octrace_bake::hard_rays::{grid_rays, GridPlanes};
 use octrace_bake::procedural::SplitMix;
-use octrace_runtime::reference::{Agreement, Reference};
+use octrace_runtime::reference::{Agreement, Reference, DISTANCE_RELATIVE};
 use octrace_runtime::Ray;
 use rayon::prelude::*;
 use serde_json::json;
@@ -12,10 +13,14 @@ use serde_json::json;
 use crate::output::thousands;
 
 /// Check a baked file: every invariant of the format (a validated open), then the
-/// octree tracer against the f64 brute-force oracle on random rays, half from inside
-/// the scene's box and half from outside aimed into it. Each mismatch is printed with
-/// its ray in full precision; ties within rounding (a ray starting on a triangle, a
-/// hit on a triangle's edge) are counted apart. Exits with an error on any mismatch.
+/// octree tracer against the f64 brute-force oracle: random rays, half from inside the
+/// scene's box and half from outside aimed into it, and rays on the octree's own planes
+/// (in cell planes with +0.0 and -0.0 components, along cell edges, from and through
+/// cell corners, aimed at the mesh's vertices). Each mismatch is printed with its ray
+/// in full precision; ties within rounding (a ray starting on a triangle, a hit on a
+/// triangle's edge, as the oracle sees it) are counted apart. Every hit's distance is
+/// checked against the exact distance to its triangle's plane. Exits with an error on
+/// any mismatch or distance beyond the bound.
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// The .oct scene.
@@ -23,12 +28,26 @@ pub(crate) struct Args {
     /// Random rays to compare (the oracle tests every triangle for each).
     #[arg(long, default_value_t = 10_000)]
     pub rays: usize,
-    /// Seed of the ray generator.
+    /// Rays on the octree's planes to compare (default: half of --rays).
+    #[arg(long)]
+    pub grid_rays: Option<usize>,
+    /// Seed of the ray generators.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// What one set of rays gave against the oracle.
+struct Tally {
+    rays: usize,
+    same: usize,
+    ties: usize,
+    mismatches: Vec<String>,
+    /// The largest |Δt| / t over the hits, and the hits beyond the distance bound.
+    max_relative_error: f64,
+    beyond_bound: Vec<String>,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -39,7 +58,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let (c, e) = ((lo + hi) * 0.5, (hi - lo).max(Vec3::splat((hi - lo).max_element() * 1e-3)));
     let mut rng = SplitMix(args.seed);
     let mut unit3 = || Vec3::new(rng.unit(), rng.unit(), rng.unit()) - 0.5;
-    let rays: Vec<Ray> = (0..args.rays)
+    let random: Vec<Ray> = (0..args.rays)
         .map(|i| {
             let inside = c + unit3() * e;
             if i % 2 == 0 {
@@ -50,36 +69,79 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             }
         })
         .collect();
+    let grid = {
+        let n = args.grid_rays.unwrap_or(args.rays / 2);
+        let point = |r: &mut SplitMix| (c + (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * e * 1.2).to_array();
+        let count = view.triangle_count() as u64;
+        let aim = |r: &mut SplitMix| view.triangle((r.next_u64() % count.max(1)) as u32)[(r.next_u64() % 3) as usize];
+        let hard = grid_rays(&GridPlanes::of(&view), n, args.seed, point, (count > 0).then_some(aim), |_| true);
+        hard.iter().map(|r| Ray::new(Vec3::from(r.origin), Vec3::from(r.dir))).collect::<Vec<Ray>>()
+    };
     let tracer = scene.tracer();
-    let verdicts: Vec<Agreement> =
-        rays.par_iter().map(|r| oracle.compare(r, tracer.intersect(r).map(|h| (h.t, h.triangle, h.u, h.v)))).collect();
-    let count = |a: Agreement| verdicts.iter().filter(|&&v| v == a).count();
-    let (same, ties, wrong) = (count(Agreement::Same), count(Agreement::Tie), count(Agreement::Different));
-    let mismatches: Vec<String> = rays
-        .iter()
-        .zip(&verdicts)
-        .filter(|(_, v)| **v == Agreement::Different)
-        .map(|(r, _)| format!("{r:?}: octree {:?}, oracle {:?}", tracer.intersect(r), oracle.intersect(r)))
-        .collect();
+    let tally = |rays: &[Ray]| {
+        let answers: Vec<_> = rays.par_iter().map(|r| tracer.intersect(r)).collect();
+        let verdicts: Vec<Agreement> = rays
+            .par_iter()
+            .zip(&answers)
+            .map(|(r, h)| oracle.compare(r, h.map(|h| (h.t, h.triangle, h.u, h.v))))
+            .collect();
+        let errors: Vec<Option<(f64, f64, f64)>> = rays
+            .par_iter()
+            .zip(&answers)
+            .map(|(r, h)| {
+                let h = (*h)?;
+                let (err, bound) = oracle.distance_error(r, h.t, h.triangle)?;
+                Some((err, bound, err / (h.t as f64).abs().max(f64::MIN_POSITIVE)))
+            })
+            .collect();
+        let count = |a: Agreement| verdicts.iter().filter(|&&v| v == a).count();
+        let show = |i: usize| format!("{:?}: octree {:?}, oracle {:?}", rays[i], answers[i], oracle.intersect(&rays[i]));
+        Tally {
+            rays: rays.len(),
+            same: count(Agreement::Same),
+            ties: count(Agreement::Tie),
+            mismatches: (0..rays.len()).filter(|&i| verdicts[i] == Agreement::Different).map(show).collect(),
+            max_relative_error: errors.iter().flatten().map(|e| e.2).fold(0.0, f64::max),
+            beyond_bound: (0..rays.len()).filter(|&i| errors[i].is_some_and(|e| e.0 > e.1)).map(show).collect(),
+        }
+    };
+    let sets = [("random", tally(&random)), ("grid", tally(&grid))];
+    let wrong: usize = sets.iter().map(|(_, t)| t.mismatches.len() + t.beyond_bound.len()).sum();
     if args.json {
+        let sets: Vec<_> = sets
+            .iter()
+            .map(|(name, t)| {
+                json!({ "set": name, "rays": t.rays, "same": t.same, "ties": t.ties, "mismatches": t.mismatches,
+                        "max_relative_t_error": t.max_relative_error, "beyond_distance_bound": t.beyond_bound })
+            })
+            .collect();
         crate::out!(
             "{}",
             serde_json::to_string_pretty(&json!({
-                "file": crate::show(&args.scene), "invariants": "ok", "rays": rays.len(),
-                "same": same, "ties": ties, "mismatches": mismatches,
+                "file": crate::show(&args.scene), "invariants": "ok", "distance_bound_relative": DISTANCE_RELATIVE,
+                "sets": sets,
             }))?
         );
     } else {
         crate::out!("{}: every invariant of the format holds", crate::show(&args.scene));
-        crate::out!(
-            "{} rays against the f64 oracle: {} same, {} ties within rounding, {} mismatches",
-            thousands(rays.len() as u64),
-            thousands(same as u64),
-            thousands(ties as u64),
-            wrong
-        );
-        for m in &mismatches {
-            crate::out!("mismatch: {m}");
+        for (name, t) in &sets {
+            crate::out!(
+                "{} {name} rays against the f64 oracle: {} same, {} ties within rounding, {} mismatches; \
+                 max |Δt|/t {:.1e} (bound {:.1e}), {} beyond it",
+                thousands(t.rays as u64),
+                thousands(t.same as u64),
+                thousands(t.ties as u64),
+                t.mismatches.len(),
+                t.max_relative_error,
+                DISTANCE_RELATIVE,
+                t.beyond_bound.len(),
+            );
+            for m in &t.mismatches {
+                crate::out!("mismatch: {m}");
+            }
+            for m in &t.beyond_bound {
+                crate::out!("distance beyond the bound: {m}");
+            }
         }
     }
     anyhow::ensure!(wrong == 0, "{wrong} rays disagree with the oracle");
