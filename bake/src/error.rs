@@ -79,11 +79,19 @@ pub enum Error {
         /// Triangles found.
         count: u64,
     },
-    /// The scene is too large for `f32` coordinates.
-    #[error("scene extent {extent} is beyond f32's range")]
-    Extent {
+    /// The scene's size or position is beyond what the tracer's `f32` arithmetic
+    /// serves: an extent below `2^-60` or a size or coordinate above `2^60`
+    /// (`octree::MIN_ROOT_EDGE`, `octree::MAX_COORDINATE`). Rays would leak or miss.
+    #[error(
+        "scene extent {extent:e} and largest coordinate {largest:e} are beyond what the tracer serves: \
+         extents from 2^-60 (8.7e-19) and coordinates up to 2^60 (1.2e18), where products of f32 \
+         coordinates stay in f32's normal range; scale the mesh (or move it towards the origin)"
+    )]
+    Scale {
         /// The largest extent of the mesh's box.
         extent: f64,
+        /// The largest coordinate magnitude.
+        largest: f64,
     },
     /// Writing the baked file failed.
     #[error(transparent)]

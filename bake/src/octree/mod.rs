@@ -51,25 +51,38 @@ pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
     crate::mesh::edge_cross(t) == [0.0; 3]
 }
 
-/// The smallest root edge: `2^-100`, so that cells at the deepest level the format
-/// allows (`2^-20` of the root) are still normal `f32` (`>= 2^-126`). Found by fuzzing:
-/// a mesh 1e-39 across got a subnormal root.
-pub const MIN_ROOT_EDGE: f64 = 7.888609052210118e-31; // 2^-100
+/// The smallest root edge the tracer serves: `2^-60` (8.7e-19). The watertight test
+/// multiplies coordinates relative to a ray's origin in pairs (its edge functions), and
+/// the walk multiplies cell offsets by direction components; below this edge those
+/// products leave `f32`'s normal range (`2^-126`), lose their precision and then their
+/// signs: every ray from inside a sphere 1e-22 across leaked. Cells at the deepest level
+/// the format allows stay normal too. A smaller scene is refused at bake
+/// ([`Error::Scale`]): scale it up.
+pub const MIN_ROOT_EDGE: f64 = 8.673617379884035e-19; // 2^-60
+
+/// The largest root edge and coordinate magnitude the tracer serves: `2^60` (1.2e18).
+/// Above, the same products overflow `f32` (`2^128`) for rays whose direction is as
+/// long as the scene (rays aimed at points of it): 40 % of the rays aimed at a sphere
+/// 1e20 across leaked. A larger or farther scene is refused at bake ([`Error::Scale`]).
+pub const MAX_COORDINATE: f64 = 1.152921504606847e18; // 2^60
 
 /// The root cube: a power-of-two edge at least the mesh's largest extent, centred on
 /// the mesh, its low corner rounded down to `f32`; doubled until it holds the mesh.
 ///
 /// # Errors
-/// [`Error::Extent`] when the cube's edge is beyond `f32`'s range.
+/// [`Error::Scale`] when the scene is smaller or larger, or farther from the origin,
+/// than the tracer serves ([`MIN_ROOT_EDGE`], [`MAX_COORDINATE`]).
 pub fn root_cube(lo: [f32; 3], hi: [f32; 3]) -> Result<([f32; 3], f32)> {
     let extent = (0..3).map(|a| hi[a] as f64 - lo[a] as f64).fold(0.0, f64::max);
+    let largest = (0..3).map(|a| (lo[a] as f64).abs().max((hi[a] as f64).abs())).fold(0.0, f64::max);
+    // A single point (every vertex the same, all degenerate) gets a unit root.
     let mut size = if extent > 0.0 { extent.log2().ceil().exp2() } else { 1.0 };
-    // Every level's cell edge must stay a normal f32 (subnormals lose the exactness
-    // the walk relies on, and the format refuses them).
-    size = size.max(MIN_ROOT_EDGE);
+    if !(MIN_ROOT_EDGE..=MAX_COORDINATE).contains(&size) || largest > MAX_COORDINATE {
+        return Err(Error::Scale { extent, largest });
+    }
     loop {
-        if !((size as f32).is_finite()) {
-            return Err(Error::Extent { extent });
+        if size > 2.0 * MAX_COORDINATE {
+            return Err(Error::Scale { extent, largest });
         }
         let root_lo = [0, 1, 2].map(|a| {
             let exact = 0.5 * (lo[a] as f64 + hi[a] as f64) - 0.5 * size;
@@ -118,7 +131,8 @@ pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
 ///
 /// # Errors
 /// [`Error::NonFinite`] for a NaN or infinite coordinate, [`Error::EmptyScene`] for
-/// no triangles, [`Error::Extent`] for a scene beyond `f32`'s range.
+/// no triangles, [`Error::Scale`] for a scene smaller, larger or farther from the origin
+/// than the tracer serves.
 ///
 /// # Example
 /// ```

@@ -188,17 +188,31 @@ fn one_thread_and_two_threads_give_byte_identical_files() {
 }
 
 /// Regression, found by fuzzing (fuzz/load_gltf): a mesh 1e-39 across got a
-/// subnormal root edge, and the bake wrote a file its own validation refused.
+/// subnormal root edge, and the bake wrote a file its own validation refused. Such a
+/// mesh is now refused with a clear error (the tracer's f32 products underflow there:
+/// rays from inside a sphere 1e-22 across all leaked), and so is one beyond 2^60.
 #[test]
-fn a_vanishingly_small_mesh_bakes_a_valid_file() {
+fn scenes_smaller_or_larger_than_the_tracer_serves_are_refused() {
     let tiny = Mesh::from_triangles(vec![
         [[0.0, 0.0, 0.0], [1e-39, 0.0, 0.0], [0.0, 1e-39, 0.0]],
         [[0.0; 3], [2e-45, 0.0, 0.0], [0.0, 3e-45, 0.0]],
     ]);
-    let scene = bake(&tiny, &BuildParams::auto()).unwrap();
-    assert!(scene.bounds.root_size.is_normal());
-    scene.view().validate().unwrap();
-    SceneFile::from_bytes(&scene.to_file_bytes(0).unwrap()).unwrap();
+    let scaled = |k: f32| {
+        let mut m = procedural::sphere([0.3, -0.2, 0.1], 1.0, 8, 12);
+        m.triangles.iter_mut().flatten().for_each(|v| *v = v.map(|c| c * k));
+        m
+    };
+    let far = Mesh::from_triangles(vec![[[2e18, 0.0, 0.0], [2e18, 1e16, 0.0], [2e18, 0.0, 1e16]]]);
+    for (name, mesh) in [("1e-39", tiny), ("1e-22", scaled(1e-22)), ("1e20", scaled(1e20)), ("far", far)] {
+        let err = bake(&mesh, &BuildParams::auto()).unwrap_err();
+        assert!(matches!(err, crate::Error::Scale { .. }), "{name}: {err}");
+        assert!(err.to_string().contains("2^-60 (8.7e-19)") && err.to_string().contains("2^60"), "{err}");
+    }
+    // The scales, 1e-14 and 1e14, and the limits' neighbours bake and validate.
+    for k in [1e-18, 1e-14, 1e14, 1e17] {
+        let scene = bake(&scaled(k), &BuildParams::auto()).unwrap();
+        scene.view().validate().unwrap();
+    }
 }
 
 #[test]

@@ -65,12 +65,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     };
     progress.finish();
     crate::out!(
-        "baked {}: {} triangles ({} degenerate) -> {} leaves, depth {}, {}{} in {:.2} s (bake {:.2} s) -> {}",
+        "baked {}: {} triangles ({} degenerate) -> {} leaves, depth {}{}, {}{} in {:.2} s (bake {:.2} s) -> {}",
         crate::show(&args.input),
         thousands(scene.stats.input_triangles),
         thousands(scene.stats.degenerate_triangles),
         thousands(scene.leaf_count() as u64),
         scene.params.max_depth,
+        depth_note(&scene, &params),
         mb(bytes),
         on_disk,
         started.elapsed().as_secs_f64(),
@@ -78,6 +79,20 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         crate::show(&args.output),
     );
     Ok(())
+}
+
+/// What limited the depth, when it is less than asked for (or than the automatic
+/// choice): `" (12 asked; f32 precision allows 3 at this position)"`, else nothing.
+pub(crate) fn depth_note(scene: &BakedScene, params: &BuildParams) -> String {
+    let kept = (scene.stats.input_triangles - scene.stats.degenerate_triangles) as usize;
+    let wanted = params.resolve(kept).max_depth;
+    let allowed = octrace_bake::octree::precision_depth(scene.bounds.root_lo, scene.bounds.root_size);
+    if scene.params.max_depth < wanted {
+        let how = if params.max_depth.is_some() { "asked" } else { "automatic" };
+        format!(" ({wanted} {how}; f32 precision allows {allowed} at this position)")
+    } else {
+        String::new()
+    }
 }
 
 /// Bakes with stage reports, returning the scene and the bake's wall time.

@@ -71,6 +71,16 @@ impl<'a> Report<'a> {
         }
     }
 
+    /// Whether the depth is what f32 precision allows at the scene's position and less
+    /// than the automatic choice for its triangles: the bake was limited there.
+    fn depth_limited_by_precision(&self) -> bool {
+        let v = &self.view;
+        let allowed = octrace_bake::octree::precision_depth(v.bounds.root_lo, v.bounds.root_size);
+        let kept = (v.stats.input_triangles - v.stats.degenerate_triangles) as usize;
+        let automatic = octrace_bake::BuildParams { leaf_size: Some(v.params.leaf_size), ..Default::default() };
+        v.params.max_depth == allowed && allowed < automatic.resolve(kept).max_depth
+    }
+
     fn bake_time(&self) -> String {
         match self.bake_time_us {
             0 => "not recorded (reproducible file)".into(),
@@ -129,8 +139,13 @@ impl<'a> Report<'a> {
                 mb(b.total())
             ),
             format!(
-                "bake               max depth {}, leaf size {}, margin {:e} of the root edge; time {}",
+                "bake               max depth {}{}, leaf size {}, margin {:e} of the root edge; time {}",
                 v.params.max_depth,
+                if self.depth_limited_by_precision() {
+                    " (the most f32 precision allows at this position: cells of four spacings)"
+                } else {
+                    ""
+                },
                 v.params.leaf_size,
                 v.params.margin,
                 self.bake_time()
@@ -223,6 +238,8 @@ impl<'a> Report<'a> {
             })).collect::<Vec<_>>(),
             "bake": {
                 "max_depth": v.params.max_depth, "leaf_size": v.params.leaf_size,
+                "depth_limited_by_precision": self.depth_limited_by_precision(),
+                "precision_depth": octrace_bake::octree::precision_depth(v.bounds.root_lo, v.bounds.root_size),
                 "margin": v.params.margin,
                 "time_s": (self.bake_time_us > 0).then(|| self.bake_time_us as f64 / 1e6),
             },

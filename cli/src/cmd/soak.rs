@@ -77,7 +77,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
                 soak(&scene, test, gpu_tracer.as_ref(), &solid, kind, rays, total)
             };
             let seed = args.seed;
-            rows.push(count("random", &mut |done, n| random_rays(&solid, seed.wrapping_add(done as u64), n), args.rays)?);
+            rows.push(count(
+                "random",
+                &mut |done, n| random_rays(&solid, seed.wrapping_add(done as u64), n),
+                args.rays,
+            )?);
             let grid = GridPlanes::of(&scene.view());
             rows.push(count(
                 "grid",

@@ -95,7 +95,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             })
             .collect();
         let count = |a: Agreement| verdicts.iter().filter(|&&v| v == a).count();
-        let show = |i: usize| format!("{:?}: octree {:?}, oracle {:?}", rays[i], answers[i], oracle.intersect(&rays[i]));
+        let show =
+            |i: usize| format!("{:?}: octree {:?}, oracle {:?}", rays[i], answers[i], oracle.intersect(&rays[i]));
         Tally {
             rays: rays.len(),
             same: count(Agreement::Same),

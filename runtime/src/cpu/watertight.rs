@@ -97,8 +97,10 @@ impl Shear {
             return None; // the ray lies in the triangle's plane
         }
         let dist = plane_distance(o, self.d, t);
-        let inv = 1.0 / det;
-        (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
+        // Barycentrics by division: |v| and |w| are at most |det| (the three agree in
+        // sign), so the quotients stay in [0, 1] even where det is subnormal (a
+        // reciprocal there overflows).
+        (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
     }
 }
 

@@ -197,9 +197,8 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
     // cpu::watertight::plane_distance, in f64 where the adapter has it).
     let plane = plane_distance(o, (*wk).d, at);
     let dist = plane.x;
-    let inv_det = 1.0 / det;
     if plane.y != 0.0 && dist >= tmin && dist <= tmax {
-        return vec4<f32>(dist, v * inv_det, w * inv_det, 1.0);
+        return vec4<f32>(dist, v / det, w / det, 1.0);
     }
     return vec4<f32>(0.0);
 }

@@ -253,8 +253,8 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
             }
         }
         let Some((lane, t)) = best else { return Batch::Miss };
-        let inv = 1.0 / lane_of(det, lane);
-        Batch::Hit(lane, t, lane_of(v, lane) * inv, lane_of(w, lane) * inv)
+        let det = lane_of(det, lane);
+        Batch::Hit(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det)
     }
 }
 

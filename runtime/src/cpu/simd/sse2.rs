@@ -211,8 +211,7 @@ impl ShearSse {
                 return None;
             }
             let dist = plane_distance(self.scalar.origin(), self.scalar.direction(), t);
-            let inv = 1.0 / det;
-            (dist >= tmin && dist <= tmax).then_some((dist, v * inv, w * inv))
+            (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
         }
     }
 }

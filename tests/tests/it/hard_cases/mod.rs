@@ -254,6 +254,26 @@ fn far_and_wide_same_answers_as_the_reference() {
     }
 }
 
+/// The extremes of the scales the bake accepts (`octree::MIN_ROOT_EDGE`,
+/// `MAX_COORDINATE`) and the 1e-14 and 1e14 (which traced t = 0, t = inf and
+/// wrong triangles before the distances came from the plane in f64): no ray from
+/// inside a closed sphere leaks, random and vertex-aimed ones included, and every
+/// answer is the oracle's with its distance within the bound.
+#[test]
+fn extreme_scales_within_the_limits_trace_right() {
+    let sphere = || procedural::closed_solids().into_iter().find(|s| s.name == "sphere").unwrap();
+    for scale in [1e-18, 1e-14, 1e14, 1e17] {
+        let solid = sphere().moved(0.0, scale);
+        let s = scene(&solid.mesh, None, 16);
+        let rays: Vec<Ray> =
+            solid.leak_rays(30_000, 4).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect();
+        let leaks = s.intersect_all(&rays).iter().filter(|h| h.is_none()).count();
+        assert_eq!(leaks, 0, "scale {scale:e}: {leaks} of {} rays leaked", rays.len());
+        let sample: Vec<Ray> = rays.iter().step_by(40).copied().collect();
+        all_agree(&format!("scale {scale:e}"), &s, &oracle(&solid.mesh), &sample);
+    }
+}
+
 /// Collinear triangles, repeated vertices, slivers, stacks of coplanar copies, a
 /// triangle lying exactly in cell faces and one spanning the whole root: degenerate
 /// ones must be skipped, ties must resolve to a triangle at the right distance.
