@@ -100,8 +100,6 @@ pub(crate) struct Embree {
     device: Device,
     scene: Scene,
     pub build_time: Duration,
-    /// Built with `RTC_SCENE_FLAG_ROBUST`.
-    pub robust: bool,
 }
 
 // SAFETY: Embree's documentation allows rtcIntersect1 / rtcOccluded1 on a committed
@@ -152,7 +150,7 @@ impl Embree {
         let build_time = t.elapsed();
         // SAFETY: the device is valid.
         let error = unsafe { rtcGetDeviceError(device) };
-        let embree = Embree { device, scene, build_time, robust };
+        let embree = Embree { device, scene, build_time };
         anyhow::ensure!(error == 0, "Embree: the build failed (error {error})");
         Ok(embree)
     }

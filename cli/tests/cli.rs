@@ -515,28 +515,63 @@ fn trace_and_render_on_the_gpu_give_the_cpus_files() {
 fn report_measures_every_knob_and_writes_markdown_and_json() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
-    let quick = ["--runs", "1", "--sample", "64", "--leak-rays", "2000", "--max-rays", "4096"];
+    let quick = [
+        "--runs",
+        "2",
+        "--sample",
+        "64",
+        "--hard-rays",
+        "64",
+        "--leak-rays",
+        "2000",
+        "--max-rays",
+        "4096",
+        "--render-width",
+        "32",
+    ];
     let out = ok(dir.path(), &[&["report", "cube.obj", "-o", "rep", "--json"][..], &quick].concat());
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
     let mesh = &json["meshes"][0];
     assert_eq!((mesh["name"].as_str(), mesh["triangles"].as_u64()), (Some("cube.obj"), Some(13)));
     let rows = mesh["rows"].as_array().unwrap();
     let knobs: Vec<&str> = rows.iter().map(|r| r["knob"].as_str().unwrap()).collect();
-    for knob in
-        ["defaults", "triangle test", "exit face", "bake margin", "depth limit", "leaf target", "peer", "octree"]
-    {
+    for knob in [
+        "defaults",
+        "triangle test",
+        "exit face",
+        "bake margin",
+        "depth limit",
+        "leaf target",
+        "peer",
+        "octree",
+        "baseline",
+    ] {
         assert!(knobs.contains(&knob), "{knob} missing from {knobs:?}");
     }
+    let kinds = ["in-plane", "along-edge", "corners", "grazing", "vertex-aimed", "slivers", "on-surface", "far"];
     for row in rows {
-        assert_eq!(row["mrays"].as_array().unwrap().len(), 3, "{row}");
-        assert!(row["mrays"].as_array().unwrap().iter().all(|m| m.as_f64().unwrap() > 0.0), "{row}");
+        let mrays = row["mrays"].as_array().unwrap();
+        assert_eq!(mrays.len(), 3, "{row}");
+        for (m, spread) in mrays.iter().zip(row["mrays_spread"].as_array().unwrap()) {
+            let (m, lo, hi) = (m.as_f64().unwrap(), spread[0].as_f64().unwrap(), spread[1].as_f64().unwrap());
+            assert!(0.0 < lo && lo <= m && m <= hi, "{row}");
+        }
         assert_eq!(row["errors"]["compared"], 3 * 64, "{row}");
-        assert!(row["leak_rays"].as_u64().unwrap() > 4 * 2000, "{row}");
+        assert!(row["leak_rays"].as_u64().unwrap() > 5 * 2 * 2000, "{row}");
+        let hard: Vec<&str> = row["hard"].as_array().unwrap().iter().map(|h| h["kind"].as_str().unwrap()).collect();
+        assert_eq!(hard, kinds, "{row}");
+        assert!(row["hard"].as_array().unwrap().iter().all(|h| h["compared"].as_u64().unwrap() >= 32), "{row}");
     }
-    // The watertight configurations: no wrong hit, no leak.
+    // The watertight configurations (the octree's and the seeds' baselines): no wrong
+    // hit, random or hard, no leak.
     for row in rows.iter().filter(|r| r["knob"] != "peer" && r["knob"] != "triangle test") {
-        assert_eq!((row["errors"]["wrong"].as_u64(), row["leaks_per_million"].as_f64()), (Some(0), Some(0.0)), "{row}");
+        let wrong = (row["errors"]["wrong"].as_u64(), row["hard_wrong_per_million"].as_f64());
+        assert_eq!((wrong, row["leaks_per_million"].as_f64()), ((Some(0), Some(0.0)), Some(0.0)), "{row}");
     }
+    // Leaks by solid and kind: every solid, every kind.
+    let leaks = rows[0]["leaks"].as_array().unwrap();
+    assert_eq!(leaks.len(), 5 * 3, "{leaks:?}");
+    assert!(leaks.iter().any(|l| l["solid"] == "room" && l["kind"] == "grid"), "{leaks:?}");
     // Embree, in its two modes, where this build has it: the oracle's answers.
     let embree: Vec<&serde_json::Value> =
         rows.iter().filter(|r| r["setting"].as_str().unwrap().starts_with("Embree")).collect();
@@ -554,14 +589,21 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     let balance = &mesh["balance"];
     assert!(balance["unconstrained_leaves_per_ray"].as_f64().unwrap() > 0.0, "{balance}");
     // The seeds' four BVH builds and the kd-tree, on the same rays, with the
-    // watertight test: no wrong hit.
-    let baselines = mesh["baselines"].as_array().unwrap();
+    // watertight test.
+    let baselines: Vec<&serde_json::Value> = rows.iter().filter(|r| r["knob"] == "baseline").collect();
     assert_eq!(baselines.len(), 5);
-    assert!(baselines[4]["structure"].as_str().unwrap().starts_with("SAH kd-tree"));
-    for b in baselines {
-        assert!(b["sah_cost"].as_f64().unwrap() > 0.0, "{b}");
-        assert_eq!((b["errors"]["compared"].as_u64(), b["errors"]["wrong"].as_u64()), (Some(3 * 64), Some(0)), "{b}");
-    }
+    assert!(baselines[4]["setting"].as_str().unwrap().starts_with("SAH kd-tree"));
+    assert!(baselines.iter().all(|b| b["sah_cost"].as_f64().unwrap() > 0.0), "{baselines:?}");
+    // The renderer's knobs: soft samples and depth, each against its reference, more
+    // samples closer to it.
+    let render = json["render_knobs"].as_array().unwrap();
+    assert_eq!(render.len(), 7 + 6, "{render:?}");
+    let rmse = |knob: &str, value: u64| {
+        let row = render.iter().find(|r| r["knob"] == knob && r["value"] == value).unwrap();
+        row["rmse"].as_f64().unwrap()
+    };
+    assert!(rmse("soft-shadow samples", 1) > rmse("soft-shadow samples", 64), "{render:?}");
+    assert!(rmse("reflection depth", 1) > rmse("reflection depth", 8), "{render:?}");
     let md = std::fs::read_to_string(dir.path().join("rep/report.md")).unwrap();
     assert!(md.contains("## cube.obj (13 triangles)") && md.contains("| defaults | watertight f32"), "{md}");
     assert!(
@@ -572,6 +614,11 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
         md.contains("| BVH, SAH, 16 bins |") && md.contains("| SAH kd-tree, Havran's depth and failures |"),
         "{md}"
     );
+    for section in ["Hard rays, wrong answers", "## Leaks from the procedural closed solids", "## The renderer's knobs"]
+    {
+        assert!(md.contains(section), "{section} missing from {md}");
+    }
+    assert!(md.contains("slab distances (one walk at a time: no eight-lane walk)"), "{md}");
     assert!(dir.path().join("rep/report.json").exists());
     // The chart: two panels for the one mesh, a point per configuration in its knob's
     // colour (Möller-Trumbore's red among them), text drawn.

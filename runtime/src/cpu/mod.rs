@@ -80,7 +80,7 @@ impl Tracer<'_> {
     ) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         if self.uses_x86_64_v3() {
-            if !SLAB && simd::lanes::fits(self) {
+            if !SLAB && self.uses_lanes() && simd::lanes::fits(self) {
                 // SAFETY: the processor has the features (as below), and the arrays
                 // fit the gathers.
                 return unsafe { simd::lanes::trace::<ANY, TEST>(self, rays, done) };

@@ -56,6 +56,8 @@ pub struct Tracer<'a> {
     /// Whether the walks run the code compiled for x86-64-v3 (where the processor
     /// has it).
     v3: bool,
+    /// Whether batch calls may step eight walks at once (with `v3`).
+    lanes: bool,
 }
 
 /// The ray/triangle test a tracer uses.
@@ -267,6 +269,7 @@ impl<'a> Tracer<'a> {
             exit: ExitTest::default(),
             grid: None,
             v3: wider_simd_available(),
+            lanes: true,
         }
     }
 
@@ -282,6 +285,20 @@ impl<'a> Tracer<'a> {
     /// Whether the walks run the code compiled for x86-64-v3.
     pub fn uses_x86_64_v3(&self) -> bool {
         self.v3
+    }
+
+    /// The same tracer with or without the batch calls' eight-lane walk (on by
+    /// default where the processor has x86-64-v3; off, batches step one walk at a time,
+    /// several in flight). The answers are the same bits either way; off is for
+    /// measuring what the lanes buy (the slab exit test always runs without them).
+    pub fn with_lanes(mut self, on: bool) -> Self {
+        self.lanes = on;
+        self
+    }
+
+    /// Whether batch calls may use the eight-lane walk.
+    pub(crate) fn uses_lanes(&self) -> bool {
+        self.lanes
     }
 
     /// The same tracer locating points with `grid` (built for this scene).

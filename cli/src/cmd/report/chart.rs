@@ -1,9 +1,11 @@
 //! report.png: error against speed, one point per configuration, two panels per mesh.
 //!
-//! Left: rays answered wrongly per million (wrong hits on the oracle's sample plus
-//! leaks from the closed solids) against Mrays/s; right: the largest |Δt|/t against
-//! Mrays/s. Mrays/s is the geometric mean of the three standard sets (one thread).
-//! Both error axes are logarithmic; a zero is drawn on the axis's floor, labelled 0.
+//! Left: rays answered wrongly per million (wrong hits on the oracle's sample and on
+//! the hard rays, plus leaks from the closed solids) against Mrays/s; right: the
+//! largest |Δt|/t against Mrays/s. Mrays/s is the geometric mean of the three standard
+//! sets (one thread), with a bar from the geometric mean of the slowest runs to that
+//! of the fastest. Both error axes are logarithmic; a zero is drawn on the axis's
+//! floor, labelled 0. The speed axis is linear, so it always has ticks.
 //! Text uses a subset of DejaVu Sans the binary carries, so the chart looks the same
 //! on every machine, fonts installed or not.
 
@@ -11,6 +13,12 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 use super::{MeshReport, Row};
+
+/// The geometric mean of positive numbers.
+fn geo_mean(xs: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = xs.fold((0.0, 0usize), |(s, n), x| (s + x.max(1e-9).ln(), n + 1));
+    (sum / n.max(1) as f64).exp()
+}
 
 /// DejaVu Sans, subset to the characters the chart draws (assets/DejaVuSans-LICENSE.txt).
 const FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans-subset.ttf");
@@ -24,6 +32,8 @@ struct Point {
     label: String,
     group: &'static str,
     mrays: f64,
+    /// The geometric means of the slowest and the fastest runs.
+    spread: (f64, f64),
     /// Wrong answers per million rays (sample + leaks).
     failures: f64,
     max_relative_dt: f64,
@@ -31,13 +41,13 @@ struct Point {
 
 impl Point {
     fn of(row: &Row) -> Point {
-        let geo_mean = row.mrays.iter().map(|m| m.max(1e-9).ln()).sum::<f64>() / row.mrays.len().max(1) as f64;
-        let wrong = row.errors.wrong as f64 * 1e6 / row.errors.compared.max(1) as f64;
+        let speeds = row.speeds();
         Point {
             label: label(row),
             group: row.knob,
-            mrays: geo_mean.exp(),
-            failures: wrong + row.leaks_per_million,
+            mrays: geo_mean(speeds.iter().map(|s| s.median)),
+            spread: (geo_mean(speeds.iter().map(|s| s.min)), geo_mean(speeds.iter().map(|s| s.max))),
+            failures: row.errors.per_million() + row.hard_wrong_per_million + row.leaks_per_million,
             max_relative_dt: row.errors.max_relative_dt,
         }
     }
@@ -72,6 +82,7 @@ fn colour(group: &str) -> RGBColor {
         "depth limit" => RGBColor(255, 127, 14),
         "leaf target" => RGBColor(148, 103, 189),
         "octree" => RGBColor(23, 190, 207),
+        "baseline" => RGBColor(140, 86, 75),
         _ => RGBColor(127, 127, 127),
     }
 }
@@ -102,9 +113,13 @@ fn draw(rgb: &mut [u8], size: (u32, u32), reports: &[MeshReport]) -> DrawResult 
     for (r, report) in reports.iter().enumerate() {
         let points: Vec<Point> = report.rows.iter().map(Point::of).collect();
         let title = |what: &str| format!("{}: {what}", report.name);
-        panel(&panels[2 * r], &title("wrong answers + leaks per million rays"), "wrong / M rays", &points, |p| {
-            p.failures
-        })?;
+        panel(
+            &panels[2 * r],
+            &title("wrong answers (random, hard) + leaks per M rays"),
+            "wrong / M rays",
+            &points,
+            |p| p.failures,
+        )?;
         panel(&panels[2 * r + 1], &title("largest |Δt|/t on the sample"), "max |Δt|/t", &points, |p| {
             p.max_relative_dt
         })?;
@@ -129,14 +144,16 @@ where
     // A decade below the smallest non-zero error is the floor where zeros sit.
     let (floor, top) =
         if hi > 0.0 { (10f64.powf(lo.log10().floor() - 1.0), 10f64.powf(hi.log10().ceil())) } else { (0.1, 10.0) };
-    let (x_lo, x_hi) = points.iter().fold((f64::INFINITY, 0.0f64), |(l, h), p| (l.min(p.mrays), h.max(p.mrays)));
-    let (x_lo, x_hi) = if x_hi > 0.0 { (x_lo / 1.4, x_hi * 1.6) } else { (0.1, 10.0) };
+    // A linear speed axis from zero: it always has ticks (a log axis over less than a
+    // decade may have none), and the spreads read as lengths.
+    let x_hi = points.iter().map(|p| p.spread.1.max(p.mrays)).fold(0.0f64, f64::max);
+    let x_hi = if x_hi > 0.0 { x_hi * 1.25 } else { 10.0 };
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FAMILY, 18))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(64)
-        .build_cartesian_2d((x_lo..x_hi).log_scale(), (floor..top).log_scale())?;
+        .build_cartesian_2d(0.0..x_hi, (floor..top).log_scale())?;
     let is_floor = move |v: &f64| *v <= floor * 1.0001;
     chart
         .configure_mesh()
@@ -149,6 +166,11 @@ where
         .y_label_formatter(&|v| if is_floor(v) { "0".into() } else { format!("{v:.0e}") })
         .draw()?;
     let at = |p: &Point| (p.mrays, error(p).max(floor));
+    // The runs' spread: a bar from the slowest to the fastest.
+    chart.draw_series(points.iter().map(|p| {
+        let y = error(p).max(floor);
+        PathElement::new(vec![(p.spread.0, y), (p.spread.1, y)], colour(p.group).mix(0.6))
+    }))?;
     chart.draw_series(points.iter().map(|p| Circle::new(at(p), 4, colour(p.group).filled())))?;
     // Configurations with the same errors and close speeds crowd together (most have
     // no error at all): each label takes the first offset, alternately above and
