@@ -168,14 +168,102 @@ struct HitOut {
     flags: u32,
 }
 
-/// Rays a dispatch takes at most (64-thread workgroups, at most 65535 of them).
+/// Rays a dispatch takes at most (and at most 65,535 workgroups of [`Budget::workgroup`]).
 const RAYS_PER_DISPATCH: usize = 1 << 21;
-/// Threads a workgroup (`@workgroup_size` in trace.wgsl).
+/// Threads a workgroup (`WORKGROUP_SIZE` in trace.wgsl) where the adapter runs loops
+/// without a cap.
 const WORKGROUP: u32 = 64;
+/// Workgroups a dispatch dimension may hold (WebGPU's limit).
+const MAX_WORKGROUPS: u32 = 65_535;
+
+/// How the kernels bound their loops on this adapter (see [`loop_cap`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Budget {
+    /// Invocations a workgroup.
+    pub workgroup: u32,
+    /// Loop iterations an invocation may run (`u32::MAX`: no bound).
+    pub loops: u32,
+}
+
+impl Budget {
+    /// The budget for an adapter that caps an invocation's loop iterations at `cap`
+    /// (`None`: no cap). Under a cap, each invocation gets a workgroup of its own (the
+    /// cap is counted per SIMD group of lanes, whose loops run in lockstep: alone, an
+    /// invocation's own count is the group's) and half the cap: the driver's count runs
+    /// ahead of the kernel's own (lavapipe cut the render kernel short when the kernel
+    /// had counted 58,000 to 61,300 iterations: loops of its own making, about 10 %).
+    fn for_cap(cap: Option<u32>) -> Budget {
+        match cap {
+            Some(cap) => Budget { workgroup: 1, loops: cap / 2 },
+            None => Budget { workgroup: WORKGROUP, loops: u32::MAX },
+        }
+    }
+
+    /// Items (rays, pixels) a dispatch takes at most, given a preferred batch.
+    pub(super) fn per_dispatch(&self, preferred: u32) -> u32 {
+        preferred.min(MAX_WORKGROUPS * self.workgroup)
+    }
+}
+
+/// Loop iterations a probe kernel asks one invocation for.
+const PROBE_ITERATIONS: u32 = 1 << 20;
+
+/// The cap the adapter puts on the loop iterations of one shader invocation, if it has
+/// one: one invocation asked for 2^20 iterations of a loop reports how many it ran.
+/// Mesa's llvmpipe (lavapipe) stops every loop of an invocation once their iterations
+/// together reach 65,535 (its guard against infinite loops), without an error: a walk
+/// or a ray tree that needs more is cut short. Hardware drivers have no such cap.
+pub fn loop_cap(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Option<u32>> {
+    let source = format!(
+        "@group(0) @binding(0) var<storage, read_write> out: array<u32>;\n\
+         @compute @workgroup_size(1)\n\
+         fn main() {{\n    var n = 0u;\n    for (var i = 0u; i < {PROBE_ITERATIONS}u; i++) {{\n        n += 1u;\n    }}\n    out[0] = n;\n}}\n"
+    );
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("octrace loop probe"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("octrace loop probe"),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("octrace loop probe"),
+        size: 4,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("octrace loop probe"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }],
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
+    queue.submit([encoder.finish()]);
+    let ran = read_buffer::<u32>(device, queue, &out, 4)?[0];
+    Ok((ran < PROBE_ITERATIONS).then_some(ran))
+}
 
 /// Traces rays through one scene on the GPU.
+///
+/// Where the adapter caps the loop iterations of a shader invocation ([`loop_cap`]:
+/// lavapipe), a walk that would need more than the cap is traced again on the CPU, from
+/// the same scene: the answers are whole whatever the adapter.
 #[derive(Debug)]
-pub struct GpuTracer {
+pub struct GpuTracer<'s> {
+    scene: &'s Scene,
+    cap: Option<u32>,
+    budget: Budget,
     device: wgpu::Device,
     queue: wgpu::Queue,
     nearest: wgpu::ComputePipeline,
@@ -198,13 +286,13 @@ pub struct GpuTimings {
     pub download: Duration,
 }
 
-impl GpuTracer {
+impl<'s> GpuTracer<'s> {
     /// Uploads `scene` to `device` and builds the kernels.
     ///
     /// # Errors
     /// [`GpuError::TooLarge`] when the scene needs more bindings or a larger buffer
     /// than the device allows; [`GpuError::Device`] for a refused resource.
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> GpuResult<GpuTracer> {
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &'s Scene) -> GpuResult<GpuTracer<'s>> {
         Self::with_options(device, queue, scene, GpuOptions::default())
     }
 
@@ -215,9 +303,9 @@ impl GpuTracer {
     pub fn with_options(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        scene: &Scene,
+        scene: &'s Scene,
         options: GpuOptions,
-    ) -> GpuResult<GpuTracer> {
+    ) -> GpuResult<GpuTracer<'s>> {
         let view = scene.view();
         let limits = device.limits();
         let binding_limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
@@ -242,7 +330,9 @@ impl GpuTracer {
         }
         let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
         let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
-        let source = shader_source(scene_buffers.len(), chunk_words, f64_edges);
+        let cap = loop_cap(device, queue)?;
+        let budget = Budget::for_cap(cap);
+        let source = shader_source(scene_buffers.len(), chunk_words, f64_edges, budget);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("octrace trace"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -291,6 +381,9 @@ impl GpuTracer {
             box_hi: [hi[0], hi[1], hi[2], 0.0],
         };
         Ok(GpuTracer {
+            scene,
+            cap,
+            budget,
             device: device.clone(),
             queue: queue.clone(),
             nearest: pipeline(false),
@@ -314,11 +407,15 @@ impl GpuTracer {
         self.chunk_words
     }
 
-    /// Whether the kernel runs its `f64` paths (edge functions, exact and so watertight
-    /// whatever the compiler fuses; point location; hit distances): where the adapter
-    /// has 64-bit floats. Hit distances then keep the
-    /// CPU's bound (`cpu::watertight::plane_distance`); without, they are computed in
-    /// `f32` and long thin triangles lose precision.
+    /// Whether the kernel runs its `f64` paths: where the adapter has 64-bit floats.
+    /// Then every product of the triangle test is exact in `f64` and rounded to `f32`
+    /// once, as the CPU rounds it, whatever the compiler fuses (so edge functions and
+    /// barycentrics are the CPU's bits, and a shared edge is watertight); exact zeros
+    /// are decided in `f64`, as on the CPU; point location and hit distances are the
+    /// CPU's `f64` computations (`cpu::watertight::plane_distance`, in the same order).
+    /// Without `f64` they are computed in `f32`: long thin triangles lose precision,
+    /// the last bits are the adapter's, and a shared edge stays watertight only where
+    /// the compiler does not fuse a product into the edge function's subtraction.
     pub fn uses_f64(&self) -> bool {
         self.f64_edges
     }
@@ -363,14 +460,46 @@ impl GpuTracer {
         Ok((out.iter().map(to_hit).collect(), timings))
     }
 
-    /// Runs the kernel over `rays` in dispatches of at most [`RAYS_PER_DISPATCH`].
+    /// The loop cap of the adapter this tracer runs on, if it has one ([`loop_cap`]).
+    pub fn loop_cap(&self) -> Option<u32> {
+        self.cap
+    }
+
+    /// The scene this tracer traces.
+    pub(super) fn scene(&self) -> &'s Scene {
+        self.scene
+    }
+
+    /// How the kernels bound their loops.
+    pub(super) fn budget(&self) -> Budget {
+        self.budget
+    }
+
+    /// Runs the kernel over `rays` in dispatches of at most [`RAYS_PER_DISPATCH`]; the
+    /// walks that ran out of loop budget are traced again on the CPU.
     fn run(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
+        let (mut out, timings) = self.run_kernel(rays, any)?;
+        let tracer = self.scene.tracer();
+        for (h, r) in out.iter_mut().zip(rays).filter(|(h, _)| h.steps == OVER_BUDGET) {
+            *h = if any {
+                from_hit(tracer.occluder(r), WalkStats::default())
+            } else {
+                let (hit, stats) = tracer.intersect_with_stats(r);
+                from_hit(hit, stats)
+            };
+        }
+        Ok((out, timings))
+    }
+
+    /// The kernel's answers for `rays`, and the time each part took.
+    fn run_kernel(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
         let mut out = Vec::with_capacity(rays.len());
         let mut timings = GpuTimings::default();
         if rays.is_empty() {
             return Ok((out, timings));
         }
-        let batch = rays.len().min(RAYS_PER_DISPATCH);
+        let per_dispatch = self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as usize;
+        let batch = rays.len().min(per_dispatch);
         let ray_bytes = (batch * std::mem::size_of::<Ray>()) as u64;
         let hit_bytes = (batch * std::mem::size_of::<HitOut>()) as u64;
         use wgpu::BufferUsages as U;
@@ -381,7 +510,7 @@ impl GpuTracer {
             self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
         let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
         let pipeline = if any { &self.any } else { &self.nearest };
-        for part in rays.chunks(RAYS_PER_DISPATCH) {
+        for part in rays.chunks(per_dispatch) {
             let t = Instant::now();
             let params = Params { ray_count: part.len() as u32, ..self.params };
             self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
@@ -396,7 +525,7 @@ impl GpuTracer {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups((part.len() as u32).div_ceil(WORKGROUP), 1, 1);
+                pass.dispatch_workgroups((part.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
             }
             self.queue.submit([encoder.finish()]);
             self.wait()?;
@@ -412,7 +541,7 @@ impl GpuTracer {
 
     /// The kernel's source for this scene's bindings.
     fn source(&self) -> String {
-        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges)
+        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges, self.budget)
     }
 
     /// A bind group for the tracing layout with the scene's buffers (and empty rays
@@ -467,30 +596,62 @@ impl GpuTracer {
         readback: &wgpu::Buffer,
         bytes: u64,
     ) -> GpuResult<Vec<T>> {
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, readback, 0, bytes);
-        self.queue.submit([encoder.finish()]);
-        let slice = readback.slice(..bytes);
-        let (send, receive) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = send.send(r);
-        });
-        self.wait()?;
-        receive.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
-        let out = {
-            let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
-            bytemuck::cast_slice(&mapped).to_vec()
-        };
-        readback.unmap();
-        Ok(out)
+        read_buffer_into(&self.device, &self.queue, buffer, readback, bytes)
     }
 
     fn wait(&self) -> GpuResult<()> {
-        self.device
-            .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
-            .map(drop)
-            .map_err(|e| GpuError::Device(e.to_string()))
+        wait(&self.device)
     }
+}
+
+/// Waits for the device's work.
+fn wait(device: &wgpu::Device) -> GpuResult<()> {
+    device
+        .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
+        .map(drop)
+        .map_err(|e| GpuError::Device(e.to_string()))
+}
+
+/// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
+fn read_buffer<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+) -> GpuResult<Vec<T>> {
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("octrace readback"),
+        size: bytes.max(4),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    read_buffer_into(device, queue, buffer, &readback, bytes)
+}
+
+/// The first `bytes` of `buffer`, through `readback` (a mappable buffer).
+fn read_buffer_into<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    readback: &wgpu::Buffer,
+    bytes: u64,
+) -> GpuResult<Vec<T>> {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, readback, 0, bytes);
+    queue.submit([encoder.finish()]);
+    let slice = readback.slice(..bytes);
+    let (send, receive) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = send.send(r);
+    });
+    wait(device)?;
+    receive.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
+    let out = {
+        let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
+        bytemuck::cast_slice(&mapped).to_vec()
+    };
+    readback.unmap();
+    Ok(out)
 }
 
 /// The arrays the kernel walks: octree, tri_refs, triangles, triangle_ids, boxes,
@@ -500,6 +661,27 @@ const TRACE_ARRAYS: usize = 7;
 fn to_hit(h: &HitOut) -> Option<Hit> {
     (h.triangle != u32::MAX).then_some(Hit { t: h.t, triangle: h.triangle, u: h.u, v: h.v, leaf: h.leaf, prim: h.prim })
 }
+
+/// The kernel's record of a CPU answer (for the walks traced again on the CPU).
+fn from_hit(hit: Option<Hit>, stats: WalkStats) -> HitOut {
+    let flags = stats.stopped_at_bound as u32 | stats.triangle_tests.min(0x7FFF_FFFF) << 1;
+    match hit {
+        Some(h) => HitOut {
+            t: h.t,
+            triangle: h.triangle,
+            u: h.u,
+            v: h.v,
+            leaf: h.leaf,
+            prim: h.prim,
+            steps: stats.leaves,
+            flags,
+        },
+        None => HitOut { t: 0.0, triangle: u32::MAX, u: 0.0, v: 0.0, leaf: 0, prim: 0, steps: stats.leaves, flags },
+    }
+}
+
+/// `HitOut::steps` of a walk that ran out of loop budget (`OVER_BUDGET` in trace.wgsl).
+const OVER_BUDGET: u32 = u32::MAX;
 
 fn offsets_of(arrays: &[&[u32]; TRACE_ARRAYS]) -> GpuResult<Offsets> {
     let mut at = [0u64; 8];
@@ -589,8 +771,9 @@ fn bind_group_layout(device: &wgpu::Device, chunks: usize) -> wgpu::BindGroupLay
 
 /// The kernel's source: trace.wgsl with the scene's bindings, the `word` accessor over
 /// them, and the precision-dependent helpers.
-fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
-    let mut g = String::new();
+fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budget) -> String {
+    let mut g =
+        format!("const WORKGROUP_SIZE: u32 = {}u;\nconst LOOP_BUDGET: u32 = {}u;\n", budget.workgroup, budget.loops);
     for k in 0..chunks {
         g += &format!("@group(0) @binding({}) var<storage, read> scene_{k}: array<u32>;\n", 3 + k);
     }
@@ -611,6 +794,9 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
         // whatever the compiler fuses.
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    \
               return f32(f64(px) * f64(qy) - f64(py) * f64(qx));\n}\n";
+        // The product of two f32s is exact in f64: rounded to f32 it is the f32
+        // product, bit for bit, and no longer a multiply a compiler may fuse.
+        g += "fn product(a: f32, b: f32) -> f32 {\n    return f32(f64(a) * f64(b));\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f64((1u << params.max_depth) - 1u);\n    \
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
@@ -618,6 +804,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool) -> String {
         g += &plane_distance_source("f64");
     } else {
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
+        g += "fn product(a: f32, b: f32) -> f32 {\n    return a * b;\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
@@ -662,13 +849,15 @@ mod tests {
 
     /// The generated kernels (tracing, and rendering on top of it) parse and validate
     /// (naga, no device needed) for one binding and for a split scene, with and
-    /// without f64.
+    /// without f64, with and without a loop cap.
     #[test]
     fn the_kernel_source_is_valid_wgsl() {
         for (chunks, f64_edges) in [(1, false), (1, true), (3, false), (5, true)] {
-            let trace = shader_source(chunks, 1 << 10, f64_edges);
-            for source in [trace.clone(), render::render_source(&trace, 6)] {
-                validate(&source, f64_edges, chunks);
+            for budget in [Budget::for_cap(None), Budget::for_cap(Some(65_535))] {
+                let trace = shader_source(chunks, 1 << 10, f64_edges, budget);
+                for source in [trace.clone(), render::render_source(&trace, 6)] {
+                    validate(&source, f64_edges, chunks);
+                }
             }
         }
     }
@@ -678,7 +867,7 @@ mod tests {
     #[test]
     fn host_structs_match_the_kernels() {
         use std::mem::{offset_of, size_of};
-        let source = render::render_source(&shader_source(1, 1 << 10, false), 6);
+        let source = render::render_source(&shader_source(1, 1 << 10, false, Budget::for_cap(None)), 6);
         let module = naga::front::wgsl::parse_str(&source).expect("valid");
         let layout = |name: &str| {
             let ty = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name).1;

@@ -3,10 +3,11 @@
 
 use glam::Vec3;
 use octrace_format::{Effect, LightKind, Material};
+use rayon::prelude::*;
 
-use super::{GpuError, GpuResult, GpuTracer, WORKGROUP};
+use super::{GpuError, GpuResult, GpuTracer};
 use crate::raysets::Camera;
-use crate::render::effects::{EffectSet, Radiance, RayCounts, RenderOptions};
+use crate::render::effects::{EffectSet, LightSum, Radiance, RayCounts, RenderOptions};
 use crate::render::lighting::{self, Emitters, PLAIN};
 use crate::scene::Scene;
 use crate::spawn::gamma;
@@ -15,6 +16,8 @@ use crate::spawn::gamma;
 pub const MAX_GPU_DEPTH: u32 = 31;
 /// Pixels a dispatch renders at most.
 const PIXELS_PER_DISPATCH: u32 = 1 << 20;
+/// Words of a pixel's record in the kernel's `pixel_io` (render.wgsl).
+const PIXEL_WORDS: usize = 8;
 /// Words of a material record (`material` in render.wgsl).
 const MATERIAL_WORDS: usize = 28;
 /// Words of a light record (`punctual` in render.wgsl).
@@ -25,9 +28,6 @@ const LIGHT_WORDS: usize = 16;
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub(super) struct RenderParams {
     eye: [f32; 4],
-    right: [f32; 4],
-    up: [f32; 4],
-    back: [f32; 4],
     width: u32,
     height: u32,
     first_pixel: u32,
@@ -51,9 +51,8 @@ pub(super) struct RenderParams {
 #[cfg(test)]
 impl RenderParams {
     /// Members of the WGSL struct and the Rust fields' offsets, for the layout test.
-    pub(super) const OFFSETS: [(&'static str, usize); 6] = [
+    pub(super) const OFFSETS: [(&'static str, usize); 5] = [
         ("eye", std::mem::offset_of!(RenderParams, eye)),
-        ("back", std::mem::offset_of!(RenderParams, back)),
         ("width", std::mem::offset_of!(RenderParams, width)),
         ("o_materials", std::mem::offset_of!(RenderParams, o_materials)),
         ("plain_material", std::mem::offset_of!(RenderParams, plain_material)),
@@ -85,16 +84,18 @@ impl RenderParams {
 /// # Ok(()) }
 /// ```
 #[derive(Debug)]
-pub struct GpuRenderer<'t> {
-    tracer: &'t GpuTracer,
+pub struct GpuRenderer<'t, 's> {
+    tracer: &'t GpuTracer<'s>,
     pipeline: wgpu::ComputePipeline,
     scene_group: wgpu::BindGroup,
     render_layout: wgpu::BindGroupLayout,
     shade: wgpu::Buffer,
     params: RenderParams,
+    /// The options, for the pixels rendered again on the CPU.
+    options: RenderOptions,
 }
 
-impl<'t> GpuRenderer<'t> {
+impl<'t, 's> GpuRenderer<'t, 's> {
     /// Uploads what shading needs besides the tracer's arrays (materials, lights,
     /// emitters, and the file's material ids and normals as they are) and makes the
     /// pipeline for `options`.
@@ -103,7 +104,7 @@ impl<'t> GpuRenderer<'t> {
     /// [`GpuError::Unsupported`] for `max_depth` above [`MAX_GPU_DEPTH`];
     /// [`GpuError::TooLarge`] when the shading data exceed one storage binding;
     /// [`GpuError::Device`] for a refused resource.
-    pub fn new(tracer: &'t GpuTracer, scene: &Scene, options: &RenderOptions) -> GpuResult<GpuRenderer<'t>> {
+    pub fn new(tracer: &'t GpuTracer<'s>, scene: &Scene, options: &RenderOptions) -> GpuResult<GpuRenderer<'t, 's>> {
         if options.max_depth > MAX_GPU_DEPTH {
             return Err(GpuError::Unsupported(format!(
                 "the GPU renders ray trees at most {MAX_GPU_DEPTH} deep; {} asked for (the CPU renders any depth)",
@@ -148,11 +149,13 @@ impl<'t> GpuRenderer<'t> {
             cache: None,
         });
         let scene_group = tracer.scene_bind_group();
-        Ok(GpuRenderer { tracer, pipeline, scene_group, render_layout, shade, params })
+        Ok(GpuRenderer { tracer, pipeline, scene_group, render_layout, shade, params, options: *options })
     }
 
     /// Renders through `camera`: the radiance of every pixel and the rays traced per
-    /// kind.
+    /// kind. Where the adapter caps shader loops (lavapipe, `gpu::loop_cap`), a pixel
+    /// whose ray tree needs more loop iterations than the cap is rendered again on the
+    /// CPU, so the image and the counts are whole whatever the adapter.
     ///
     /// # Errors
     /// [`GpuError::Device`] if the device is lost or a buffer cannot be read.
@@ -160,13 +163,13 @@ impl<'t> GpuRenderer<'t> {
         let device = &self.tracer.device;
         let queue = &self.tracer.queue;
         let total = camera.width * camera.height;
-        let batch = total.clamp(1, PIXELS_PER_DISPATCH);
+        let batch = total.clamp(1, self.tracer.budget().per_dispatch(PIXELS_PER_DISPATCH));
         use wgpu::BufferUsages as U;
-        let out_bytes = 16 * u64::from(batch);
+        let out_bytes = 4 * PIXEL_WORDS as u64 * u64::from(batch);
         let count_bytes = 4 * 12;
         let params_size = std::mem::size_of::<RenderParams>() as u64;
         let params_buffer = self.tracer.buffer("octrace render params", params_size, U::UNIFORM | U::COPY_DST);
-        let out = self.tracer.buffer("octrace radiance", out_bytes, U::STORAGE | U::COPY_SRC);
+        let out = self.tracer.buffer("octrace pixels", out_bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
         let counts = self.tracer.buffer("octrace ray counts", count_bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("octrace render"),
@@ -178,17 +181,11 @@ impl<'t> GpuRenderer<'t> {
                 wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
             ],
         });
-        let to4 = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
-        let mut params = RenderParams {
-            eye: to4(camera.eye, camera.tan_half_fov),
-            right: to4(camera.u, f64::from(camera.width) / f64::from(camera.height)),
-            up: to4(camera.s, 0.0),
-            back: to4(camera.w, 0.0),
-            width: camera.width,
-            height: camera.height,
-            ..self.params
-        };
+        let eye = camera.ray(0, 0).origin;
+        let mut params =
+            RenderParams { eye: [eye.x, eye.y, eye.z, 0.0], width: camera.width, height: camera.height, ..self.params };
         let mut pixels = Vec::with_capacity(total as usize);
+        let mut over = Vec::new();
         let mut sums = [0u64; 6];
         let mut first = 0;
         while first < total {
@@ -196,6 +193,17 @@ impl<'t> GpuRenderer<'t> {
             params.first_pixel = first;
             params.pixel_count = n;
             queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+            // The primary rays are the CPU camera's, bit for bit (render.wgsl reads
+            // them from the pixels' words, where it then writes their light).
+            let w = camera.width;
+            let directions: Vec<[u32; PIXEL_WORDS]> = (first..first + n)
+                .into_par_iter()
+                .map(|p| {
+                    let d = camera.ray(p % w, p / w).dir;
+                    [d.x.to_bits(), d.y.to_bits(), d.z.to_bits(), 0, 0, 0, 0, 0]
+                })
+                .collect();
+            queue.write_buffer(&out, 0, bytemuck::cast_slice(&directions));
             let mut encoder = device.create_command_encoder(&Default::default());
             encoder.clear_buffer(&counts, 0, None);
             {
@@ -203,19 +211,35 @@ impl<'t> GpuRenderer<'t> {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.scene_group, &[]);
                 pass.set_bind_group(1, &group, &[]);
-                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+                pass.dispatch_workgroups(n.div_ceil(self.tracer.budget().workgroup), 1, 1);
             }
             queue.submit([encoder.finish()]);
-            let radiance: Vec<[f32; 4]> = self.tracer.read_back(&out, 16 * u64::from(n))?;
-            pixels.extend(radiance.iter().map(|p| Vec3::new(p[0], p[1], p[2])));
+            let words: Vec<u32> = self.tracer.read_back(&out, 4 * PIXEL_WORDS as u64 * u64::from(n))?;
+            let sum = |w: &[u32], c: usize| u64::from(w[2 * c]) | u64::from(w[2 * c + 1]) << 32;
+            for (i, w) in (first..).zip(words.chunks_exact(PIXEL_WORDS)) {
+                pixels.push(LightSum([sum(w, 0), sum(w, 1), sum(w, 2)]).radiance());
+                // Word 6: out of loop budget (render.wgsl), rendered again below.
+                if w[6] != 0 {
+                    over.push(i);
+                }
+            }
             let c: Vec<u32> = self.tracer.read_back(&counts, count_bytes)?;
             for (k, s) in sums.iter_mut().enumerate() {
                 *s += u64::from(c[2 * k]) | u64::from(c[2 * k + 1]) << 32;
             }
             first += n;
         }
+        let mut counts = RayCounts::from_array(sums);
+        if !over.is_empty() {
+            let scene = self.tracer.scene();
+            let (redone, cpu_counts) = crate::render::effects::render_pixels(scene, camera, &self.options, &over);
+            for (&i, p) in over.iter().zip(redone) {
+                pixels[i as usize] = p;
+            }
+            counts = counts.merge(cpu_counts);
+        }
         let radiance = Radiance { width: camera.width, height: camera.height, pixels };
-        Ok((radiance, RayCounts::from_array(sums)))
+        Ok((radiance, counts))
     }
 }
 
@@ -329,10 +353,20 @@ fn render_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 /// The render kernel's source: the tracing kernel's (`trace`), the constants the
 /// host fixes, render.wgsl.
 pub(super) fn render_source(trace: &str, max_depth: u32) -> String {
+    let floats = |name: &str, xs: &[f32]| {
+        let xs: Vec<String> = xs.iter().map(|x| format!("{x:e}f")).collect();
+        format!("const {name}: array<f32, {}> = array<f32, {}>({});\n", xs.len(), xs.len(), xs.join(", "))
+    };
     format!(
-        "{trace}\nconst STACK_SIZE: u32 = {}u;\nconst GAMMA_7: f32 = {:e}f;\n{}",
+        "{trace}\nconst STACK_SIZE: u32 = {}u;\nconst GAMMA_7: f32 = {:e}f;\n\
+         const SQRT_2: f32 = {:e}f;\nconst LOG2_E: f32 = {:e}f;\nconst LN_2: f32 = {:e}f;\n{}{}{}",
         2 * max_depth + 1,
         gamma(7),
+        std::f32::consts::SQRT_2,
+        std::f32::consts::LOG2_E,
+        std::f32::consts::LN_2,
+        floats("POWER_LN", &lighting::POWER_LN),
+        floats("POWER_EXP", &lighting::POWER_EXP),
         include_str!("render.wgsl")
     )
 }

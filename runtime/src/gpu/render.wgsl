@@ -22,14 +22,8 @@ override ALPHA: bool = true;
 override HEADLIGHT: bool = false;
 
 struct RenderParams {
-    // xyz: the eye; w: tan(fov / 2).
+    // xyz: the eye (the primary rays' directions come in `pixel_io`).
     eye: vec4<f32>,
-    // xyz: right; w: width / height.
-    right: vec4<f32>,
-    // xyz: up.
-    up: vec4<f32>,
-    // xyz: backwards (from the target to the eye).
-    back: vec4<f32>,
     width: u32,
     height: u32,
     first_pixel: u32,
@@ -59,7 +53,11 @@ struct RenderParams {
 // emitters (4 words: radiance rgb, running area), emitter triangles (1 word), material
 // ids and normals (the file's sections, as they are).
 @group(1) @binding(1) var<storage, read> shade: array<u32>;
-@group(1) @binding(2) var<storage, read_write> radiance_out: array<vec4<f32>>;
+// Eight words a pixel. In: the direction of its primary ray (words 0-2, f32 bits), the
+// CPU camera's (raysets::Camera::ray), so the GPU traces exactly the CPU's rays. Out:
+// its light sum (`light_sum`, words 0-5) and in word 6 whether it ran out of loop
+// budget.
+@group(1) @binding(2) var<storage, read_write> pixel_io: array<u32>;
 // Rays traced per kind (RayKind order), summed over the dispatch: 64 bits each, low
 // word first.
 @group(1) @binding(3) var<storage, read_write> ray_counts: array<atomic<u32>, 12>;
@@ -111,6 +109,10 @@ struct SpawnPoint {
 
 var<private> stack: array<Task, STACK_SIZE>;
 var<private> counts: array<u32, 6>;
+// The pixel's light (effects.rs's `LightSum`): per channel a 64-bit sum of 32.32 fixed
+// point terms, low word first. Integer sums do not depend on the order of the terms,
+// which this kernel adds ray tree by ray tree and the CPU wave by wave.
+var<private> light_sum: array<u32, 6>;
 var<workgroup> group_counts: array<atomic<u32>, 6>;
 
 fn sf(i: u32) -> f32 {
@@ -125,6 +127,13 @@ fn max3(v: vec3<f32>) -> f32 {
     return max(max(v.x, v.y), v.z);
 }
 
+// glam's `normalize`: `v` times the reciprocal of its length (WGSL's `normalize` is
+// the adapter's; lavapipe's differs from this in the last bit of a quarter of vectors).
+fn unit(v: vec3<f32>) -> vec3<f32> {
+    return v * (1.0 / length(v));
+}
+
+// glam's `normalize_or_zero`.
 fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     let r = 1.0 / length(v);
     if is_finite(r) && r > 0.0 {
@@ -174,8 +183,14 @@ fn vertex(prim: u32, corner: u32) -> vec3<f32> {
     return vec3<f32>(wordf(at), wordf(at + 1u), wordf(at + 2u));
 }
 
+// glam's `cross`, in its order (WGSL's `cross` is the adapter's: lavapipe's differs
+// from this in the last bit of a third of cases).
+fn cross3(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+
 fn face_normal(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
-    return normalize_or_zero(cross(b - a, c - a));
+    return normalize_or_zero(cross3(b - a, c - a));
 }
 
 fn spawn_point(prim: u32, hit: HitOut) -> SpawnPoint {
@@ -220,34 +235,101 @@ fn uniform2(pixel: u32, depth: u32, sample: u32) -> vec2<f32> {
     return vec2<f32>(f32(a >> 8u), f32(b >> 8u)) * (1.0 / 16777216.0);
 }
 
+// lighting::power: x^e for the highlight, with lighting.rs's operations in its order
+// (not WGSL's `pow`, the adapter's own approximation), so the lobe, and whether a
+// shadow ray is traced for it, is the CPU's.
+fn power(x: f32, e: f32) -> f32 {
+    if !(x >= F32_MIN_POSITIVE) {
+        return 0.0;
+    }
+    let bits = bitcast<u32>(x);
+    var k = i32(bits >> 23u) - 127;
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    if m > SQRT_2 {
+        m *= 0.5;
+        k += 1;
+    }
+    let f = (m - 1.0) / (m + 1.0);
+    let s = f * f;
+    let l = POWER_LN;
+    let ln_m = 2.0 * f * (1.0 + s * (l[0] + s * (l[1] + s * (l[2] + s * l[3]))));
+    let y = e * (f32(k) + ln_m * LOG2_E);
+    let n = floor(y + 0.5);
+    if !(n >= -126.0) {
+        return 0.0;
+    }
+    if n > 127.0 {
+        return inf();
+    }
+    let r = (y - n) * LN_2;
+    let c = POWER_EXP;
+    let two_r = 1.0 + r * (c[0] + r * (c[1] + r * (c[2] + r * (c[3] + r * (c[4] + r * (c[5] + r * c[6]))))));
+    return two_r * bitcast<f32>(u32(i32(n) + 127) << 23u);
+}
+
+// LightSum::add: `x` rounded down to a multiple of 2^-32 (nothing for x <= 0 or NaN,
+// all ones from 2^32 up) and added to channel `c`, saturating.
+fn add_channel(c: u32, x: f32) {
+    if !(x > 0.0) {
+        return;
+    }
+    var hi = 0xffffffffu;
+    var lo = 0xffffffffu;
+    if x < 4294967296.0 {
+        let whole = floor(x);
+        hi = u32(whole);
+        lo = u32((x - whole) * 4294967296.0);
+    }
+    let lo0 = light_sum[2u * c];
+    let hi0 = light_sum[2u * c + 1u];
+    let lo1 = lo0 + lo;
+    let hi1 = hi0 + hi;
+    let hi2 = hi1 + select(0u, 1u, lo1 < lo0);
+    if hi1 < hi0 || hi2 < hi1 {
+        light_sum[2u * c] = 0xffffffffu;
+        light_sum[2u * c + 1u] = 0xffffffffu;
+    } else {
+        light_sum[2u * c] = lo1;
+        light_sum[2u * c + 1u] = hi2;
+    }
+}
+
+// One term of the pixel's light.
+fn add_light(v: vec3<f32>) {
+    add_channel(0u, v.x);
+    add_channel(1u, v.y);
+    add_channel(2u, v.z);
+}
+
 // lighting::reflectance: Lambert plus a normalised Blinn-Phong highlight.
 fn reflectance(m: Material, transmits: bool, n: vec3<f32>, v: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let kd = select(m.albedo, m.albedo_transmits, transmits);
     let h = normalize_or_zero(v + l);
     var spec = vec3<f32>(0.0);
     if any(m.ks != vec3<f32>(0.0)) {
-        let lobe = pow(max(dot(n, h), 0.0), m.exponent);
+        let lobe = power(max(dot(n, h), 0.0), m.exponent);
         spec = m.ks * (m.exponent + 8.0) / (8.0 * PI) * select(0.0, lobe, lobe >= F32_MIN_POSITIVE);
     }
     return kd / PI + spec;
 }
 
-// What reaches a shadow ray's end: 1 when nothing blocks it, 0 when something does, and
-// with alpha or refraction what the surfaces it crosses let through.
-fn shadow(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32) -> vec3<f32> {
+// What of `value0` reaches a shadow ray's end: all of it when nothing blocks it, none
+// when something does, and with alpha or refraction what the surfaces it crosses let
+// through, dimmed surface by surface as Context::trace_shadows does.
+fn shadowed(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32, value0: vec3<f32>) -> vec3<f32> {
     if !(ALPHA || REFRACTION) {
         counts[kind] += 1u;
         let blocked = trace(o0, d, 0.0, tmax0, true).triangle != MISS;
-        return select(vec3<f32>(1.0), vec3<f32>(0.0), blocked);
+        return select(value0, vec3<f32>(0.0), blocked);
     }
     var o = o0;
     var tmax = tmax0;
-    var through = vec3<f32>(1.0);
-    for (var layers = 0u; layers <= MAX_SHADOW_LAYERS; layers++) {
+    var value = value0;
+    for (var layers = 0u; layers <= MAX_SHADOW_LAYERS && tick(); layers++) {
         counts[kind] += 1u;
         let hit = trace(o, d, 0.0, tmax, false);
         if hit.triangle == MISS {
-            return through;
+            return value;
         }
         let m = material(hit.prim);
         var coverage = 1.0;
@@ -264,7 +346,7 @@ fn shadow(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32) -> vec3<f32> {
         }
         o = spawn_origin(spawn_point(hit.prim, hit), d);
         tmax = tmax - hit.t;
-        through *= passes;
+        value = value * passes;
     }
     return vec3<f32>(0.0);
 }
@@ -294,43 +376,46 @@ struct Surface {
     weight: vec3<f32>,
 }
 
-fn light(s: Surface, to: vec3<f32>, tmax: f32, incident: vec3<f32>, kind: u32) -> vec3<f32> {
+fn light(s: Surface, to: vec3<f32>, tmax: f32, incident: vec3<f32>, kind: u32) {
     let l = normalize_or_zero(to);
     let cos = dot(s.n, l);
     if cos <= 0.0 || dot(s.ng, l) <= 0.0 {
-        return vec3<f32>(0.0);
+        return;
     }
     let value = s.weight * reflectance(s.m, s.transmits, s.n, s.v, l) * incident * cos;
     // Below f32's normal range is nothing (GPUs flush it to zero; so does the CPU here).
     if !(max3(value) >= F32_MIN_POSITIVE) {
-        return vec3<f32>(0.0);
+        return;
     }
     if SHADOWS {
-        return value * shadow(spawn_origin(s.sp, to), to, tmax, kind);
+        add_light(shadowed(spawn_origin(s.sp, to), to, tmax, kind, value));
+    } else {
+        add_light(value);
     }
-    return value;
 }
 
 // lighting::punctual for light `i`, seen from `p`.
-fn punctual(s: Surface, i: u32, p: vec3<f32>) -> vec3<f32> {
+fn punctual(s: Surface, i: u32, p: vec3<f32>) {
     let at = rp.o_lights + 16u * i;
     let kind = shade[at];
     let colour = sv3(at + 4u);
     let direction = sv3(at + 12u);
     if kind == 2u {
-        return light(s, -direction, inf(), colour, SHADOW);
+        light(s, -direction, inf(), colour, SHADOW);
+        return;
     }
     let to_light = sv3(at + 8u) - p;
     let d2 = dot(to_light, to_light);
     if d2 == 0.0 || !is_finite(d2) {
-        return vec3<f32>(0.0);
+        return;
     }
     let d = sqrt(d2);
     let range = sf(at + 1u);
     var window = 1.0;
     if is_finite(range) {
         let x = d / range;
-        let w = clamp(1.0 - x * x * x * x, 0.0, 1.0);
+        let x2 = x * x;
+        let w = clamp(1.0 - x2 * x2, 0.0, 1.0);
         window = w * w;
     }
     var falloff = window / d2;
@@ -342,9 +427,9 @@ fn punctual(s: Surface, i: u32, p: vec3<f32>) -> vec3<f32> {
         falloff *= x * x;
     }
     if !(falloff > 0.0) {
-        return vec3<f32>(0.0);
+        return;
     }
-    return light(s, to_light, 1.0, colour * falloff, SHADOW);
+    light(s, to_light, 1.0, colour * falloff, SHADOW);
 }
 
 // Emitters::pick: the emitter whose running area passes u * total.
@@ -352,7 +437,7 @@ fn pick_emitter(u: f32) -> u32 {
     let target_area = u * rp.emitter_area;
     var lo = 0u;
     var hi = rp.emitter_count;
-    while lo < hi {
+    while lo < hi && tick() {
         let mid = (lo + hi) / 2u;
         if sf(rp.o_emitters + 4u * mid + 3u) <= target_area {
             lo = mid + 1u;
@@ -364,14 +449,13 @@ fn pick_emitter(u: f32) -> u32 {
 }
 
 // Context::sample_area_lights.
-fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) -> vec3<f32> {
+fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
     var samples = 1u;
     if SOFT_SHADOWS {
         samples = max(rp.soft_samples, 1u);
     }
     let scale = rp.emitter_area / f32(samples);
-    var sum = vec3<f32>(0.0);
-    for (var k = 0u; k < samples; k++) {
+    for (var k = 0u; k < samples && tick(); k++) {
         let e = pick_emitter(uniform2(pixel, depth, 2u * k).x);
         let emitted = sv3(rp.o_emitters + 4u * e);
         let prim = shade[rp.o_emitters + 4u * rp.emitter_count + e];
@@ -391,10 +475,9 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) -> vec3<f32> {
         let cos_y = abs(dot(face_normal(a, b, c), to)) / sqrt(d2);
         if d2 > 0.0 && cos_y > 0.0 {
             let kind = select(SHADOW, SOFT_SHADOW, SOFT_SHADOWS);
-            sum += light(s, to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
+            light(s, to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
         }
     }
-    return sum;
 }
 
 // A ray pushed for later, when it carries enough to see.
@@ -407,11 +490,11 @@ fn push(sp: ptr<function, u32>, o: vec3<f32>, d: vec3<f32>, weight: vec3<f32>, d
 
 // Context::shade: the light of `task`'s hit that needs no further ray (shadow rays are
 // traced here), the other rays pushed.
-fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) -> vec3<f32> {
+fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     var s: Surface;
     s.sp = spawn_point(hit.prim, hit);
     s.m = material(hit.prim);
-    let dir = normalize(task.d);
+    let dir = unit(task.d);
     var ng = s.sp.normal;
     let entering = dot(ng, dir) < 0.0;
     if !entering {
@@ -432,26 +515,26 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) -> vec
         }
     }
     if coverage <= 0.0 {
-        return vec3<f32>(0.0);
+        return;
     }
     s.weight = task.weight * coverage;
     s.v = -dir;
     s.transmits = REFRACTION && s.m.transmission > 0.0;
-    var radiance = s.weight * s.m.emissive;
+    add_light(s.weight * s.m.emissive);
     let p = s.sp.point;
     if HEADLIGHT {
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
-        radiance += s.weight * kd * (HEADLIGHT_AMBIENT + HEADLIGHT_DIRECT * abs(dot(s.n, s.v)));
+        add_light(s.weight * kd * (HEADLIGHT_AMBIENT + HEADLIGHT_DIRECT * abs(dot(s.n, s.v))));
     } else {
-        for (var i = 0u; i < rp.light_count; i++) {
-            radiance += punctual(s, i, p);
+        for (var i = 0u; i < rp.light_count && tick(); i++) {
+            punctual(s, i, p);
         }
         if rp.emitter_count > 0u {
-            radiance += area_lights(s, pixel, task.depth, p);
+            area_lights(s, pixel, task.depth, p);
         }
     }
     if !can_continue {
-        return radiance;
+        return;
     }
     // Context::secondary.
     let n = s.n;
@@ -485,42 +568,43 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) -> vec
         let w = reflected + s.weight * s.m.mirror;
         push(sp, spawn_origin(s.sp, r), r, w, task.depth + 1u, REFLECTION_RAY);
     }
-    return radiance;
 }
 
-fn render_pixel(pixel: u32) -> vec3<f32> {
-    let x = pixel % rp.width;
-    let y = pixel / rp.width;
-    let tan_half = rp.eye.w;
-    let px = (2.0 * (f32(x) + 0.5) / f32(rp.width) - 1.0) * tan_half * rp.right.w;
-    let py = (1.0 - 2.0 * (f32(y) + 0.5) / f32(rp.height)) * tan_half;
-    let d = normalize(px * rp.right.xyz + py * rp.up.xyz - rp.back.xyz);
+// The light of pixel `pixel`, whose primary ray leaves the eye along `d`, into
+// `light_sum`.
+fn render_pixel(pixel: u32, d: vec3<f32>) {
     var sp = 1u;
     stack[0] = Task(rp.eye.xyz, 0u, d, PRIMARY, vec3<f32>(1.0));
-    var radiance = vec3<f32>(0.0);
     // Every push is one level deeper and depths are bounded: the loop ends.
-    while sp > 0u {
+    while sp > 0u && tick() {
         sp -= 1u;
         let task = stack[sp];
         counts[task.kind] += 1u;
         let hit = trace(task.o, task.d, 0.0, inf(), false);
         if hit.triangle == MISS {
-            radiance += task.weight * BACKGROUND;
+            add_light(task.weight * BACKGROUND);
         } else {
-            radiance += shade_hit(task, hit, pixel, &sp);
+            shade_hit(task, hit, pixel, &sp);
         }
     }
-    return radiance;
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = gid.x;
     if i < rp.pixel_count {
-        radiance_out[i] = vec4<f32>(render_pixel(rp.first_pixel + i), 1.0);
+        let at = 8u * i;
+        let d = vec3<f32>(bitcast<f32>(pixel_io[at]), bitcast<f32>(pixel_io[at + 1u]), bitcast<f32>(pixel_io[at + 2u]));
+        render_pixel(rp.first_pixel + i, d);
+        for (var k = 0u; k < 6u; k++) {
+            pixel_io[at + k] = light_sum[k];
+        }
+        // A pixel that ran out of loop budget (trace.wgsl, `tick`) is rendered again
+        // on the CPU: word 6 says so, and its rays are not counted here.
+        pixel_io[at + 6u] = select(0u, 1u, over_budget);
     }
     for (var k = 0u; k < 6u; k++) {
-        if counts[k] != 0u {
+        if counts[k] != 0u && !over_budget {
             atomicAdd(&group_counts[k], counts[k]);
         }
     }

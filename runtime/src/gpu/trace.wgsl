@@ -58,6 +58,27 @@ struct HitOut {
 
 //GENERATED//
 
+// Loops run under a budget of iterations an invocation (LOOP_BUDGET, generated). Mesa's
+// llvmpipe (lavapipe, the Vulkan driver CI runs) caps the loop iterations of a shader
+// invocation at 65,535, counted over all its loops together, and then silently leaves
+// every loop: walks ended early and pixels lost the rest of their ray tree
+// (tests/tests/it/gpu.rs, `lavapipe_caps_loop_iterations`, is the reproduction). On
+// such an adapter the host gives each invocation its own workgroup and a budget under
+// the cap; an invocation that spends it stops and says so (`over_budget`), and the host
+// traces or renders that ray or pixel on the CPU. Elsewhere the budget is unbounded.
+var<private> loops_left: u32 = LOOP_BUDGET;
+var<private> over_budget: bool = false;
+
+// Spends one loop iteration of the budget; false (and `over_budget`) when none is left.
+fn tick() -> bool {
+    if loops_left == 0u {
+        over_budget = true;
+        return false;
+    }
+    loops_left -= 1u;
+    return true;
+}
+
 const LEAF_HEADER_WORDS: u32 = 4u;
 const INTERNAL_BIT: u32 = 0x80000000u;
 const COARSER_SHIFT: u32 = 24u;
@@ -114,7 +135,7 @@ fn descend(start: u32, start_level: u32, q: vec3<u32>) -> vec2<u32> {
     var node = start;
     var level = start_level;
     // A valid tree is at most max_depth deep; the bound keeps any file finite.
-    for (var guard = 0u; guard <= 32u; guard++) {
+    for (var guard = 0u; guard <= 32u && tick(); guard++) {
         if (node & INTERNAL_BIT) == 0u {
             return vec2<u32>(node, level);
         }
@@ -177,15 +198,25 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
     let az = component(a, k.z);
     let bz = component(b, k.z);
     let cz = component(c, k.z);
-    let ax = component(a, k.x) - s.x * az;
-    let ay = component(a, k.y) - s.y * az;
-    let bx = component(b, k.x) - s.x * bz;
-    let by = component(b, k.y) - s.y * bz;
-    let cx = component(c, k.x) - s.x * cz;
-    let cy = component(c, k.y) - s.y * cz;
-    let u = edge(cx, cy, bx, by);
-    let v = edge(ax, ay, cx, cy);
-    let w = edge(bx, by, ax, ay);
+    // Every product rounded on its own, as on the CPU (generated `product`: exact in
+    // f64 and then rounded where the adapter has f64, so no compiler fusing a multiply
+    // into the subtraction changes a bit).
+    let ax = component(a, k.x) - product(s.x, az);
+    let ay = component(a, k.y) - product(s.y, az);
+    let bx = component(b, k.x) - product(s.x, bz);
+    let by = component(b, k.y) - product(s.y, bz);
+    let cx = component(c, k.x) - product(s.x, cz);
+    let cy = component(c, k.y) - product(s.y, cz);
+    var u = product(cx, by) - product(cy, bx);
+    var v = product(ax, cy) - product(ay, cx);
+    var w = product(bx, ay) - product(by, ax);
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Exact zeros are decided again (generated `edge`: exactly in f64 where the
+        // adapter has it), as cpu::watertight does.
+        u = edge(cx, cy, bx, by);
+        v = edge(ax, ay, cx, cy);
+        w = edge(bx, by, ax, ay);
+    }
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return vec4<f32>(0.0);
     }
@@ -220,7 +251,7 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let ncount = word(rec + 3u);
     (*wk).tests += count;
     // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-    for (var j = 0u; j < count; j++) {
+    for (var j = 0u; j < count && tick(); j++) {
         let tri = word(params.o_refs + offset + j);
         let h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
         if h.w != 0.0 {
@@ -296,7 +327,7 @@ fn exit_along_moving_axes(off: vec3<f32>, d: vec3<f32>, inv: vec3<f32>) -> u32 {
     var best_t = inf();
     var best_axis = 0u;
     var found = false;
-    for (var a = 0u; a < 3u; a++) {
+    for (var a = 0u; a < 3u && tick(); a++) {
         if component(d, a) != 0.0 {
             let t = component(off, a) * component(inv, a);
             if t < best_t || !found {
@@ -315,7 +346,7 @@ fn clip(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec4<f32> {
     var t0 = -inf();
     var t1 = inf();
     var entry_axis = 0u;
-    for (var a = 0u; a < 3u; a++) {
+    for (var a = 0u; a < 3u && tick(); a++) {
         let da = component(d, a);
         let oa = component(o, a);
         let la = component(lo, a);
@@ -450,9 +481,9 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
 // counts in `steps` and `flags`.
 fn trace(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> HitOut {
     var wk = begin(o, d, tmin, tmax);
-    // Bounded by max_steps (step() stops the walk there).
+    // Bounded by max_steps (step() stops the walk there), and by the loop budget.
     loop {
-        if wk.done {
+        if wk.done || !tick() {
             break;
         }
         step(&wk, any);
@@ -463,7 +494,7 @@ fn trace(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> HitOut 
     return out;
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
     if i >= params.ray_count {
@@ -471,5 +502,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let r0 = rays[2u * i];
     let r1 = rays[2u * i + 1u];
-    hits[i] = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
+    var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
+    // A walk that ran out of loop budget: the host traces it again on the CPU.
+    if over_budget {
+        out.steps = OVER_BUDGET;
+    }
+    hits[i] = out;
 }
+
+// `HitOut::steps` of a walk that ran out of loop budget.
+const OVER_BUDGET: u32 = 0xFFFFFFFFu;

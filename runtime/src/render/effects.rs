@@ -125,7 +125,7 @@ impl RayCounts {
         self.0[kind as usize] += n;
     }
 
-    fn merge(mut self, other: RayCounts) -> RayCounts {
+    pub(crate) fn merge(mut self, other: RayCounts) -> RayCounts {
         for (a, b) in self.0.iter_mut().zip(other.0) {
             *a += b;
         }
@@ -150,6 +150,42 @@ impl RenderOptions {
     /// Every effect the scene calls for, depth 6, 16 soft-shadow samples.
     pub fn for_scene(shading: &Shading) -> RenderOptions {
         RenderOptions { effects: EffectSet::of(shading), max_depth: 6, soft_samples: 16 }
+    }
+}
+
+/// The light a pixel receives, summed term by term (background, emission, each light
+/// a surface receives) in 32.32 fixed point per channel: integer additions, so the sum
+/// does not depend on the order the terms arrive in. The CPU adds them wave by wave,
+/// the GPU kernel ray tree by ray tree (`gpu/render.wgsl`'s `add_light`, the same
+/// conversion in 32-bit halves); with the same terms both get the same bits. Each term
+/// is rounded down to a multiple of `2^-32` (a term below that, or not positive, adds
+/// nothing) and the sum saturates at `2^32`: far finer and far wider than any image of
+/// it (sRGB's first 8-bit step is about `3e-4`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct LightSum(pub(crate) [u64; 3]);
+
+/// `2^32`, the fixed point's one.
+const FIXED_ONE: f32 = 4_294_967_296.0;
+
+impl LightSum {
+    /// Adds one term.
+    pub(crate) fn add(&mut self, term: Vec3) {
+        for (sum, x) in self.0.iter_mut().zip(term.to_array()) {
+            let fixed = if x.is_nan() || x <= 0.0 {
+                0
+            } else if x >= FIXED_ONE {
+                u64::MAX
+            } else {
+                // Exact: a power-of-two scaling below 2^64; then rounded down.
+                (x * FIXED_ONE) as u64
+            };
+            *sum = sum.saturating_add(fixed);
+        }
+    }
+
+    /// The sum as radiance.
+    pub(crate) fn radiance(&self) -> Vec3 {
+        Vec3::from_array(self.0.map(|s| (s as f64 / FIXED_ONE as f64) as f32))
     }
 }
 
@@ -289,11 +325,30 @@ pub fn render_effects(
 #[cfg(feature = "gpu")]
 pub fn render_effects_gpu(
     scene: &Scene,
-    gpu: &crate::gpu::GpuTracer,
+    gpu: &crate::gpu::GpuTracer<'_>,
     camera: &Camera,
     options: &RenderOptions,
 ) -> crate::gpu::GpuResult<(Radiance, RayCounts)> {
     crate::gpu::GpuRenderer::new(gpu, scene, options)?.render(camera)
+}
+
+/// [`render_effects`] for some pixels only (row-major indices, in any order): their
+/// radiance in that order and the rays traced. Each pixel is rendered alone, which
+/// gives the bits it gets in the whole image (a pixel's sums do not depend on its
+/// neighbours'). For the GPU renderer's pixels that an adapter's loop cap stopped.
+#[cfg(feature = "gpu")]
+pub(crate) fn render_pixels(
+    scene: &Scene,
+    camera: &Camera,
+    options: &RenderOptions,
+    pixels: &[u32],
+) -> (Vec<Vec3>, RayCounts) {
+    let ctx = Context::new(scene.view(), camera, options);
+    let tracer = scene.tracer();
+    let done: Vec<(Vec3, RayCounts)> =
+        pixels.par_iter().map(|&p| ctx.run(&tracer, p..p + 1)).map(|(r, c)| (r[0], c)).collect();
+    let counts = done.iter().fold(RayCounts::default(), |a, (_, c)| a.merge(*c));
+    (done.into_iter().map(|(r, _)| r).collect(), counts)
 }
 
 impl<'a> Context<'a> {
@@ -310,7 +365,7 @@ impl<'a> Context<'a> {
     /// Renders pixels `pixels` (row-major indices) wave by wave.
     fn run(&self, tracer: &Tracer<'_>, pixels: std::ops::Range<u32>) -> (Vec<Vec3>, RayCounts) {
         let first = pixels.start;
-        let mut out = vec![Vec3::ZERO; pixels.len()];
+        let mut out = vec![LightSum::default(); pixels.len()];
         let mut counts = RayCounts::default();
         let w = self.camera.width;
         let mut wave: Vec<Task> = pixels
@@ -330,16 +385,16 @@ impl<'a> Context<'a> {
             let hits = intersect(tracer, &rays);
             let (mut next, mut shadows) = (Vec::new(), Vec::new());
             for (task, hit) in wave.iter().zip(hits) {
-                let radiance = match hit {
-                    None => task.weight * BACKGROUND,
-                    Some(hit) => self.shade(task, &hit, &mut next, &mut shadows),
-                };
-                out[(task.pixel - first) as usize] += radiance;
+                let sum = &mut out[(task.pixel - first) as usize];
+                match hit {
+                    None => sum.add(task.weight * BACKGROUND),
+                    Some(hit) => self.shade(task, &hit, sum, &mut next, &mut shadows),
+                }
             }
             self.trace_shadows(tracer, shadows, &mut out, first, &mut counts);
             wave = next;
         }
-        (out, counts)
+        (out.iter().map(LightSum::radiance).collect(), counts)
     }
 
     /// Traces shadow rays and adds the light of those that get through. With the alpha
@@ -349,7 +404,7 @@ impl<'a> Context<'a> {
         &self,
         tracer: &Tracer<'_>,
         mut shadows: Vec<ShadowTask>,
-        out: &mut [Vec3],
+        out: &mut [LightSum],
         first: u32,
         counts: &mut RayCounts,
     ) {
@@ -363,7 +418,7 @@ impl<'a> Context<'a> {
                 tracer.occluded_batch(&rays, &mut blocked);
                 for (s, blocked) in shadows.iter().zip(blocked) {
                     if !blocked {
-                        out[(s.pixel - first) as usize] += s.value;
+                        out[(s.pixel - first) as usize].add(s.value);
                     }
                 }
                 return;
@@ -371,7 +426,7 @@ impl<'a> Context<'a> {
             let mut next = Vec::new();
             for (s, hit) in shadows.iter().zip(intersect(tracer, &rays)) {
                 let Some(hit) = hit else {
-                    out[(s.pixel - first) as usize] += s.value;
+                    out[(s.pixel - first) as usize].add(s.value);
                     continue;
                 };
                 let pass = self.shadow_pass(self.material(hit.prim));
@@ -397,9 +452,9 @@ impl<'a> Context<'a> {
         self.view.material(prim).unwrap_or(&PLAIN)
     }
 
-    /// The light `task` receives from its hit that needs no further ray, and the rays
-    /// that bring the rest.
-    fn shade(&self, task: &Task, hit: &Hit, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) -> Vec3 {
+    /// Adds to `sum` the light `task` receives from its hit that needs no further ray,
+    /// and queues the rays that bring the rest.
+    fn shade(&self, task: &Task, hit: &Hit, sum: &mut LightSum, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) {
         // The hit point, normal and offset, once for every ray that leaves this hit.
         let at = SpawnPoint::new(&self.view.triangle(hit.prim), hit);
         let m = self.material(hit.prim);
@@ -422,15 +477,15 @@ impl<'a> Context<'a> {
             });
         }
         if coverage <= 0.0 {
-            return Vec3::ZERO;
+            return;
         }
         let weight = task.weight * coverage;
         let v = -dir;
         let transmits = self.has(Effect::Refraction) && m.transmission > 0.0;
-        let mut radiance = weight * Vec3::from(m.emissive);
+        sum.add(weight * Vec3::from(m.emissive));
         if self.headlight {
             let (ambient, direct) = HEADLIGHT;
-            radiance += weight * lighting::albedo(m, transmits) * (ambient + direct * n.dot(v).abs());
+            sum.add(weight * lighting::albedo(m, transmits) * (ambient + direct * n.dot(v).abs()));
         } else {
             let mut light = |to: Vec3, tmax: f32, incident: Vec3, kind: RayKind| {
                 let l = to.normalize_or_zero();
@@ -447,7 +502,7 @@ impl<'a> Context<'a> {
                     let ray = at.ray(to, tmax);
                     shadows.push(ShadowTask { ray, pixel: task.pixel, value, kind, layers: 0 });
                 } else {
-                    radiance += value;
+                    sum.add(value);
                 }
             };
             let p = at.point();
@@ -463,7 +518,6 @@ impl<'a> Context<'a> {
         if can_continue {
             self.secondary(task, &at, m, (n, ng, dir), entering, weight, next);
         }
-        radiance
     }
 
     /// Light from emissive triangles: `soft_samples` points spread over them by area

@@ -76,10 +76,60 @@ pub(crate) fn reflectance(m: &Material, transmits: bool, n: Vec3, v: Vec3, l: Ve
     let (ks, e) = highlight(m);
     let h = (v + l).normalize_or_zero();
     // A lobe below f32's normal range is zero (GPUs flush it; the GPU kernel does the same).
-    let lobe = n.dot(h).max(0.0).powf(e);
+    let lobe = power(n.dot(h).max(0.0), e);
     let lobe = if lobe >= f32::MIN_POSITIVE { lobe } else { 0.0 };
     let spec = if ks == Vec3::ZERO { Vec3::ZERO } else { ks * (e + 8.0) / (8.0 * PI) * lobe };
     kd / PI + spec
+}
+
+/// The coefficients of [`power`]'s series, in the order it uses them: `ln m` as
+/// `2 f (1 + f^2/3 + f^4/5 + f^6/7 + f^8/9)` with `f = (m - 1)/(m + 1)`, and `2^r` as
+/// `e^(r ln 2)` by Taylor to the seventh power. The GPU kernel gets the same `f32`s.
+pub(crate) const POWER_LN: [f32; 4] = [1.0 / 3.0, 1.0 / 5.0, 1.0 / 7.0, 1.0 / 9.0];
+/// See [`POWER_LN`].
+pub(crate) const POWER_EXP: [f32; 7] = [1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0];
+
+/// `x^e` for the highlight's lobe (`x` a cosine, `e` an exponent from [`highlight`],
+/// in `[1, 10^4]`), from `f32` additions, multiplications, one division and bit
+/// operations only, within `4e-7 (2 + |e log2 x|)` of the exact power (relative).
+///
+/// # Why not `powf`
+/// The GPU kernel (`gpu/render.wgsl`'s `power`) runs these operations in this order,
+/// so it computes the same bits wherever its compiler keeps them as written (lavapipe
+/// does). WGSL's `pow` is each adapter's own approximation (lavapipe's is
+/// `exp2(e log2 x)`, 10^-3 from `powf` at large exponents), and the lobe decides
+/// whether a shadow ray is traced (a light whose contribution is below `f32`'s normal
+/// range gets none): a different last bit there was a different ray count.
+pub(crate) fn power(x: f32, e: f32) -> f32 {
+    // x^e < 2^-126 for x below the normal range and e >= 1: nothing (as a lobe).
+    if x.is_nan() || x < f32::MIN_POSITIVE {
+        return 0.0;
+    }
+    // x = m 2^k with m in [sqrt(1/2), sqrt(2)).
+    let bits = x.to_bits();
+    let mut k = (bits >> 23) as i32 - 127;
+    let mut m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    if m > std::f32::consts::SQRT_2 {
+        m *= 0.5;
+        k += 1;
+    }
+    let f = (m - 1.0) / (m + 1.0);
+    let s = f * f;
+    let [l3, l5, l7, l9] = POWER_LN;
+    let ln_m = 2.0 * f * (1.0 + s * (l3 + s * (l5 + s * (l7 + s * l9))));
+    let y = e * (k as f32 + ln_m * std::f32::consts::LOG2_E);
+    // 2^y = 2^r 2^n, r in [-1/2, 1/2].
+    let n = (y + 0.5).floor();
+    if n.is_nan() || n < -126.0 {
+        return 0.0; // below 2^-126 sqrt(2): a lobe too small to count
+    }
+    if n > 127.0 {
+        return f32::INFINITY;
+    }
+    let r = (y - n) * std::f32::consts::LN_2;
+    let [c0, c1, c2, c3, c4, c5, c6] = POWER_EXP;
+    let two_r = 1.0 + r * (c0 + r * (c1 + r * (c2 + r * (c3 + r * (c4 + r * (c5 + r * c6))))));
+    two_r * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
 
 /// Colour and exponent of a material's highlight.
@@ -111,8 +161,16 @@ pub(crate) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
         return None;
     }
     let d = d2.sqrt();
-    // glTF's recommended window: (1 - (d / range)^4)^2, clamped.
-    let window = if light.range.is_finite() { (1.0 - (d / light.range).powi(4)).clamp(0.0, 1.0).powi(2) } else { 1.0 };
+    // glTF's recommended window: (1 - (d / range)^4)^2, clamped. Multiplied out in
+    // this order, as the GPU kernel does (`powi`'s order is LLVM's choice).
+    let window = if light.range.is_finite() {
+        let x = d / light.range;
+        let x2 = x * x;
+        let w = (1.0 - x2 * x2).clamp(0.0, 1.0);
+        w * w
+    } else {
+        1.0
+    };
     let mut falloff = window / d2;
     if light.kind == LightKind::Spot {
         let cos = Vec3::from(light.direction).dot(-to_light / d);
@@ -210,4 +268,39 @@ fn hash32(mut x: u32) -> u32 {
     x ^= x >> 15;
     x = x.wrapping_mul(0x846c_a68b);
     x ^ (x >> 16)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `power` against `f64`'s `powf` over the cosines and exponents highlights use:
+    /// within its documented bound; exact at 1 and for `e = 1`; zero for no cosine
+    /// (zero, negative, NaN).
+    #[test]
+    fn power_is_within_its_bound_of_the_exact_power() {
+        let mut worst = 0.0f64;
+        let mut x = 1.0f32;
+        while x >= f32::MIN_POSITIVE {
+            for e in [1.0f32, 1.5, 2.0, 3.0, 7.9, 10.0, 31.0, 100.0, 1e3, 4321.5, 1e4] {
+                let exact = (x as f64).powf(e as f64);
+                let got = power(x, e) as f64;
+                let y = e as f64 * (x as f64).log2();
+                if exact < f32::MIN_POSITIVE as f64 * 2.0 {
+                    assert!(got <= exact * 1.001 + 1e-45, "{x}^{e}: {got:e}, exact {exact:e}");
+                    continue;
+                }
+                let err = (got - exact).abs() / exact;
+                worst = worst.max(err / (2.0 + y.abs()));
+                assert!(err <= 4e-7 * (2.0 + y.abs()), "{x}^{e}: {got:e}, exact {exact:e}, {err:e} off");
+            }
+            x = f32::from_bits(x.to_bits() - 0x1_2345); // a few hundred cosines per octave
+        }
+        eprintln!("worst error {worst:e} (2 + |e log2 x|)");
+        assert_eq!(power(0.0, 3.0), 0.0);
+        assert_eq!(power(1.0, 1e4), 1.0);
+        assert_eq!(power(0.5, 1.0), 0.5);
+        assert_eq!(power(f32::NAN, 2.0), 0.0);
+        assert_eq!(power(-0.5, 2.0), 0.0);
+    }
 }

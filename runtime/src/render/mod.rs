@@ -100,7 +100,7 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
 #[cfg(feature = "gpu")]
 pub fn render_gpu(
     scene: &Scene,
-    gpu: &crate::gpu::GpuTracer,
+    gpu: &crate::gpu::GpuTracer<'_>,
     camera: &Camera,
     mode: RenderMode,
 ) -> crate::gpu::GpuResult<(Image, RenderStats)> {
