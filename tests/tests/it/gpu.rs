@@ -366,7 +366,11 @@ fn effects_render_at_default_settings_gives_the_cpus_rays_and_image() {
 /// highlight's lobe `x^e` turns one ulp of `x` into `e` ulps (e up to 10^4), hence the
 /// wider bound off lavapipe.
 fn renders_agree(name: &str, ctx: &octrace_runtime::gpu::GpuContext, cpu: &Radiance, gpu: &Radiance) {
-    let bound = if ctx.info.name.contains("llvmpipe") { 1e-5 } else { 1e-3 };
+    // On lavapipe, where the README's claim was measured, the 8-bit images are identical
+    // and the radiance differs only where the driver fuses a multiply and an add (1.4e-7
+    // at worst); other drivers may round their builtins differently.
+    let lavapipe = ctx.info.name.contains("llvmpipe");
+    let bound = if lavapipe { 1e-6 } else { 1e-3 };
     let mut worst_radiance = 0.0f32;
     for (i, (c, g)) in cpu.pixels.iter().zip(&gpu.pixels).enumerate() {
         let error = ((*c - *g).abs() / c.abs().max(Vec3::splat(1e-3))).max_element();
@@ -378,6 +382,9 @@ fn renders_agree(name: &str, ctx: &octrace_runtime::gpu::GpuContext, cpu: &Radia
     let worst = diffs.iter().copied().max().unwrap_or(0);
     let off = diffs.iter().filter(|&&d| d > 0).count();
     eprintln!("{name}: radiance within {worst_radiance:e}; {off} of {} 8-bit channels differ", diffs.len());
+    if lavapipe {
+        assert_eq!(off, 0, "{name}: {off} of {} 8-bit channels differ (by up to {worst})", diffs.len());
+    }
     assert!(worst <= 1, "{name}: a channel differs by {worst} levels ({off} differ)");
     assert!(off * 10_000 <= diffs.len(), "{name}: {off} of {} channels differ", diffs.len());
 }
