@@ -23,6 +23,21 @@ pub enum Error {
         /// The file.
         path: PathBuf,
     },
+    /// A file the mesh names (a glTF buffer URI) may not or cannot be read: outside
+    /// the mesh's folder under [`References::Confined`](crate::References), not a
+    /// regular file, over the size limit, missing, or an unsupported URI scheme.
+    /// Nothing of it was read.
+    #[error("{path}: {element}: reference '{reference}' not read: {reason}")]
+    Reference {
+        /// The mesh file.
+        path: PathBuf,
+        /// What names it (a glTF buffer).
+        element: String,
+        /// The reference as the file writes it.
+        reference: String,
+        /// Why it was not read.
+        reason: String,
+    },
     /// The file does not parse.
     #[error("{path}: {element}: {message}")]
     Parse {
@@ -92,6 +107,12 @@ pub enum Error {
         extent: f64,
         /// The largest coordinate magnitude.
         largest: f64,
+    },
+    /// A build parameter is beyond its limit ([`BuildParams::check`](crate::BuildParams::check)).
+    #[error("invalid build parameters: {message}")]
+    Params {
+        /// Which parameter, and its limit.
+        message: String,
     },
     /// Writing the baked file failed.
     #[error(transparent)]

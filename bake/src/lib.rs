@@ -27,5 +27,5 @@ pub mod octree;
 pub mod procedural;
 
 pub use error::{Error, Result};
-pub use mesh::{Mesh, MeshFormat, MAX_MESH_COMPRESSION_RATIO};
+pub use mesh::{LoadOptions, Mesh, MeshFormat, References, MAX_MESH_COMPRESSION_RATIO};
 pub use octree::{bake, bake_with_progress, BakeStage, BuildParams};

@@ -8,24 +8,26 @@ use gltf::mesh::Mode;
 
 use octrace_format::{AlphaMode, Camera, Light, LightKind, Material};
 
+use super::refs::{self, LoadOptions};
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
-pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
+pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
     // The gltf crate (gltf-json 1.4) indexes arrays with unchecked indices while it
     // validates, and panics on some malformed files (a POSITION accessor index out of
     // range, found by fuzzing). A panic there is a malformed file, not a bug of ours:
     // it becomes a parse error.
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_unguarded(bytes, path, base))).unwrap_or_else(|_| {
-        Err(Error::Parse {
-            path: path.into(),
-            element: "document".into(),
-            message: "malformed glTF (an index out of range made the glTF parser give up)".into(),
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_unguarded(bytes, path, base, options)))
+        .unwrap_or_else(|_| {
+            Err(Error::Parse {
+                path: path.into(),
+                element: "document".into(),
+                message: "malformed glTF (an index out of range made the glTF parser give up)".into(),
+            })
         })
-    })
 }
 
-fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
+fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
     let parse_error = |element: &str, e: gltf::Error| Error::Parse {
         path: path.into(),
         element: element.into(),
@@ -53,25 +55,14 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
         }
     }
     let document = gltf::Document::from_json(json).map_err(|e| parse_error("document", e))?;
-    // gltf's import unwraps the percent-decoding of a file URI as UTF-8: check first.
-    for buffer in document.buffers() {
-        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
-            if !uri.starts_with("data:") && !percent_decodes_to_utf8(uri) {
-                return Err(Error::Parse {
-                    path: path.into(),
-                    element: format!("buffer {}", buffer.index()),
-                    message: "URI does not decode to UTF-8".into(),
-                });
-            }
-        }
-    }
-    let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| parse_error("buffers", e))?;
+    let mut sources = Vec::new();
+    let buffers = load_buffers(&document, blob, path, base, options, &mut sources)?;
     // The default scene, or scene 0 when the file names none.
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         return Err(Error::EmptyScene { path: path.into() });
     };
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.0.len()).sum::<usize>();
-    let mut mesh = Mesh::default();
+    let mut mesh = Mesh { sources, ..Mesh::default() };
     for m in document.materials() {
         mesh.materials.push(material(&m, path)?);
     }
@@ -87,26 +78,69 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mes
     Ok(loader.mesh)
 }
 
-/// Whether `%XX` escapes in `uri` decode to valid UTF-8 (malformed escapes are left
-/// as they are, as percent-decoders do).
-fn percent_decodes_to_utf8(uri: &str) -> bool {
-    let b = uri.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        match (b[i], b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c))) {
-            (b'%', Some(h), Some(l)) => {
-                out.push((h * 16 + l) as u8);
-                i += 3;
+/// Every buffer's bytes: the GLB blob, a `data:` URI, or a file the URI names, read
+/// only where `options` allow (`refs::resolve`) and only if it is a regular file within
+/// the size limit. A buffer shorter than its declared length is an error.
+fn load_buffers(
+    document: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+    path: &Path,
+    base: Option<&Path>,
+    options: &LoadOptions,
+    sources: &mut Vec<std::path::PathBuf>,
+) -> Result<Vec<gltf::buffer::Data>> {
+    let mut out = Vec::new();
+    for buffer in document.buffers() {
+        let element = || format!("buffer {}", buffer.index());
+        let mut data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| Error::Parse {
+                path: path.into(),
+                element: element(),
+                message: "refers to the GLB binary chunk, which the file lacks (or an earlier buffer took)".into(),
+            })?,
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                gltf::buffer::Data::from_source(buffer.source(), None)
+                    .map_err(|e| Error::Parse { path: path.into(), element: element(), message: e.to_string() })?
+                    .0
             }
-            (c, _, _) => {
-                out.push(c);
-                i += 1;
+            gltf::buffer::Source::Uri(uri) => {
+                let refused = |reason: String| Error::Reference {
+                    path: path.into(),
+                    element: element(),
+                    reference: uri.chars().take(200).collect(),
+                    reason,
+                };
+                let target = uri_path(uri).map_err(&refused)?;
+                let file = refs::resolve(base, Path::new(&target), options.references).map_err(&refused)?;
+                let data = refs::read_regular(&file, options.max_file_bytes).map_err(|e| refused(e.to_string()))?;
+                sources.push(file);
+                data
             }
+        };
+        if data.len() < buffer.length() {
+            return Err(Error::Parse {
+                path: path.into(),
+                element: element(),
+                message: format!("{} bytes, but its byteLength says {}", data.len(), buffer.length()),
+            });
         }
+        while data.len() % 4 != 0 {
+            data.push(0);
+        }
+        out.push(gltf::buffer::Data(data));
     }
-    String::from_utf8(out).is_ok()
+    Ok(out)
+}
+
+/// The path a buffer URI names: `file:` URIs and relative references, percent-decoded;
+/// other schemes are refused.
+fn uri_path(uri: &str) -> std::result::Result<String, String> {
+    let rest = match uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
+        Some(rest) => rest,
+        None if uri.contains(':') => return Err("not a relative path, a file: URI or a data: URI".into()),
+        None => uri,
+    };
+    refs::percent_decode(rest).ok_or_else(|| "does not decode to UTF-8".to_string())
 }
 
 struct Loader<'a> {

@@ -2,6 +2,9 @@
 
 mod gltf;
 mod obj;
+mod refs;
+
+pub use refs::{LoadOptions, References, DEFAULT_MAX_FILE_BYTES, MAX_MTL_BYTES};
 
 use std::path::{Path, PathBuf};
 
@@ -35,6 +38,9 @@ pub struct Mesh {
     pub cameras: Vec<octrace_format::Camera>,
     /// Things skipped while loading (non-triangle glTF primitives, ...), one line each.
     pub warnings: Vec<String>,
+    /// The files read besides the mesh file itself (glTF buffers, OBJ material
+    /// libraries), as resolved: what a command must not overwrite.
+    pub sources: Vec<PathBuf>,
 }
 
 impl Mesh {
@@ -139,10 +145,13 @@ impl MeshFormat {
 }
 
 impl Mesh {
-    /// Loads a mesh file, choosing the format by its extension.
+    /// Loads a mesh file, choosing the format by its extension, with the default
+    /// [`LoadOptions`]: the files it names must lie inside its folder, and no file
+    /// read may exceed [`DEFAULT_MAX_FILE_BYTES`].
     ///
     /// # Errors
-    /// [`Error::Unreadable`], [`Error::UnknownFormat`], and the parse errors of the
+    /// [`Error::Unreadable`] (also for a FIFO, a device or a file over the limit),
+    /// [`Error::UnknownFormat`], [`Error::Reference`], and the parse errors of the
     /// format: each names the file and the element at fault.
     ///
     /// # Example
@@ -152,25 +161,48 @@ impl Mesh {
     /// # Ok::<(), octrace_bake::Error>(())
     /// ```
     pub fn load(path: impl AsRef<Path>) -> Result<Mesh> {
+        Mesh::load_with(path, &LoadOptions::default())
+    }
+
+    /// [`Mesh::load`] with the given options (where references may lead, how large a
+    /// file may be).
+    ///
+    /// # Errors
+    /// As [`Mesh::load`].
+    pub fn load_with(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Mesh> {
         let path = path.as_ref();
         let (format, zst) = MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
-        let raw = std::fs::read(path).map_err(unreadable)?;
-        let bytes = if zst { decompress(&raw).map_err(unreadable)? } else { raw };
+        let raw = refs::read_regular(path, options.max_file_bytes).map_err(unreadable)?;
+        let bytes = if zst { decompress(&raw, options.max_file_bytes).map_err(unreadable)? } else { raw };
         let base = path.parent().map(Path::to_path_buf);
-        Mesh::from_bytes(&bytes, format, path, base.as_deref())
+        Mesh::from_bytes_with(&bytes, format, path, base.as_deref(), options)
     }
 
     /// Parses a mesh held in memory. `name` is used in error messages; `base` is the
     /// folder external glTF buffers and OBJ material libraries are read from (none:
-    /// only embedded buffers, no MTL materials).
+    /// only embedded buffers, no MTL materials), under the default [`LoadOptions`].
     ///
     /// # Errors
     /// As [`Mesh::load`].
     pub fn from_bytes(bytes: &[u8], format: MeshFormat, name: &Path, base: Option<&Path>) -> Result<Mesh> {
+        Mesh::from_bytes_with(bytes, format, name, base, &LoadOptions::default())
+    }
+
+    /// [`Mesh::from_bytes`] with the given options.
+    ///
+    /// # Errors
+    /// As [`Mesh::load`].
+    pub fn from_bytes_with(
+        bytes: &[u8],
+        format: MeshFormat,
+        name: &Path,
+        base: Option<&Path>,
+        options: &LoadOptions,
+    ) -> Result<Mesh> {
         let mesh = match format {
-            MeshFormat::Obj => obj::parse(bytes, name, base)?,
-            MeshFormat::Gltf => gltf::parse(bytes, name, base)?,
+            MeshFormat::Obj => obj::parse(bytes, name, base, options)?,
+            MeshFormat::Gltf => gltf::parse(bytes, name, base, options)?,
         };
         mesh.check_attributes(name)?;
         if mesh.triangles.is_empty() {
@@ -181,6 +213,23 @@ impl Mesh {
         }
         Ok(mesh)
     }
+}
+
+/// Reads a whole regular file of at most `max` bytes, as the mesh loader reads its
+/// inputs: a FIFO, a device, a folder or a larger file is refused before a byte is
+/// read (and a FIFO without waiting for a writer).
+///
+/// # Errors
+/// The I/O error, or [`std::io::ErrorKind::InvalidInput`] saying why the file was
+/// refused.
+///
+/// # Example
+/// ```
+/// let err = octrace_bake::mesh::read_regular_file("/dev/zero".as_ref(), 1 << 20).unwrap_err();
+/// assert!(err.to_string().contains("not a regular file"));
+/// ```
+pub fn read_regular_file(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+    refs::read_regular(path, max)
 }
 
 /// Checks that every coordinate of `v` is finite.
@@ -196,16 +245,19 @@ pub(crate) fn check_finite(v: [f32; 3], path: &Path, element: impl FnOnce() -> S
 /// (Text meshes compress 3-10×; a million identical lines, 1000× at most.)
 pub const MAX_MESH_COMPRESSION_RATIO: u64 = 1024;
 
-/// Decompresses a zstd mesh, refusing to expand past [`MAX_MESH_COMPRESSION_RATIO`].
-fn decompress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
+/// Decompresses a zstd mesh, refusing to expand past [`MAX_MESH_COMPRESSION_RATIO`]
+/// times its size or past `max` bytes, whichever is less: it stops reading there.
+fn decompress(raw: &[u8], max: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
-    let limit = (raw.len() as u64).saturating_mul(MAX_MESH_COMPRESSION_RATIO);
+    let limit = (raw.len() as u64).saturating_mul(MAX_MESH_COMPRESSION_RATIO).min(max);
     let mut out = Vec::new();
     zstd::stream::read::Decoder::new(raw)?.take(limit + 1).read_to_end(&mut out)?;
     if out.len() as u64 > limit {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
-            format!("decompresses to more than {MAX_MESH_COMPRESSION_RATIO} times its size"),
+            format!(
+                "decompresses to more than {limit} bytes ({MAX_MESH_COMPRESSION_RATIO} times its size, at most {max})"
+            ),
         ));
     }
     Ok(out)

@@ -4,23 +4,42 @@ use std::path::Path;
 
 use octrace_format::{AlphaMode, Material};
 
+use super::refs::{self, LoadOptions, MAX_MTL_BYTES};
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
-pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>) -> Result<Mesh> {
-    let options = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
-    // Material libraries are read beside the OBJ; one that is missing or unreadable
-    // costs the materials (a warning), never the bake.
-    let load_mtl = |p: &Path| match base {
-        Some(dir) => tobj::load_mtl(dir.join(p)),
-        None => Err(tobj::LoadError::OpenFileFailed),
+pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+    let load_options =
+        tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    // Material libraries are read beside the OBJ, under the same rules as glTF buffers
+    // (`refs`); one that is refused, missing or unreadable costs the materials (a
+    // warning naming it), never the bake.
+    let refused = std::cell::RefCell::new(Vec::new());
+    let sources = std::cell::RefCell::new(Vec::<std::path::PathBuf>::new());
+    let load_mtl = |p: &Path| {
+        let read = refs::resolve(base, p, options.references).and_then(|file| {
+            let text = refs::read_regular(&file, MAX_MTL_BYTES).map_err(|e| e.to_string())?;
+            sources.borrow_mut().push(file);
+            Ok(text)
+        });
+        match read {
+            Ok(text) => tobj::load_mtl_buf(&mut text.as_slice()),
+            Err(reason) => {
+                refused.borrow_mut().push(format!("'{}' not loaded ({reason})", p.display()));
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+        }
     };
     let (models, materials) =
-        tobj::load_obj_buf(&mut { bytes }, &options, load_mtl).map_err(|e| obj_error(e, bytes, path))?;
-    let mut mesh = Mesh::default();
+        tobj::load_obj_buf(&mut { bytes }, &load_options, load_mtl).map_err(|e| obj_error(e, bytes, path))?;
+    let mut mesh = Mesh { sources: sources.into_inner(), ..Mesh::default() };
     let wants_materials = bytes.windows(7).any(|w| w == b"mtllib ");
+    for why in refused.borrow().iter() {
+        mesh.warnings.push(format!("{}: material library {why}: its materials are left out", path.display()));
+    }
     match materials {
         Ok(list) => mesh.materials = list.iter().map(material).collect(),
+        Err(_) if !refused.borrow().is_empty() => {}
         Err(e) if wants_materials => {
             mesh.warnings.push(format!("{}: material library not loaded ({e}): no materials", path.display()))
         }

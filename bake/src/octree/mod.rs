@@ -10,7 +10,7 @@ mod params;
 #[cfg(test)]
 mod tests;
 
-pub use params::{BuildParams, ResolvedParams, AUTO_DEPTH_LIMIT, DEFAULT_LEAF_SIZE, DEFAULT_MARGIN};
+pub use params::{BuildParams, ResolvedParams, AUTO_DEPTH_LIMIT, DEFAULT_LEAF_SIZE, DEFAULT_MARGIN, MAX_MARGIN};
 
 use octrace_format::{BakeParams, BakeStats, BakedScene, Bounds};
 
@@ -235,6 +235,7 @@ struct Prepared {
 /// the parameters.
 fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     let name = std::path::Path::new("mesh");
+    params.check()?;
     if mesh.triangles.is_empty() {
         return Err(Error::EmptyScene { path: name.into() });
     }

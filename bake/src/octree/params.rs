@@ -20,6 +20,13 @@ pub const DEFAULT_LEAF_SIZE: u32 = 16;
 /// for entry points rounded into a neighbouring cell.
 pub const DEFAULT_MARGIN: f32 = 1.0 / (1u32 << 20) as f32;
 
+/// The largest bake margin accepted: 2^-10 of the root edge. A margin copies each
+/// triangle into every cell within it, so beyond a cell's own size the references (and
+/// the bake's memory and time) grow with the cube of margin / cell edge: 0.1 took 5 GB
+/// and minutes on the bunny. 2^-10 is 1,024 times the default and a cell's edge at
+/// depth 10.
+pub const MAX_MARGIN: f32 = 1.0 / 1024.0;
+
 /// Deepest level the automatic formula picks.
 pub const AUTO_DEPTH_LIMIT: u32 = 16;
 
@@ -54,6 +61,38 @@ pub struct ResolvedParams {
 }
 
 impl BuildParams {
+    /// Checks the parameters against their limits: a leaf target of at least 1, a
+    /// depth of at most the format's [`MAX_LEVEL`](octrace_format::layout::MAX_LEVEL),
+    /// a margin from 0 to [`MAX_MARGIN`].
+    ///
+    /// # Errors
+    /// [`Error::Params`](crate::Error::Params) naming the parameter and its limit.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::BuildParams;
+    /// assert!(BuildParams { margin: 0.1, ..BuildParams::auto() }.check().is_err());
+    /// assert!(BuildParams::auto().check().is_ok());
+    /// ```
+    pub fn check(&self) -> crate::Result<()> {
+        let fail = |message: String| Err(crate::Error::Params { message });
+        let max_level = octrace_format::layout::MAX_LEVEL;
+        if self.leaf_size == Some(0) {
+            return fail("the leaf target must be at least 1".into());
+        }
+        if let Some(d) = self.max_depth.filter(|&d| d > max_level) {
+            return fail(format!("depth {d} is beyond the format's deepest level, {max_level}"));
+        }
+        if !(self.margin.is_finite() && (0.0..=MAX_MARGIN).contains(&self.margin)) {
+            return fail(format!(
+                "margin {} is outside 0 to {MAX_MARGIN} (2^-10) of the root edge; past it every triangle is \
+                 copied into a growing cube of cells",
+                self.margin
+            ));
+        }
+        Ok(())
+    }
+
     /// Everything automatic, default margin.
     pub fn auto() -> Self {
         BuildParams { max_depth: None, leaf_size: None, margin: DEFAULT_MARGIN }

@@ -5,6 +5,7 @@ mod effects;
 mod format;
 mod gpu;
 mod hard_cases;
+mod hostile;
 mod mesh;
 mod raysets;
 mod render;

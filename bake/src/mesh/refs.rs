@@ -1,0 +1,220 @@
+//! Reading a mesh and the files it names (glTF buffers, OBJ material libraries) as
+//! untrusted input: only regular files, only as many bytes as a stated limit, and by
+//! default only inside the mesh's own folder.
+
+use std::io::Read;
+use std::path::{Component, Path, PathBuf};
+
+/// Where the files a mesh names (glTF buffer URIs, OBJ `mtllib`) may be.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum References {
+    /// Relative paths that stay inside the mesh file's folder once `..` and symbolic
+    /// links are resolved. Absolute paths, `file:` URIs and paths that climb out are
+    /// refused. The default: a mesh from a stranger reads nothing else of the machine.
+    #[default]
+    Confined,
+    /// Any path the mesh names, absolute paths and `file:` URIs included, for inputs
+    /// you trust. The other rules (regular files, size limits) still hold.
+    Anywhere,
+}
+
+/// How a mesh is loaded: where its references may lead, and how large a file (the mesh
+/// itself, decompressed, or a buffer it names) may be.
+///
+/// # Example
+/// ```no_run
+/// use octrace_bake::{LoadOptions, Mesh, References};
+/// let trusted = LoadOptions { references: References::Anywhere, ..LoadOptions::default() };
+/// let mesh = Mesh::load_with("assets/scene.gltf", &trusted)?;
+/// # Ok::<(), octrace_bake::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// Where the mesh's references may lead.
+    pub references: References,
+    /// The largest file read, in bytes: the mesh file, its decompressed contents, each
+    /// glTF buffer. Checked before anything is read.
+    pub max_file_bytes: u64,
+}
+
+/// The default [`LoadOptions::max_file_bytes`]: 4 GiB, eight times the dragon's
+/// glTF-sized data and far beyond what the format's 2^32 - 1 triangles need in OBJ.
+pub const DEFAULT_MAX_FILE_BYTES: u64 = 4 << 30;
+
+/// The largest material library read (MTL files are a few kilobytes).
+pub const MAX_MTL_BYTES: u64 = 16 << 20;
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { references: References::Confined, max_file_bytes: DEFAULT_MAX_FILE_BYTES }
+    }
+}
+
+/// Reads a whole regular file of at most `max` bytes. A FIFO, a device, a folder or a
+/// larger file is refused before a byte is read (a FIFO is opened without blocking, so
+/// refusing it cannot hang).
+pub(crate) fn read_regular(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path)?;
+    let meta = file.metadata()?;
+    if !meta.file_type().is_file() {
+        return Err(invalid(format!("not a regular file ({})", kind_of(&meta.file_type()))));
+    }
+    if meta.len() > max {
+        return Err(invalid(format!("{} bytes, more than the limit of {max}", meta.len())));
+    }
+    let mut out = Vec::with_capacity(meta.len() as usize);
+    // A file that grows while it is read is cut at the limit and refused.
+    file.take(max + 1).read_to_end(&mut out)?;
+    if out.len() as u64 > max {
+        return Err(invalid(format!("grew past the limit of {max} bytes while read")));
+    }
+    Ok(out)
+}
+
+fn invalid(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
+}
+
+fn kind_of(t: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a folder"
+    } else {
+        "not a file"
+    }
+}
+
+/// The file a reference names, or why it may not be read. `base` is the mesh's folder
+/// (none when the mesh came as bytes: then nothing outside it is read).
+pub(crate) fn resolve(base: Option<&Path>, reference: &Path, references: References) -> Result<PathBuf, String> {
+    let Some(base) = base else {
+        return Err("the mesh was given without a folder, so it may not name files".into());
+    };
+    if reference.as_os_str().is_empty() {
+        return Err("empty path".into());
+    }
+    let absolute = reference.components().any(|c| matches!(c, Component::RootDir | Component::Prefix(_)));
+    if references == References::Anywhere {
+        return Ok(if absolute { reference.to_path_buf() } else { base.join(reference) });
+    }
+    let hint = "; a mesh may name only files inside its own folder (`octrace bake --allow-outside-references` \
+                or `References::Anywhere` for inputs you trust)";
+    if absolute {
+        return Err(format!("an absolute path{hint}"));
+    }
+    let folder = base_folder(base).map_err(|e| format!("the mesh's folder: {e}"))?;
+    let target = folder.join(reference).canonicalize().map_err(|e| e.to_string())?;
+    if !target.starts_with(&folder) {
+        return Err(format!("it leads outside the mesh's folder{hint}"));
+    }
+    Ok(target)
+}
+
+/// The canonical form of the mesh's folder (`""` is the current one).
+fn base_folder(base: &Path) -> std::io::Result<PathBuf> {
+    if base.as_os_str().is_empty() {
+        Path::new(".").canonicalize()
+    } else {
+        base.canonicalize()
+    }
+}
+
+/// Decodes `%XX` escapes; `None` when the result is not UTF-8. Malformed escapes are
+/// kept as they are, as URI decoders do.
+pub(crate) fn percent_decode(uri: &str) -> Option<String> {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match (b[i], b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c))) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, _, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn confined_references_stay_in_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("scene");
+        std::fs::create_dir_all(inner.join("sub")).unwrap();
+        std::fs::write(inner.join("sub/a.bin"), b"a").unwrap();
+        std::fs::write(dir.path().join("outside.bin"), b"b").unwrap();
+        let ok = resolve(Some(&inner), Path::new("sub/../sub/a.bin"), References::Confined).unwrap();
+        assert_eq!(ok, inner.join("sub/a.bin").canonicalize().unwrap());
+        for bad in ["../outside.bin", "/etc/passwd", "sub/../../outside.bin", ""] {
+            assert!(resolve(Some(&inner), Path::new(bad), References::Confined).is_err(), "{bad}");
+        }
+        assert!(resolve(None, Path::new("sub/a.bin"), References::Confined).is_err());
+        let anywhere = resolve(Some(&inner), Path::new("../outside.bin"), References::Anywhere).unwrap();
+        assert_eq!(std::fs::read(anywhere).unwrap(), b"b");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_symlink_out_of_the_folder_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("scene");
+        std::fs::create_dir(&inner).unwrap();
+        std::fs::write(dir.path().join("secret"), b"s").unwrap();
+        std::os::unix::fs::symlink(dir.path().join("secret"), inner.join("link.bin")).unwrap();
+        let err = resolve(Some(&inner), Path::new("link.bin"), References::Confined).unwrap_err();
+        assert!(err.contains("outside"), "{err}");
+    }
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("%2e%2E/a%20b").as_deref(), Some("../a b"));
+        assert_eq!(percent_decode("100%").as_deref(), Some("100%"));
+        assert_eq!(percent_decode("%ff"), None);
+    }
+
+    #[test]
+    fn only_regular_files_within_the_limit_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("f");
+        std::fs::write(&f, [7u8; 100]).unwrap();
+        assert_eq!(read_regular(&f, 100).unwrap().len(), 100);
+        let err = read_regular(&f, 99).unwrap_err().to_string();
+        assert!(err.contains("more than the limit of 99"), "{err}");
+        let err = read_regular(dir.path(), 1 << 20).unwrap_err().to_string();
+        assert!(err.contains("not a regular file") || err.contains("directory"), "{err}");
+        #[cfg(unix)]
+        {
+            let err = read_regular(Path::new("/dev/zero"), 1 << 20).unwrap_err().to_string();
+            assert!(err.contains("a device"), "{err}");
+        }
+    }
+}
