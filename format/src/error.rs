@@ -139,7 +139,10 @@ pub(crate) fn write_failure(path: &std::path::Path, e: &std::io::Error) -> Strin
         // The raw OS error without the temporary file's path that tempfile adds.
         _ => match e.raw_os_error() {
             Some(code) => std::io::Error::from_raw_os_error(code).to_string(),
-            None => e.kind().to_string(),
+            None => match e.to_string().split(" at path ").next() {
+                Some(words) if !words.is_empty() => words.to_string(),
+                _ => e.kind().to_string(),
+            },
         },
     }
 }

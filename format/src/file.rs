@@ -60,7 +60,7 @@ impl SceneFile {
     /// errors.
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut file = open_regular(path)?;
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         if is_compressed(&mut file).map_err(|e| Error::io(path, e))? {
             return Self::read_compressed(file, len, path);
@@ -95,15 +95,19 @@ impl SceneFile {
         }
         let payload_len = usize::try_from(header.payload_len)
             .map_err(|_| Error::corrupt("archive larger than this machine's address space"))?;
-        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(payload_len);
-        payload.resize(payload_len, 0);
-        let mut filled = 0;
-        while filled < payload_len {
-            match stream.read(&mut payload[filled..]).map_err(io)? {
+        // Memory grows with what the stream really yields, in steps, never past the
+        // declared length: a small file that claims a large archive and then ends costs
+        // what it decompressed to, not what it claimed.
+        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::new();
+        let mut chunk = vec![0u8; payload_len.min(4 << 20)];
+        while payload.len() < payload_len {
+            let want = (payload_len - payload.len()).min(chunk.len());
+            match stream.read(&mut chunk[..want]).map_err(io)? {
                 0 => break,
-                n => filled += n,
+                n => payload.extend_from_slice(&chunk[..n]),
             }
         }
+        let filled = payload.len();
         if filled < payload_len {
             return Err(Error::Truncated {
                 what: "compressed archive",
@@ -267,8 +271,28 @@ pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
 /// [`Error::Io`] if the file cannot be opened or read.
 pub fn is_compressed_file(path: impl AsRef<Path>) -> Result<bool> {
     let path = path.as_ref();
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = open_regular(path)?;
     is_compressed(&mut file).map_err(|e| Error::io(path, e))
+}
+
+/// Opens a scene file for reading, refusing what is not a regular file (a FIFO, a
+/// device, a folder) before reading: a FIFO is opened without waiting for a writer,
+/// so `inspect` on one answers at once instead of blocking.
+fn open_regular(path: &Path) -> Result<File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(|e| Error::io(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        let what = if meta.is_dir() { "a folder" } else { "not a regular file (a FIFO, a device or a socket)" };
+        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, what)));
+    }
+    Ok(file)
 }
 
 /// Whether the file starts with a zstd frame (the read position is put back).
@@ -281,7 +305,7 @@ fn is_compressed(file: &mut File) -> std::io::Result<bool> {
 }
 
 fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = open_regular(path)?;
     if is_compressed(&mut file).map_err(|e| Error::io(path, e))? {
         return Err(Error::Compressed { path: path.into() });
     }

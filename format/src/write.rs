@@ -62,6 +62,15 @@ impl BakedScene {
     pub fn write(&self, path: impl AsRef<Path>, bake_time_us: u64) -> Result<u64> {
         let path = path.as_ref();
         let io = |e: std::io::Error| Error::write(path, e);
+        let path = match destination(path)? {
+            Destination::Replace(target) => target,
+            Destination::Direct(target) => {
+                let image = self.to_file_bytes(bake_time_us)?;
+                write_direct(path, &target, &[&image])?;
+                return Ok(image.len() as u64);
+            }
+        };
+        let path = path.as_path();
         let mut tmp = temporary_beside(path)?;
         let file = tmp.as_file_mut();
         file.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
@@ -101,12 +110,20 @@ impl BakedScene {
         let path = path.as_ref();
         let io = |e: std::io::Error| Error::write(path, e);
         let image = self.to_file_bytes(bake_time_us)?;
-        let mut tmp = temporary_beside(path)?;
+        let target = match destination(path)? {
+            Destination::Replace(target) => target,
+            Destination::Direct(target) => {
+                let compressed = zstd::bulk::compress(&image, level).map_err(io)?;
+                write_direct(path, &target, &[&compressed])?;
+                return Ok((image.len() as u64, compressed.len() as u64));
+            }
+        };
+        let mut tmp = temporary_beside(&target)?;
         let mut encoder = zstd::stream::write::Encoder::new(tmp.as_file_mut(), level).map_err(io)?;
         encoder.write_all(&image).map_err(io)?;
         encoder.finish().map_err(io)?;
         let compressed = tmp.as_file().metadata().map_err(io)?.len();
-        finish(tmp, path)?;
+        finish(tmp, &target)?;
         Ok((image.len() as u64, compressed))
     }
 }
@@ -240,12 +257,116 @@ fn finish(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
 /// Writes `parts`, one after the other, to `path` through a temporary file in the same
 /// directory, `fsync`, and a rename: readers see the old file or the whole new one.
 ///
+/// What `path` names decides how (every writer of this crate does the same):
+/// - nothing, or a regular file: replaced atomically as above;
+/// - a symbolic link: the file it leads to is replaced (the link stays a link);
+/// - a FIFO, a character device (`/dev/null`, a terminal) or a socket: written to
+///   directly, never replaced by a regular file (a FIFO waits for its reader);
+/// - a folder: an error.
+///
 /// # Errors
 /// [`Error::Write`] naming `path`.
 pub fn write_atomically(path: &Path, parts: &[&[u8]]) -> Result<()> {
-    let mut tmp = temporary_beside(path)?;
+    let target = match destination(path)? {
+        Destination::Replace(target) => target,
+        Destination::Direct(target) => return write_direct(path, &target, parts),
+    };
+    let mut tmp = temporary_beside(&target)?;
     for part in parts {
         tmp.write_all(part).map_err(|e| Error::write(path, e))?;
     }
-    finish(tmp, path)
+    finish(tmp, &target)
+}
+
+/// How a write to a path is done.
+enum Destination {
+    /// Through a temporary file renamed over this path (a regular file or nothing).
+    Replace(std::path::PathBuf),
+    /// Straight into this existing FIFO, device or socket.
+    Direct(std::path::PathBuf),
+}
+
+/// Follows `path`'s symbolic links to what a write should replace or write into.
+fn destination(path: &Path) -> Result<Destination> {
+    let fail = |message: &str| Error::write(path, std::io::Error::other(message.to_string()));
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        let meta = match std::fs::symlink_metadata(&p) {
+            Ok(meta) => meta,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Destination::Replace(p)),
+            Err(e) => return Err(Error::write(path, e)),
+        };
+        let kind = meta.file_type();
+        if kind.is_symlink() {
+            let link = std::fs::read_link(&p).map_err(|e| Error::write(path, e))?;
+            // A relative link is relative to the link's folder; `join` keeps an absolute one.
+            p = p.parent().map_or_else(|| link.clone(), |dir| dir.join(&link));
+        } else if kind.is_file() {
+            return Ok(Destination::Replace(p));
+        } else if kind.is_dir() {
+            return Err(fail("it is a folder"));
+        } else {
+            return Ok(Destination::Direct(p));
+        }
+    }
+    Err(fail("too many levels of symbolic links"))
+}
+
+/// Writes `parts` into an existing FIFO, device or socket (not atomic: there is no file
+/// to replace).
+fn write_direct(path: &Path, target: &Path, parts: &[&[u8]]) -> Result<()> {
+    let io = |e: std::io::Error| Error::write(path, e);
+    let mut file = std::fs::OpenOptions::new().write(true).open(target).map_err(io)?;
+    for part in parts {
+        file.write_all(part).map_err(io)?;
+    }
+    file.flush().map_err(io)
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_symlink_is_written_through_and_stays_a_link() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("real")).unwrap();
+        std::fs::write(dir.path().join("real/target"), b"old").unwrap();
+        let link = dir.path().join("link");
+        std::os::unix::fs::symlink("real/target", &link).unwrap();
+        write_atomically(&link, &[b"new"]).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read(dir.path().join("real/target")).unwrap(), b"new");
+        // A dangling link: its target is created.
+        let dangling = dir.path().join("dangling");
+        std::os::unix::fs::symlink("real/later", &dangling).unwrap();
+        write_atomically(&dangling, &[b"made"]).unwrap();
+        assert_eq!(std::fs::read(dir.path().join("real/later")).unwrap(), b"made");
+        // A loop is an error, not a hang.
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        std::os::unix::fs::symlink(&b, &a).unwrap();
+        std::os::unix::fs::symlink(&a, &b).unwrap();
+        let err = write_atomically(&a, &[b"x"]).unwrap_err().to_string();
+        assert!(err.contains("symbolic links"), "{err}");
+    }
+
+    #[test]
+    fn devices_and_fifos_are_written_into_never_replaced() {
+        write_atomically(Path::new("/dev/null"), &[b"discarded"]).unwrap();
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pipe");
+        let status = std::process::Command::new("mkfifo").arg(&fifo).status().unwrap();
+        assert!(status.success());
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_atomically(&fifo, &[b"through ", b"the pipe"]).unwrap();
+        assert_eq!(reader.join().unwrap(), b"through the pipe");
+        assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+        let err = write_atomically(dir.path(), &[b"x"]).unwrap_err().to_string();
+        assert!(err.contains("it is a folder"), "{err}");
+    }
 }
