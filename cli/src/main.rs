@@ -38,17 +38,27 @@ enum Command {
     ///
     /// The file is written to a temporary name beside OUT and renamed when complete:
     /// an interrupted bake never leaves a partial OUT. The same input and options give
-    /// the same archive whatever the thread count (add --reproducible for identical
-    /// files: the bake time is then not recorded).
+    /// the same file, byte for byte, whatever the machine or thread count (unless
+    /// --record-time writes the bake's duration into the header).
     Bake(cmd::bake::Args),
     /// Print a baked file's statistics: counts, depth histogram, neighbours and
     /// triangles per leaf, bytes per array, bake parameters.
+    ///
+    /// The scene is memory-mapped: if the file is truncated or rewritten in place while
+    /// this runs, the process may die of SIGBUS or read wrong data. Replace baked files
+    /// by renaming a new file over the old one (as `octrace bake` does), never by
+    /// writing into them; a .oct.zst scene is read into memory instead.
     Inspect(cmd::inspect::Args),
     /// Trace a file of rays and write the hits (formats in --help).
     Trace(cmd::trace::Args),
     /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
     Rays(cmd::rays::Args),
     /// Render a baked scene to PNG.
+    ///
+    /// The scene is memory-mapped: if the file is truncated or rewritten in place while
+    /// this runs, the process may die of SIGBUS or read wrong data. Replace baked files
+    /// by renaming a new file over the old one (as `octrace bake` does), never by
+    /// writing into them; a .oct.zst scene is read into memory instead.
     Render(cmd::render::Args),
     /// Check a file's invariants and compare the tracer with the f64 oracle.
     Verify(cmd::verify::Args),
@@ -109,11 +119,15 @@ fn is_broken_pipe(e: &anyhow::Error) -> bool {
     e.chain().any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe))
 }
 
+/// The most threads `--threads` asks for: each is a stack of its own, and a pool
+/// of 100,000 never finishes starting.
+pub(crate) const MAX_THREADS: usize = 1024;
+
 /// Runs `f` on a rayon pool of `threads` threads (all cores when `None`).
 pub(crate) fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> anyhow::Result<T> {
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
-        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        anyhow::ensure!((1..=MAX_THREADS).contains(&n), "--threads must be from 1 to {MAX_THREADS}");
         b = b.num_threads(n);
     }
     Ok(b.build()?.install(f))

@@ -26,3 +26,77 @@ macro_rules! out {
         writeln!(std::io::stdout().lock(), $($arg)*)?;
     }};
 }
+
+/// Writes a report line to standard output, or to standard error when standard output
+/// carries the command's data (`-o -`), so that the two never mix.
+#[macro_export]
+macro_rules! report {
+    ($data_on_stdout:expr, $($arg:tt)*) => {{
+        if $data_on_stdout {
+            eprintln!($($arg)*);
+        } else {
+            $crate::out!($($arg)*);
+        }
+    }};
+}
+
+/// Whether an output path is `-`: the data goes to standard output.
+pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// Writes a command's data to `path` as `octrace_format::write_atomically` does (a
+/// symbolic link is written through, a FIFO or device written into, a regular file
+/// replaced whole), or to standard output for `-`.
+pub(crate) fn write_data(path: &std::path::Path, parts: &[&[u8]]) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    if is_stdout(path) {
+        let mut out = std::io::stdout().lock();
+        for part in parts {
+            out.write_all(part)?;
+        }
+        out.flush()?;
+        return Ok(());
+    }
+    Ok(octrace_format::write_atomically(path, parts)?)
+}
+
+/// Refuses an output that is one of the command's inputs (the same file, through
+/// symbolic and hard links): writing it would destroy what the command reads. Checked
+/// before any work; an output that does not exist yet, or is not a regular file (a
+/// FIFO, `/dev/null`), passes.
+pub(crate) fn refuse_overwriting(
+    output: &std::path::Path,
+    option: &str,
+    inputs: &[&std::path::Path],
+) -> anyhow::Result<()> {
+    if is_stdout(output) {
+        return Ok(());
+    }
+    let Ok(out) = std::fs::metadata(output) else { return Ok(()) };
+    if !out.is_file() {
+        return Ok(());
+    }
+    for input in inputs {
+        if std::fs::metadata(input).is_ok_and(|inp| same_file(&out, &inp, output, input)) {
+            anyhow::bail!(
+                "{option} {} is the file this command reads as {}: writing it would destroy its input \
+                 (nothing was written; choose another output)",
+                output.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(unix)]
+fn same_file(a: &std::fs::Metadata, b: &std::fs::Metadata, _: &std::path::Path, _: &std::path::Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    a.dev() == b.dev() && a.ino() == b.ino()
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &std::fs::Metadata, _: &std::fs::Metadata, a: &std::path::Path, b: &std::path::Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+}

@@ -21,10 +21,7 @@ f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 7 3\nf 4 8 7\nf 1 5 8\
 fn bake_then_inspect_prints_exactly_this() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
-    let out = ok(
-        dir.path(),
-        &["bake", "cube.obj", "-o", "cube.oct", "--max-depth", "3", "--leaf-size", "2", "--reproducible"],
-    );
+    let out = ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct", "--max-depth", "3", "--leaf-size", "2"]);
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
@@ -127,11 +124,19 @@ fn bakes_are_identical_whatever_the_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj.zst");
     let b = bunny.to_str().unwrap();
-    ok(dir.path(), &["bake", b, "-o", "one.oct", "--threads", "1", "--reproducible"]);
-    ok(dir.path(), &["bake", b, "-o", "two.oct", "--threads", "2", "--reproducible"]);
-    let (one, two) =
-        (std::fs::read(dir.path().join("one.oct")).unwrap(), std::fs::read(dir.path().join("two.oct")).unwrap());
-    assert!(one == two, "1-thread and 2-thread bakes differ");
+    // With default options: identical files, the header included.
+    ok(dir.path(), &["bake", b, "-o", "one.oct", "--threads", "1"]);
+    ok(dir.path(), &["bake", b, "-o", "two.oct", "--threads", "2"]);
+    let read = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    assert!(read("one.oct") == read("two.oct"), "1-thread and 2-thread bakes differ");
+    // The bake time only when asked, and then only in the header.
+    ok(dir.path(), &["bake", b, "-o", "timed.oct", "--record-time"]);
+    let (one, timed) = (read("one.oct"), read("timed.oct"));
+    assert_eq!(one.len(), timed.len());
+    let differing: Vec<usize> = (0..one.len()).filter(|&i| one[i] != timed[i]).collect();
+    assert!(!differing.is_empty() && differing.iter().all(|&i| i < 416), "{differing:?}");
+    let inspect = ok(dir.path(), &["inspect", "timed.oct"]);
+    assert!(!inspect.contains("not recorded"), "{inspect}");
 }
 
 #[test]
@@ -270,14 +275,14 @@ fn soak_counts_no_leaks_with_the_watertight_test() {
 fn compressed_bakes_open_and_inspect_shows_both_sizes() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
-    let out = ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct.zst", "--compress", "--reproducible"]);
+    let out = ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct.zst", "--compress"]);
     assert!(out.contains("zstd:"), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct.zst"]);
     assert!(text.lines().next().unwrap().contains("zstd-compressed"), "{text}");
     let json: serde_json::Value =
         serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct.zst", "--json"])).unwrap();
     assert!(json["bytes_on_disk"].as_u64().unwrap() < json["file_bytes"].as_u64().unwrap());
-    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct", "--reproducible"]);
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
     let raw: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "cube.oct", "--json"])).unwrap();
     assert_eq!(raw["file_bytes"], json["file_bytes"]);
     assert_eq!(raw["bytes_on_disk"], raw["file_bytes"]);
@@ -631,4 +636,138 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     let count = |f: &dyn Fn(&[u8]) -> bool| pixels.iter().filter(|p| f(p)).count();
     assert!(count(&|p| p == [214, 39, 40]) > 2 * 40, "the triangle test's points");
     assert!(count(&|p| p[0] < 64 && p[1] < 64 && p[2] < 64) > 2000, "text and axes");
+}
+
+fn fails_saying(dir: &Path, args: &[&str], says: &str) {
+    let out = octrace(dir, args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "octrace {args:?} succeeded");
+    assert!(stderr.contains(says), "octrace {args:?}: expected '{says}' in: {stderr}");
+}
+
+/// `bake same.obj -o same.obj`, `render x.oct -o x.oct`, `rays`, `trace --out`: an
+/// output that is one of the command's inputs (also through a link, or a glTF's
+/// buffer) is refused before any work, and the input is left as it was.
+#[test]
+fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    fails_saying(d, &["bake", "cube.obj", "-o", "cube.obj"], "would destroy its input");
+    assert_eq!(std::fs::read_to_string(d.join("cube.obj")).unwrap(), CUBE_OBJ);
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("cube.obj", d.join("alias.oct")).unwrap();
+        fails_saying(d, &["bake", "cube.obj", "-o", "alias.oct"], "would destroy its input");
+        assert_eq!(std::fs::read_to_string(d.join("cube.obj")).unwrap(), CUBE_OBJ);
+    }
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let scene = std::fs::read(d.join("cube.oct")).unwrap();
+    fails_saying(d, &["render", "cube.oct", "-o", "cube.oct", "--width", "8"], "would destroy its input");
+    fails_saying(d, &["rays", "cube.oct", "-o", "cube.oct"], "would destroy its input");
+    ok(d, &["rays", "cube.oct", "-o", "rays.bin", "--set", "incoherent"]);
+    let rays = std::fs::read(d.join("rays.bin")).unwrap();
+    fails_saying(d, &["trace", "cube.oct", "--rays", "rays.bin", "--out", "cube.oct"], "would destroy its input");
+    fails_saying(d, &["trace", "cube.oct", "--rays", "rays.bin", "--out", "rays.bin"], "would destroy its input");
+    assert!(std::fs::read(d.join("cube.oct")).unwrap() == scene && std::fs::read(d.join("rays.bin")).unwrap() == rays);
+    // A glTF's external buffer is an input too.
+    let gltf =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/hostile/uri-absolute.gltf"))
+            .unwrap()
+            .replace("/etc/passwd", "tri.bin");
+    std::fs::write(d.join("tri.gltf"), gltf).unwrap();
+    let tri: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0].iter().flat_map(|c| c.to_le_bytes()).collect();
+    std::fs::write(d.join("tri.bin"), &tri).unwrap();
+    fails_saying(d, &["bake", "tri.gltf", "-o", "tri.bin"], "would destroy its input");
+    assert_eq!(std::fs::read(d.join("tri.bin")).unwrap(), tri);
+    ok(d, &["bake", "tri.gltf", "-o", "tri.oct"]);
+}
+
+/// A symbolic link is written through (it stays a link), `/dev/null` and a FIFO are
+/// written into (never replaced by a regular file), and `-` writes to standard output
+/// with the summary on standard error.
+#[cfg(unix)]
+#[test]
+fn links_devices_fifos_and_stdout_as_outputs() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    std::fs::create_dir(d.join("store")).unwrap();
+    std::os::unix::fs::symlink("store/cube.oct", d.join("cube.oct")).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    assert!(std::fs::symlink_metadata(d.join("cube.oct")).unwrap().file_type().is_symlink());
+    assert!(std::fs::metadata(d.join("store/cube.oct")).unwrap().len() > 416);
+    ok(d, &["render", "cube.oct", "-o", "/dev/null", "--width", "16"]);
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+    // Standard output: the PNG alone; the summary on standard error.
+    let out = octrace(d, &["render", "cube.oct", "-o", "-", "--width", "16"]);
+    assert!(out.status.success());
+    assert_eq!(&out.stdout[1..4], b"PNG");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rendered cube.oct (16 x 16"));
+    let rays = octrace(d, &["rays", "cube.oct", "-o", "-"]);
+    assert_eq!(rays.stdout.len(), 32 * 1024 * 1024);
+    ok(d, &["rays", "cube.oct", "-o", "rays.bin"]);
+    let hits = octrace(d, &["trace", "cube.oct", "--rays", "rays.bin", "--out", "-"]);
+    assert!(hits.status.success());
+    assert_eq!(hits.stdout.len(), 8 * 1024 * 1024);
+    // A FIFO: a reader gets the rays; the FIFO stays a FIFO.
+    let status = Command::new("mkfifo").arg(d.join("pipe")).status().unwrap();
+    assert!(status.success());
+    let reader = {
+        let pipe = d.join("pipe");
+        std::thread::spawn(move || std::fs::read(pipe).unwrap())
+    };
+    ok(d, &["rays", "cube.oct", "-o", "pipe"]);
+    assert_eq!(reader.join().unwrap(), std::fs::read(d.join("rays.bin")).unwrap());
+    assert!(std::fs::symlink_metadata(d.join("pipe")).unwrap().file_type().is_fifo());
+    // As an input, a FIFO is refused at once rather than waited on.
+    fails_saying(d, &["inspect", "pipe"], "not a regular file");
+    fails_saying(d, &["trace", "cube.oct", "--rays", "/dev/zero", "--out", "h.bin"], "not a regular file");
+}
+
+/// Sizes from the command line are checked against their documented limits before
+/// any memory is taken: each of these used to allocate tens of gigabytes, run for
+/// minutes or hang.
+#[test]
+fn oversized_requests_are_refused_before_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--margin", "0.1"], "margin 0.1 is outside 0 to 0.0009765625");
+    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--leaf-size", "0"], "--leaf-size");
+    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--max-depth", "40"], "beyond the format's deepest level");
+    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--threads", "100000"], "--threads must be from 1 to 1024");
+    assert!(!d.join("c.oct").exists());
+    ok(d, &["bake", "cube.obj", "-o", "c.oct"]);
+    fails_saying(d, &["render", "c.oct", "-o", "x.png", "--width", "100000000"], "more than the limit of 8192 x 8192");
+    fails_saying(d, &["render", "c.oct", "-o", "x.png", "--width", "9000", "--height", "9000"], "more than the limit");
+    fails_saying(d, &["render", "c.oct", "-o", "x.png", "--soft-samples", "100000"], "--soft-samples");
+    fails_saying(d, &["render", "c.oct", "-o", "x.png", "--max-depth", "1000"], "--max-depth");
+    ok(d, &["rays", "c.oct", "-o", "r.bin", "--set", "incoherent"]);
+    fails_saying(d, &["trace", "c.oct", "--rays", "r.bin", "--out", "h.bin", "--threads", "100000"], "--threads");
+    assert!(!d.join("x.png").exists() && !d.join("h.bin").exists());
+}
+
+/// A mesh that names files outside its folder is refused by default, naming the
+/// reference and the flag; `--allow-outside-references` reads them.
+#[test]
+fn bake_confines_mesh_references_unless_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("scene")).unwrap();
+    let tri: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0].iter().flat_map(|c| c.to_le_bytes()).collect();
+    std::fs::write(d.join("shared.bin"), &tri).unwrap();
+    let gltf =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/hostile/uri-absolute.gltf"))
+            .unwrap()
+            .replace("/etc/passwd", "../shared.bin");
+    std::fs::write(d.join("scene/tri.gltf"), gltf).unwrap();
+    fails_saying(d, &["bake", "scene/tri.gltf", "-o", "t.oct"], "reference '../shared.bin' not read");
+    fails_saying(d, &["bake", "scene/tri.gltf", "-o", "t.oct"], "--allow-outside-references");
+    assert!(!d.join("t.oct").exists());
+    ok(d, &["bake", "scene/tri.gltf", "-o", "t.oct", "--allow-outside-references"]);
+    let hostile = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/hostile/uri-file-scheme.gltf");
+    fails_saying(d, &["bake", hostile.to_str().unwrap(), "-o", "p.oct"], "reference 'file:///etc/passwd' not read");
+    assert!(!d.join("p.oct").exists());
 }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use octrace_bake::{bake_with_progress, BakeStage, BuildParams, Mesh};
+use octrace_bake::{bake_with_progress, BakeStage, BuildParams, LoadOptions, Mesh, References};
 use octrace_format::BakedScene;
 
 use crate::output::{mb, thousands};
@@ -23,17 +23,31 @@ pub(crate) struct Args {
     /// four f32 spacings of their coordinates.
     #[arg(long)]
     pub max_depth: Option<u32>,
-    /// Split a cell while it holds more triangles than this.
-    #[arg(long, default_value_t = octrace_bake::octree::DEFAULT_LEAF_SIZE)]
+    /// Split a cell while it holds more triangles than this (at least 1).
+    #[arg(long, default_value_t = octrace_bake::octree::DEFAULT_LEAF_SIZE,
+          value_parser = clap::value_parser!(u32).range(1..))]
     pub leaf_size: u32,
-    /// Enlarge cells by this fraction of the root edge when assigning triangles.
+    /// Enlarge cells by this fraction of the root edge when assigning triangles
+    /// (0 to 2^-10 = 0.0009765625: past that every triangle is copied into a growing
+    /// cube of cells).
     #[arg(long, default_value_t = octrace_bake::octree::DEFAULT_MARGIN)]
     pub margin: f32,
-    /// Threads to bake with (default: all cores). The output does not depend on it.
+    /// Threads to bake with (default: all cores; at most 1024). The output does not
+    /// depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Do not record the bake time, so that identical inputs give identical files.
+    /// Let the mesh read files outside its own folder: absolute paths, `file:` URIs and
+    /// `..` in glTF buffer URIs and OBJ `mtllib` lines. Only for inputs you trust; by
+    /// default such a buffer is an error and such a material library a warning. Devices,
+    /// FIFOs and files over the size limit are refused either way.
     #[arg(long)]
+    pub allow_outside_references: bool,
+    /// Record the bake's duration in the file's header. Off by default, so that two
+    /// bakes of the same input with the same options give identical files.
+    #[arg(long)]
+    pub record_time: bool,
+    /// Accepted for older scripts: bakes are reproducible by default now.
+    #[arg(long, hide = true, conflicts_with = "record_time")]
     pub reproducible: bool,
     /// Write the file zstd-compressed (name it .oct.zst): smaller on disk, read into
     /// memory when opened instead of memory-mapped.
@@ -46,17 +60,21 @@ pub(crate) struct Args {
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let params = BuildParams { max_depth: args.max_depth, leaf_size: Some(args.leaf_size), margin: args.margin };
-    anyhow::ensure!(args.margin.is_finite() && args.margin >= 0.0, "--margin must be a finite number >= 0");
+    params.check().context("--max-depth, --leaf-size or --margin")?;
     let progress = Progress::new();
     progress.stage("loading");
     let started = Instant::now();
-    let mesh = Mesh::load(&args.input)?;
+    crate::output::refuse_overwriting(&args.output, "-o", &[&args.input])?;
+    let references = if args.allow_outside_references { References::Anywhere } else { References::Confined };
+    let mesh = Mesh::load_with(&args.input, &LoadOptions { references, ..LoadOptions::default() })?;
+    let sources: Vec<&Path> = mesh.sources.iter().map(PathBuf::as_path).collect();
+    crate::output::refuse_overwriting(&args.output, "-o", &sources)?;
     for w in &mesh.warnings {
         progress.warn(w);
     }
     let (scene, bake_time) = crate::with_threads(args.threads, || bake_mesh(&mesh, &params, &progress))??;
     progress.stage("writing");
-    let time_us = if args.reproducible { 0 } else { bake_time.as_micros() as u64 };
+    let time_us = if args.record_time { bake_time.as_micros() as u64 } else { 0 };
     let (bytes, on_disk) = if args.compress {
         let (raw, compressed) = scene.write_compressed(&args.output, time_us, args.level)?;
         (raw, format!(" (zstd: {} on disk)", mb(compressed)))

@@ -15,7 +15,7 @@ pub(crate) struct Args {
     /// primary (1024 x 1024 camera rays) or incoherent (1,000,000 random rays).
     #[arg(long, value_enum, default_value_t = Set::Primary)]
     pub set: Set,
-    /// The file to write.
+    /// The file to write; `-` writes the rays to standard output. Never the scene.
     #[arg(short, long)]
     pub output: PathBuf,
 }
@@ -27,6 +27,7 @@ pub(crate) enum Set {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    crate::output::refuse_overwriting(&args.output, "-o", &[&args.scene])?;
     let scene = crate::open::open_scene(&args.scene)?;
     let b = scene.view().bounds;
     let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
@@ -34,7 +35,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         Set::Primary => raysets::primary(&frame),
         Set::Incoherent => raysets::incoherent(&frame, 1_000_000),
     };
-    octrace_format::write_atomically(&args.output, &[bytemuck::cast_slice(&rays)])?;
-    crate::out!("wrote {} {:?} rays to {}", thousands(rays.len() as u64), args.set, crate::show(&args.output));
+    crate::output::write_data(&args.output, &[bytemuck::cast_slice(&rays)])?;
+    crate::report!(
+        crate::output::is_stdout(&args.output),
+        "wrote {} {:?} rays to {}",
+        thousands(rays.len() as u64),
+        args.set,
+        crate::show(&args.output)
+    );
     Ok(())
 }

@@ -28,10 +28,12 @@ refraction, alpha); --json prints the same as JSON.")]
 pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
-    /// The PNG to write.
+    /// The PNG to write; `-` writes it to standard output (the summary then goes to
+    /// standard error). Never the scene itself.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Image width.
+    /// Image width (width x height at most 8192 x 8192 pixels: a render holds about 50
+    /// bytes a pixel).
     #[arg(long, default_value_t = 1024)]
     pub width: u32,
     /// Image height (default: the width, or the width over the scene camera's aspect).
@@ -58,11 +60,11 @@ pub(crate) struct Args {
     /// reflection, refraction, alpha), or `none` for primary rays only.
     #[arg(long, allow_hyphen_values = true)]
     pub effects: Option<String>,
-    /// Shadow rays towards area lights per shading point (soft shadows).
-    #[arg(long, default_value_t = 16)]
+    /// Shadow rays towards area lights per shading point (soft shadows), 1 to 4096.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub soft_samples: u32,
-    /// Secondary rays (reflection, refraction, alpha) a path may take.
-    #[arg(long, default_value_t = 6)]
+    /// Secondary rays (reflection, refraction, alpha) a path may take, at most 31.
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=31))]
     pub max_depth: u32,
     /// Print rays traced per kind.
     #[arg(long)]
@@ -131,14 +133,32 @@ pub(crate) fn effect_set(shading: &Shading, spec: Option<&str>) -> anyhow::Resul
     Ok((set, notes))
 }
 
+/// The most pixels a render may have: 8192 x 8192. A render holds about 50 bytes a
+/// pixel (radiance, the image, the rays of a wave), so this bounds it near 3.4 GB.
+pub(crate) const MAX_PIXELS: u64 = 8192 * 8192;
+
+/// Refuses an image over [`MAX_PIXELS`] before anything is allocated.
+fn check_size(width: u32, height: u32) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        width as u64 * height as u64 <= MAX_PIXELS,
+        "{width} x {height} pixels is more than the limit of 8192 x 8192 ({MAX_PIXELS} pixels)"
+    );
+    Ok(())
+}
+
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let height = args.height.unwrap_or(args.width);
     anyhow::ensure!(args.width > 0 && height > 0, "image size must be at least 1 x 1");
+    check_size(args.width, height)?;
+    crate::output::refuse_overwriting(&args.output, "-o", &[&args.scene])?;
+    let to_stdout = crate::output::is_stdout(&args.output);
     if let Some(fov) = args.fov {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
     }
     let scene = crate::open::open_scene(&args.scene)?;
     let camera = camera(&scene, &args)?;
+    // A scene camera's aspect ratio sets the height: checked again.
+    check_size(camera.width, camera.height)?;
     let (effects, notes) = effect_set(scene.shading(), args.effects.as_deref())?;
     anyhow::ensure!(args.effects.is_none() || args.mode == Mode::Shaded, "--effects applies to --mode shaded");
     for n in &notes {
@@ -177,7 +197,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let secs = t.elapsed().as_secs_f64();
-    image.write_png(&args.output)?;
+    crate::output::write_data(&args.output, &[&image.png_bytes()?])?;
     let effect_names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
     if args.json {
         let mut j = serde_json::json!({
@@ -196,13 +216,14 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
                 j["mean_leaves"] = s.mean_leaves.into();
             }
         }
-        crate::out!("{}", serde_json::to_string_pretty(&j)?);
+        crate::report!(to_stdout, "{}", serde_json::to_string_pretty(&j)?);
         return Ok(());
     }
     match &summary {
         Summary::Effects(counts) => {
             let listed = if effect_names.is_empty() { "none".to_string() } else { effect_names.join(", ") };
-            crate::out!(
+            crate::report!(
+                to_stdout,
                 "rendered {} ({} x {}, shaded; effects: {listed}): {} rays, {:.3} s -> {}",
                 crate::show(&args.scene),
                 camera.width,
@@ -213,11 +234,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             );
             if args.stats {
                 for kind in RayKind::ALL {
-                    crate::out!("  {:<12} {:>14}", kind.name(), thousands(counts.get(kind)));
+                    crate::report!(to_stdout, "  {:<12} {:>14}", kind.name(), thousands(counts.get(kind)));
                 }
             }
         }
-        Summary::Walks(stats) => crate::out!(
+        Summary::Walks(stats) => crate::report!(
+                to_stdout,
             "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
             crate::show(&args.scene),
             camera.width,
@@ -292,6 +314,7 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     };
     if let Some(c) = from_file {
         let height = args.height.unwrap_or_else(|| match c.aspect {
+            // `as` saturates: a hostile aspect gives u32::MAX, which the size check refuses.
             Some(a) => ((args.width as f32 / a).round() as u32).max(1),
             None => args.width,
         });

@@ -8,21 +8,26 @@ use octrace_runtime::{Hit, Ray};
 
 use crate::output::thousands;
 
-/// Trace a file of rays through a scene and write one hit record per ray.
-///
-/// RAYS.bin: little-endian, no header, 32 bytes a ray, f32 `ox oy oz tmin dx dy dz
-/// tmax`. HITS.bin: 8 bytes a ray, in ray order, f32 `t` then u32 triangle id (its
-/// index in the input mesh); a miss is `t = tmax`, id `0xFFFFFFFF`. With --occluded
-/// the id is that of some occluding triangle, not necessarily the nearest.
+/// `octrace trace`'s arguments; the formats are in its long help.
 #[derive(clap::Args, Debug)]
-#[command(verbatim_doc_comment)]
+#[command(after_long_help = "\
+RAYS.bin: little-endian, no header, 32 bytes a ray, f32 `ox oy oz tmin dx dy dz tmax`.
+HITS.bin: 8 bytes a ray, in ray order, f32 `t` then u32 triangle id (its index in the
+input mesh); a miss is `t = tmax`, id `0xFFFFFFFF`. With --occluded the id is that of
+some occluding triangle, not necessarily the nearest.
+
+The scene is memory-mapped: if the file is truncated or rewritten in place while this
+runs, the process may die of SIGBUS or read wrong data. Replace baked files by renaming
+a new file over the old one (as `octrace bake` does), never by writing into them; a
+.oct.zst scene is read into memory instead.")]
 pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
-    /// Input rays (32 bytes each).
+    /// Input rays (32 bytes each; a regular file of at most 2^32 rays, 128 GiB).
     #[arg(long)]
     pub rays: PathBuf,
-    /// Output hits (8 bytes each).
+    /// Output hits (8 bytes each); `-` writes them to standard output (the summary then
+    /// goes to standard error). Never one of the inputs.
     #[arg(long)]
     pub out: PathBuf,
     /// Answer occlusion (any hit) instead of the nearest hit.
@@ -40,9 +45,15 @@ pub(crate) struct Args {
 /// The id written for a miss.
 pub(crate) const MISS: u32 = u32::MAX;
 
+/// The most rays a ray file may hold: 2^32 (128 GiB of rays, 32 GiB of hits).
+pub(crate) const MAX_RAYS: u64 = 1 << 32;
+
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    crate::output::refuse_overwriting(&args.out, "--out", &[&args.scene, &args.rays])?;
+    let to_stdout = crate::output::is_stdout(&args.out);
     let scene = crate::open::open_scene(&args.scene)?;
-    let bytes = std::fs::read(&args.rays).with_context(|| format!("cannot read {}", args.rays.display()))?;
+    let bytes = octrace_bake::mesh::read_regular_file(&args.rays, 32 * MAX_RAYS)
+        .with_context(|| format!("cannot read {}", args.rays.display()))?;
     anyhow::ensure!(
         bytes.len() % 32 == 0,
         "{}: {} bytes is not a whole number of 32-byte rays",
@@ -65,9 +76,10 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         out.extend_from_slice(&t.to_le_bytes());
         out.extend_from_slice(&id.to_le_bytes());
     }
-    octrace_format::write_atomically(&args.out, &[&out])?;
+    crate::output::write_data(&args.out, &[&out])?;
     let n = hits.iter().flatten().count();
-    crate::out!(
+    crate::report!(
+        to_stdout,
         "{} rays, {} {}, {:.2} Mrays/s ({on})",
         thousands(rays.len() as u64),
         thousands(n as u64),

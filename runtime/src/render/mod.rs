@@ -39,13 +39,30 @@ pub struct Image {
 }
 
 impl Image {
-    /// Writes the image as PNG.
+    /// Writes the image as PNG (as [`octrace_format::write_atomically`] writes).
     ///
     /// # Errors
     /// [`Error::Image`] naming the path.
     pub fn write_png(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         let err = |e: &dyn std::fmt::Display| Error::Image { path: path.into(), message: e.to_string() };
+        let bytes = self.png_bytes()?;
+        octrace_format::write_atomically(path, &[&bytes]).map_err(|e| err(&e))
+    }
+
+    /// The image as a PNG file's bytes.
+    ///
+    /// # Errors
+    /// [`Error::Image`] if the encoder fails (an image too large for PNG).
+    ///
+    /// # Example
+    /// ```
+    /// let image = octrace_runtime::render::Image { width: 1, height: 1, rgb: vec![255, 0, 0] };
+    /// assert_eq!(&image.png_bytes()?[1..4], b"PNG");
+    /// # Ok::<(), octrace_runtime::Error>(())
+    /// ```
+    pub fn png_bytes(&self) -> Result<Vec<u8>> {
+        let err = |e: &dyn std::fmt::Display| Error::Image { path: "-".into(), message: e.to_string() };
         let mut bytes = Vec::new();
         {
             let mut enc = png::Encoder::new(&mut bytes, self.width, self.height);
@@ -54,7 +71,7 @@ impl Image {
             let mut w = enc.write_header().map_err(|e| err(&e))?;
             w.write_image_data(&self.rgb).map_err(|e| err(&e))?;
         }
-        octrace_format::write_atomically(path, &[&bytes]).map_err(|e| err(&e))
+        Ok(bytes)
     }
 
     /// Mean absolute difference per channel, in `[0, 255]`, or `None` if the sizes differ.
