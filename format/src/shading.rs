@@ -185,7 +185,8 @@ pub struct Camera {
     pub position: [f32; 3],
     /// Unit viewing direction.
     pub forward: [f32; 3],
-    /// Unit up vector, orthogonal to `forward`.
+    /// Unit up vector, not parallel to `forward` (a glTF camera's is orthogonal to
+    /// it; the renderer takes the part orthogonal to `forward`).
     pub up: [f32; 3],
     /// Vertical field of view, radians.
     pub yfov: f32,
@@ -281,15 +282,21 @@ impl Shading {
             if !l.outer_cone.is_finite() || l.range <= 0.0 || l.intensity < 0.0 || l.color.iter().any(|&c| c < 0.0) {
                 return Err(corrupt(format!("light '{}' holds a value out of range", l.name)));
             }
+            if !is_unit(l.direction) {
+                return Err(corrupt(format!("light '{}' has a direction that is not a unit vector", l.name)));
+            }
         }
         for c in &self.cameras {
             let v = c.position.iter().chain(&c.forward).chain(&c.up).chain([&c.yfov]).chain(c.aspect.as_ref());
             if v.clone().any(|x| !x.is_finite()) || !(c.yfov > 0.0 && c.yfov < std::f32::consts::PI) {
                 return Err(corrupt(format!("camera '{}' holds a value that is not finite or out of range", c.name)));
             }
-            let len2 = |v: [f32; 3]| v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>();
-            if len2(c.forward) == 0.0 || len2(c.up) == 0.0 {
-                return Err(corrupt(format!("camera '{}' has a zero direction", c.name)));
+            let cos = (0..3).map(|a| c.forward[a] as f64 * c.up[a] as f64).sum::<f64>();
+            if !is_unit(c.forward) || !is_unit(c.up) || cos.abs() > 1.0 - UNIT_TOLERANCE {
+                return Err(corrupt(format!(
+                    "camera '{}' needs unit forward and up vectors that are not parallel",
+                    c.name
+                )));
             }
             if c.aspect.is_some_and(|a| a <= 0.0) {
                 return Err(corrupt(format!("camera '{}' has a non-positive aspect ratio", c.name)));
@@ -302,4 +309,14 @@ impl Shading {
         }
         Ok(())
     }
+}
+
+/// How far from 1 a stored unit vector's length may be: `f32` rounding of a normalised
+/// vector stays within 1e-6; a vector built by hand from a few decimals, within this.
+const UNIT_TOLERANCE: f64 = 1e-4;
+
+/// Whether `v`'s length is 1 within [`UNIT_TOLERANCE`].
+fn is_unit(v: [f32; 3]) -> bool {
+    let len2 = v.iter().map(|&x| x as f64 * x as f64).sum::<f64>();
+    (len2.sqrt() - 1.0).abs() <= UNIT_TOLERANCE
 }

@@ -125,10 +125,38 @@ impl SceneView<'_> {
             return Err(Error::corrupt(format!("triangle reference {bad} out of range")));
         }
         let stats = &self.stats;
-        if stats.input_triangles != tri_count + stats.degenerate_triangles {
+        if tri_count.checked_add(stats.degenerate_triangles) != Some(stats.input_triangles) {
             return Err(Error::corrupt("triangle counts in the statistics do not add up"));
         }
+        self.check_geometry()?;
         self.check_shading()
+    }
+
+    /// Every vertex finite and inside the mesh box, the mesh box inside the root cube.
+    fn check_geometry(&self) -> Result<()> {
+        if let Some(i) = self.triangles.iter().position(|v| !v.is_finite()) {
+            return Err(Error::corrupt(format!(
+                "triangle {} has a coordinate that is not finite",
+                i / TRIANGLE_FLOATS
+            )));
+        }
+        let b = &self.bounds;
+        let root_hi = b.root_lo.map(|lo| lo as f64 + b.root_size as f64);
+        for a in 0..3 {
+            let (lo, hi) = (b.mesh_lo[a], b.mesh_hi[a]);
+            if !(lo <= hi && lo >= b.root_lo[a] && hi as f64 <= root_hi[a]) {
+                return Err(Error::corrupt(format!(
+                    "the mesh box {:?}-{:?} is not inside the root cube",
+                    b.mesh_lo, b.mesh_hi
+                )));
+            }
+        }
+        for (t, corner) in self.triangles.chunks_exact(3).enumerate() {
+            if (0..3).any(|a| corner[a] < b.mesh_lo[a] || corner[a] > b.mesh_hi[a]) {
+                return Err(Error::corrupt(format!("triangle {} has a vertex outside the mesh box", t / 3)));
+            }
+        }
+        Ok(())
     }
 
     /// The shading arrays are absent or one entry a stored triangle; material ids in
@@ -146,6 +174,9 @@ impl SceneView<'_> {
                     n.saturating_mul(per)
                 )));
             }
+        }
+        if self.normals.iter().chain(self.uvs).any(|v| !v.is_finite()) {
+            return Err(Error::corrupt("a shading normal or texture coordinate is not finite"));
         }
         let materials = self.shading.materials.len();
         if let Some(bad) = self.material_ids.iter().find(|&&m| m as usize >= materials) {
@@ -246,12 +277,33 @@ impl SceneView<'_> {
             if end > self.tri_refs.len() as u64 {
                 return Err(Error::corrupt(format!("leaf {b}'s triangles end at {end}, past the references")));
             }
+            self.check_leaf_triangles(b, &rec)?;
             if rec.ncount >> (crate::layout::COARSER_SHIFT + 6) != 0 {
                 return Err(Error::corrupt(format!("leaf {b} has stray bits in its neighbour counts")));
             }
         }
         if next != self.octree.len() as u64 {
             return Err(Error::corrupt("octree array has words after the last record"));
+        }
+        Ok(())
+    }
+
+    /// Each triangle a leaf lists reaches its cell, enlarged by the bake margin: their
+    /// boxes overlap (a necessary condition of the bake's exact overlap test; it catches
+    /// a triangle moved away from the cells that list it).
+    fn check_leaf_triangles(&self, b: usize, rec: &crate::view::LeafRecord<'_>) -> Result<()> {
+        let cell = self.leaf_box(rec.box_index);
+        let margin = self.params.margin as f64 * self.bounds.root_size as f64;
+        let refs = &self.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
+        for &t in refs {
+            let v = &self.triangles[t as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+            let apart = (0..3).any(|a| {
+                let (lo, hi) = (v[a].min(v[a + 3]).min(v[a + 6]), v[a].max(v[a + 3]).max(v[a + 6]));
+                (lo as f64) > cell[a + 3] as f64 + margin || (hi as f64) < cell[a] as f64 - margin
+            });
+            if apart {
+                return Err(Error::corrupt(format!("leaf {b} lists triangle {t}, which does not reach its cell")));
+            }
         }
         Ok(())
     }

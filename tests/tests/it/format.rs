@@ -386,5 +386,86 @@ fn the_fuzzing_header_helper_rebuilds_a_real_header() {
     let junk = vec![7u8; 100];
     let mut file = octrace_format::testing::header_for_archive(&junk).encode().to_vec();
     file.extend_from_slice(&junk);
-    assert!(matches!(open(&file), Err(Error::Corrupt(ref m)) if m.contains("archive structure")));
+    // What bytecheck found, in every build (rancor's default error type keeps it only
+    // where debug assertions are on).
+    let err = open(&file).unwrap_err();
+    assert!(
+        matches!(err, Error::Corrupt(ref m) if m.contains("archive structure") && !m.contains("without error information")),
+        "{err}"
+    );
+}
+
+/// The geometry and shading rules: finite vertices inside the mesh box, the mesh box
+/// inside the root cube, every listed triangle reaching its cell, finite normals and
+/// texture coordinates, cameras with unit forward and up that are not parallel, lights
+/// with unit directions. Each of these used to open.
+#[test]
+fn geometry_and_shading_that_break_the_rules_are_rejected() {
+    use octrace_format::{Camera, Light, LightKind};
+    let camera = Camera {
+        name: "c".into(),
+        position: [0.0, 0.0, 3.0],
+        forward: [0.0, 0.0, -1.0],
+        up: [0.0, 1.0, 0.0],
+        yfov: 0.8,
+        aspect: None,
+    };
+    let light = Light {
+        name: "l".into(),
+        kind: LightKind::Directional,
+        color: [1.0; 3],
+        intensity: 1.0,
+        position: [0.0; 3],
+        direction: [0.0, -1.0, 0.0],
+        range: f32::INFINITY,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+    };
+    let with = |c: Camera, l: Light| {
+        move |s: &mut BakedScene| {
+            s.shading.cameras.push(c);
+            s.shading.lights.push(l);
+        }
+    };
+    // The rules hold for the scene with a good camera and light.
+    let mut good = scene();
+    with(camera.clone(), light.clone())(&mut good);
+    open(&good.to_file_bytes(0).unwrap()).unwrap();
+    type Change = Box<dyn FnOnce(&mut BakedScene)>;
+    let cases: Vec<(&str, Change, &str)> = vec![
+        ("NaN vertex", Box::new(|s| s.triangles[4] = f32::NAN), "not finite"),
+        ("infinite vertex", Box::new(|s| s.triangles[0] = f32::INFINITY), "not finite"),
+        ("mesh box too small", Box::new(|s| s.bounds.mesh_hi[1] -= 0.25), "outside the mesh box"),
+        ("mesh box past the root", Box::new(|s| s.bounds.mesh_hi[2] += 100.0), "not inside the root cube"),
+        (
+            "triangle moved from its cells",
+            Box::new(|s| {
+                // The first stored triangle, mirrored through the centre: inside the mesh
+                // box, far from the leaves that list it.
+                for v in 0..3 {
+                    for a in 0..3 {
+                        s.triangles[3 * v + a] = -s.triangles[3 * v + a];
+                    }
+                }
+            }),
+            "does not reach its cell",
+        ),
+        ("NaN normal", Box::new(|s| s.normals[7] = f32::NAN), "not finite"),
+        ("infinite uv", Box::new(|s| s.uvs[3] = f32::NEG_INFINITY), "not finite"),
+        (
+            "forward parallel to up",
+            Box::new(with(Camera { up: [0.0, 0.0, 1.0], ..camera.clone() }, light.clone())),
+            "not parallel",
+        ),
+        ("long forward", Box::new(with(Camera { forward: [0.0, 0.0, -2.0], ..camera.clone() }, light.clone())), "unit"),
+        (
+            "zero light direction",
+            Box::new(with(camera.clone(), Light { direction: [0.0; 3], ..light.clone() })),
+            "unit",
+        ),
+    ];
+    for (what, change, says) in cases {
+        let err = corrupt(change);
+        assert!(matches!(err, Error::Corrupt(ref m) if m.contains(says)), "{what}: {err}");
+    }
 }
