@@ -148,23 +148,54 @@ impl SceneFile {
         Self::validated(Storage::Mapped(map), header)
     }
 
-    /// Memory-maps the file and checks its header and section table only: the trusted
-    /// fast path, whose cost does not grow with the file.
+    /// Memory-maps the file and checks its header, its section table and the archive's
+    /// structure (rkyv's bytecheck: every pointer and length inside the file, a few
+    /// microseconds for a 60 MB file), but neither the checksums nor the format's
+    /// semantic rules: the trusted fast path, for files baked by octrace or validated
+    /// earlier and not changed since.
+    ///
+    /// What it guarantees for a file that breaks the semantic rules (links to the wrong
+    /// leaf, counts and offsets out of range, a depth beyond the format's, non-finite
+    /// numbers): tracing it gives wrong answers or misses, never a panic, a hang (every
+    /// walk is bounded by `Tracer::max_steps`) or a read out of bounds. Use
+    /// [`SceneFile::map`] to have such a file refused instead.
     ///
     /// # Safety
-    /// Everything [`SceneFile::map`] requires, and the file must be a valid scene
-    /// written by this format version (baked by octrace, or validated earlier and not
-    /// changed since). Tracing a file that breaks the format's rules through this path
-    /// is undefined behaviour.
+    /// As [`SceneFile::map`]: no one may modify or truncate the file while it is mapped.
     ///
     /// # Errors
-    /// [`Error::Io`] and the header errors.
+    /// [`Error::Io`], the header errors, and [`Error::Corrupt`] for an archive whose
+    /// structure is broken.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Self> {
         let (map, header) = map_file(path.as_ref())?;
         let mut file = SceneFile { storage: Storage::Mapped(map), header, shading: Shading::default() };
-        // SAFETY: our caller promised a valid file (see above); the payload is aligned
-        // as in `view`.
-        let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(file.payload()) };
+        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(file.payload())
+            .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
+        file.shading = deserialize_shading(archived)?;
+        Ok(file)
+    }
+
+    /// [`SceneFile::map_unchecked`]'s checks on a file held in memory (copied into
+    /// aligned memory): the header and the archive's structure, not the checksums or
+    /// the semantic rules. Safe: the bytes cannot change under it.
+    ///
+    /// # Errors
+    /// The header errors, and [`Error::Corrupt`] for a broken archive structure.
+    ///
+    /// # Example
+    /// ```
+    /// let scene = octrace_format::testing::single_leaf_scene();
+    /// let file = octrace_format::SceneFile::from_bytes_unchecked(&scene.to_file_bytes(0)?)?;
+    /// assert_eq!(file.view().triangle_count(), scene.view().triangle_count());
+    /// # Ok::<(), octrace_format::Error>(())
+    /// ```
+    pub fn from_bytes_unchecked(bytes: &[u8]) -> Result<Self> {
+        let header = Header::decode(bytes, bytes.len() as u64)?;
+        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(bytes.len() - HEADER_LEN);
+        payload.extend_from_slice(&bytes[HEADER_LEN..]);
+        let mut file = SceneFile { storage: Storage::Owned(payload), header, shading: Shading::default() };
+        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(file.payload())
+            .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
         file.shading = deserialize_shading(archived)?;
         Ok(file)
     }
@@ -173,7 +204,7 @@ impl SceneFile {
         let mut file = SceneFile { storage, header, shading: Shading::default() };
         let payload = file.payload();
         check_sections(&header, payload)?;
-        let archived = rkyv::access::<ArchivedBakedScene, rancor::Error>(payload)
+        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(payload)
             .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
         check_arrays_in_sections(&header, payload, archived)?;
         file.shading = deserialize_shading(archived)?;
@@ -206,8 +237,8 @@ impl SceneFile {
 
     /// The scene's arrays, borrowed.
     pub fn view(&self) -> SceneView<'_> {
-        // SAFETY: every constructor either ran `rkyv::access` on these exact bytes
-        // (`validated`) or is an `unsafe fn` whose caller promised a valid file. The
+        // SAFETY: every constructor ran `rkyv::access` (bytecheck) on these exact bytes,
+        // which do not change (a map's caller promised as much). The
         // payload starts 16-byte aligned: a map starts on a page and the header is 64
         // bytes; owned bytes are an `AlignedVec<16>`.
         let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) };
@@ -360,5 +391,6 @@ pub(crate) static EMPTY_SHADING: Shading =
 
 /// The archive's shading data as native values.
 fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {
-    rkyv::deserialize::<Shading, rancor::Error>(&a.shading).map_err(|e| Error::corrupt(format!("shading data: {e}")))
+    rkyv::deserialize::<Shading, rancor::BoxedError>(&a.shading)
+        .map_err(|e| Error::corrupt(format!("shading data: {e}")))
 }

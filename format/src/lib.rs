@@ -107,4 +107,80 @@ pub mod testing {
             shading: Default::default(),
         }
     }
+
+    /// One to three changes to the scene's semantic fields (array words and lengths,
+    /// depth, cube level, bounds, shading arrays), drawn from `next`: the file it
+    /// serializes to stays a sound archive, so only validation (or the trusted path's
+    /// own checks) stands between it and a tracer. For the trusted-path test and fuzz
+    /// target.
+    pub fn mutate_semantics(s: &mut BakedScene, next: &mut dyn FnMut() -> u64) {
+        let mut pick = |n: u64| next() % n;
+        for _ in 0..1 + pick(3) {
+            match pick(16) {
+                0..=3 => poke_words(&mut s.octree, &mut pick),
+                4 => poke_words(&mut s.tri_refs, &mut pick),
+                5 => poke_floats(&mut s.triangles, &mut pick),
+                6 => poke_words(&mut s.triangle_ids, &mut pick),
+                7 => poke_floats(&mut s.boxes, &mut pick),
+                8 => poke_words(&mut s.cube_map, &mut pick),
+                9 => poke_words(&mut s.nodes, &mut pick),
+                10 => s.root = word(s.nodes.len(), &mut pick),
+                11 => s.params.max_depth = pick(40) as u32,
+                12 => s.params.cube_level = pick(40) as u32,
+                13 => {
+                    let (field, value) = (pick(10) as usize, float(&mut pick));
+                    let b = &mut s.bounds;
+                    match field {
+                        0..=2 => b.mesh_lo[field] = value,
+                        3..=5 => b.mesh_hi[field - 3] = value,
+                        6..=8 => b.root_lo[field - 6] = value,
+                        _ => b.root_size = value,
+                    }
+                }
+                14 => poke_words(&mut s.material_ids, &mut pick),
+                _ if pick(2) == 0 => poke_floats(&mut s.normals, &mut pick),
+                _ => poke_floats(&mut s.uvs, &mut pick),
+            }
+        }
+    }
+
+    /// A value a hostile file might hold in a word: small, near a length, huge, a power
+    /// of two or any.
+    fn word(len: usize, pick: &mut dyn FnMut(u64) -> u64) -> u32 {
+        match pick(6) {
+            0 => pick(8) as u32,
+            1 => len as u32 + pick(3) as u32,
+            2 => u32::MAX - pick(3) as u32,
+            3 => 1 << pick(32),
+            _ => pick(1 << 32) as u32,
+        }
+    }
+
+    fn float(pick: &mut dyn FnMut(u64) -> u64) -> f32 {
+        [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0, 1e30, -1e-30, f32::MIN_POSITIVE, 3.0, -2.0]
+            [pick(10) as usize]
+    }
+
+    fn poke_words(v: &mut Vec<u32>, pick: &mut dyn FnMut(u64) -> u64) {
+        match (pick(5), v.len() as u64) {
+            (_, 0) => v.push(word(0, pick)),
+            (0, n) => v.truncate(pick(n) as usize),
+            (1, _) => v.push(word(v.len(), pick)),
+            (_, n) => {
+                let i = pick(n) as usize;
+                v[i] = word(v.len(), pick);
+            }
+        }
+    }
+
+    fn poke_floats(v: &mut Vec<f32>, pick: &mut dyn FnMut(u64) -> u64) {
+        match (pick(4), v.len() as u64) {
+            (_, 0) => {}
+            (0, n) => v.truncate(pick(n) as usize),
+            (_, n) => {
+                let i = pick(n) as usize;
+                v[i] = float(pick);
+            }
+        }
+    }
 }

@@ -34,7 +34,7 @@ impl BakedScene {
         // Sized up front: growing a buffer of a hundred megabytes by doubling costs more
         // than the serialization itself.
         let buffer = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(self.array_bytes() as usize + 1024);
-        let payload = rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, buffer)
+        let payload = rkyv::api::high::to_bytes_in::<_, rancor::BoxedError>(self, buffer)
             .map_err(|e| Error::corrupt(format!("cannot archive the scene: {e}")))?;
         let mut sections = SectionHasher::new(self);
         sections.update(&payload);
@@ -80,9 +80,11 @@ impl BakedScene {
                 sections: SectionHasher::new(self),
                 failure: None,
             };
-            let archived =
-                rkyv::api::high::to_bytes_in::<_, rancor::Error>(self, rkyv::ser::writer::IoWriter::new(&mut sink))
-                    .map(drop);
+            let archived = rkyv::api::high::to_bytes_in::<_, rancor::BoxedError>(
+                self,
+                rkyv::ser::writer::IoWriter::new(&mut sink),
+            )
+            .map(drop);
             if let Some(e) = sink.failure.take() {
                 return Err(io(e));
             }

@@ -68,15 +68,18 @@ impl Scene {
         Ok(Scene::with(Source::File(Box::new(file))))
     }
 
-    /// Memory-maps a `.oct` file checking its header only: microseconds whatever the
-    /// size. The trusted path, for files this pipeline baked.
+    /// Memory-maps a `.oct` file checking its header and the archive's structure only,
+    /// not its checksums or semantic rules: microseconds whatever the size. The trusted
+    /// path, for files this pipeline baked. A file that breaks the semantic rules gives
+    /// wrong answers or misses through it, never a panic, a hang or a read out of
+    /// bounds (see `octrace_format::SceneFile::map_unchecked`).
     ///
     /// # Safety
-    /// As [`Scene::map`], and the file must be a valid scene of this format version
-    /// (see `octrace_format::SceneFile::map_unchecked`).
+    /// As [`Scene::map`]: the file must not be modified or truncated while the scene is
+    /// alive.
     ///
     /// # Errors
-    /// I/O and header errors.
+    /// I/O, header and archive-structure errors.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Scene> {
         // SAFETY: forwarded to our caller.
         let file = unsafe { SceneFile::map_unchecked(path)? };
@@ -89,6 +92,16 @@ impl Scene {
     /// As [`Scene::open`].
     pub fn from_bytes(bytes: &[u8]) -> Result<Scene> {
         Ok(Scene::with(Source::File(Box::new(SceneFile::from_bytes(bytes)?))))
+    }
+
+    /// The trusted path on a file held in memory: the header and the archive's
+    /// structure are checked, not the checksums or the semantic rules (see
+    /// [`Scene::map_unchecked`] for what that guarantees).
+    ///
+    /// # Errors
+    /// Header and archive-structure errors.
+    pub fn from_bytes_unchecked(bytes: &[u8]) -> Result<Scene> {
+        Ok(Scene::with(Source::File(Box::new(SceneFile::from_bytes_unchecked(bytes)?))))
     }
 
     /// Wraps a scene baked in this process (it is validated first).

@@ -24,7 +24,7 @@
 //! valid file ever is.
 
 use octrace_format::layout::{
-    links_before, other_axes, texel_index, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS,
+    links_before, other_axes, texel_index, NodeRef, COARSER_SHIFT, LEAF_HEADER_WORDS, MAX_LEVEL, TRIANGLE_FLOATS,
 };
 use octrace_format::SceneView;
 
@@ -249,7 +249,9 @@ impl<'a> Tracer<'a> {
     /// Prepares a tracer for a validated view.
     pub fn new(view: SceneView<'a>) -> Tracer<'a> {
         let b = view.bounds;
-        let max_depth = view.params.max_depth;
+        // The format's own limit: a file that claims more (on the trusted path) is
+        // walked as if it said 20, so no shift overflows and the step bound holds.
+        let max_depth = view.params.max_depth.min(MAX_LEVEL);
         let (root_lo, root_hi) = root_corners(&view);
         let (box_lo, box_hi) = mesh_box(&view);
         Tracer {
@@ -262,8 +264,11 @@ impl<'a> Tracer<'a> {
             max_depth,
             // A line crosses at most 3 * 2^depth planes of the finest grid, and each
             // step crosses one (or sits on an edge or corner and crosses one at no
-            // distance, at most twice more): 3x that, plus slack for tiny trees.
-            max_steps: 9 * (1u32 << max_depth) + 64,
+            // distance, at most twice more): 3x that, plus slack for tiny trees. And a
+            // line enters a convex cell once, so a walk visits no leaf more than three
+            // times: 9x the leaves bounds it too, and the smaller bound wins (a small
+            // hostile file claiming a deep tree ends its cycles sooner).
+            max_steps: (9 * (1u32 << max_depth) + 64).min(9 * view.leaf_count().min(1 << 26) as u32 + 64),
             view,
             test: TriangleTest::default(),
             exit: ExitTest::default(),
@@ -492,9 +497,11 @@ impl<'a> Tracer<'a> {
             return None;
         }
         let a = address as usize;
-        let rec = &v.octree[a..a + LEAF_HEADER_WORDS];
+        // A valid file's links are record starts; a hostile one on the trusted path
+        // ends the walk here.
+        let rec = v.octree.get(a..a + LEAF_HEADER_WORDS)?;
         let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
-        stats.triangle_tests += count;
+        stats.triangle_tests = stats.triangle_tests.saturating_add(count);
         (!self.test_leaf::<ANY>(count, offset, box_index, walk, test)).then_some((box_index, ncount))
     }
 
@@ -510,7 +517,8 @@ impl<'a> Tracer<'a> {
         test: &impl LeafTest,
     ) -> bool {
         let v = &self.view;
-        let refs = &v.tri_refs[offset as usize..(offset + count) as usize];
+        // References past the array (a hostile file on the trusted path): none.
+        let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
         let size = test.batch_size();
         if size == 0 {
             return self.one_by_one::<ANY>(refs, box_index, walk, test);
@@ -545,7 +553,12 @@ impl<'a> Tracer<'a> {
         test: &impl LeafTest,
     ) -> bool {
         for &tri in refs {
-            let data = &self.view.triangles[tri as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+            // A reference past the triangles (a hostile file on the trusted path) is skipped.
+            let Some(data) =
+                self.view.triangles.get(tri as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+            else {
+                continue;
+            };
             if let Some(hit) = test.hit(data, walk.tmin, *walk.t_best) {
                 self.keep(walk, tri, box_index, hit);
                 if ANY {
@@ -571,7 +584,8 @@ impl<'a> Tracer<'a> {
     /// A finished walk's answer, its triangle named by its input id.
     #[inline(always)]
     pub(crate) fn answer(&self, best: Option<Hit>) -> Option<Hit> {
-        best.map(|h| Hit { triangle: self.view.triangle_ids[h.prim as usize], ..h })
+        // A stored triangle without an id (a hostile file on the trusted path): a miss.
+        best.and_then(|h| Some(Hit { triangle: *self.view.triangle_ids.get(h.prim as usize)?, ..h }))
     }
 
     /// Visits the walk's current leaf and moves to the next; returns whether the walk
@@ -647,14 +661,18 @@ impl<'a> Tracer<'a> {
         let side_bits = sides[0] | sides[1] << 1 | sides[2] << 2;
         let quadrant = (side_bits & ((1 << axis) - 1)) | ((side_bits >> (axis + 1)) << axis);
         let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
-        w.address = v.octree[link];
+        // A link past the array (a hostile file on the trusted path) ends the walk.
+        let Some(&next) = v.octree.get(link) else { return true };
+        w.address = next;
         // 5. The neighbour's cell: across the face at this level, then one level finer
         //    (four neighbours: the quadrant's child on our side), the same, or one
         //    coarser (the flag in nCount), without a branch:
         //    cell' = ((across << 1) | child bits) >> (1 - d).
         let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
         let finer = n >> 2;
-        let shift = 1 + coarser - finer;
+        // 0 to 2 in a valid file; `& 31` keeps a hostile file's counts (on the trusted
+        // path) from overflowing the shift, as release builds would anyway.
+        let shift = (1 + coarser).wrapping_sub(finer) & 31;
         let up = (face as u32 & 1) * 2; // 0 to go down the axis, 2 to go up
         let next = |k: usize| {
             let on_axis = k == axis;
@@ -663,7 +681,7 @@ impl<'a> Tracer<'a> {
             ((across << 1) | bit) >> shift
         };
         w.cell = [next(0), next(1), next(2)];
-        w.level = (level + finer).wrapping_sub(coarser);
+        w.level = level.wrapping_add(finer).wrapping_sub(coarser);
         false
     }
 }
@@ -793,7 +811,12 @@ impl Tracer<'_> {
         q[axis] = if high { (1u32 << self.max_depth) - 1 } else { 0 };
         let face = 2 * axis + high as usize;
         let level = self.view.params.cube_level;
-        let res = 1usize << level;
+        let res = 1usize << level.min(MAX_LEVEL);
+        // A cube map that does not fit the tree (a hostile file on the trusted path):
+        // locate the entry point from the root instead.
+        if level > self.max_depth || self.view.cube_map.len() != 6 * res * res {
+            return self.descend(self.view.root, 0, q);
+        }
         let (u, v) = other_axes(axis);
         let shift = self.max_depth - level;
         let texel = texel_index(face, res, (q[u] >> shift) as usize, (q[v] >> shift) as usize);
@@ -803,8 +826,13 @@ impl Tracer<'_> {
             // The texel's leaf may be coarser than the texel: its level is read off its
             // box, whose edge is the root's divided by a power of two.
             NodeRef::Leaf(address) => {
-                let b = self.view.octree[address as usize + 2] as usize * 6;
-                let edge = self.view.boxes[b + 3] as f64 - self.view.boxes[b] as f64;
+                let view = &self.view;
+                let edge =
+                    view.octree.get(address as usize + 2).and_then(|&b| view.boxes.get(b as usize * 6..)?.get(..6));
+                // A leaf or box past its array (a hostile file): from the root instead.
+                let Some(edge) = edge.map(|b| b[3] as f64 - b[0] as f64) else {
+                    return self.descend(view.root, 0, q);
+                };
                 // Edges are the root's over powers of two: compare binary exponents
                 // (rounding of the planes moves an edge by far less than a factor 2).
                 let ratio = self.view.bounds.root_size as f64 / edge * std::f64::consts::SQRT_2;
@@ -822,11 +850,14 @@ impl Tracer<'_> {
 /// stops there too, so the descent is bounded whatever the file.
 #[inline(always)]
 fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32) -> (u32, u32) {
+    // `q` is on the grid of the depth the tracer uses (the file's, at most the format's
+    // limit), which `stop` never exceeds.
+    let depth = view.params.max_depth.min(MAX_LEVEL);
     while let NodeRef::Internal(i) = NodeRef::decode(word) {
-        if level >= stop {
+        if level >= stop || level >= depth {
             break;
         }
-        let shift = (view.params.max_depth - level - 1).min(31);
+        let shift = (depth - level - 1).min(31);
         let child = (q[0] >> shift & 1) | (q[1] >> shift & 1) << 1 | (q[2] >> shift & 1) << 2;
         word = view.nodes.get(8 * i as usize + child as usize).copied().unwrap_or(0);
         level += 1;
@@ -851,9 +882,10 @@ impl LocateGrid {
 
     /// The grid of a validated scene.
     pub fn build(view: &SceneView<'_>) -> LocateGrid {
-        let level = view.params.max_depth.min(Self::MAX_LEVEL);
+        let depth = view.params.max_depth.min(MAX_LEVEL);
+        let level = depth.min(Self::MAX_LEVEL);
         let res = 1u32 << level;
-        let shift = view.params.max_depth - level;
+        let shift = depth - level;
         let cells = (res as usize).pow(3);
         let (mut words, mut levels) = (Vec::with_capacity(cells), Vec::with_capacity(cells));
         for z in 0..res {

@@ -358,13 +358,15 @@ impl<'s> GpuTracer<'s> {
         };
         let b = view.bounds;
         let (root_lo, root_hi) = crate::cpu::root_corners(&view);
-        let max_depth = view.params.max_depth;
+        // As the CPU tracer: a depth beyond the format's (a hostile file on the trusted
+        // path) is walked as the format's limit. (WGSL bounds-checks every buffer read.)
+        let max_depth = view.params.max_depth.min(octrace_format::layout::MAX_LEVEL);
         let (lo, hi) = crate::cpu::mesh_box(&view);
         let params = Params {
             ray_count: 0,
             max_depth,
             max_steps: crate::Tracer::new(view.clone()).max_steps(),
-            cube_level: view.params.cube_level,
+            cube_level: view.params.cube_level.min(max_depth),
             root_node: view.root,
             offsets: [
                 offsets.octree,

@@ -9,4 +9,5 @@ mod hostile;
 mod mesh;
 mod raysets;
 mod render;
+mod trusted;
 mod unconstrained;

@@ -338,14 +338,16 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         let sides = ((_mm_movemask_ps(_mm_cmpgt_ps(ps, _mm_setzero_ps())) as u32) ^ if negative_a { 7 } else { 0 }) & 7;
         let quadrant = (sides & ((1 << axis) - 1)) | ((sides >> (axis + 1)) << axis);
         let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
-        w.address = v.octree[link];
+        // A link past the array (a hostile file on the trusted path) ends the walk.
+        let Some(&next) = v.octree.get(link) else { return true };
+        w.address = next;
         // The next record is this ray's next load, after the other rays in flight have
         // stepped: ask for it now.
         // A record is 16 to 112 bytes; its links spill onto the next cache line when
         // it starts late in one: ask for the line 60 bytes on too (dragon incoherent
         // rays 6 % faster, the other sets unchanged).
         prefetch(v.octree, w.address);
-        prefetch(v.octree, w.address + 15);
+        prefetch(v.octree, w.address.wrapping_add(15));
         // 5. The next cell: ((across << 1) | child bits) >> (1 + coarser - finer).
         let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
         let finer = n >> 2;
@@ -358,8 +360,10 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
             lane_bits,
         ));
         let shifted = _mm_or_si128(_mm_slli_epi32::<1>(across), bits);
-        w.cell = _mm_srl_epi32(shifted, _mm_cvtsi32_si128((1 + coarser - finer) as i32));
-        w.level = (w.level + finer).wrapping_sub(coarser);
+        // A hostile file's counts (on the trusted path) may make the shift 32 or more:
+        // the lanes then hold zero, a cell the step bound or a miss soon ends.
+        w.cell = _mm_srl_epi32(shifted, _mm_cvtsi32_si128((1 + coarser).wrapping_sub(finer) as i32));
+        w.level = w.level.wrapping_add(finer).wrapping_sub(coarser);
         false
     }
 }

@@ -1,0 +1,66 @@
+//! The trusted path on semantically broken files never panics, hangs or reads out of
+//! bounds: a valid scene (a small torus with shading data, baked once) has its
+//! semantic fields changed as the input's bytes say (`testing::mutate_semantics`),
+//! is serialized with correct checksums (a sound archive), opened without validation
+//! (`Scene::from_bytes_unchecked`, what `map_unchecked` checks) and traced one ray at a
+//! time and in batches, then rendered small.
+#![no_main]
+
+use std::sync::OnceLock;
+
+use glam::Vec3;
+use libfuzzer_sys::fuzz_target;
+use octrace_bake::{bake, procedural, BuildParams, Mesh};
+use octrace_format::BakedScene;
+use octrace_runtime::{Ray, Scene};
+
+fn base() -> &'static BakedScene {
+    static BASE: OnceLock<BakedScene> = OnceLock::new();
+    BASE.get_or_init(|| {
+        let torus = procedural::torus([0.0; 3], 1.0, 0.3, 12, 6);
+        let mut mesh = Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
+        for t in torus.triangles {
+            mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
+            mesh.material_ids.push(0);
+        }
+        bake(&mesh, &BuildParams { max_depth: Some(4), leaf_size: Some(4), ..BuildParams::auto() }).unwrap()
+    })
+}
+
+fuzz_target!(|data: &[u8]| {
+    // The input is the random source: eight bytes a draw, zeros once it runs out.
+    let mut words = data.chunks(8).map(|c| {
+        let mut w = [0u8; 8];
+        w[..c.len()].copy_from_slice(c);
+        u64::from_le_bytes(w)
+    });
+    let mut next = move || words.next().unwrap_or(0);
+    let mut s = base().clone();
+    octrace_format::testing::mutate_semantics(&mut s, &mut next);
+    let Ok(bytes) = s.to_file_bytes(0) else { return };
+    let Ok(scene) = Scene::from_bytes_unchecked(&bytes) else { return };
+    let t = scene.tracer();
+    let mut rays = Vec::new();
+    for (k, d) in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8), Vec3::new(-1.0, 0.0, -0.0), Vec3::new(0.0, -0.0, 1.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let inside = Vec3::new(0.5, 0.1, -0.2) * (k as f32 - 2.0);
+        rays.extend([Ray::new(inside, d), Ray::new(inside - d * 5.0, d), Ray::segment(inside, d, 0.0, k as f32)]);
+    }
+    for r in &rays {
+        let _ = t.intersect(r);
+        let _ = t.occluded(r);
+    }
+    let _ = scene.intersect_all(&rays);
+    let _ = scene.occluded_all(&rays);
+    let b = scene.view().bounds;
+    let frame = octrace_runtime::raysets::Frame::from_bounds(b.mesh_lo, b.mesh_hi);
+    let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 4, 3);
+    let options = octrace_runtime::render::effects::RenderOptions {
+        soft_samples: 2,
+        max_depth: 2,
+        ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
+    };
+    let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {});
+});

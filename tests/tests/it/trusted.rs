@@ -1,0 +1,93 @@
+//! The trusted path (`Scene::map_unchecked`) on files that break the format's semantic
+//! rules but whose archive is sound (a scene serialized as it is, checksums right):
+//! every walk ends, with some answer, never a panic or an out-of-bounds read. This is
+//! what FORMAT.md and the `# Safety` docs promise; a fuzz target does the same at
+//! length (`fuzz/fuzz_targets/trusted_scene.rs`).
+
+use glam::Vec3;
+use octrace_bake::procedural::{self, SplitMix};
+use octrace_bake::{bake, BuildParams};
+use octrace_format::BakedScene;
+use octrace_runtime::{Ray, Scene};
+
+/// A small scene with every array and shading data: a torus with normals, texture
+/// coordinates and a material, at depth 5.
+fn base() -> BakedScene {
+    let torus = procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
+    let mut mesh = octrace_bake::Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
+    for t in torus.triangles {
+        mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
+        mesh.material_ids.push(0);
+    }
+    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() }).unwrap()
+}
+
+/// Rays through the scene, from outside and inside, axis-aligned with both zeros too.
+fn rays(rng: &mut SplitMix) -> Vec<Ray> {
+    let mut out = Vec::new();
+    for k in 0..24 {
+        let d = match k % 4 {
+            0 => Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5),
+            1 => Vec3::new(0.0, -0.0, 1.0),
+            2 => Vec3::new(-1.0, 0.0, -0.0),
+            _ => Vec3::new(0.3, 1.0, 0.0),
+        };
+        let o =
+            if k % 2 == 0 { Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.6 } else { -d * 5.0 + Vec3::splat(0.1) };
+        out.push(Ray::segment(o, d, 0.0, f32::INFINITY));
+    }
+    out
+}
+
+#[test]
+fn semantically_broken_files_on_the_trusted_path_never_panic_or_hang() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.oct");
+    let original = base();
+    let seed = std::env::var("OCTRACE_TRUSTED_SEED").ok().and_then(|n| n.parse().ok()).unwrap_or(2026);
+    let mut rng = SplitMix(seed);
+    let mut failures = Vec::new();
+    let mut refused = 0;
+    // OCTRACE_TRUSTED_CASES runs more (the fuzz target runs for minutes).
+    let cases = std::env::var("OCTRACE_TRUSTED_CASES").ok().and_then(|n| n.parse().ok()).unwrap_or(2000);
+    for case in 0..cases {
+        let mut s = original.clone();
+        octrace_format::testing::mutate_semantics(&mut s, &mut || rng.next_u64());
+        s.write(&path, 0).unwrap();
+        if Scene::open(&path).is_err() {
+            refused += 1;
+        }
+        let rays = rays(&mut rng);
+        let traced = std::panic::catch_unwind(|| {
+            // SAFETY: this test's own file, not changed while mapped; its archive is
+            // sound (a scene serialized as it is), which is all the trusted path needs.
+            let Ok(scene) = (unsafe { Scene::map_unchecked(&path) }) else { return };
+            let tracer = scene.tracer();
+            for r in &rays {
+                let _ = tracer.intersect(r);
+                let _ = tracer.occluded(r);
+            }
+            let _ = scene.intersect_all(&rays);
+            let _ = scene.occluded_all(&rays);
+            let frame =
+                octrace_runtime::raysets::Frame::from_bounds(scene.view().bounds.mesh_lo, scene.view().bounds.mesh_hi);
+            let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 4, 3);
+            let options = octrace_runtime::render::effects::RenderOptions {
+                soft_samples: 2,
+                max_depth: 2,
+                ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
+            };
+            let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {});
+        });
+        if let Err(panic) = traced {
+            let why =
+                panic.downcast_ref::<String>().cloned().or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()));
+            failures.push(format!("case {case}: {}", why.unwrap_or_default()));
+        }
+    }
+    eprintln!(
+        "{refused} of {cases} mutated files refused by validation; {} panicked on the trusted path",
+        failures.len()
+    );
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
