@@ -33,6 +33,18 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
         element: element.into(),
         message: e.to_string(),
     };
+    // The gltf crate subtracts the GLB header's size from its declared length without
+    // a check (a panic where overflow checks are on, found by fuzzing): check it first.
+    if bytes.starts_with(b"glTF") {
+        let declared = bytes.get(8..12).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+        if declared.is_none_or(|n| n < 12 || n > bytes.len()) {
+            return Err(Error::Parse {
+                path: path.into(),
+                element: "GLB header".into(),
+                message: format!("declares {declared:?} bytes; the file has {} and the header alone 12", bytes.len()),
+            });
+        }
+    }
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error("document", e))?;
     // gltf-json's validation reads `accessors[i]` for every primitive attribute before

@@ -389,3 +389,18 @@ fn obj_normals_texture_coordinates_and_a_missing_material_library() {
         mesh.warnings
     );
 }
+
+/// Regression, found by fuzzing (fuzz/load_gltf, overflow checks on): a GLB header
+/// declaring fewer bytes than the header itself made the gltf crate subtract past
+/// zero; it is a parse error naming the header.
+#[test]
+fn a_glb_header_shorter_than_itself_is_a_parse_error() {
+    for declared in [0u32, 11, 1 << 30] {
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&declared.to_le_bytes());
+        glb.extend_from_slice(b"{\"asset\": {\"version\": \"2.0\"}}");
+        let err = Mesh::from_bytes(&glb, octrace_bake::MeshFormat::Gltf, "x.glb".as_ref(), None).unwrap_err();
+        assert!(matches!(err, Error::Parse { ref element, .. } if element == "GLB header"), "{declared}: {err}");
+    }
+}
