@@ -797,7 +797,7 @@ impl Tracer<'_> {
     /// `q`: its address, level and cell.
     #[inline(always)]
     fn descend(&self, word: u32, level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
-        let (address, level) = descend_to(&self.view, word, level, q, self.max_depth);
+        let (address, level) = descend_to(&self.view, word, level, q, self.max_depth, self.max_depth);
         let shift = self.max_depth.saturating_sub(level).min(31);
         (address, level, q.map(|c| c >> shift))
     }
@@ -849,12 +849,12 @@ impl Tracer<'_> {
 /// valid tree has no internal node at `max_depth`; a hostile one (on the trusted path)
 /// stops there too, so the descent is bounded whatever the file.
 #[inline(always)]
-fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32) -> (u32, u32) {
-    // `q` is on the grid of the depth the tracer uses (the file's, at most the format's
-    // limit), which `stop` never exceeds.
-    let depth = view.params.max_depth.min(MAX_LEVEL);
+fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32, depth: u32) -> (u32, u32) {
+    // `q` is on the grid of `depth`, the depth the tracer uses (the file's, at most the
+    // format's limit); `stop <= depth`, so the shift cannot underflow.
+    debug_assert!(stop <= depth);
     while let NodeRef::Internal(i) = NodeRef::decode(word) {
-        if level >= stop || level >= depth {
+        if level >= stop {
             break;
         }
         let shift = (depth - level - 1).min(31);
@@ -892,7 +892,7 @@ impl LocateGrid {
             for y in 0..res {
                 for x in 0..res {
                     let q = [x << shift, y << shift, z << shift];
-                    let (word, l) = descend_to(view, view.root, 0, q, level);
+                    let (word, l) = descend_to(view, view.root, 0, q, level, depth);
                     words.push(word);
                     levels.push(l as u8);
                 }
