@@ -9,6 +9,7 @@ use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+    check_face_indices(bytes, path)?;
     let load_options =
         tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
     // Material libraries are read beside the OBJ, under the same rules as glTF buffers
@@ -89,6 +90,54 @@ pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Lo
         mesh.material_ids = material_ids.iter().map(|m| m.map_or(default, |i| i as u32)).collect();
     }
     Ok(mesh)
+}
+
+/// The largest index a face may hold: the format stores at most 2^32 - 1 triangles,
+/// so no real file comes near it.
+const MAX_FACE_INDEX: u64 = 1 << 32;
+
+/// Refuses face indices (`v/vt/vn` of `f`, `l` and `p` lines) tobj would turn into
+/// garbage before it reads them: 0, a relative (negative) index reaching before the
+/// first element, or one beyond [`MAX_FACE_INDEX`]. tobj makes such an index a huge
+/// `usize` and multiplies it by 3 unchecked: an overflow panic where overflow checks are
+/// on, a read of the wrong element where they are off (found by fuzzing).
+fn check_face_indices(bytes: &[u8], path: &Path) -> Result<()> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut counts = [0u64; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f" | "l" | "p") => {
+                for corner in words {
+                    for (kind, index) in corner.split('/').enumerate().take(3) {
+                        let Ok(i) = index.parse::<i128>() else { continue };
+                        let fine = match i {
+                            0 => false,
+                            i if i < 0 => i.unsigned_abs() <= counts[kind] as u128,
+                            i => i as u128 <= MAX_FACE_INDEX as u128,
+                        };
+                        if !fine {
+                            let what = ["vertex", "texture coordinate", "normal"][kind];
+                            return Err(Error::Parse {
+                                path: path.into(),
+                                element: format!("line {}", n + 1),
+                                message: format!(
+                                    "{what} index {i}: indices count from 1 (or back from -1, within the {} {what}s \
+                                     so far) and stay below 2^32",
+                                    counts[kind]
+                                ),
+                            });
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// For each triangle the file's faces make (fan-triangulated, in file order), whether

@@ -404,3 +404,23 @@ fn a_glb_header_shorter_than_itself_is_a_parse_error() {
         assert!(matches!(err, Error::Parse { ref element, .. } if element == "GLB header"), "{declared}: {err}");
     }
 }
+
+/// Regression, found by fuzzing (fuzz/load_obj, overflow checks on): a relative
+/// normal index before the first normal (`2//-1223` with none) overflowed tobj's index
+/// arithmetic; such indices, index 0 and indices beyond 2^32 are parse errors naming
+/// the line.
+#[test]
+fn obj_face_indices_tobj_cannot_resolve_are_parse_errors() {
+    for face in [
+        "f -1 -1 -1 2/ 2//-1223",
+        "f 1//6148914691236517206 2//1 3//1",
+        "f 1/-2 2 3",
+        "f 0 1 2",
+        "f 1 2 4294967297",
+        "l 1 -4",
+    ] {
+        let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvt 0 0\n{face}\n");
+        let err = Mesh::from_bytes(text.as_bytes(), octrace_bake::MeshFormat::Obj, "x.obj".as_ref(), None).unwrap_err();
+        assert!(matches!(err, Error::Parse { ref element, .. } if element == "line 6"), "{face}: {err}");
+    }
+}
