@@ -26,7 +26,7 @@ use clap::{Parser, Subcommand};
 ///
 /// `octrace demo` does all of it on the bunny this build carries.
 #[derive(Parser, Debug)]
-#[command(name = "octrace", version, about, long_about)]
+#[command(name = "octrace", version, about, long_about, verbatim_doc_comment)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -49,7 +49,7 @@ enum Command {
     /// by renaming a new file over the old one (as `octrace bake` does), never by
     /// writing into them; a .oct.zst scene is read into memory instead.
     Inspect(cmd::inspect::Args),
-    /// Trace a file of rays and write the hits (formats in --help).
+    /// Trace a file of rays and write the hits (the formats: `octrace trace --help`).
     Trace(cmd::trace::Args),
     /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
     Rays(cmd::rays::Args),

@@ -13,6 +13,17 @@ pub(crate) fn thousands(n: u64) -> String {
     out
 }
 
+/// `n` things, with thousands separators and the plural when `n` is not 1:
+/// `1 triangle`, `1,234 triangles`, `2 leaves`.
+pub(crate) fn counted(n: u64, thing: &str) -> String {
+    let plural = match thing {
+        _ if n == 1 => thing.to_string(),
+        "leaf" => "leaves".to_string(),
+        _ => format!("{thing}s"),
+    };
+    format!("{} {plural}", thousands(n))
+}
+
 /// Bytes in MB (10^6), one decimal.
 pub(crate) fn mb(bytes: u64) -> String {
     format!("{:.1} MB", bytes as f64 / 1e6)
@@ -99,4 +110,17 @@ fn same_file(a: &std::fs::Metadata, b: &std::fs::Metadata, _: &std::path::Path, 
 #[cfg(not(unix))]
 fn same_file(_: &std::fs::Metadata, _: &std::fs::Metadata, a: &std::path::Path, b: &std::path::Path) -> bool {
     matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_read_as_english() {
+        assert_eq!(counted(1, "triangle"), "1 triangle");
+        assert_eq!(counted(0, "triangle"), "0 triangles");
+        assert_eq!(counted(1, "leaf"), "1 leaf");
+        assert_eq!(counted(46_467, "leaf"), "46,467 leaves");
+    }
 }

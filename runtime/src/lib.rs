@@ -39,6 +39,18 @@ mod scene;
 pub mod spawn;
 pub mod unconstrained;
 
+/// The vector type of the API (`Ray::new` takes `glam::Vec3`), re-exported so that a
+/// caller needs no `glam` of its own (or a matching version of it).
+pub use glam;
+/// The file format's crate: [`format::SceneView`], [`format::Shading`] and the other
+/// types the runtime hands out.
+pub use octrace_format as format;
+
+/// The README's code, compiled (not run: it opens a file) with the doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeDoctests;
+
 pub use cpu::{ExitTest, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};

@@ -8,7 +8,7 @@ use anyhow::Context;
 use octrace_bake::{bake_with_progress, BakeStage, BuildParams, LoadOptions, Mesh, References};
 use octrace_format::BakedScene;
 
-use crate::output::{mb, thousands};
+use crate::output::{counted, mb, thousands};
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
@@ -83,11 +83,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     };
     progress.finish();
     crate::out!(
-        "baked {}: {} triangles ({} degenerate) -> {} leaves, depth {}{}, {}{} in {:.2} s (bake {:.2} s) -> {}",
+        "baked {}: {} ({} degenerate) -> {}, depth {}{}, {}{} in {:.2} s (bake {:.2} s) -> {}",
         crate::show(&args.input),
-        thousands(scene.stats.input_triangles),
+        counted(scene.stats.input_triangles, "triangle"),
         thousands(scene.stats.degenerate_triangles),
-        thousands(scene.leaf_count() as u64),
+        counted(scene.leaf_count() as u64, "leaf"),
         scene.params.max_depth,
         depth_note(&scene, &params),
         mb(bytes),
