@@ -1,9 +1,9 @@
 //! The trusted path on semantically broken files never panics, hangs or reads out of
 //! bounds: a valid scene (a small torus with shading data, baked once) has its
 //! semantic fields changed as the input's bytes say (`testing::mutate_semantics`),
-//! is serialized with correct checksums (a sound archive), opened without validation
-//! (`Scene::from_bytes_unchecked`, what `map_unchecked` checks) and traced one ray at a
-//! time and in batches, then rendered small.
+//! is serialized with correct checksums (a sound archive), written to a file of this
+//! process, memory-mapped without validation (`Scene::map_unchecked`) and traced one
+//! ray at a time and in batches, then rendered small.
 #![no_main]
 
 use std::sync::OnceLock;
@@ -37,8 +37,13 @@ fuzz_target!(|data: &[u8]| {
     let mut next = move || words.next().unwrap_or(0);
     let mut s = base().clone();
     octrace_format::testing::mutate_semantics(&mut s, &mut next);
-    let Ok(bytes) = s.to_file_bytes(0) else { return };
-    let Ok(scene) = Scene::from_bytes_unchecked(&bytes) else { return };
+    let path = std::env::temp_dir().join(format!("octrace-fuzz-{}.oct", std::process::id()));
+    if s.write(&path, 0).is_err() {
+        return;
+    }
+    // SAFETY: this process's own file, rewritten only by the next input, after this
+    // scene (and its map) is dropped.
+    let Ok(scene) = (unsafe { Scene::map_unchecked(&path) }) else { return };
     let t = scene.tracer();
     let mut rays = Vec::new();
     for (k, d) in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8), Vec3::new(-1.0, 0.0, -0.0), Vec3::new(0.0, -0.0, 1.0)]

@@ -31,6 +31,19 @@ pub fn bunny_scene() -> &'static Scene {
     })
 }
 
+/// A torus with a material, shading normals and texture coordinates, baked to depth 5
+/// with four triangles a leaf: every section of the file holds bytes.
+pub fn torus_scene() -> octrace_format::BakedScene {
+    let torus = octrace_bake::procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
+    let mut mesh = Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
+    for t in torus.triangles {
+        mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
+        mesh.material_ids.push(0);
+    }
+    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() })
+        .expect("the torus bakes")
+}
+
 /// A test data file under `tests/data`.
 pub fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)

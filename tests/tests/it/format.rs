@@ -6,16 +6,8 @@ use octrace_format::{BakedScene, Error, Header, SceneFile, Section, FIXED_HEADER
 
 const SECTION_ENTRY_LEN: usize = (HEADER_LEN - FIXED_HEADER_LEN) / octrace_format::SECTION_COUNT;
 
-/// A torus with a material, shading normals and texture coordinates: every section of
-/// the file holds bytes.
 fn scene() -> BakedScene {
-    let torus = procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
-    let mut mesh = octrace_bake::Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
-    for t in torus.triangles {
-        mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
-        mesh.material_ids.push(0);
-    }
-    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() }).unwrap()
+    octrace_tests::torus_scene()
 }
 
 fn open(bytes: &[u8]) -> Result<SceneFile, Error> {

@@ -5,22 +5,8 @@
 //! length (`fuzz/fuzz_targets/trusted_scene.rs`).
 
 use glam::Vec3;
-use octrace_bake::procedural::{self, SplitMix};
-use octrace_bake::{bake, BuildParams};
-use octrace_format::BakedScene;
+use octrace_bake::procedural::SplitMix;
 use octrace_runtime::{Ray, Scene};
-
-/// A small scene with every array and shading data: a torus with normals, texture
-/// coordinates and a material, at depth 5.
-fn base() -> BakedScene {
-    let torus = procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
-    let mut mesh = octrace_bake::Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
-    for t in torus.triangles {
-        mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
-        mesh.material_ids.push(0);
-    }
-    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() }).unwrap()
-}
 
 /// Rays through the scene, from outside and inside, axis-aligned with both zeros too.
 fn rays(rng: &mut SplitMix) -> Vec<Ray> {
@@ -43,7 +29,7 @@ fn rays(rng: &mut SplitMix) -> Vec<Ray> {
 fn semantically_broken_files_on_the_trusted_path_never_panic_or_hang() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("broken.oct");
-    let original = base();
+    let original = octrace_tests::torus_scene();
     let seed = std::env::var("OCTRACE_TRUSTED_SEED").ok().and_then(|n| n.parse().ok()).unwrap_or(2026);
     let mut rng = SplitMix(seed);
     let mut failures = Vec::new();
