@@ -134,12 +134,6 @@ impl SceneView<'_> {
 
     /// Every vertex finite and inside the mesh box, the mesh box inside the root cube.
     fn check_geometry(&self) -> Result<()> {
-        if let Some(i) = self.triangles.iter().position(|v| !v.is_finite()) {
-            return Err(Error::corrupt(format!(
-                "triangle {} has a coordinate that is not finite",
-                i / TRIANGLE_FLOATS
-            )));
-        }
         let b = &self.bounds;
         let root_hi = b.root_lo.map(|lo| lo as f64 + b.root_size as f64);
         for a in 0..3 {
@@ -151,10 +145,20 @@ impl SceneView<'_> {
                 )));
             }
         }
-        for (t, corner) in self.triangles.chunks_exact(3).enumerate() {
-            if (0..3).any(|a| corner[a] < b.mesh_lo[a] || corner[a] > b.mesh_hi[a]) {
-                return Err(Error::corrupt(format!("triangle {} has a vertex outside the mesh box", t / 3)));
-            }
+        // One branch-free pass: a NaN or infinite coordinate fails the comparisons with
+        // the (finite) mesh box too.
+        let (lo, hi) = (b.mesh_lo, b.mesh_hi);
+        let inside = |c: &[f32]| {
+            (c[0] >= lo[0]) & (c[0] <= hi[0]) & (c[1] >= lo[1]) & (c[1] <= hi[1]) & (c[2] >= lo[2]) & (c[2] <= hi[2])
+        };
+        if let Some(corner) = self.triangles.chunks_exact(3).position(|c| !inside(c)) {
+            let c = &self.triangles[3 * corner..3 * corner + 3];
+            let what = if c.iter().all(|v| v.is_finite()) {
+                "a vertex outside the mesh box"
+            } else {
+                "a coordinate that is not finite"
+            };
+            return Err(Error::corrupt(format!("triangle {} has {what}", corner / 3)));
         }
         Ok(())
     }
@@ -277,7 +281,6 @@ impl SceneView<'_> {
             if end > self.tri_refs.len() as u64 {
                 return Err(Error::corrupt(format!("leaf {b}'s triangles end at {end}, past the references")));
             }
-            self.check_leaf_triangles(b, &rec)?;
             if rec.ncount >> (crate::layout::COARSER_SHIFT + 6) != 0 {
                 return Err(Error::corrupt(format!("leaf {b} has stray bits in its neighbour counts")));
             }
@@ -294,13 +297,25 @@ impl SceneView<'_> {
     fn check_leaf_triangles(&self, b: usize, rec: &crate::view::LeafRecord<'_>) -> Result<()> {
         let cell = self.leaf_box(rec.box_index);
         let margin = self.params.margin as f64 * self.bounds.root_size as f64;
+        // The enlarged cell in f32, rounded outwards: comparisons with the f32 vertices
+        // can then only accept more, never refuse a triangle the bake kept.
+        let outward = |x: f64, up: bool| {
+            let f = x as f32;
+            match (f as f64).partial_cmp(&x) {
+                Some(std::cmp::Ordering::Less) if up => f.next_up(),
+                Some(std::cmp::Ordering::Greater) if !up => f.next_down(),
+                _ => f,
+            }
+        };
+        let lo: [f32; 3] = std::array::from_fn(|a| outward(cell[a] as f64 - margin, false));
+        let hi: [f32; 3] = std::array::from_fn(|a| outward(cell[a + 3] as f64 + margin, true));
         let refs = &self.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
         for &t in refs {
             let v = &self.triangles[t as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-            let apart = (0..3).any(|a| {
-                let (lo, hi) = (v[a].min(v[a + 3]).min(v[a + 6]), v[a].max(v[a + 3]).max(v[a + 6]));
-                (lo as f64) > cell[a + 3] as f64 + margin || (hi as f64) < cell[a] as f64 - margin
-            });
+            let mut apart = false;
+            for a in 0..3 {
+                apart |= (v[a].min(v[a + 3]).min(v[a + 6]) > hi[a]) | (v[a].max(v[a + 3]).max(v[a + 6]) < lo[a]);
+            }
             if apart {
                 return Err(Error::corrupt(format!("leaf {b} lists triangle {t}, which does not reach its cell")));
             }
@@ -308,11 +323,13 @@ impl SceneView<'_> {
         Ok(())
     }
 
-    /// Checks the links of leaves `range` (box indices).
+    /// Checks the links and the triangles of leaves `range` (box indices): the part of
+    /// validation that runs on two threads for a large file.
     fn check_links(&self, index: &TreeIndex, range: std::ops::Range<usize>) -> Result<()> {
         for b in range {
             let address = index.leaf_addresses[b];
             let rec = self.leaf(address).expect("indexed leaves fit");
+            self.check_leaf_triangles(b, &rec)?;
             let key = index.leaf_keys[b];
             for face in 0..6 {
                 let links = rec.face_links(face);
