@@ -306,24 +306,10 @@ pub fn is_compressed_file(path: impl AsRef<Path>) -> Result<bool> {
     is_compressed(&mut file).map_err(|e| Error::io(path, e))
 }
 
-/// Opens a scene file for reading, refusing what is not a regular file (a FIFO, a
-/// device, a folder) before reading: a FIFO is opened without waiting for a writer,
-/// so `inspect` on one answers at once instead of blocking.
+/// Opens a scene file for reading ([`crate::open_regular_file`]: a FIFO or a device is
+/// refused at once, so `inspect` on one answers instead of blocking).
 fn open_regular(path: &Path) -> Result<File> {
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.custom_flags(libc::O_NONBLOCK);
-    }
-    let file = options.open(path).map_err(|e| Error::io(path, e))?;
-    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
-    if !meta.is_file() {
-        let what = if meta.is_dir() { "a folder" } else { "not a regular file (a FIFO, a device or a socket)" };
-        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, what)));
-    }
-    Ok(file)
+    crate::open_regular_file(path).map_err(|e| Error::io(path, e))
 }
 
 /// Whether the file starts with a zstd frame (the read position is put back).

@@ -28,6 +28,7 @@
 mod error;
 mod file;
 mod header;
+mod input;
 pub mod layout;
 mod scene;
 mod shading;
@@ -42,6 +43,7 @@ pub use header::{
     Header, Section, ARCHIVE_ALIGN, FIXED_HEADER_LEN, HEADER_LEN, MAGIC, RKYV_SETTINGS, SECTION_COUNT, SECTION_NAMES,
     VERSION,
 };
+pub use input::{open_regular_file, read_regular_file};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{

@@ -124,7 +124,8 @@ fn load_buffers(
                 };
                 let target = uri_path(uri).map_err(&refused)?;
                 let file = refs::resolve(base, Path::new(&target), options.references).map_err(&refused)?;
-                let data = refs::read_regular(&file, options.max_file_bytes).map_err(|e| refused(e.to_string()))?;
+                let data = octrace_format::read_regular_file(&file, options.max_file_bytes)
+                    .map_err(|e| refused(e.to_string()))?;
                 sources.push(file);
                 data
             }

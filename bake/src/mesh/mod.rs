@@ -173,7 +173,7 @@ impl Mesh {
         let path = path.as_ref();
         let (format, zst) = MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
-        let raw = refs::read_regular(path, options.max_file_bytes).map_err(unreadable)?;
+        let raw = octrace_format::read_regular_file(path, options.max_file_bytes).map_err(unreadable)?;
         let bytes = if zst { decompress(&raw, options.max_file_bytes).map_err(unreadable)? } else { raw };
         let base = path.parent().map(Path::to_path_buf);
         Mesh::from_bytes_with(&bytes, format, path, base.as_deref(), options)
@@ -213,23 +213,6 @@ impl Mesh {
         }
         Ok(mesh)
     }
-}
-
-/// Reads a whole regular file of at most `max` bytes, as the mesh loader reads its
-/// inputs: a FIFO, a device, a folder or a larger file is refused before a byte is
-/// read (and a FIFO without waiting for a writer).
-///
-/// # Errors
-/// The I/O error, or [`std::io::ErrorKind::InvalidInput`] saying why the file was
-/// refused.
-///
-/// # Example
-/// ```
-/// let err = octrace_bake::mesh::read_regular_file("/dev/zero".as_ref(), 1 << 20).unwrap_err();
-/// assert!(err.to_string().contains("not a regular file"));
-/// ```
-pub fn read_regular_file(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
-    refs::read_regular(path, max)
 }
 
 /// Checks that every coordinate of `v` is finite.

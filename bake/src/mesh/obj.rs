@@ -19,7 +19,7 @@ pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Lo
     let sources = std::cell::RefCell::new(Vec::<std::path::PathBuf>::new());
     let load_mtl = |p: &Path| {
         let read = refs::resolve(base, p, options.references).and_then(|file| {
-            let text = refs::read_regular(&file, MAX_MTL_BYTES).map_err(|e| e.to_string())?;
+            let text = octrace_format::read_regular_file(&file, MAX_MTL_BYTES).map_err(|e| e.to_string())?;
             sources.borrow_mut().push(file);
             Ok(text)
         });

@@ -1,8 +1,7 @@
-//! Reading a mesh and the files it names (glTF buffers, OBJ material libraries) as
-//! untrusted input: only regular files, only as many bytes as a stated limit, and by
-//! default only inside the mesh's own folder.
+//! The files a mesh names (glTF buffers, OBJ material libraries): where they may lead
+//! (by default only inside the mesh's own folder) and how large a file may be. Every
+//! file is read as untrusted input, through `octrace_format::read_regular_file`.
 
-use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
 /// Where the files a mesh names (glTF buffer URIs, OBJ `mtllib`) may be.
@@ -47,60 +46,6 @@ pub const MAX_MTL_BYTES: u64 = 16 << 20;
 impl Default for LoadOptions {
     fn default() -> Self {
         LoadOptions { references: References::Confined, max_file_bytes: DEFAULT_MAX_FILE_BYTES }
-    }
-}
-
-/// Reads a whole regular file of at most `max` bytes. A FIFO, a device, a folder or a
-/// larger file is refused before a byte is read (a FIFO is opened without blocking, so
-/// refusing it cannot hang).
-pub(crate) fn read_regular(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
-        options.custom_flags(libc::O_NONBLOCK);
-    }
-    let file = options.open(path)?;
-    let meta = file.metadata()?;
-    if !meta.file_type().is_file() {
-        return Err(invalid(format!("not a regular file ({})", kind_of(&meta.file_type()))));
-    }
-    if meta.len() > max {
-        return Err(invalid(format!("{} bytes, more than the limit of {max}", meta.len())));
-    }
-    let mut out = Vec::with_capacity(meta.len() as usize);
-    // A file that grows while it is read is cut at the limit and refused.
-    file.take(max + 1).read_to_end(&mut out)?;
-    if out.len() as u64 > max {
-        return Err(invalid(format!("grew past the limit of {max} bytes while read")));
-    }
-    Ok(out)
-}
-
-fn invalid(message: String) -> std::io::Error {
-    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
-}
-
-fn kind_of(t: &std::fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if t.is_dir() {
-        "a folder"
-    } else {
-        "not a file"
     }
 }
 
@@ -199,22 +144,5 @@ mod tests {
         assert_eq!(percent_decode("%2e%2E/a%20b").as_deref(), Some("../a b"));
         assert_eq!(percent_decode("100%").as_deref(), Some("100%"));
         assert_eq!(percent_decode("%ff"), None);
-    }
-
-    #[test]
-    fn only_regular_files_within_the_limit_are_read() {
-        let dir = tempfile::tempdir().unwrap();
-        let f = dir.path().join("f");
-        std::fs::write(&f, [7u8; 100]).unwrap();
-        assert_eq!(read_regular(&f, 100).unwrap().len(), 100);
-        let err = read_regular(&f, 99).unwrap_err().to_string();
-        assert!(err.contains("more than the limit of 99"), "{err}");
-        let err = read_regular(dir.path(), 1 << 20).unwrap_err().to_string();
-        assert!(err.contains("not a regular file") || err.contains("directory"), "{err}");
-        #[cfg(unix)]
-        {
-            let err = read_regular(Path::new("/dev/zero"), 1 << 20).unwrap_err().to_string();
-            assert!(err.contains("a device"), "{err}");
-        }
     }
 }

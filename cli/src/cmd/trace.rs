@@ -52,7 +52,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     crate::output::refuse_overwriting(&args.out, "--out", &[&args.scene, &args.rays])?;
     let to_stdout = crate::output::is_stdout(&args.out);
     let scene = crate::open::open_scene(&args.scene)?;
-    let bytes = octrace_bake::mesh::read_regular_file(&args.rays, 32 * MAX_RAYS)
+    let bytes = octrace_format::read_regular_file(&args.rays, 32 * MAX_RAYS)
         .with_context(|| format!("cannot read {}", args.rays.display()))?;
     anyhow::ensure!(
         bytes.len() % 32 == 0,

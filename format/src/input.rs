@@ -1,0 +1,107 @@
+//! Opening input files as untrusted: only regular files, never waiting on a FIFO, and
+//! never more bytes than a stated limit. Scenes are opened this way, and so are the
+//! meshes, buffers, material libraries and ray files the other crates read.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+/// Opens a file for reading, refusing what is not a regular file (a FIFO, a device, a
+/// socket, a folder) before a byte is read; the error says which it is. A FIFO is
+/// opened without waiting for a writer, so refusing one cannot hang.
+///
+/// # Errors
+/// The I/O error, or [`std::io::ErrorKind::InvalidInput`] for a file that is not
+/// regular.
+pub fn open_regular_file(path: &Path) -> std::io::Result<File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer
+        // (it changes nothing for a regular file).
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = options.open(path)?;
+    let kind = file.metadata()?.file_type();
+    if !kind.is_file() {
+        return Err(invalid(format!("not a regular file ({})", kind_of(&kind))));
+    }
+    Ok(file)
+}
+
+/// Reads a whole regular file of at most `max` bytes ([`open_regular_file`]'s rules):
+/// a larger file is refused before a byte is read, and one that grows past `max` while
+/// it is read is refused too.
+///
+/// # Errors
+/// As [`open_regular_file`], and [`std::io::ErrorKind::InvalidInput`] for a file over
+/// the limit.
+///
+/// # Example
+/// ```
+/// let err = octrace_format::read_regular_file("/dev/zero".as_ref(), 1 << 20).unwrap_err();
+/// assert!(err.to_string().contains("not a regular file (a device)"));
+/// ```
+pub fn read_regular_file(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+    let file = open_regular_file(path)?;
+    let len = file.metadata()?.len();
+    if len > max {
+        return Err(invalid(format!("{len} bytes, more than the limit of {max}")));
+    }
+    let mut out = Vec::with_capacity(len as usize);
+    file.take(max + 1).read_to_end(&mut out)?;
+    if out.len() as u64 > max {
+        return Err(invalid(format!("grew past the limit of {max} bytes while read")));
+    }
+    Ok(out)
+}
+
+fn invalid(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
+}
+
+/// What a file that is not regular is, in words.
+fn kind_of(t: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a folder"
+    } else {
+        "not a file"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_regular_files_within_the_limit_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("f");
+        std::fs::write(&f, [7u8; 100]).unwrap();
+        assert_eq!(read_regular_file(&f, 100).unwrap().len(), 100);
+        let err = read_regular_file(&f, 99).unwrap_err().to_string();
+        assert!(err.contains("more than the limit of 99"), "{err}");
+        let err = read_regular_file(dir.path(), 1 << 20).unwrap_err().to_string();
+        assert!(err.contains("not a regular file (a folder)"), "{err}");
+        #[cfg(unix)]
+        {
+            let err = read_regular_file(Path::new("/dev/zero"), 1 << 20).unwrap_err().to_string();
+            assert!(err.contains("a device"), "{err}");
+        }
+    }
+}
