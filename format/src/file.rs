@@ -126,10 +126,8 @@ impl SceneFile {
     /// # Errors
     /// The header and validation errors.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
-        let header = Header::decode(bytes, bytes.len() as u64)?;
-        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(bytes.len() - HEADER_LEN);
-        payload.extend_from_slice(&bytes[HEADER_LEN..]);
-        Self::validated(Storage::Owned(payload), header)
+        let (payload, header) = copied(bytes)?;
+        Self::validated(payload, header)
     }
 
     /// Memory-maps the file and validates it completely.
@@ -168,11 +166,7 @@ impl SceneFile {
     /// structure is broken.
     pub unsafe fn map_unchecked(path: impl AsRef<Path>) -> Result<Self> {
         let (map, header) = map_file(path.as_ref())?;
-        let mut file = SceneFile { storage: Storage::Mapped(map), header, shading: Shading::default() };
-        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(file.payload())
-            .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
-        file.shading = deserialize_shading(archived)?;
-        Ok(file)
+        Self::structured(Storage::Mapped(map), header)
     }
 
     /// [`SceneFile::map_unchecked`]'s checks on a file held in memory (copied into
@@ -190,26 +184,27 @@ impl SceneFile {
     /// # Ok::<(), octrace_format::Error>(())
     /// ```
     pub fn from_bytes_unchecked(bytes: &[u8]) -> Result<Self> {
-        let header = Header::decode(bytes, bytes.len() as u64)?;
-        let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(bytes.len() - HEADER_LEN);
-        payload.extend_from_slice(&bytes[HEADER_LEN..]);
-        let mut file = SceneFile { storage: Storage::Owned(payload), header, shading: Shading::default() };
-        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(file.payload())
-            .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
-        file.shading = deserialize_shading(archived)?;
+        let (payload, header) = copied(bytes)?;
+        Self::structured(payload, header)
+    }
+
+    /// Every check: the checksums, the archive's structure, its arrays in their
+    /// sections, and the semantic rules.
+    fn validated(storage: Storage, header: Header) -> Result<Self> {
+        check_sections(&header, payload_of(&storage))?;
+        let file = Self::structured(storage, header)?;
+        check_arrays_in_sections(&header, file.payload(), file.archived())?;
+        file.view().validate()?;
         Ok(file)
     }
 
-    fn validated(storage: Storage, header: Header) -> Result<Self> {
-        let mut file = SceneFile { storage, header, shading: Shading::default() };
-        let payload = file.payload();
-        check_sections(&header, payload)?;
-        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(payload)
+    /// The trusted path's checks: the archive's structure (bytecheck), then the
+    /// shading data read through it.
+    fn structured(storage: Storage, header: Header) -> Result<Self> {
+        let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(payload_of(&storage))
             .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
-        check_arrays_in_sections(&header, payload, archived)?;
-        file.shading = deserialize_shading(archived)?;
-        file.view().validate()?;
-        Ok(file)
+        let shading = deserialize_shading(archived)?;
+        Ok(SceneFile { storage, header, shading })
     }
 
     /// The scene's materials, lights, cameras and effects.
@@ -224,10 +219,7 @@ impl SceneFile {
 
     /// The archive's bytes.
     pub fn payload(&self) -> &[u8] {
-        match &self.storage {
-            Storage::Mapped(map) => &map[HEADER_LEN..],
-            Storage::Owned(bytes) => bytes,
-        }
+        payload_of(&self.storage)
     }
 
     /// Whether the bytes are a memory map (as opposed to a copy in memory).
@@ -237,12 +229,16 @@ impl SceneFile {
 
     /// The scene's arrays, borrowed.
     pub fn view(&self) -> SceneView<'_> {
-        // SAFETY: every constructor ran `rkyv::access` (bytecheck) on these exact bytes,
-        // which do not change (a map's caller promised as much). The
+        view_of(self.archived(), &self.shading)
+    }
+
+    /// The archive's root.
+    fn archived(&self) -> &ArchivedBakedScene {
+        // SAFETY: every constructor ran `rkyv::access` (bytecheck, in `structured`) on
+        // these exact bytes, which do not change (a map's caller promised as much). The
         // payload starts 16-byte aligned: a map starts on a page and the header is 64
         // bytes; owned bytes are an `AlignedVec<16>`.
-        let archived = unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) };
-        view_of(archived, &self.shading)
+        unsafe { rkyv::access_unchecked::<ArchivedBakedScene>(self.payload()) }
     }
 }
 
@@ -379,4 +375,21 @@ pub(crate) static EMPTY_SHADING: Shading =
 fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {
     rkyv::deserialize::<Shading, rancor::BoxedError>(&a.shading)
         .map_err(|e| Error::corrupt(format!("shading data: {e}")))
+}
+
+/// The archive's bytes: past the header of a map, or the copy in memory.
+fn payload_of(storage: &Storage) -> &[u8] {
+    match storage {
+        Storage::Mapped(map) => &map[HEADER_LEN..],
+        Storage::Owned(bytes) => bytes,
+    }
+}
+
+/// A file held in memory, its header decoded and its archive copied into aligned
+/// memory.
+fn copied(bytes: &[u8]) -> Result<(Storage, Header)> {
+    let header = Header::decode(bytes, bytes.len() as u64)?;
+    let mut payload = AlignedVec::<ARCHIVE_ALIGN>::with_capacity(bytes.len() - HEADER_LEN);
+    payload.extend_from_slice(&bytes[HEADER_LEN..]);
+    Ok((Storage::Owned(payload), header))
 }
