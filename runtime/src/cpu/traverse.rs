@@ -49,6 +49,9 @@ pub struct Tracer<'a> {
     sizes: [f32; 32],
     max_depth: u32,
     max_steps: u32,
+    /// The cube map's level, when the map fits the tree (always, in a valid file; a
+    /// hostile one on the trusted path enters from the root instead).
+    cube_level: Option<u32>,
     test: TriangleTest,
     exit: ExitTest,
     /// The top levels of point location as a grid, when the scene has one.
@@ -269,6 +272,10 @@ impl<'a> Tracer<'a> {
             // times: 9x the leaves bounds it too, and the smaller bound wins (a small
             // hostile file claiming a deep tree ends its cycles sooner).
             max_steps: (9 * (1u32 << max_depth) + 64).min(9 * view.leaf_count().min(1 << 26) as u32 + 64),
+            cube_level: Some(view.params.cube_level).filter(|&level| {
+                let res = 1usize << level.min(MAX_LEVEL);
+                level <= max_depth && view.cube_map.len() == 6 * res * res
+            }),
             view,
             test: TriangleTest::default(),
             exit: ExitTest::default(),
@@ -810,13 +817,10 @@ impl Tracer<'_> {
         let high = d[axis] < 0.0;
         q[axis] = if high { (1u32 << self.max_depth) - 1 } else { 0 };
         let face = 2 * axis + high as usize;
-        let level = self.view.params.cube_level;
-        let res = 1usize << level.min(MAX_LEVEL);
-        // A cube map that does not fit the tree (a hostile file on the trusted path):
-        // locate the entry point from the root instead.
-        if level > self.max_depth || self.view.cube_map.len() != 6 * res * res {
+        let Some(level) = self.cube_level else {
             return self.descend(self.view.root, 0, q);
-        }
+        };
+        let res = 1usize << level;
         let (u, v) = other_axes(axis);
         let shift = self.max_depth - level;
         let texel = texel_index(face, res, (q[u] >> shift) as usize, (q[v] >> shift) as usize);
