@@ -51,7 +51,7 @@ impl SceneView<'_> {
             self.check_triangle_ids()?;
             let index = self.index_tree()?;
             self.check_records(&index)?;
-            self.check_links(&index, 0..leaves)?;
+            self.check_leaves(&index, 0..leaves)?;
             return self.check_cube_map(&index);
         }
         // A large file: the independent checks run side by side on two threads.
@@ -61,8 +61,8 @@ impl SceneView<'_> {
             self.check_records(index)?;
             std::thread::scope(|s| {
                 let half = leaves / 2;
-                let upper = s.spawn(move || self.check_links(index, half..leaves));
-                self.check_links(index, 0..half)?;
+                let upper = s.spawn(move || self.check_leaves(index, half..leaves));
+                self.check_leaves(index, 0..half)?;
                 self.check_cube_map(index)?;
                 join(upper)
             })?;
@@ -325,7 +325,7 @@ impl SceneView<'_> {
 
     /// Checks the links and the triangles of leaves `range` (box indices): the part of
     /// validation that runs on two threads for a large file.
-    fn check_links(&self, index: &TreeIndex, range: std::ops::Range<usize>) -> Result<()> {
+    fn check_leaves(&self, index: &TreeIndex, range: std::ops::Range<usize>) -> Result<()> {
         for b in range {
             let address = index.leaf_addresses[b];
             let rec = self.leaf(address).expect("indexed leaves fit");
