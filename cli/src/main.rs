@@ -2,6 +2,17 @@
 //! baked files, trace rays through them, render and benchmark them.
 #![deny(unsafe_code)]
 
+/// The long help's paragraph on memory-mapped scenes, for the commands that map one
+/// (`inspect`, `trace`, `render`).
+macro_rules! mapped_scene_help {
+    () => {
+        "The scene is memory-mapped: if the file is truncated or rewritten in place while this
+runs, the process may die of SIGBUS or read wrong data. Replace baked files by renaming
+a new file over the old one (as `octrace bake` does), never by writing into them; a
+.oct.zst scene is read into memory instead."
+    };
+}
+
 mod cmd;
 mod open;
 mod output;
@@ -43,22 +54,12 @@ enum Command {
     Bake(cmd::bake::Args),
     /// Print a baked file's statistics: counts, depth histogram, neighbours and
     /// triangles per leaf, bytes per array, bake parameters.
-    ///
-    /// The scene is memory-mapped: if the file is truncated or rewritten in place while
-    /// this runs, the process may die of SIGBUS or read wrong data. Replace baked files
-    /// by renaming a new file over the old one (as `octrace bake` does), never by
-    /// writing into them; a .oct.zst scene is read into memory instead.
     Inspect(cmd::inspect::Args),
     /// Trace a file of rays and write the hits (the formats: `octrace trace --help`).
     Trace(cmd::trace::Args),
     /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
     Rays(cmd::rays::Args),
     /// Render a baked scene to PNG.
-    ///
-    /// The scene is memory-mapped: if the file is truncated or rewritten in place while
-    /// this runs, the process may die of SIGBUS or read wrong data. Replace baked files
-    /// by renaming a new file over the old one (as `octrace bake` does), never by
-    /// writing into them; a .oct.zst scene is read into memory instead.
     Render(cmd::render::Args),
     /// Check a file's invariants and compare the tracer with the f64 oracle.
     Verify(cmd::verify::Args),

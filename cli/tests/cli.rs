@@ -771,3 +771,14 @@ fn bake_confines_mesh_references_unless_allowed() {
     fails_saying(d, &["bake", hostile.to_str().unwrap(), "-o", "p.oct"], "reference 'file:///etc/passwd' not read");
     assert!(!d.join("p.oct").exists());
 }
+
+/// The commands that memory-map a scene say in their help what a file rewritten under
+/// them does, and how to deploy files so that it cannot happen.
+#[test]
+fn help_of_mapping_commands_warns_about_files_rewritten_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    for command in ["inspect", "trace", "render"] {
+        let help = ok(dir.path(), &[command, "--help"]);
+        assert!(help.contains("SIGBUS") && help.contains("Replace baked files by renaming"), "{command}: {help}");
+    }
+}

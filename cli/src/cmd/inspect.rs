@@ -9,6 +9,7 @@ use serde_json::json;
 use crate::output::{mb, thousands};
 
 #[derive(clap::Args, Debug)]
+#[command(after_long_help = mapped_scene_help!())]
 pub(crate) struct Args {
     /// The .oct file.
     pub file: PathBuf,

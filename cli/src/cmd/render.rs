@@ -16,7 +16,7 @@ use octrace_runtime::Scene;
 use crate::output::thousands;
 
 #[derive(clap::Args, Debug)]
-#[command(after_long_help = "\
+#[command(after_long_help = concat!("\
 Shaded images simulate only the effects the scene calls for (see `octrace inspect`):
 shadows, soft shadows, reflection, refraction, alpha. Turn some off with --effects:
 
@@ -24,7 +24,9 @@ shadows, soft shadows, reflection, refraction, alpha. Turn some off with --effec
 
 A scene without lights is lit by a headlight at the camera, without shadow rays.
 --stats prints the rays traced per kind (primary, shadow, soft_shadow, reflection,
-refraction, alpha); --json prints the same as JSON.")]
+refraction, alpha); --json prints the same as JSON.
+
+", mapped_scene_help!()))]
 pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
@@ -239,7 +241,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             }
         }
         Summary::Walks(stats) => crate::report!(
-                to_stdout,
+            to_stdout,
             "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
             crate::show(&args.scene),
             camera.width,

@@ -10,16 +10,13 @@ use crate::output::thousands;
 
 /// `octrace trace`'s arguments; the formats are in its long help.
 #[derive(clap::Args, Debug)]
-#[command(after_long_help = "\
+#[command(after_long_help = concat!("\
 RAYS.bin: little-endian, no header, 32 bytes a ray, f32 `ox oy oz tmin dx dy dz tmax`.
 HITS.bin: 8 bytes a ray, in ray order, f32 `t` then u32 triangle id (its index in the
 input mesh); a miss is `t = tmax`, id `0xFFFFFFFF`. With --occluded the id is that of
 some occluding triangle, not necessarily the nearest.
 
-The scene is memory-mapped: if the file is truncated or rewritten in place while this
-runs, the process may die of SIGBUS or read wrong data. Replace baked files by renaming
-a new file over the old one (as `octrace bake` does), never by writing into them; a
-.oct.zst scene is read into memory instead.")]
+", mapped_scene_help!()))]
 pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
