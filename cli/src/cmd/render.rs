@@ -179,7 +179,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let (image, summary) = match args.mode {
         Mode::Shaded => {
             let (radiance, counts) = match &gpu {
-                Some((_, tracer)) => render_effects_gpu(&scene, tracer, &camera, &options)?,
+                Some((_, tracer)) => render_effects_gpu(tracer, &camera, &options)?,
                 None => {
                     let bar = RowsBar::new(camera.height);
                     let out = render_effects(&scene, &camera, &options, &|rows| bar.set(rows));
@@ -192,7 +192,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         mode => {
             let mode = if mode == Mode::Normals { RenderMode::Normals } else { RenderMode::Cells };
             let (image, stats) = match &gpu {
-                Some((_, tracer)) => octrace_runtime::render::render_gpu(&scene, tracer, &camera, mode)?,
+                Some((_, tracer)) => octrace_runtime::render::render_gpu(tracer, &camera, mode)?,
                 None => render(&scene, &camera, mode),
             };
             (image, Summary::Walks(stats))

@@ -468,7 +468,7 @@ impl<'s> GpuTracer<'s> {
     }
 
     /// The scene this tracer traces.
-    pub(super) fn scene(&self) -> &'s Scene {
+    pub fn scene(&self) -> &'s Scene {
         self.scene
     }
 

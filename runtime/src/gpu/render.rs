@@ -76,7 +76,7 @@ impl RenderParams {
 /// let scene = Scene::open("effects.oct")?;
 /// let gpu = GpuContext::new()?;
 /// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
-/// let renderer = GpuRenderer::new(&tracer, &scene, &RenderOptions::for_scene(scene.shading()))?;
+/// let renderer = GpuRenderer::new(&tracer, &RenderOptions::for_scene(scene.shading()))?;
 /// let camera = Camera::from_scene(&scene.shading().cameras[0], 40.0, 640, 480);
 /// let (radiance, counts) = renderer.render(&camera)?;
 /// radiance.to_image().write_png("effects.png")?;
@@ -104,7 +104,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
     /// [`GpuError::Unsupported`] for `max_depth` above [`MAX_GPU_DEPTH`];
     /// [`GpuError::TooLarge`] when the shading data exceed one storage binding;
     /// [`GpuError::Device`] for a refused resource.
-    pub fn new(tracer: &'t GpuTracer<'s>, scene: &Scene, options: &RenderOptions) -> GpuResult<GpuRenderer<'t, 's>> {
+    pub fn new(tracer: &'t GpuTracer<'s>, options: &RenderOptions) -> GpuResult<GpuRenderer<'t, 's>> {
         if options.max_depth > MAX_GPU_DEPTH {
             return Err(GpuError::Unsupported(format!(
                 "the GPU renders ray trees at most {MAX_GPU_DEPTH} deep; {} asked for (the CPU renders any depth)",
@@ -113,7 +113,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         }
         let device = &tracer.device;
         use wgpu::BufferUsages as U;
-        let (words, mut params, headlight) = shading_words(scene);
+        let (words, mut params, headlight) = shading_words(tracer.scene());
         let limits = device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
@@ -231,8 +231,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         }
         let mut counts = RayCounts::from_array(sums);
         if !over.is_empty() {
-            let scene = self.tracer.scene();
-            let (redone, cpu_counts) = crate::render::effects::render_pixels(scene, camera, &self.options, &over);
+            let (redone, cpu_counts) =
+                crate::render::effects::render_pixels(self.tracer.scene(), camera, &self.options, &over);
             for (&i, p) in over.iter().zip(redone) {
                 pixels[i as usize] = p;
             }

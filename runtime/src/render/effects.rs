@@ -324,12 +324,11 @@ pub fn render_effects(
 /// The GPU's errors.
 #[cfg(feature = "gpu")]
 pub fn render_effects_gpu(
-    scene: &Scene,
     gpu: &crate::gpu::GpuTracer<'_>,
     camera: &Camera,
     options: &RenderOptions,
 ) -> crate::gpu::GpuResult<(Radiance, RayCounts)> {
-    crate::gpu::GpuRenderer::new(gpu, scene, options)?.render(camera)
+    crate::gpu::GpuRenderer::new(gpu, options)?.render(camera)
 }
 
 /// [`render_effects`] for some pixels only (row-major indices, in any order): their

@@ -109,20 +109,19 @@ pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, Rende
     compose(scene, camera, mode, &walks)
 }
 
-/// Renders `scene` through `camera` on the GPU: the same image as [`render`] (the GPU
-/// walk gives the CPU's hits and visits the same leaves).
+/// Renders the tracer's scene through `camera` on the GPU: the same image as [`render`]
+/// (the GPU walk gives the CPU's hits and visits the same leaves).
 ///
 /// # Errors
 /// The GPU's errors.
 #[cfg(feature = "gpu")]
 pub fn render_gpu(
-    scene: &Scene,
     gpu: &crate::gpu::GpuTracer<'_>,
     camera: &Camera,
     mode: RenderMode,
 ) -> crate::gpu::GpuResult<(Image, RenderStats)> {
     let rays: Vec<_> = (0..camera.width * camera.height).map(|i| pixel_ray(camera, i)).collect();
-    Ok(compose(scene, camera, mode, &gpu.intersect_with_stats(&rays)?))
+    Ok(compose(gpu.scene(), camera, mode, &gpu.intersect_with_stats(&rays)?))
 }
 
 /// Pixel `i`'s ray, row by row from the top.

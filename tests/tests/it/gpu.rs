@@ -204,7 +204,7 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     sets.push(EffectSet::NONE);
     for effects in sets {
         let options = RenderOptions { effects, ..all };
-        let (g, gc) = render_effects_gpu(&scene, &tracer, &camera, &options).unwrap();
+        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
         let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
         eprintln!("{:?}: cpu {cc:?}, gpu {gc:?}", effects.iter().map(Effect::name).collect::<Vec<_>>());
         for kind in RayKind::ALL {
@@ -215,7 +215,7 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     assert!(all.effects.iter().count() == Effect::ALL.len(), "the scene calls for every effect");
     // Deeper trees than the kernel's stack holds are refused, not cut short.
     let deep = RenderOptions { max_depth: octrace_runtime::gpu::MAX_GPU_DEPTH + 1, ..all };
-    let err = octrace_runtime::gpu::GpuRenderer::new(&tracer, &scene, &deep).unwrap_err();
+    let err = octrace_runtime::gpu::GpuRenderer::new(&tracer, &deep).unwrap_err();
     assert!(err.to_string().contains("at most 31 deep"), "{err}");
     // No lights: the headlight, primary rays only.
     let sphere = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
@@ -224,7 +224,7 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     let camera = raysets::Camera::standard_sized(&Frame::from_bounds(b.mesh_lo, b.mesh_hi), 64, 48);
     let options = RenderOptions::for_scene(scene.shading());
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
-    let (g, gc) = render_effects_gpu(&scene, &tracer, &camera, &options).unwrap();
+    let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
     let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
     assert_eq!((gc, gc.total()), (cc, 64 * 48));
     renders_agree("headlight", ctx, &cpu, &g);
@@ -341,7 +341,7 @@ fn effects_render_at_default_settings_gives_the_cpus_rays_and_image() {
     assert_eq!(defaults.soft_samples, 16, "the defaults this test stands for");
     for samples in [16, 32] {
         let options = RenderOptions { soft_samples: samples, ..defaults };
-        let (g, gc) = render_effects_gpu(&scene, &tracer, &camera, &options).unwrap();
+        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
         let (c, cc) = render_effects(&scene, &camera, &options, &|_| {});
         for kind in RayKind::ALL {
             assert_eq!(gc.get(kind), cc.get(kind), "{samples} samples: {} rays, GPU against CPU", kind.name());
