@@ -1,6 +1,7 @@
 //! Opening a baked file from arbitrary bytes on the validated path never panics,
-//! hangs or reads out of bounds; whatever opens is traced, and rendered small with
-//! every effect its shading data calls for.
+//! hangs or reads out of bounds; whatever opens is traced (one ray at a time and in
+//! batches) and rendered small with every effect its shading data calls for
+//! (`octrace_runtime::testing::exercise`).
 //!
 //! The first byte picks how the rest is used: odd, as a whole file; even, as an archive
 //! wrapped in a correct header (so mutations get past the checksums to bytecheck and
@@ -27,20 +28,10 @@ fuzz_target!(|data: &[u8]| {
     let _ = octrace_format::stats::SceneStatistics::compute(&scene.view());
     let b = scene.view().bounds;
     let c = (Vec3::from(b.mesh_lo) + Vec3::from(b.mesh_hi)) * 0.5;
-    let t = scene.tracer();
+    let mut rays = Vec::new();
     for (k, d) in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8), Vec3::new(-1.0, 0.0, -0.0)].into_iter().enumerate() {
         let outside = c - d * (b.root_size * 2.0);
-        for r in [Ray::new(c, d), Ray::new(outside, d), Ray::segment(c, d, 0.0, k as f32)] {
-            let _ = t.intersect(&r);
-            let _ = t.occluded(&r);
-        }
+        rays.extend([Ray::new(c, d), Ray::new(outside, d), Ray::segment(c, d, 0.0, k as f32)]);
     }
-    let frame = octrace_runtime::raysets::Frame::from_bounds(b.mesh_lo, b.mesh_hi);
-    let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 6, 4);
-    let options = octrace_runtime::render::effects::RenderOptions {
-        soft_samples: 2,
-        max_depth: 3,
-        ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
-    };
-    let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {}).0.to_image();
+    octrace_runtime::testing::exercise(&scene, &rays);
 });

@@ -44,7 +44,6 @@ fuzz_target!(|data: &[u8]| {
     // SAFETY: this process's own file, rewritten only by the next input, after this
     // scene (and its map) is dropped.
     let Ok(scene) = (unsafe { Scene::map_unchecked(&path) }) else { return };
-    let t = scene.tracer();
     let mut rays = Vec::new();
     for (k, d) in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8), Vec3::new(-1.0, 0.0, -0.0), Vec3::new(0.0, -0.0, 1.0)]
         .into_iter()
@@ -53,19 +52,5 @@ fuzz_target!(|data: &[u8]| {
         let inside = Vec3::new(0.5, 0.1, -0.2) * (k as f32 - 2.0);
         rays.extend([Ray::new(inside, d), Ray::new(inside - d * 5.0, d), Ray::segment(inside, d, 0.0, k as f32)]);
     }
-    for r in &rays {
-        let _ = t.intersect(r);
-        let _ = t.occluded(r);
-    }
-    let _ = scene.intersect_all(&rays);
-    let _ = scene.occluded_all(&rays);
-    let b = scene.view().bounds;
-    let frame = octrace_runtime::raysets::Frame::from_bounds(b.mesh_lo, b.mesh_hi);
-    let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 4, 3);
-    let options = octrace_runtime::render::effects::RenderOptions {
-        soft_samples: 2,
-        max_depth: 2,
-        ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
-    };
-    let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {});
+    octrace_runtime::testing::exercise(&scene, &rays);
 });

@@ -37,6 +37,8 @@ pub mod reference;
 pub mod render;
 mod scene;
 pub mod spawn;
+#[doc(hidden)]
+pub mod testing;
 pub mod unconstrained;
 
 /// The vector type of the API (`Ray::new` takes `glam::Vec3`), re-exported so that a

@@ -48,22 +48,7 @@ fn semantically_broken_files_on_the_trusted_path_never_panic_or_hang() {
             // SAFETY: this test's own file, not changed while mapped; its archive is
             // sound (a scene serialized as it is), which is all the trusted path needs.
             let Ok(scene) = (unsafe { Scene::map_unchecked(&path) }) else { return };
-            let tracer = scene.tracer();
-            for r in &rays {
-                let _ = tracer.intersect(r);
-                let _ = tracer.occluded(r);
-            }
-            let _ = scene.intersect_all(&rays);
-            let _ = scene.occluded_all(&rays);
-            let frame =
-                octrace_runtime::raysets::Frame::from_bounds(scene.view().bounds.mesh_lo, scene.view().bounds.mesh_hi);
-            let camera = octrace_runtime::raysets::Camera::standard_sized(&frame, 4, 3);
-            let options = octrace_runtime::render::effects::RenderOptions {
-                soft_samples: 2,
-                max_depth: 2,
-                ..octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading())
-            };
-            let _ = octrace_runtime::render::effects::render_effects(&scene, &camera, &options, &|_| {});
+            octrace_runtime::testing::exercise(&scene, &rays);
         });
         if let Err(panic) = traced {
             let why =
