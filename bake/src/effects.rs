@@ -8,12 +8,15 @@ use crate::mesh::Mesh;
 /// The effects `mesh` calls for, in [`Effect::ALL`] order, considering only the
 /// materials of the triangles in `used` (the triangles that reach the octree).
 ///
-/// * shadows: any punctual light or emissive triangle;
-/// * soft shadows: emissive triangles (area lights);
-/// * reflection: a material whose mirror weight ([`Material::mirror`]) is visible, or
-///   a transmissive one (its Fresnel reflection);
-/// * refraction: transmission above zero;
-/// * alpha: coverage ([`Material::coverage`]) below one.
+/// * shadows: any punctual light or emissive triangle, when some surface is lit (not
+///   `KHR_materials_unlit`);
+/// * soft shadows: emissive triangles (area lights), likewise;
+/// * reflection: a lit material whose mirror weight ([`Material::mirror`]) is
+///   visible, or a transmissive one with an index of refraction above 1 (its Fresnel
+///   reflection);
+/// * refraction: a lit material with transmission above zero;
+/// * alpha: coverage ([`Material::coverage_at`]) below one somewhere: the alpha
+///   factor times the smallest alpha of the material's texture.
 ///
 /// # Example
 /// ```
@@ -42,15 +45,20 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     };
     let area = |(m, n): &(&Material, usize)| {
         let e = m.emissive;
-        format!("area light: material '{}' emits ({:.2}, {:.2}, {:.2}) on {n} triangles", m.name, e[0], e[1], e[2])
+        let s = if *n == 1 { "" } else { "s" };
+        format!("area light: material '{}' emits ({:.2}, {:.2}, {:.2}) on {n} triangle{s}", m.name, e[0], e[1], e[2])
     };
+    // A mesh without materials is lit (the renderer's plain material).
+    let lit = used_materials.is_empty() || used_materials.iter().any(|(m, _)| !m.unlit);
     let mut lights: Vec<String> =
         mesh.lights.iter().map(|l| format!("light '{}' ({:?})", l.name, l.kind).to_lowercase()).collect();
     lights.extend(emitters.iter().map(area));
-    add(Effect::Shadows, lights);
-    add(Effect::SoftShadows, emitters.iter().map(area).collect());
-    let mirrors = used_materials.iter().filter_map(|(m, _)| {
-        if m.transmission > 0.0 {
+    if lit {
+        add(Effect::Shadows, lights);
+        add(Effect::SoftShadows, emitters.iter().map(area).collect());
+    }
+    let mirrors = used_materials.iter().filter(|(m, _)| !m.unlit).filter_map(|(m, _)| {
+        if m.transmission > 0.0 && m.ior > 1.0 {
             return Some(format!("material '{}', transmission {:.2} (Fresnel reflection)", m.name, m.transmission));
         }
         let w = m.mirror();
@@ -63,19 +71,26 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
         })
     });
     add(Effect::Reflection, mirrors.collect());
-    let glass = used_materials.iter().filter(|(m, _)| m.transmission > 0.0).map(|(m, _)| match m.illum {
+    let glass = used_materials.iter().filter(|(m, _)| m.transmission > 0.0 && !m.unlit).map(|(m, _)| match m.illum {
         Some(_) => format!("material '{}', d {:.2}, Ni {:.2}", m.name, 1.0 - m.transmission, m.ior),
         None => format!("material '{}', transmission {:.2}, ior {:.2}", m.name, m.transmission, m.ior),
     });
     add(Effect::Refraction, glass.collect());
-    let cut = used_materials.iter().filter(|(m, _)| m.coverage() < 1.0).map(|(m, _)| {
-        let alpha = m.base_color[3];
+    let texture = |m: &Material| m.base_color_texture.and_then(|t| mesh.textures.get(t as usize));
+    let min_alpha = |m: &Material| m.base_color[3] * texture(m).map_or(1.0, |t| t.min_alpha);
+    let cut = used_materials.iter().filter(|(m, _)| m.coverage_at(min_alpha(m)) < 1.0).map(|(m, _)| {
+        let alpha = min_alpha(m);
+        // "alpha 0.30", or "alpha down to 0.00 (texture 'leaves.png')".
+        let value = match texture(m) {
+            Some(t) => format!("down to {alpha:.2} (texture {})", t.name),
+            None => format!("{alpha:.2}"),
+        };
         match (m.alpha_mode, m.illum) {
             (AlphaMode::Mask, _) => {
-                format!("material '{}', alphaMode MASK, alpha {alpha:.2} < cutoff {:.2}", m.name, m.alpha_cutoff)
+                format!("material '{}', alphaMode MASK, alpha {value} < cutoff {:.2}", m.name, m.alpha_cutoff)
             }
             (_, Some(_)) => format!("material '{}', d {alpha:.2}", m.name),
-            _ => format!("material '{}', alphaMode BLEND, alpha {alpha:.2}", m.name),
+            _ => format!("material '{}', alphaMode BLEND, alpha {value}", m.name),
         }
     });
     add(Effect::Alpha, cut.collect());

@@ -362,14 +362,20 @@ pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> Sc
         material_ids: bytemuck::cast_slice(a.material_ids.as_slice()),
         normals: bytemuck::cast_slice(a.normals.as_slice()),
         uvs: bytemuck::cast_slice(a.uvs.as_slice()),
+        texels: bytemuck::cast_slice(a.texels.as_slice()),
         root: a.root.to_native(),
         shading,
     }
 }
 
 /// No materials, lights, cameras or effects: for views that only need the arrays.
-pub(crate) static EMPTY_SHADING: Shading =
-    Shading { materials: Vec::new(), lights: Vec::new(), cameras: Vec::new(), effects: Vec::new() };
+pub(crate) static EMPTY_SHADING: Shading = Shading {
+    materials: Vec::new(),
+    lights: Vec::new(),
+    cameras: Vec::new(),
+    textures: Vec::new(),
+    effects: Vec::new(),
+};
 
 /// The archive's shading data as native values.
 fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {

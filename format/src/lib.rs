@@ -33,6 +33,7 @@ pub mod layout;
 mod scene;
 mod shading;
 pub mod stats;
+mod texture;
 pub mod validate;
 mod view;
 mod write;
@@ -49,6 +50,7 @@ pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{
     AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, Shading, DIELECTRIC_F0, VISIBLE_WEIGHT,
 };
+pub use texture::{srgb_to_linear16, Filter, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS};
 pub use view::{LeafRecord, SceneView};
 pub use write::write_atomically;
 
@@ -105,6 +107,7 @@ pub mod testing {
             material_ids: vec![],
             normals: vec![],
             uvs: vec![],
+            texels: vec![],
             root: 0,
             shading: Default::default(),
         }

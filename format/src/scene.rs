@@ -82,6 +82,9 @@ pub struct BakedScene {
     pub normals: Vec<f32>,
     /// Texture coordinates of each stored triangle's three corners (six `f32`), or empty.
     pub uvs: Vec<f32>,
+    /// The texels of every texture ([`crate::Texture`], [`crate::TEXEL_WORDS`] words a
+    /// texel), or empty.
+    pub texels: Vec<u32>,
     /// The point-location tree's root reference.
     pub root: u32,
     /// Materials, lights, cameras and the effects the scene calls for.
@@ -110,6 +113,7 @@ impl BakedScene {
             material_ids: &self.material_ids,
             normals: &self.normals,
             uvs: &self.uvs,
+            texels: &self.texels,
             root: self.root,
             shading: &self.shading,
         }

@@ -7,6 +7,8 @@
 
 use rkyv::{Archive, Deserialize, Serialize};
 
+use crate::texture::{Texture, MAX_TEXTURE_SIDE, TEXEL_WORDS};
+
 /// How a material's alpha is used (glTF `alphaMode`).
 #[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[rkyv(derive(Debug))]
@@ -54,6 +56,13 @@ pub struct Material {
     pub specular: [f32; 3],
     /// The MTL `illum` model, when the material came from an MTL file that gave one.
     pub illum: Option<u32>,
+    /// glTF `KHR_materials_unlit`: the surface shows its base colour as it is, lit by
+    /// nothing and casting no shadow rays of its own.
+    pub unlit: bool,
+    /// The texture (an index into [`Shading::textures`]) whose texels multiply
+    /// `base_color` (glTF `baseColorTexture`), sampled at the triangle's texture
+    /// coordinates.
+    pub base_color_texture: Option<u32>,
 }
 
 impl Default for Material {
@@ -71,11 +80,14 @@ impl Default for Material {
             ior: 1.5,
             specular: [0.0; 3],
             illum: None,
+            unlit: false,
+            base_color_texture: None,
         }
     }
 }
 
-/// Reflectance at normal incidence of a dielectric of index 1.5 (glTF's `F0` of 0.04).
+/// Reflectance at normal incidence of a dielectric of index 1.5 (glTF's `F0` of 0.04;
+/// [`Material::dielectric_f0`] computes it from the material's index).
 pub const DIELECTRIC_F0: f32 = 0.04;
 
 /// A weight below this adds less than half a step of 8-bit colour to any pixel: an
@@ -85,22 +97,46 @@ pub const VISIBLE_WEIGHT: f32 = 1.0 / 512.0;
 impl Material {
     /// Mirror reflectance per channel: the weight of a reflection ray.
     ///
-    /// glTF: the metallic-roughness `F0` (`0.04` for dielectrics, the base colour for
-    /// metals, mixed by `metallic`), scaled by `(1 - roughness)^2` so that a rough
-    /// surface has no mirror image. MTL: `Ks` when `illum` is 3 to 7, else nothing.
+    /// glTF: the metallic-roughness `F0` (the dielectric's [`Material::dielectric_f0`]
+    /// for the share that neither is metal nor transmits, the base colour for metals,
+    /// mixed by `metallic`), scaled by `(1 - roughness)^2` so that a rough surface has
+    /// no mirror image. The transmitted share's reflection is the Fresnel reflection
+    /// of the refraction effect, not counted here. Unlit materials reflect nothing.
+    /// MTL: `Ks` when `illum` is 3 to 7, else nothing.
     pub fn mirror(&self) -> [f32; 3] {
         if let Some(illum) = self.illum {
             return if (3..=7).contains(&illum) { self.specular.map(|k| k.clamp(0.0, 1.0)) } else { [0.0; 3] };
         }
+        if self.unlit {
+            return [0.0; 3];
+        }
         let m = self.metallic.clamp(0.0, 1.0);
         let gloss = (1.0 - self.roughness.clamp(0.0, 1.0)).powi(2);
-        [0, 1, 2].map(|c| ((1.0 - m) * DIELECTRIC_F0 + m * self.base_color[c].clamp(0.0, 1.0)) * gloss)
+        let dielectric = (1.0 - m) * (1.0 - self.transmission.clamp(0.0, 1.0)) * self.dielectric_f0();
+        [0, 1, 2].map(|c| (dielectric + m * self.base_color[c].clamp(0.0, 1.0)) * gloss)
+    }
+
+    /// Reflectance at normal incidence of the material as a dielectric:
+    /// `((ior - 1) / (ior + 1))^2`, [`DIELECTRIC_F0`] for glTF's default index of 1.5,
+    /// zero for an index of 1 (no interface, no reflection).
+    pub fn dielectric_f0(&self) -> f32 {
+        if self.ior == 1.5 {
+            return DIELECTRIC_F0; // the f32 nearest 0.04, which the formula misses by an ulp
+        }
+        let r = (self.ior - 1.0) / (self.ior + 1.0);
+        r * r
     }
 
     /// The fraction of the surface that exists (alpha coverage): 1 for opaque
     /// surfaces, 0 or 1 for masks (alpha against the cutoff), alpha for blending.
     pub fn coverage(&self) -> f32 {
-        let alpha = self.base_color[3].clamp(0.0, 1.0);
+        self.coverage_at(self.base_color[3])
+    }
+
+    /// [`Material::coverage`] where the surface's alpha is `alpha` (the factor times
+    /// what a texture or a vertex colour gives there).
+    pub fn coverage_at(&self, alpha: f32) -> f32 {
+        let alpha = alpha.clamp(0.0, 1.0);
         match self.alpha_mode {
             AlphaMode::Opaque => 1.0,
             AlphaMode::Mask => {
@@ -192,6 +228,10 @@ pub struct Camera {
     pub yfov: f32,
     /// Width over height, when the file fixes it.
     pub aspect: Option<f32>,
+    /// An orthographic camera's half height of view (glTF `ymag`): its rays are
+    /// parallel, along `forward`, from a `2 ymag` high rectangle (`yfov` is then
+    /// unused); `None` for a perspective camera.
+    pub orthographic: Option<f32>,
 }
 
 /// An effect a renderer may have to simulate.
@@ -253,6 +293,9 @@ pub struct Shading {
     pub lights: Vec<Light>,
     /// Cameras.
     pub cameras: Vec<Camera>,
+    /// Texture images, indexed by [`Material::base_color_texture`]; their texels are
+    /// [`crate::BakedScene::texels`].
+    pub textures: Vec<Texture>,
     /// The effects the scene calls for, one entry each, in [`Effect::ALL`] order; empty
     /// when primary rays suffice.
     pub effects: Vec<EffectReason>,
@@ -301,10 +344,51 @@ impl Shading {
             if c.aspect.is_some_and(|a| a <= 0.0) {
                 return Err(corrupt(format!("camera '{}' has a non-positive aspect ratio", c.name)));
             }
+            if c.orthographic.is_some_and(|h| !(h.is_finite() && h > 0.0)) {
+                return Err(corrupt(format!("camera '{}' has an orthographic height that is not positive", c.name)));
+            }
+        }
+        for m in &self.materials {
+            if m.base_color_texture.is_some_and(|t| t as usize >= self.textures.len()) {
+                return Err(corrupt(format!(
+                    "material '{}' names a texture beyond the {} there are",
+                    m.name,
+                    self.textures.len()
+                )));
+            }
         }
         for (i, e) in self.effects.iter().enumerate() {
             if self.effects[..i].iter().any(|f| f.effect == e.effect) {
                 return Err(corrupt(format!("effect {} listed twice", e.effect.name())));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Shading {
+    /// Checks that every texture's size is within [`MAX_TEXTURE_SIDE`] and its texels
+    /// lie within the `words` words of the texel array.
+    ///
+    /// # Errors
+    /// [`crate::Error::Corrupt`] naming the first bad texture.
+    pub fn validate_texels(&self, words: usize) -> crate::Result<()> {
+        for t in &self.textures {
+            let sides = 1..=MAX_TEXTURE_SIDE;
+            let end = (t.first as u64 + t.width as u64 * t.height as u64) * TEXEL_WORDS as u64;
+            if !sides.contains(&t.width) || !sides.contains(&t.height) || end > words as u64 {
+                return Err(crate::Error::corrupt(format!(
+                    "texture '{}' ({} x {} from texel {}) is empty, larger than {MAX_TEXTURE_SIDE} a side, \
+                     or runs past the {} texels there are",
+                    t.name,
+                    t.width,
+                    t.height,
+                    t.first,
+                    words / TEXEL_WORDS
+                )));
+            }
+            if !(0.0..=1.0).contains(&t.min_alpha) {
+                return Err(crate::Error::corrupt(format!("texture '{}' has minimum alpha {}", t.name, t.min_alpha)));
             }
         }
         Ok(())

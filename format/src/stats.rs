@@ -18,7 +18,7 @@ pub struct ArrayBytes {
     pub cube_map: u64,
     /// The point-location tree.
     pub point_location: u64,
-    /// The per-triangle shading arrays: material ids, normals, texture coordinates.
+    /// The shading arrays: material ids, normals, texture coordinates, texels.
     pub shading: u64,
 }
 
@@ -93,7 +93,7 @@ impl SceneStatistics {
                 boxes: four(view.boxes.len()),
                 cube_map: four(view.cube_map.len()),
                 point_location: four(view.nodes.len()),
-                shading: four(view.material_ids.len() + view.normals.len() + view.uvs.len()),
+                shading: four(view.material_ids.len() + view.normals.len() + view.uvs.len() + view.texels.len()),
             },
         })
     }

@@ -186,7 +186,8 @@ impl SceneView<'_> {
         if let Some(bad) = self.material_ids.iter().find(|&&m| m as usize >= materials) {
             return Err(Error::corrupt(format!("material id {bad} out of range ({materials} materials)")));
         }
-        self.shading.validate()
+        self.shading.validate()?;
+        self.shading.validate_texels(self.texels.len())
     }
 
     fn check_triangle_ids(&self) -> Result<()> {

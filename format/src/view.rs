@@ -41,6 +41,8 @@ pub struct SceneView<'a> {
     pub normals: &'a [f32],
     /// Texture coordinates, six `f32` a stored triangle, or empty.
     pub uvs: &'a [f32],
+    /// Texels of the scene's textures, or empty.
+    pub texels: &'a [u32],
     /// Root reference of the point-location tree.
     pub root: u32,
     /// Materials, lights, cameras and effects.
@@ -75,7 +77,8 @@ impl LeafRecord<'_> {
 
 impl<'a> SceneView<'a> {
     /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
-    /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs):
+    /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs,
+    /// texels):
     /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
@@ -89,6 +92,7 @@ impl<'a> SceneView<'a> {
             self.material_ids,
             bytemuck::cast_slice(self.normals),
             bytemuck::cast_slice(self.uvs),
+            self.texels,
         ]
     }
 
@@ -109,6 +113,28 @@ impl<'a> SceneView<'a> {
     pub fn corner_uvs(&self, index: u32) -> Option<[[f32; 2]; 3]> {
         let t = self.uvs.get(index as usize * UV_FLOATS..)?.get(..UV_FLOATS)?;
         Some([[t[0], t[1]], [t[2], t[3]], [t[4], t[5]]])
+    }
+
+    /// The texture coordinates at barycentrics `(u, v)` of stored triangle `index`
+    /// (`(0, 0)` when the scene has none): each product exact in `f64`, the sum
+    /// rounded once to `f32`, so that the GPU kernel, which computes it the same way
+    /// where it has `f64`, finds the same texels.
+    pub fn uv_at(&self, index: u32, u: f32, v: f32) -> [f32; 2] {
+        let Some([t0, t1, t2]) = self.corner_uvs(index) else { return [0.0; 2] };
+        let w = 1.0 - u - v;
+        [0, 1].map(|c| (t0[c] as f64 * w as f64 + t1[c] as f64 * u as f64 + t2[c] as f64 * v as f64) as f32)
+    }
+
+    /// The base colour (and alpha) of `material` at barycentrics `(u, v)` of stored
+    /// triangle `index`: its factor times its texture there, channel by channel; the
+    /// factor alone when it has no texture.
+    pub fn base_color_at(&self, material: &crate::Material, index: u32, u: f32, v: f32) -> [f32; 4] {
+        let factor = material.base_color;
+        let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) else {
+            return factor;
+        };
+        let texel = texture.sample(self.texels, self.uv_at(index, u, v));
+        [0, 1, 2, 3].map(|c| factor[c] * texel[c])
     }
 
     /// Number of leaves.

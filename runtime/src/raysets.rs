@@ -80,6 +80,9 @@ pub struct Camera {
     pub w: DVec3,
     /// `tan(fov / 2)`.
     pub tan_half_fov: f64,
+    /// An orthographic camera's half height of view: its rays are parallel (along
+    /// `-w`) and start on the image rectangle through the eye. `None`: perspective.
+    pub orthographic: Option<f64>,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -98,12 +101,14 @@ impl Camera {
         }
         let u = normalize(u);
         let s = cross(w, u);
-        Camera { eye, u, s, w, tan_half_fov: (fov_deg / 2.0 * (std::f64::consts::PI / 180.0)).tan(), width, height }
+        let tan_half_fov = (fov_deg / 2.0 * (std::f64::consts::PI / 180.0)).tan();
+        Camera { eye, u, s, w, tan_half_fov, orthographic: None, width, height }
     }
 
     /// A camera of the scene file (`Shading::cameras`): its position, direction and up
     /// vector, with a vertical field of view of `fov_deg` degrees (the file's is
-    /// `yfov`, in radians).
+    /// `yfov`, in radians); an orthographic camera keeps its height of view and
+    /// ignores `fov_deg`.
     pub fn from_scene(c: &octrace_format::Camera, fov_deg: f64, width: u32, height: u32) -> Camera {
         let eye = DVec3::from(c.position.map(f64::from));
         let mut cam = Camera::look_at(eye, eye + DVec3::from(c.forward.map(f64::from)), fov_deg, width, height);
@@ -111,6 +116,7 @@ impl Camera {
         let up = DVec3::from(c.up.map(f64::from)).normalize();
         cam.u = up.cross(cam.w).normalize();
         cam.s = cam.w.cross(cam.u);
+        cam.orthographic = c.orthographic.map(f64::from);
         cam
     }
 
@@ -133,6 +139,9 @@ impl Camera {
 
     /// The unrounded direction through pixel `(x, y)` (`y` from the top).
     pub fn direction(&self, x: u32, y: u32) -> DVec3 {
+        if self.orthographic.is_some() {
+            return -self.w;
+        }
         let aspect = self.width as f64 / self.height as f64;
         let px = (2.0 * (x as f64 + 0.5) / self.width as f64 - 1.0) * self.tan_half_fov * aspect;
         let py = (1.0 - 2.0 * (y as f64 + 0.5) / self.height as f64) * self.tan_half_fov;
@@ -140,9 +149,19 @@ impl Camera {
         normalize(DVec3::new(px * u.x + py * s.x - w.x, px * u.y + py * s.y - w.y, px * u.z + py * s.z - w.z))
     }
 
+    /// The origin of the ray through pixel `(x, y)`: the eye, or for an orthographic
+    /// camera the pixel's centre on the image rectangle through the eye.
+    pub fn origin(&self, x: u32, y: u32) -> DVec3 {
+        let Some(half) = self.orthographic else { return self.eye };
+        let aspect = self.width as f64 / self.height as f64;
+        let px = (2.0 * (x as f64 + 0.5) / self.width as f64 - 1.0) * half * aspect;
+        let py = (1.0 - 2.0 * (y as f64 + 0.5) / self.height as f64) * half;
+        self.eye + self.u * px + self.s * py
+    }
+
     /// The ray through pixel `(x, y)`.
     pub fn ray(&self, x: u32, y: u32) -> Ray {
-        Ray::new(to_f32(self.eye), to_f32(self.direction(x, y)))
+        Ray::new(to_f32(self.origin(x, y)), to_f32(self.direction(x, y)))
     }
 
     /// All the camera's rays, row by row.

@@ -31,11 +31,22 @@ pub fn bunny_scene() -> &'static Scene {
     })
 }
 
-/// A torus with a material, shading normals and texture coordinates, baked to depth 5
-/// with four triangles a leaf: every section of the file holds bytes.
+/// A torus with a textured material, shading normals and texture coordinates, baked to
+/// depth 5 with four triangles a leaf: every section of the file holds bytes.
 pub fn torus_scene() -> octrace_format::BakedScene {
     let torus = octrace_bake::procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
-    let mut mesh = Mesh { materials: vec![octrace_format::Material::default()], ..Default::default() };
+    let material = octrace_format::Material { base_color_texture: Some(0), ..Default::default() };
+    let texture = octrace_format::Texture {
+        name: "2 x 2".into(),
+        width: 2,
+        height: 2,
+        first: 0,
+        wrap: Default::default(),
+        filter: Default::default(),
+        min_alpha: 1.0,
+    };
+    let texels = vec![0xffff_0000, 0xffff_8000, 0x0000_ffff, 0xffff_0000, 0x8000_8000, 0xffff_8000, 1, 0xffff_0001];
+    let mut mesh = Mesh { materials: vec![material], textures: vec![texture], texels, ..Default::default() };
     for t in torus.triangles {
         mesh.push(t, Some([octrace_bake::mesh::face_normal(&t); 3]), Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]));
         mesh.material_ids.push(0);
@@ -70,6 +81,24 @@ pub fn base64(bytes: &[u8]) -> String {
         }
     }
     out
+}
+
+/// A file of `../shared` (beside the repository), for the tests that use the shared
+/// meshes, or `None` with a skip notice when it is missing.
+///
+/// # Panics
+/// With `OCTRACE_REQUIRE_SHARED=1` (CI, which always has `../shared`), when the file
+/// is missing: a test CI runs must never pass by skipping.
+pub fn shared_file(relative: &str, test: &str) -> Option<PathBuf> {
+    let path = repo_root().join("../shared").join(relative);
+    if path.exists() {
+        return Some(path);
+    }
+    if std::env::var("OCTRACE_REQUIRE_SHARED").is_ok_and(|v| v == "1") {
+        panic!("OCTRACE_REQUIRE_SHARED=1 but {} is missing", path.display());
+    }
+    eprintln!("SKIPPED {test}: no {} (set OCTRACE_REQUIRE_SHARED=1 to make this a failure)", path.display());
+    None
 }
 
 /// The GPU (a Vulkan adapter) for the GPU tests, opened once.

@@ -1,6 +1,7 @@
 //! Mesh input: OBJ and glTF 2.0 (`.gltf`, `.glb`), each optionally zstd-compressed.
 
 mod gltf;
+mod image;
 mod obj;
 mod refs;
 
@@ -34,8 +35,12 @@ pub struct Mesh {
     pub materials: Vec<octrace_format::Material>,
     /// Punctual lights (glTF `KHR_lights_punctual`), world space.
     pub lights: Vec<octrace_format::Light>,
-    /// Perspective cameras (glTF), world space.
+    /// Cameras (glTF), world space.
     pub cameras: Vec<octrace_format::Camera>,
+    /// Texture images (glTF base colour textures), their texels in `texels`.
+    pub textures: Vec<octrace_format::Texture>,
+    /// The textures' texels, decoded and linear ([`octrace_format::Texture`]).
+    pub texels: Vec<u32>,
     /// Things skipped while loading (non-triangle glTF primitives, ...), one line each.
     pub warnings: Vec<String>,
     /// The files read besides the mesh file itself (glTF buffers, OBJ material

@@ -212,6 +212,8 @@ fn material(m: &tobj::Material) -> Material {
         ior: ior.unwrap_or(1.5),
         specular: colour(m.specular, 0.0),
         illum: Some(m.illumination_model.map_or(2, u32::from)),
+        unlit: false,
+        base_color_texture: None,
     }
 }
 

@@ -188,6 +188,7 @@ pub fn bake_with_progress(
         materials: mesh.materials.clone(),
         lights: mesh.lights.clone(),
         cameras: mesh.cameras.clone(),
+        textures: mesh.textures.clone(),
         effects: crate::effects::decide(mesh, &ids),
     };
     Ok(BakedScene {
@@ -213,6 +214,7 @@ pub fn bake_with_progress(
         material_ids,
         normals,
         uvs,
+        texels: mesh.texels.clone(),
         root: arrays.root,
         shading,
     })

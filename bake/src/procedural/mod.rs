@@ -219,6 +219,7 @@ pub fn effects_scene() -> Mesh {
             up: [0.0, 1.0, 0.0],
             yfov: 0.7,
             aspect: Some(4.0 / 3.0),
+            orthographic: None,
         }],
         ..Mesh::default()
     };

@@ -6,7 +6,7 @@ use octrace_format::stats::SceneStatistics;
 use octrace_format::SceneView;
 use serde_json::json;
 
-use crate::output::{mb, thousands};
+use crate::output::{counted, mb, thousands};
 
 #[derive(clap::Args, Debug)]
 #[command(after_long_help = mapped_scene_help!())]
@@ -182,12 +182,31 @@ impl<'a> Report<'a> {
         .flatten()
         .collect();
         let attrs = if per_triangle.is_empty() { "none".to_string() } else { per_triangle.join(", ") };
-        format!(
-            "scene data         {} materials, {} lights, {} cameras; per triangle: {attrs}",
-            sh.materials.len(),
-            sh.lights.len(),
-            sh.cameras.len()
-        )
+        let n = |count: usize, thing: &str| counted(count as u64, thing);
+        let mut text = format!(
+            "scene data         {}, {}, {}, {}; per triangle: {attrs}",
+            n(sh.materials.len(), "material"),
+            n(sh.lights.len(), "light"),
+            n(sh.cameras.len(), "camera"),
+            n(sh.textures.len(), "texture"),
+        );
+        // `render --camera N` takes these indices.
+        for (i, c) in sh.cameras.iter().enumerate() {
+            let label = if i == 0 { "cameras" } else { "" };
+            let projection = match c.orthographic {
+                Some(h) => format!("orthographic, {:.3} high", 2.0 * h),
+                None => format!("perspective, yfov {:.1} degrees", c.yfov.to_degrees()),
+            };
+            text.push_str(&format!("\n{label:<18} {i}: '{}', {projection}", c.name));
+        }
+        for (i, t) in sh.textures.iter().enumerate() {
+            let label = if i == 0 { "textures" } else { "" };
+            text.push_str(&format!(
+                "\n{label:<18} {}: {} x {}, {:?} filter, wrap {:?} / {:?}, alpha down to {:.2}",
+                t.name, t.width, t.height, t.filter, t.wrap[0], t.wrap[1], t.min_alpha
+            ));
+        }
+        text
     }
 
     pub(crate) fn json(&self) -> serde_json::Value {
@@ -219,15 +238,23 @@ impl<'a> Report<'a> {
                     "roughness": m.roughness, "emissive": m.emissive,
                     "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
                     "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
+                    "unlit": m.unlit, "base_color_texture": m.base_color_texture,
+                })).collect::<Vec<_>>(),
+                "textures": v.shading.textures.iter().map(|t| json!({
+                    "name": t.name, "width": t.width, "height": t.height,
+                    "filter": format!("{:?}", t.filter).to_lowercase(),
+                    "wrap": t.wrap.map(|w| format!("{w:?}").to_lowercase()), "min_alpha": t.min_alpha,
                 })).collect::<Vec<_>>(),
                 "lights": v.shading.lights.iter().map(|l| json!({
                     "name": l.name, "kind": format!("{:?}", l.kind).to_lowercase(), "color": l.color,
                     "intensity": l.intensity, "position": l.position, "direction": l.direction,
                     "range": l.range.is_finite().then_some(l.range),
                 })).collect::<Vec<_>>(),
-                "cameras": v.shading.cameras.iter().map(|c| json!({
-                    "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
-                    "yfov": c.yfov, "aspect": c.aspect,
+                "cameras": v.shading.cameras.iter().enumerate().map(|(i, c)| json!({
+                    "index": i, "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
+                    "projection": if c.orthographic.is_some() { "orthographic" } else { "perspective" },
+                    "yfov": c.orthographic.is_none().then_some(c.yfov), "aspect": c.aspect,
+                    "orthographic_height": c.orthographic.map(|h| 2.0 * h),
                 })).collect::<Vec<_>>(),
                 "per_triangle": {
                     "material_ids": !v.material_ids.is_empty(), "normals": !v.normals.is_empty(),

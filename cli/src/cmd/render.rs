@@ -308,9 +308,9 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
     let cameras = &scene.shading().cameras;
     let from_file = match args.camera {
-        Some(i) => Some(
-            cameras.get(i).ok_or_else(|| anyhow::anyhow!("--camera {i}: the scene has {} cameras", cameras.len()))?,
-        ),
+        Some(i) => Some(cameras.get(i).ok_or_else(|| {
+            anyhow::anyhow!("--camera {i}: the scene has {}", crate::output::counted(cameras.len() as u64, "camera"))
+        })?),
         None if args.eye.is_none() && args.target.is_none() => cameras.first(),
         None => None,
     };

@@ -799,6 +799,9 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         // The product of two f32s is exact in f64: rounded to f32 it is the f32
         // product, bit for bit, and no longer a multiply a compiler may fuse.
         g += "fn product(a: f32, b: f32) -> f32 {\n    return f32(f64(a) * f64(b));\n}\n";
+        // SceneView::uv_at: exact products, one f64 sum, rounded once.
+        g += "fn uv_mix(a: f32, b: f32, c: f32, w: f32, u: f32, v: f32) -> f32 {\n    \
+              return f32(f64(a) * f64(w) + f64(b) * f64(u) + f64(c) * f64(v));\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f64((1u << params.max_depth) - 1u);\n    \
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
@@ -807,6 +810,8 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
     } else {
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
         g += "fn product(a: f32, b: f32) -> f32 {\n    return a * b;\n}\n";
+        g += "fn uv_mix(a: f32, b: f32, c: f32, w: f32, u: f32, v: f32) -> f32 {\n    \
+              return a * w + b * u + c * v;\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";

@@ -2,7 +2,7 @@
 //! (`render.wgsl`), specialised per effect set with override constants.
 
 use glam::Vec3;
-use octrace_format::{Effect, LightKind, Material};
+use octrace_format::{AlphaMode, Effect, Filter, LightKind, Material, Wrap};
 use rayon::prelude::*;
 
 use super::{GpuError, GpuResult, GpuTracer};
@@ -19,7 +19,9 @@ const PIXELS_PER_DISPATCH: u32 = 1 << 20;
 /// Words of a pixel's record in the kernel's `pixel_io` (render.wgsl).
 const PIXEL_WORDS: usize = 8;
 /// Words of a material record (`material` in render.wgsl).
-const MATERIAL_WORDS: usize = 28;
+const MATERIAL_WORDS: usize = 44;
+/// Words of a texture record (`sample` in render.wgsl).
+const TEXTURE_WORDS: usize = 8;
 /// Words of a light record (`punctual` in render.wgsl).
 const LIGHT_WORDS: usize = 16;
 
@@ -45,6 +47,10 @@ pub(super) struct RenderParams {
     has_normals: u32,
     plain_material: u32,
     emitter_area: f32,
+    o_uvs: u32,
+    has_uvs: u32,
+    o_textures: u32,
+    o_texels: u32,
     pad: [u32; 3],
 }
 
@@ -199,8 +205,9 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             let directions: Vec<[u32; PIXEL_WORDS]> = (first..first + n)
                 .into_par_iter()
                 .map(|p| {
-                    let d = camera.ray(p % w, p / w).dir;
-                    [d.x.to_bits(), d.y.to_bits(), d.z.to_bits(), 0, 0, 0, 0, 0]
+                    let ray = camera.ray(p % w, p / w);
+                    let (d, o) = (ray.dir, ray.origin);
+                    [d.x.to_bits(), d.y.to_bits(), d.z.to_bits(), o.x.to_bits(), o.y.to_bits(), o.z.to_bits(), 0, 0]
                 })
                 .collect();
             queue.write_buffer(&out, 0, bytemuck::cast_slice(&directions));
@@ -304,6 +311,25 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     params.o_normals = words.len() as u32;
     params.has_normals = u32::from(!view.normals.is_empty());
     f(&mut words, view.normals);
+    params.o_uvs = words.len() as u32;
+    params.has_uvs = u32::from(!view.uvs.is_empty());
+    f(&mut words, view.uvs);
+    params.o_textures = words.len() as u32;
+    for t in &shading.textures {
+        let wrap = |w: Wrap| match w {
+            Wrap::Repeat => 0,
+            Wrap::MirroredRepeat => 1,
+            Wrap::ClampToEdge => 2,
+        };
+        let filter = match t.filter {
+            Filter::Nearest => 0,
+            Filter::Linear => 1,
+        };
+        words.extend([t.width, t.height, t.first, wrap(t.wrap[0]), wrap(t.wrap[1]), filter, 0, 0]);
+    }
+    debug_assert_eq!(words.len() - params.o_textures as usize, TEXTURE_WORDS * shading.textures.len());
+    params.o_texels = words.len() as u32;
+    words.extend_from_slice(view.texels);
     if words.is_empty() {
         words.push(0);
     }
@@ -312,7 +338,9 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
 }
 
 /// A material's record: the values shading derives from it, computed here by the
-/// CPU's functions so both sides use the same numbers.
+/// CPU's functions so both sides use the same numbers, then the factors the kernel
+/// derives them from again where a texture changes the base colour (`surface` in
+/// render.wgsl, the operations of lighting.rs and `Material::mirror`).
 fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
     let (ks, exponent) = lighting::highlight(m);
     let parts: [(Vec3, f32); 7] = [
@@ -328,6 +356,34 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
     for (i, (v, w)) in parts.iter().enumerate() {
         record[4 * i..4 * i + 4].copy_from_slice(&[v.x, v.y, v.z, *w]);
     }
+    let metallic = m.metallic.clamp(0.0, 1.0);
+    let gloss = (1.0 - m.roughness.clamp(0.0, 1.0)).powi(2);
+    let metal = if m.illum.is_some() { 0.0 } else { metallic * gloss };
+    let transmission = m.transmission.clamp(0.0, 1.0);
+    let shadow_f0 = ((1.0 - m.ior) / (1.0 + m.ior)).powi(2);
+    let bits = |u: u32| f32::from_bits(u);
+    let alpha_mode = match m.alpha_mode {
+        AlphaMode::Opaque => 0,
+        AlphaMode::Mask => 1,
+        AlphaMode::Blend => 2,
+    };
+    record[28..43].copy_from_slice(&[
+        m.base_color[0],
+        m.base_color[1],
+        m.base_color[2],
+        m.base_color[3],
+        bits(m.base_color_texture.map_or(0, |t| t + 1)),
+        bits(u32::from(m.unlit)),
+        metallic,
+        gloss,
+        1.0 - metal,
+        1.0 - transmission,
+        (1.0 - metallic) * (1.0 - transmission) * m.dielectric_f0(),
+        m.dielectric_f0() * (1.0 - metallic),
+        1.0 - shadow_f0,
+        bits(alpha_mode),
+        m.alpha_cutoff,
+    ]);
     record
 }
 
@@ -359,12 +415,14 @@ pub(super) fn render_source(trace: &str, max_depth: u32) -> String {
     };
     format!(
         "{trace}\nconst STACK_SIZE: u32 = {}u;\nconst GAMMA_7: f32 = {:e}f;\n\
-         const SQRT_2: f32 = {:e}f;\nconst LOG2_E: f32 = {:e}f;\nconst LN_2: f32 = {:e}f;\n{}{}{}",
+         const SQRT_2: f32 = {:e}f;\nconst LOG2_E: f32 = {:e}f;\nconst LN_2: f32 = {:e}f;\n\
+         const SAMPLE_SCALE: f32 = {:e}f;\n{}{}{}",
         2 * max_depth + 1,
         gamma(7),
         std::f32::consts::SQRT_2,
         std::f32::consts::LOG2_E,
         std::f32::consts::LN_2,
+        octrace_format::TEXEL_SCALE,
         floats("POWER_LN", &lighting::POWER_LN),
         floats("POWER_EXP", &lighting::POWER_EXP),
         include_str!("render.wgsl")

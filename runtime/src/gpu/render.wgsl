@@ -22,7 +22,7 @@ override ALPHA: bool = true;
 override HEADLIGHT: bool = false;
 
 struct RenderParams {
-    // xyz: the eye (the primary rays' directions come in `pixel_io`).
+    // xyz: the eye (unused: the primary rays come in `pixel_io`).
     eye: vec4<f32>,
     width: u32,
     height: u32,
@@ -43,6 +43,12 @@ struct RenderParams {
     // The material of triangles without one (the last record).
     plain_material: u32,
     emitter_area: f32,
+    // Texture coordinates (absent when has_uvs is 0), texture records (8 words each:
+    // width, height, first texel, wrap u, wrap v, filter) and texels.
+    o_uvs: u32,
+    has_uvs: u32,
+    o_textures: u32,
+    o_texels: u32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
@@ -53,8 +59,9 @@ struct RenderParams {
 // emitters (4 words: radiance rgb, running area), emitter triangles (1 word), material
 // ids and normals (the file's sections, as they are).
 @group(1) @binding(1) var<storage, read> shade: array<u32>;
-// Eight words a pixel. In: the direction of its primary ray (words 0-2, f32 bits), the
-// CPU camera's (raysets::Camera::ray), so the GPU traces exactly the CPU's rays. Out:
+// Eight words a pixel. In: the direction of its primary ray (words 0-2, f32 bits) and
+// its origin (words 3-5), the CPU camera's (raysets::Camera::ray), so the GPU traces
+// exactly the CPU's rays. Out:
 // its light sum (`light_sum`, words 0-5) and in word 6 whether it ran out of loop
 // budget.
 @group(1) @binding(2) var<storage, read_write> pixel_io: array<u32>;
@@ -98,6 +105,19 @@ struct Material {
     base: vec3<f32>,
     mirror: vec3<f32>,
     shadow_pass: vec3<f32>,
+    // What a texture changes is derived again per hit from these (`tinted`).
+    factor: vec4<f32>,
+    texture: u32,
+    unlit: bool,
+    metallic: f32,
+    gloss: f32,
+    keep_metal: f32,
+    keep_transmission: f32,
+    dielectric: f32,
+    highlight_a: f32,
+    keep_shadow: f32,
+    alpha_mode: u32,
+    alpha_cutoff: f32,
 }
 
 // A hit prepared for spawning rays (runtime/src/spawn.rs, SpawnPoint).
@@ -162,7 +182,7 @@ fn material(prim: u32) -> Material {
     if rp.has_material_ids != 0u {
         id = min(shade[rp.o_material_ids + prim], rp.plain_material);
     }
-    let at = rp.o_materials + 28u * id;
+    let at = rp.o_materials + 44u * id;
     var m: Material;
     m.emissive = sv3(at);
     m.coverage = sf(at + 3u);
@@ -175,6 +195,122 @@ fn material(prim: u32) -> Material {
     m.base = sv3(at + 16u);
     m.mirror = sv3(at + 20u);
     m.shadow_pass = sv3(at + 24u);
+    m.factor = vec4<f32>(sv3(at + 28u), sf(at + 31u));
+    m.texture = shade[at + 32u];
+    m.unlit = shade[at + 33u] != 0u;
+    m.metallic = sf(at + 34u);
+    m.gloss = sf(at + 35u);
+    m.keep_metal = sf(at + 36u);
+    m.keep_transmission = sf(at + 37u);
+    m.dielectric = sf(at + 38u);
+    m.highlight_a = sf(at + 39u);
+    m.keep_shadow = sf(at + 40u);
+    m.alpha_mode = shade[at + 41u];
+    m.alpha_cutoff = sf(at + 42u);
+    return m;
+}
+
+// SceneView::uv_at: the texture coordinates at the hit (`uv_mix` is generated: exact
+// products in f64 where the adapter has it).
+fn uv_at(prim: u32, u: f32, v: f32) -> vec2<f32> {
+    if rp.has_uvs == 0u {
+        return vec2<f32>(0.0);
+    }
+    let at = rp.o_uvs + 6u * prim;
+    let w = 1.0 - u - v;
+    return vec2<f32>(uv_mix(sf(at), sf(at + 2u), sf(at + 4u), w, u, v), uv_mix(sf(at + 1u), sf(at + 3u), sf(at + 5u), w, u, v));
+}
+
+// Texture::reduce.
+fn reduce(wrap: u32, c: f32) -> f32 {
+    if c - c != 0.0 {
+        return 0.0; // not finite
+    }
+    switch wrap {
+        case 0u: { return c - floor(c); }
+        case 1u: { return c - 2.0 * floor(c * 0.5); }
+        default: { return clamp(c, 0.0, 1.0); }
+    }
+}
+
+// Texture::wrap_index.
+fn wrap_index(wrap: u32, i: i32, n: i32) -> i32 {
+    switch wrap {
+        case 0u: { return ((i % n) + n) % n; }
+        case 1u: {
+            let k = ((i % (2 * n)) + 2 * n) % (2 * n);
+            return select(k, 2 * n - 1 - k, k >= n);
+        }
+        default: { return clamp(i, 0, n - 1); }
+    }
+}
+
+// One texel's four 16-bit channels.
+fn texel(first: u32, w: i32, x: i32, y: i32) -> vec4<u32> {
+    let at = rp.o_texels + 2u * (first + u32(y * w + x));
+    let a = shade[at];
+    let b = shade[at + 1u];
+    return vec4<u32>(a & 0xffffu, a >> 16u, b & 0xffffu, b >> 16u);
+}
+
+// Texture::sample: integers up to the final scale, so the CPU's values exactly.
+fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
+    let at = rp.o_textures + 8u * t;
+    let w = i32(shade[at]);
+    let h = i32(shade[at + 1u]);
+    let first = shade[at + 2u];
+    let wrap_u = shade[at + 3u];
+    let wrap_v = shade[at + 4u];
+    let cu = reduce(wrap_u, uv.x);
+    let cv = reduce(wrap_v, uv.y);
+    var sum = vec4<u32>(0u);
+    if shade[at + 5u] == 0u {
+        let x = wrap_index(wrap_u, i32(floor(cu * f32(w))), w);
+        let y = wrap_index(wrap_v, i32(floor(cv * f32(h))), h);
+        sum = texel(first, w, x, y) << vec4<u32>(16u);
+    } else {
+        let fx = i32(floor(cu * f32(w * 256))) - 128;
+        let fy = i32(floor(cv * f32(h * 256))) - 128;
+        let x0 = fx >> 8u;
+        let y0 = fy >> 8u;
+        let ax = u32(fx & 255);
+        let ay = u32(fy & 255);
+        // Unrolled: loops count against a driver's loop cap (gpu::loop_cap).
+        let xa = wrap_index(wrap_u, x0, w);
+        let xb = wrap_index(wrap_u, x0 + 1, w);
+        let ya = wrap_index(wrap_v, y0, h);
+        let yb = wrap_index(wrap_v, y0 + 1, h);
+        sum = texel(first, w, xa, ya) * ((256u - ax) * (256u - ay)) + texel(first, w, xb, ya) * (ax * (256u - ay))
+            + texel(first, w, xa, yb) * ((256u - ax) * ay) + texel(first, w, xb, yb) * (ax * ay);
+    }
+    return vec4<f32>(sum >> vec4<u32>(8u)) * SAMPLE_SCALE;
+}
+
+// Context::surface: the material at a hit, its base colour times its texture there,
+// and what shading derives from the base colour computed again from it, in the
+// CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
+fn surface(hit: HitOut) -> Material {
+    var m = material(hit.prim);
+    if m.texture == 0u {
+        return m;
+    }
+    let texel = sample(m.texture - 1u, uv_at(hit.prim, hit.u, hit.v));
+    let bc = m.factor * texel;
+    let base = clamp(bc.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+    m.base = base;
+    m.albedo = base * m.keep_metal;
+    m.albedo_transmits = base * m.keep_metal * m.keep_transmission;
+    let mp = vec3<f32>(product(m.metallic, base.x), product(m.metallic, base.y), product(m.metallic, base.z));
+    let mirror = (vec3<f32>(m.dielectric) + mp) * m.gloss;
+    m.mirror = select(vec3<f32>(0.0), mirror, max3(mirror) >= VISIBLE_WEIGHT);
+    m.ks = (vec3<f32>(m.highlight_a) + mp) * m.gloss;
+    m.shadow_pass = base * m.transmission * m.keep_shadow;
+    let alpha = clamp(bc.w, 0.0, 1.0);
+    switch m.alpha_mode {
+        case 0u: { m.coverage = 1.0; }
+        case 1u: { m.coverage = select(0.0, 1.0, alpha >= m.alpha_cutoff); }
+        default: { m.coverage = alpha; }
+    }
     return m;
 }
 
@@ -331,7 +467,7 @@ fn shadowed(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32, value0: vec3<f32
         if hit.triangle == MISS {
             return value;
         }
-        let m = material(hit.prim);
+        let m = surface(hit);
         var coverage = 1.0;
         if ALPHA {
             coverage = m.coverage;
@@ -493,7 +629,7 @@ fn push(sp: ptr<function, u32>, o: vec3<f32>, d: vec3<f32>, weight: vec3<f32>, d
 fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     var s: Surface;
     s.sp = spawn_point(hit.prim, hit);
-    s.m = material(hit.prim);
+    s.m = surface(hit);
     let dir = unit(task.d);
     var ng = s.sp.normal;
     let entering = dot(ng, dir) < 0.0;
@@ -518,6 +654,11 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
         return;
     }
     s.weight = task.weight * coverage;
+    if s.m.unlit {
+        // KHR_materials_unlit: the base colour as it is, no light, no further ray.
+        add_light(s.weight * s.m.base);
+        return;
+    }
     s.v = -dir;
     s.transmits = REFRACTION && s.m.transmission > 0.0;
     add_light(s.weight * s.m.emissive);
@@ -570,11 +711,11 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     }
 }
 
-// The light of pixel `pixel`, whose primary ray leaves the eye along `d`, into
+// The light of pixel `pixel`, whose primary ray leaves `o` along `d`, into
 // `light_sum`.
-fn render_pixel(pixel: u32, d: vec3<f32>) {
+fn render_pixel(pixel: u32, o: vec3<f32>, d: vec3<f32>) {
     var sp = 1u;
-    stack[0] = Task(rp.eye.xyz, 0u, d, PRIMARY, vec3<f32>(1.0));
+    stack[0] = Task(o, 0u, d, PRIMARY, vec3<f32>(1.0));
     // Every push is one level deeper and depths are bounded: the loop ends.
     while sp > 0u && tick() {
         sp -= 1u;
@@ -595,7 +736,8 @@ fn render(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     if i < rp.pixel_count {
         let at = 8u * i;
         let d = vec3<f32>(bitcast<f32>(pixel_io[at]), bitcast<f32>(pixel_io[at + 1u]), bitcast<f32>(pixel_io[at + 2u]));
-        render_pixel(rp.first_pixel + i, d);
+        let o = vec3<f32>(bitcast<f32>(pixel_io[at + 3u]), bitcast<f32>(pixel_io[at + 4u]), bitcast<f32>(pixel_io[at + 5u]));
+        render_pixel(rp.first_pixel + i, o, d);
         for (var k = 0u; k < 6u; k++) {
             pixel_io[at + k] = light_sum[k];
         }

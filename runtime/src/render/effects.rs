@@ -7,6 +7,7 @@
 //! next waves. An effect that is absent or turned off never creates a ray of its kind,
 //! and [`RayCounts`] shows it.
 
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::Vec3;
@@ -428,7 +429,7 @@ impl<'a> Context<'a> {
                     out[(s.pixel - first) as usize].add(s.value);
                     continue;
                 };
-                let pass = self.shadow_pass(self.material(hit.prim));
+                let pass = self.shadow_pass(&self.surface(&hit));
                 if pass.max_element() > 0.0 && s.layers < MAX_SHADOW_LAYERS {
                     let tri = self.view.triangle(hit.prim);
                     let ray = spawn(&tri, &hit, s.ray.dir, s.ray.tmax - hit.t);
@@ -451,12 +452,24 @@ impl<'a> Context<'a> {
         self.view.material(prim).unwrap_or(&PLAIN)
     }
 
+    /// The material at `hit`, its base colour taken where the hit is (times its
+    /// texture there, when it has one).
+    fn surface(&self, hit: &Hit) -> Cow<'a, Material> {
+        let m = self.material(hit.prim);
+        if m.base_color_texture.is_none() {
+            return Cow::Borrowed(m);
+        }
+        let base_color = self.view.base_color_at(m, hit.prim, hit.u, hit.v);
+        Cow::Owned(Material { name: String::new(), base_color, ..*m })
+    }
+
     /// Adds to `sum` the light `task` receives from its hit that needs no further ray,
     /// and queues the rays that bring the rest.
     fn shade(&self, task: &Task, hit: &Hit, sum: &mut LightSum, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) {
         // The hit point, normal and offset, once for every ray that leaves this hit.
         let at = SpawnPoint::new(&self.view.triangle(hit.prim), hit);
-        let m = self.material(hit.prim);
+        let surface = self.surface(hit);
+        let m = &*surface;
         let dir = task.ray.dir.normalize();
         let mut ng = at.normal();
         let entering = ng.dot(dir) < 0.0;
@@ -479,6 +492,11 @@ impl<'a> Context<'a> {
             return;
         }
         let weight = task.weight * coverage;
+        if m.unlit {
+            // KHR_materials_unlit: the base colour as it is, no light, no further ray.
+            sum.add(weight * lighting::base(m));
+            return;
+        }
         let v = -dir;
         let transmits = self.has(Effect::Refraction) && m.transmission > 0.0;
         sum.add(weight * Vec3::from(m.emissive));

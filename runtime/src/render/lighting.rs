@@ -4,7 +4,7 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use octrace_format::{Light, LightKind, Material, SceneView, DIELECTRIC_F0, VISIBLE_WEIGHT};
+use octrace_format::{Light, LightKind, Material, SceneView, VISIBLE_WEIGHT};
 
 /// The material of a triangle with none (a mesh without materials): white, diffuse.
 pub(crate) static PLAIN: Material = Material {
@@ -19,6 +19,8 @@ pub(crate) static PLAIN: Material = Material {
     ior: 1.5,
     specular: [0.0; 3],
     illum: None,
+    unlit: false,
+    base_color_texture: None,
 };
 
 /// The base colour of a material, without alpha.
@@ -140,7 +142,7 @@ pub(crate) fn highlight(m: &Material) -> (Vec3, f32) {
         Some(illum) if illum >= 2 => (Vec3::from(m.specular).clamp(Vec3::ZERO, Vec3::ONE), exponent(r)),
         Some(_) => (Vec3::ZERO, 1.0),
         None => {
-            let f0 = Vec3::splat(DIELECTRIC_F0).lerp(base(m), m.metallic.clamp(0.0, 1.0));
+            let f0 = Vec3::splat(m.dielectric_f0()).lerp(base(m), m.metallic.clamp(0.0, 1.0));
             (f0 * (1.0 - r).powi(2), exponent(r * r))
         }
     }

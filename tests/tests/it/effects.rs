@@ -9,7 +9,7 @@ use octrace_runtime::raysets::Camera;
 use octrace_runtime::render::effects::{render_effects, EffectSet, Radiance, RayCounts, RayKind, RenderOptions};
 use octrace_runtime::{Ray, Scene};
 
-fn diffuse(name: &str, grey: f32) -> Material {
+pub(crate) fn diffuse(name: &str, grey: f32) -> Material {
     Material {
         name: name.into(),
         base_color: [grey, grey, grey, 1.0],
@@ -20,7 +20,7 @@ fn diffuse(name: &str, grey: f32) -> Material {
 }
 
 /// Appends `part`'s triangles to `mesh` with material `material` (added to the list).
-fn add(mesh: &mut Mesh, part: Mesh, material: Material) {
+pub(crate) fn add(mesh: &mut Mesh, part: Mesh, material: Material) {
     let id = mesh.materials.len() as u32;
     mesh.materials.push(material);
     for t in part.triangles {
@@ -30,7 +30,7 @@ fn add(mesh: &mut Mesh, part: Mesh, material: Material) {
 }
 
 /// A square in the plane `y = height`, facing up, over `[-half, half]` in x and z.
-fn floor(half: f32, height: f32) -> Mesh {
+pub(crate) fn floor(half: f32, height: f32) -> Mesh {
     let p = |x: f32, z: f32| [x, height, z];
     Mesh::from_triangles(vec![
         [p(-half, -half), p(-half, half), p(half, half)],
@@ -40,7 +40,7 @@ fn floor(half: f32, height: f32) -> Mesh {
 
 /// A square in the plane `z = depth`, facing `+z`, over `[-half, half]` in x and y (plus
 /// `lift` in y).
-fn wall(half: f32, depth: f32, lift: f32) -> Mesh {
+pub(crate) fn wall(half: f32, depth: f32, lift: f32) -> Mesh {
     let p = |x: f32, y: f32| [x, y + lift, depth];
     Mesh::from_triangles(vec![
         [p(-half, -half), p(half, -half), p(half, half)],
@@ -48,7 +48,7 @@ fn wall(half: f32, depth: f32, lift: f32) -> Mesh {
     ])
 }
 
-fn point_light(position: [f32; 3], intensity: f32) -> Light {
+pub(crate) fn point_light(position: [f32; 3], intensity: f32) -> Light {
     Light {
         name: "bulb".into(),
         kind: LightKind::Point,
@@ -62,21 +62,21 @@ fn point_light(position: [f32; 3], intensity: f32) -> Light {
     }
 }
 
-fn scene_of(mesh: &Mesh) -> Scene {
+pub(crate) fn scene_of(mesh: &Mesh) -> Scene {
     Scene::from_baked(bake(mesh, &BuildParams::auto()).expect("bakes")).expect("valid")
 }
 
-fn camera(eye: [f64; 3], target: [f64; 3], size: u32) -> Camera {
+pub(crate) fn camera(eye: [f64; 3], target: [f64; 3], size: u32) -> Camera {
     Camera::look_at(DVec3::from(eye), DVec3::from(target), 50.0, size, size)
 }
 
-fn render(scene: &Scene, cam: &Camera, effects: EffectSet) -> (Radiance, RayCounts) {
+pub(crate) fn render(scene: &Scene, cam: &Camera, effects: EffectSet) -> (Radiance, RayCounts) {
     let options = RenderOptions { effects, ..RenderOptions::for_scene(scene.shading()) };
     render_effects(scene, cam, &options, &|_| {})
 }
 
 /// A sphere on a floor, with materials, and what else `extra` adds.
-fn base_scene(extra: impl FnOnce(&mut Mesh)) -> Mesh {
+pub(crate) fn base_scene(extra: impl FnOnce(&mut Mesh)) -> Mesh {
     let mut m = Mesh::default();
     add(&mut m, floor(4.0, 0.0), diffuse("floor", 0.7));
     add(&mut m, procedural::sphere([0.0, 0.8, 0.0], 0.8, 16, 24), diffuse("ball", 0.5));

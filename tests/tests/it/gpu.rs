@@ -78,11 +78,8 @@ fn the_standard_sets_on_the_bunny_match_the_cpu() {
 #[test]
 fn the_standard_sets_on_the_dragon_match_the_cpu() {
     let Some(gpu) = gpu("the_standard_sets_on_the_dragon_match_the_cpu") else { return };
-    let path = octrace_tests::repo_root().join("../shared/meshes/dragon.obj");
-    if !path.exists() {
-        eprintln!("SKIPPED the_standard_sets_on_the_dragon_match_the_cpu: no {}", path.display());
-        return;
-    }
+    let test = "the_standard_sets_on_the_dragon_match_the_cpu";
+    let Some(path) = octrace_tests::shared_file("meshes/dragon.obj", test) else { return };
     let mesh = octrace_bake::Mesh::load(&path).unwrap();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap()).unwrap();
     standard_sets_match(gpu, &scene, &mesh.triangles);
@@ -424,4 +421,30 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
     same_hits("long walks", &rays, &cpu, &g);
     assert!(stats.iter().all(|s| s.triangle_tests > 65_535), "the walks test more triangles than the cap: {stats:?}");
     assert!(tracer.occluded(&rays).unwrap().iter().all(|&o| o));
+}
+
+/// The textured sample (`tests/data/textured/leaf.gltf`: an alpha-masked leaf texture,
+/// a nearest-filtered, repeated checker) as `octrace render` renders it by default
+/// (1024 pixels wide, the scene's cameras: perspective and orthographic): the GPU
+/// samples the CPU's texels, cuts out the same pixels, traces the same rays of every
+/// kind and gives the same image.
+#[test]
+fn textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu() {
+    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    let Some(ctx) = gpu("textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu") else { return };
+    let mesh = octrace_bake::Mesh::load(octrace_tests::data("textured/leaf.gltf")).unwrap();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let options = RenderOptions::for_scene(scene.shading());
+    for c in &scene.shading().cameras {
+        let height = (1024.0 / c.aspect.unwrap()).round() as u32;
+        let camera = raysets::Camera::from_scene(c, f64::from(c.yfov).to_degrees(), 1024, height);
+        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
+        let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
+        assert!(cc.get(RayKind::Alpha) > 10_000, "{}: {cc:?}", c.name);
+        for kind in RayKind::ALL {
+            assert_eq!(gc.get(kind), cc.get(kind), "camera '{}': {} rays, GPU against CPU", c.name, kind.name());
+        }
+        renders_agree(&c.name, ctx, &cpu, &g);
+    }
 }

@@ -6,6 +6,7 @@ mod format;
 mod gpu;
 mod hard_cases;
 mod hostile;
+mod materials;
 mod mesh;
 mod raysets;
 mod render;

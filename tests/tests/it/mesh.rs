@@ -364,7 +364,7 @@ fn gltf_extensions_give_materials_lights_cameras_and_effects() {
         effects,
         [
             "shadows: light 'sun' (directional) (and 2 more)",
-            "soft-shadows: area light: material 'neon' emits (4.00, 2.00, 0.00) on 1 triangles",
+            "soft-shadows: area light: material 'neon' emits (4.00, 2.00, 0.00) on 1 triangle",
             "reflection: material 'chrome', metallic 1.00, roughness 0.05 (and 1 more)",
             "refraction: material 'glass', transmission 0.90, ior 1.33",
             "alpha: material 'leaves', alphaMode MASK, alpha 0.30 < cutoff 0.60 (and 1 more)",

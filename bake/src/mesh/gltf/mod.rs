@@ -1,16 +1,20 @@
 //! glTF 2.0 through the `gltf` crate: the default scene's mesh primitives, node
 //! transforms applied; triangle lists, strips and fans; other modes skipped.
 
+mod lenient;
+mod material;
+
 use std::path::Path;
 
 use glam::{DMat4, DVec3};
 use gltf::mesh::Mode;
 
-use octrace_format::{AlphaMode, Camera, Light, LightKind, Material};
+use octrace_format::{Camera, Light, LightKind, Material};
 
 use super::refs::{self, LoadOptions};
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
+use material::UvMap;
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
     // The gltf crate (gltf-json 1.4) indexes arrays with unchecked indices while it
@@ -45,11 +49,10 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
             });
         }
     }
-    let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error("document", e))?;
+    let mut warnings = Vec::new();
+    let (json, blob) = lenient::document(bytes, path, &mut warnings)?;
     // gltf-json's validation reads `accessors[i]` for every primitive attribute before
     // checking `i`: refuse out-of-range accessor indices first, then validate.
-    let json = document.into_json();
     let accessors = json.accessors.len();
     for (m, mesh) in json.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
@@ -74,11 +77,16 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
         return Err(Error::EmptyScene { path: path.into() });
     };
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.0.len()).sum::<usize>();
-    let mut mesh = Mesh { sources, ..Mesh::default() };
+    let mut mesh = Mesh { sources, warnings, ..Mesh::default() };
+    let mut materials = material::Materials { path, base, options, buffers: &buffers, loaded: Default::default() };
+    let mut uv_maps = Vec::new();
     for m in document.materials() {
-        mesh.materials.push(material(&m, path)?);
+        let (m, uv) = materials.material(&m, &mut mesh)?;
+        mesh.materials.push(m);
+        uv_maps.push(uv);
     }
-    let mut loader = Loader { path, buffers: &buffers, input_bytes, mesh, skipped: None, default_material: None };
+    let mut loader =
+        Loader { path, buffers: &buffers, input_bytes, mesh, uv_maps, skipped: None, default_material: None };
     for node in scene.nodes() {
         loader.node(&node, DMat4::IDENTITY, 0)?;
     }
@@ -147,7 +155,7 @@ fn load_buffers(
 
 /// The path a buffer URI names: `file:` URIs and relative references, percent-decoded;
 /// other schemes are refused.
-fn uri_path(uri: &str) -> std::result::Result<String, String> {
+pub(super) fn uri_path(uri: &str) -> std::result::Result<String, String> {
     let rest = match uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
         Some(rest) => rest,
         None if uri.contains(':') => return Err("not a relative path, a file: URI or a data: URI".into()),
@@ -163,48 +171,12 @@ struct Loader<'a> {
     /// without a buffer view may declare.
     input_bytes: usize,
     mesh: Mesh,
+    /// Where each material's texture coordinates come from.
+    uv_maps: Vec<UvMap>,
     /// The first primitive skipped for its mode, for the error when nothing else is left.
     skipped: Option<(String, String)>,
     /// Index of glTF's default material, once a primitive without one needed it.
     default_material: Option<u32>,
-}
-
-/// A glTF material in octrace's terms. Factors are clamped to their ranges (the spec's
-/// ranges: 0-1 for colours and factors, an index of refraction of at least 1).
-///
-/// # Errors
-/// [`Error::Parse`] for a value that is not finite (a JSON number beyond `f32`).
-fn material(m: &gltf::Material<'_>, path: &Path) -> Result<Material> {
-    let name = m.name().map_or_else(|| format!("material {}", m.index().unwrap_or(0)), str::to_string);
-    let pbr = m.pbr_metallic_roughness();
-    let strength = m.emissive_strength().unwrap_or(1.0);
-    let unit = |v: f32| v.clamp(0.0, 1.0);
-    let out = Material {
-        base_color: pbr.base_color_factor().map(unit),
-        metallic: unit(pbr.metallic_factor()),
-        roughness: unit(pbr.roughness_factor()),
-        emissive: m.emissive_factor().map(|e| unit(e) * strength.max(0.0)),
-        alpha_mode: match m.alpha_mode() {
-            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
-            gltf::material::AlphaMode::Mask => AlphaMode::Mask,
-            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
-        },
-        alpha_cutoff: m.alpha_cutoff().unwrap_or(0.5).max(0.0),
-        transmission: unit(m.transmission().map_or(0.0, |t| t.transmission_factor())),
-        ior: m.ior().unwrap_or(1.5).max(1.0),
-        specular: [0.0; 3],
-        illum: None,
-        name,
-    };
-    let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
-    if let Some(bad) = numbers.into_iter().find(|v| !v.is_finite()) {
-        return Err(Error::Parse {
-            path: path.into(),
-            element: format!("material '{}'", out.name),
-            message: format!("value {bad} is not a finite number"),
-        });
-    }
-    Ok(out)
 }
 
 /// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
@@ -353,15 +325,17 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// A perspective camera placed by `world` (glTF cameras look along `-z`, up `+y`);
-    /// orthographic cameras and degenerate transforms are skipped with a warning.
+    /// A camera placed by `world` (glTF cameras look along `-z`, up `+y`), perspective
+    /// or orthographic (its `ymag` the half height of view, `xmag / ymag` the aspect);
+    /// a degenerate transform or view is skipped with a warning.
     fn camera(&mut self, camera: &gltf::Camera<'_>, world: &DMat4, node: usize) {
         let name = camera.name().map_or_else(|| format!("camera {}", camera.index()), str::to_string);
-        let gltf::camera::Projection::Perspective(p) = camera.projection() else {
-            self.mesh
-                .warnings
-                .push(format!("{}: node {node}: orthographic camera '{name}' skipped", self.path.display()));
-            return;
+        let (yfov, aspect, orthographic) = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => (p.yfov(), p.aspect_ratio(), None),
+            // yfov is unused by an orthographic camera; it holds a valid angle.
+            gltf::camera::Projection::Orthographic(o) => {
+                (std::f32::consts::FRAC_PI_4, Some(o.xmag().abs() / o.ymag().abs()), Some(o.ymag().abs()))
+            }
         };
         let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
         let up = world.transform_vector3(DVec3::Y);
@@ -370,13 +344,15 @@ impl Loader<'_> {
             position: to_f32(world.transform_point3(DVec3::ZERO)),
             forward: to_f32(forward),
             up: to_f32(up),
-            yfov: p.yfov(),
-            aspect: p.aspect_ratio(),
+            yfov,
+            aspect,
+            orthographic,
             name,
         };
         let finite = out.position.iter().chain([&out.yfov]).chain(out.aspect.as_ref()).all(|v| v.is_finite());
         let fov_ok = out.yfov > 0.0 && out.yfov < std::f32::consts::PI && out.aspect.is_none_or(|a| a > 0.0);
-        if !finite || !fov_ok || forward == DVec3::ZERO || up == DVec3::ZERO {
+        let ortho_ok = out.orthographic.is_none_or(|h| h.is_finite() && h > 0.0);
+        if !finite || !fov_ok || !ortho_ok || forward == DVec3::ZERO || up == DVec3::ZERO {
             self.mesh.warnings.push(format!(
                 "{}: node {node}: camera '{}' skipped (degenerate transform or field of view)",
                 self.path.display(),
@@ -413,20 +389,28 @@ impl Loader<'_> {
         Some(out.collect())
     }
 
-    /// The primitive's `TEXCOORD_0`, when it has usable ones (as [`Loader::normals`]).
+    /// The primitive's texture coordinates, when it has usable ones (as
+    /// [`Loader::normals`]): the set its material's texture reads (`TEXCOORD_0`
+    /// without one), through the texture's transform.
     fn uvs(&mut self, prim: &gltf::Primitive<'_>, vertices: usize, element: &str) -> Option<Vec<[f32; 2]>> {
         use gltf::accessor::{DataType, Dimensions};
-        let a = prim.get(&gltf::Semantic::TexCoords(0))?;
+        let map = prim.material().index().and_then(|i| self.uv_maps.get(i)).copied();
+        let map = map.unwrap_or(UvMap { set: 0, transform: None });
+        let a = prim.get(&gltf::Semantic::TexCoords(map.set))?;
         let usable = matches!(a.data_type(), DataType::F32 | DataType::U8 | DataType::U16)
             && a.dimensions() == Dimensions::Vec2
             && (a.data_type() == DataType::F32 || a.normalized());
         if let Err(why) = self.attribute_usable(&a, usable, vertices) {
-            self.mesh.warnings.push(format!("{}: {element}: TEXCOORD_0 left out: {why}", self.path.display()));
+            self.mesh.warnings.push(format!(
+                "{}: {element}: TEXCOORD_{} left out: {why}",
+                self.path.display(),
+                map.set
+            ));
             return None;
         }
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
-        let out = reader.read_tex_coords(0)?.into_f32().take(vertices);
-        Some(out.map(|t| if t.iter().all(|v| v.is_finite()) { t } else { [0.0; 2] }).collect())
+        let out = reader.read_tex_coords(map.set)?.into_f32().take(vertices);
+        Some(out.map(|t| if t.iter().all(|v| v.is_finite()) { map.apply(t) } else { [0.0; 2] }).collect())
     }
 
     /// Whether a vertex attribute can be read: the spec's type, ranges inside the

@@ -1,0 +1,193 @@
+//! glTF materials and their base colour textures: images decoded, texels stored
+//! linear, samplers and `KHR_texture_transform` resolved at bake.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use octrace_format::{srgb_to_linear16, AlphaMode, Filter, Material, Texture, Wrap};
+
+use super::super::refs::{self, LoadOptions};
+use super::super::{image, Mesh};
+use crate::error::{Error, Result};
+
+/// How a material's texture coordinates are found: the `TEXCOORD_n` set its base
+/// colour texture reads, and the affine map `KHR_texture_transform` applies to it
+/// (`[[a, b, c], [d, e, f]]`: `u' = a u + b v + c`, `v' = d u + e v + f`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct UvMap {
+    pub set: u32,
+    pub transform: Option<[[f64; 3]; 2]>,
+}
+
+impl UvMap {
+    /// `uv` through the transform.
+    pub fn apply(&self, uv: [f32; 2]) -> [f32; 2] {
+        let Some([r0, r1]) = self.transform else { return uv };
+        let (u, v) = (uv[0] as f64, uv[1] as f64);
+        let out = [(r0[0] * u + r0[1] * v + r0[2]) as f32, (r1[0] * u + r1[1] * v + r1[2]) as f32];
+        if out.iter().all(|c| c.is_finite()) {
+            out
+        } else {
+            [0.0; 2]
+        }
+    }
+}
+
+/// What loading a document's materials needs.
+pub(super) struct Materials<'a> {
+    pub path: &'a Path,
+    pub base: Option<&'a Path>,
+    pub options: &'a LoadOptions,
+    pub buffers: &'a [gltf::buffer::Data],
+    /// Textures already loaded: (image, sampler) to the index in `mesh.textures`, or
+    /// `None` when the image could not be used.
+    pub loaded: HashMap<(usize, Option<usize>), Option<u32>>,
+}
+
+impl Materials<'_> {
+    /// A glTF material in octrace's terms, with the texture coordinates its texture
+    /// reads. Factors are clamped to their ranges (the spec's ranges: 0-1 for colours
+    /// and factors, an index of refraction of at least 1).
+    ///
+    /// # Errors
+    /// [`Error::Parse`] for a value that is not finite (a JSON number beyond `f32`).
+    pub fn material(&mut self, m: &gltf::Material<'_>, mesh: &mut Mesh) -> Result<(Material, UvMap)> {
+        let name = m.name().map_or_else(|| format!("material {}", m.index().unwrap_or(0)), str::to_string);
+        let pbr = m.pbr_metallic_roughness();
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let unit = |v: f32| v.clamp(0.0, 1.0);
+        let mut uv = UvMap { set: 0, transform: None };
+        let mut texture = None;
+        if let Some(info) = pbr.base_color_texture() {
+            uv.set = info.tex_coord();
+            if let Some(t) = info.texture_transform() {
+                uv.set = t.tex_coord().unwrap_or(uv.set);
+                let ([ox, oy], r, [sx, sy]) =
+                    (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
+                // KHR_texture_transform: translation * rotation * scale.
+                let (c, s) = (r.cos(), r.sin());
+                uv.transform = Some([[c * sx, -s * sy, ox], [s * sx, c * sy, oy]]);
+            }
+            texture = self.texture(&info.texture(), &name, mesh);
+        }
+        let out = Material {
+            base_color: pbr.base_color_factor().map(unit),
+            metallic: unit(pbr.metallic_factor()),
+            roughness: unit(pbr.roughness_factor()),
+            emissive: m.emissive_factor().map(|e| unit(e) * strength.max(0.0)),
+            alpha_mode: match m.alpha_mode() {
+                gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask,
+                gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            },
+            alpha_cutoff: m.alpha_cutoff().unwrap_or(0.5).max(0.0),
+            transmission: unit(m.transmission().map_or(0.0, |t| t.transmission_factor())),
+            ior: m.ior().unwrap_or(1.5).max(1.0),
+            specular: [0.0; 3],
+            illum: None,
+            unlit: m.unlit(),
+            base_color_texture: texture,
+            name,
+        };
+        let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
+        if let Some(bad) = numbers.into_iter().find(|v| !v.is_finite()) {
+            return Err(Error::Parse {
+                path: self.path.into(),
+                element: format!("material '{}'", out.name),
+                message: format!("value {bad} is not a finite number"),
+            });
+        }
+        Ok((out, uv))
+    }
+
+    /// The index in `mesh.textures` of `texture`'s image with its sampler, loading it
+    /// the first time; `None`, with a warning naming the image, when it cannot be read
+    /// or decoded.
+    fn texture(&mut self, texture: &gltf::Texture<'_>, material: &str, mesh: &mut Mesh) -> Option<u32> {
+        let image = texture.source();
+        let sampler = texture.sampler();
+        let key = (image.index(), sampler.index());
+        if let Some(&done) = self.loaded.get(&key) {
+            return done;
+        }
+        let label = match (image.name(), image.source()) {
+            (Some(name), _) => format!("image {} '{name}'", image.index()),
+            (None, gltf::image::Source::Uri { uri, .. }) if !uri.starts_with("data:") => {
+                format!("image {} '{}'", image.index(), uri.chars().take(200).collect::<String>())
+            }
+            _ => format!("image {}", image.index()),
+        };
+        let decoded = self.image_bytes(&image, mesh).and_then(|bytes| image::decode(&bytes));
+        let index = match decoded {
+            Ok(rgba) => {
+                use gltf::texture::{MagFilter, WrappingMode};
+                let wrap = |w: WrappingMode| match w {
+                    WrappingMode::Repeat => Wrap::Repeat,
+                    WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+                    WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+                };
+                let first = mesh.texels.len() / octrace_format::TEXEL_WORDS;
+                let Ok(first) = u32::try_from(first) else {
+                    mesh.warnings.push(format!("{}: {label}: left out: more than 2^32 texels", self.path.display()));
+                    return None;
+                };
+                let mut min_alpha = 255u8;
+                for [r, g, b, a] in &rgba.pixels {
+                    let [r, g, b] = [*r, *g, *b].map(|c| u32::from(srgb_to_linear16(c)));
+                    mesh.texels.extend([r | g << 16, b | (u32::from(*a) * 257) << 16]);
+                    min_alpha = min_alpha.min(*a);
+                }
+                mesh.textures.push(Texture {
+                    name: label,
+                    width: rgba.width,
+                    height: rgba.height,
+                    first,
+                    wrap: [wrap(sampler.wrap_s()), wrap(sampler.wrap_t())],
+                    filter: match sampler.mag_filter() {
+                        Some(MagFilter::Nearest) => Filter::Nearest,
+                        _ => Filter::Linear,
+                    },
+                    min_alpha: f32::from(min_alpha) / 255.0,
+                });
+                Some(mesh.textures.len() as u32 - 1)
+            }
+            Err(why) => {
+                mesh.warnings.push(format!(
+                    "{}: {label} (base colour texture of material '{material}') left out: {why}",
+                    self.path.display()
+                ));
+                None
+            }
+        };
+        self.loaded.insert(key, index);
+        index
+    }
+
+    /// An image's encoded bytes: from a buffer view, a `data:` URI, or a file the URI
+    /// names (read only where the load options allow, as buffers are).
+    fn image_bytes(&self, image: &gltf::Image<'_>, mesh: &mut Mesh) -> std::result::Result<Vec<u8>, String> {
+        match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buffer = self.buffers.get(view.buffer().index()).map_or(&[][..], |d| &d.0[..]);
+                let range = view.offset()..view.offset().saturating_add(view.length());
+                buffer
+                    .get(range)
+                    .map(<[u8]>::to_vec)
+                    .ok_or_else(|| format!("buffer view {} runs past buffer {}", view.index(), view.buffer().index()))
+            }
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => {
+                gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), None)
+                    .map(|d| d.0)
+                    .map_err(|e| e.to_string())
+            }
+            gltf::image::Source::Uri { uri, .. } => {
+                let target = super::uri_path(uri)?;
+                let file = refs::resolve(self.base, Path::new(&target), self.options.references)?;
+                let bytes =
+                    octrace_format::read_regular_file(&file, self.options.max_file_bytes).map_err(|e| e.to_string())?;
+                mesh.sources.push(file);
+                Ok(bytes)
+            }
+        }
+    }
+}

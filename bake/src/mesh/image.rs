@@ -1,0 +1,85 @@
+//! PNG and JPEG images for textures: decoded to 8-bit RGBA, within a size limit
+//! checked before the pixels are allocated.
+
+use octrace_format::MAX_TEXTURE_SIDE;
+
+/// A decoded image: `width * height` RGBA pixels, rows top to bottom.
+pub(crate) struct Rgba8 {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[u8; 4]>,
+}
+
+/// Decodes a PNG or JPEG (told apart by their signatures, whatever the file's MIME
+/// type says).
+///
+/// # Errors
+/// A message for an image of another format, a malformed one, or one larger than
+/// [`MAX_TEXTURE_SIDE`] on a side.
+pub(crate) fn decode(bytes: &[u8]) -> Result<Rgba8, String> {
+    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        png(bytes)
+    } else if bytes.starts_with(&[0xff, 0xd8, 0xff]) {
+        jpeg(bytes)
+    } else {
+        Err("neither a PNG nor a JPEG image".into())
+    }
+}
+
+fn check_size(width: usize, height: usize) -> Result<(), String> {
+    let side = MAX_TEXTURE_SIDE as usize;
+    if width == 0 || height == 0 || width > side || height > side {
+        return Err(format!("{width} x {height} pixels; textures may have 1 to {side} a side"));
+    }
+    Ok(())
+}
+
+fn png(bytes: &[u8]) -> Result<Rgba8, String> {
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    decoder.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = decoder.read_info().map_err(|e| format!("PNG: {e}"))?;
+    let (width, height) = (reader.info().width as usize, reader.info().height as usize);
+    check_size(width, height)?;
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let frame = reader.next_frame(&mut buffer).map_err(|e| format!("PNG: {e}"))?;
+    let data = &buffer[..frame.buffer_size()];
+    let channels = match frame.color_type {
+        png::ColorType::Grayscale => 1,
+        png::ColorType::GrayscaleAlpha => 2,
+        png::ColorType::Rgb => 3,
+        png::ColorType::Rgba => 4,
+        png::ColorType::Indexed => return Err("PNG: palette left unexpanded".into()),
+    };
+    let row = frame.line_size;
+    let mut pixels = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for p in data[y * row..][..width * channels].chunks_exact(channels) {
+            pixels.push(match *p {
+                [g] => [g, g, g, 255],
+                [g, a] => [g, g, g, a],
+                [r, g, b] => [r, g, b, 255],
+                [r, g, b, a] => [r, g, b, a],
+                _ => unreachable!("chunks of 1 to 4 bytes"),
+            });
+        }
+    }
+    Ok(Rgba8 { width: width as u32, height: height as u32, pixels })
+}
+
+fn jpeg(bytes: &[u8]) -> Result<Rgba8, String> {
+    use zune_core::{bytestream::ZCursor, colorspace::ColorSpace, options::DecoderOptions};
+    let side = MAX_TEXTURE_SIDE as usize;
+    let options =
+        DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGBA).set_max_width(side).set_max_height(side);
+    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
+    decoder.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;
+    let info = decoder.info().ok_or("JPEG: no image header")?;
+    let (width, height) = (info.width as usize, info.height as usize);
+    check_size(width, height)?;
+    let data = decoder.decode().map_err(|e| format!("JPEG: {e:?}"))?;
+    if data.len() != width * height * 4 {
+        return Err(format!("JPEG: {} bytes decoded for {width} x {height} pixels", data.len()));
+    }
+    let pixels = data.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
+    Ok(Rgba8 { width: width as u32, height: height as u32, pixels })
+}

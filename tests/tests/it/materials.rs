@@ -1,0 +1,297 @@
+//! glTF materials as glTF defines them: base colour textures (sampling, wrap modes,
+//! filters, `KHR_texture_transform`, alpha cut-outs), `KHR_materials_unlit`, Fresnel
+//! from the index of refraction, orthographic cameras.
+
+use glam::{DVec3, Vec3};
+use octrace_bake::{bake, procedural, BuildParams, Mesh};
+use octrace_format::{AlphaMode, Effect, Filter, Material, Texture, Wrap, TEXEL_WORDS};
+use octrace_runtime::raysets::Camera;
+use octrace_runtime::render::effects::{render_effects, EffectSet, RayKind, RenderOptions};
+use octrace_runtime::Scene;
+use octrace_tests::data;
+use proptest::prelude::*;
+
+use crate::effects::{add, base_scene, camera, diffuse, point_light, render, scene_of, wall};
+
+/// A texture of `w x h` texels whose channel `c` of texel `i` is `value(i, c)`.
+fn texture(
+    w: u32,
+    h: u32,
+    wrap: [Wrap; 2],
+    filter: Filter,
+    value: impl Fn(usize, usize) -> u16,
+) -> (Texture, Vec<u32>) {
+    let texels = (0..(w * h) as usize)
+        .flat_map(|i| {
+            let c = |k| u32::from(value(i, k));
+            [c(0) | c(1) << 16, c(2) | c(3) << 16]
+        })
+        .collect();
+    (Texture { name: "t".into(), width: w, height: h, first: 0, wrap, filter, min_alpha: 0.0 }, texels)
+}
+
+/// The sample glTF describes in words: wrap the coordinate into one period, then the
+/// nearest texel, or the bilinear blend of the four around it with exact weights
+/// (`f64`), texel centres at half-integers.
+fn reference_sample(t: &Texture, texels: &[u32], uv: [f32; 2]) -> [f64; 4] {
+    let channel = |x: i64, y: i64, c: usize| {
+        let i = (y * t.width as i64 + x) as usize * TEXEL_WORDS;
+        let w = texels[i + c / 2];
+        f64::from(if c.is_multiple_of(2) { w & 0xffff } else { w >> 16 }) / 65535.0
+    };
+    let wrap = |mode: Wrap, i: i64, n: i64| match mode {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::MirroredRepeat => {
+            let k = i.rem_euclid(2 * n);
+            if k < n {
+                k
+            } else {
+                2 * n - 1 - k
+            }
+        }
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+    };
+    let (w, h) = (t.width as i64, t.height as i64);
+    let period = |mode: Wrap, c: f32| match mode {
+        Wrap::Repeat => c.rem_euclid(1.0) as f64,
+        Wrap::MirroredRepeat => c.rem_euclid(2.0) as f64,
+        Wrap::ClampToEdge => c.clamp(0.0, 1.0) as f64,
+    };
+    let (cu, cv) = (period(t.wrap[0], uv[0]), period(t.wrap[1], uv[1]));
+    match t.filter {
+        Filter::Nearest => {
+            // The product in f32, as documented: its rounding picks the texel at an edge.
+            let (x, y) = ((cu as f32 * w as f32).floor() as i64, (cv as f32 * h as f32).floor() as i64);
+            [0, 1, 2, 3].map(|c| channel(wrap(t.wrap[0], x, w), wrap(t.wrap[1], y, h), c))
+        }
+        Filter::Linear => {
+            let (x, y) = (cu * w as f64 - 0.5, cv * h as f64 - 0.5);
+            let (x0, y0) = (x.floor() as i64, y.floor() as i64);
+            let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+            [0, 1, 2, 3].map(|c| {
+                let at = |dx: i64, dy: i64| channel(wrap(t.wrap[0], x0 + dx, w), wrap(t.wrap[1], y0 + dy, h), c);
+                (at(0, 0) * (1.0 - fx) + at(1, 0) * fx) * (1.0 - fy) + (at(0, 1) * (1.0 - fx) + at(1, 1) * fx) * fy
+            })
+        }
+    }
+}
+
+fn wraps() -> impl Strategy<Value = Wrap> {
+    prop_oneof![Just(Wrap::Repeat), Just(Wrap::MirroredRepeat), Just(Wrap::ClampToEdge)]
+}
+
+/// Coordinates anywhere, on texel edges and centres, at 0 and 1 exactly, negative.
+fn coordinates() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        -3.0f32..3.0,
+        (-24i32..24, 1u32..9).prop_map(|(k, n)| k as f32 / n as f32),
+        (-48i32..48, 1u32..9).prop_map(|(k, n)| (k as f32 + 0.5) / n as f32),
+        Just(0.0f32),
+        Just(-0.0f32),
+        Just(1.0f32),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+
+    /// Every wrap mode on each axis, both filters, textures from 1 x 1 up: the sample is
+    /// the exact bilinear blend within the 8-bit weights' step (a 256th of the
+    /// neighbours' difference) and the 16-bit rounding, and the nearest texel exactly.
+    #[test]
+    fn texture_samples_are_the_exact_filter_within_the_weights_step(
+        w in 1u32..6, h in 1u32..6, wrap in (wraps(), wraps()), linear in any::<bool>(),
+        u in coordinates(), v in coordinates(), seed in any::<u64>(),
+    ) {
+        let filter = if linear { Filter::Linear } else { Filter::Nearest };
+        let value = |i: usize, c: usize| (seed.wrapping_mul(i as u64 * 4 + c as u64 + 1).rotate_left(17) >> 48) as u16;
+        let (t, texels) = texture(w, h, [wrap.0, wrap.1], filter, value);
+        let got = t.sample(&texels, [u, v]);
+        let want = reference_sample(&t, &texels, [u, v]);
+        // Two weight steps (one per axis) of the full range, plus rounding.
+        let tolerance = if linear { 2.0 / 256.0 + 1e-6 } else { 1e-7 };
+        for c in 0..4 {
+            prop_assert!((got[c] as f64 - want[c]).abs() <= tolerance, "channel {c}: {} vs {}", got[c], want[c]);
+            prop_assert!((0.0..=1.0).contains(&got[c]));
+        }
+    }
+}
+
+/// A texture of one value samples to exactly that value everywhere: the weights sum to
+/// one in integers, so a flat texture has no seams at any coordinate or wrap mode.
+#[test]
+fn a_flat_texture_samples_to_its_value_everywhere() {
+    for wrap in [Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge] {
+        for filter in [Filter::Nearest, Filter::Linear] {
+            let (t, texels) = texture(3, 2, [wrap; 2], filter, |_, c| [65535, 32768, 1, 0][c]);
+            let centre = t.sample(&texels, [0.5 / 3.0, 0.25]);
+            assert_eq!(centre[0], 1.0);
+            assert!((centre[1] - 32768.0 / 65535.0).abs() < 1e-7 && (centre[2] - 1.0 / 65535.0).abs() < 1e-10);
+            assert_eq!(centre[3], 0.0);
+            for k in -40..40 {
+                let c = k as f32 * 0.137;
+                assert_eq!(t.sample(&texels, [c, -c]), centre, "{wrap:?} {filter:?} {c}");
+            }
+        }
+    }
+}
+
+fn leaf() -> Mesh {
+    Mesh::load(data("textured/leaf.gltf")).expect("the textured sample loads")
+}
+
+/// The textured sample: an external PNG with alpha (a MASK cut-out), an embedded one
+/// repeated four times by `KHR_texture_transform` with nearest filtering, and its
+/// cameras, perspective and orthographic.
+#[test]
+fn the_textured_sample_loads_its_textures_samplers_and_transforms() {
+    let mesh = leaf();
+    assert!(mesh.warnings.is_empty(), "{:?}", mesh.warnings);
+    let [checker, leaf] = &mesh.textures[..] else { panic!("{:?}", mesh.textures) };
+    assert_eq!(
+        (checker.width, checker.height, checker.filter, checker.wrap),
+        (8, 8, Filter::Nearest, [Wrap::Repeat; 2])
+    );
+    assert_eq!((leaf.width, leaf.height, leaf.filter, leaf.wrap), (64, 64, Filter::Linear, [Wrap::ClampToEdge; 2]));
+    assert_eq!((checker.min_alpha, leaf.min_alpha), (1.0, 0.0));
+    assert_eq!(mesh.texels.len(), (64 + 64 * 64) * TEXEL_WORDS);
+    assert!(mesh.sources.iter().any(|s| s.ends_with("leaf.png")), "the external image is a source: {:?}", mesh.sources);
+    assert_eq!(mesh.materials[0].base_color_texture, Some(0));
+    assert_eq!((mesh.materials[1].base_color_texture, mesh.materials[1].alpha_mode), (Some(1), AlphaMode::Mask));
+    // The floor's corner (1, 1) scaled by 4; the leaf's untouched.
+    assert_eq!(mesh.uvs[0][1], [4.0, 4.0]);
+    assert_eq!(mesh.uvs[2][1], [1.0, 1.0]);
+    // sRGB decoded: the checker's blue texel (40, 80, 200) in linear light.
+    let blue = checker.sample(&mesh.texels, [0.01, 0.01]);
+    assert!((blue[2] as f64 - (200.0f64 / 255.0 + 0.055).powf(2.4) / 1.055f64.powf(2.4)).abs() < 1e-4, "{blue:?}");
+    let [view, plan] = &mesh.cameras[..] else { panic!("{:?}", mesh.cameras) };
+    assert_eq!((view.name.as_str(), view.orthographic), ("view", None));
+    assert_eq!(plan.name, "plan");
+    assert!((plan.orthographic.unwrap() - 1.8).abs() < 1e-6 && (plan.aspect.unwrap() - 2.4 / 1.8).abs() < 1e-6);
+    let baked = bake(&mesh, &BuildParams::auto()).unwrap();
+    let alpha = baked.shading.effects.iter().find(|e| e.effect == Effect::Alpha).expect("alpha from the texture");
+    assert_eq!(
+        alpha.reason,
+        "material 'leaf', alphaMode MASK, alpha down to 0.00 (texture image 1 'leaf.png') < cutoff 0.50"
+    );
+}
+
+/// Through the leaf's hole and its transparent corners the camera sees what lies
+/// behind; its opaque part shows the texture's green; shadow rays pass the hole too.
+#[test]
+fn the_leaf_is_cut_out_where_its_texture_is_transparent() {
+    let scene = Scene::from_baked(bake(&leaf(), &BuildParams::auto()).unwrap()).unwrap();
+    // Square on to the leaf (x in [-1, 1], y in [0.2, 2.2] at z = 0), level with its
+    // centre: the image spans x in [-1.25, 1.25].
+    let cam = Camera::look_at(DVec3::new(0.0, 1.2, 5.0), DVec3::new(0.0, 1.2, 0.0), 28.07, 101, 101);
+    let options = RenderOptions::for_scene(scene.shading());
+    let (image, counts) = render_effects(&scene, &cam, &options, &|_| {});
+    let background = Vec3::new(0.08, 0.08, 0.1);
+    // The hole at the centre (uv 0.5, 0.5) and a transparent corner: the background.
+    for (x, y) in [(50, 50), (14, 14), (86, 14)] {
+        assert_eq!(image.at(x, y), background, "pixel ({x}, {y})");
+    }
+    // Opaque leaf (along its long axis, off the hole): the texture's green (or its
+    // yellow vein), nothing of the background's blue.
+    for (x, y) in [(35, 35), (65, 65), (40, 45)] {
+        let p = image.at(x, y);
+        assert!(p.y > 0.2 && p.y > 5.0 * p.z, "pixel ({x}, {y}): {p}");
+    }
+    assert!(counts.get(RayKind::Alpha) > 0);
+    // Without the alpha effect the quad is opaque: its corners hide the background.
+    let opaque = RenderOptions { effects: options.effects.without(Effect::Alpha), ..options };
+    let (solid, _) = render_effects(&scene, &cam, &opaque, &|_| {});
+    assert_ne!(solid.at(14, 14), background);
+}
+
+/// `KHR_materials_unlit`: the surface shows its base colour whatever the light, and an
+/// all-unlit scene with a light casts no shadow ray.
+#[test]
+fn unlit_surfaces_show_their_colour_and_cast_no_shadow_rays() {
+    let flat = |m: Material| Material { unlit: true, ..m };
+    let mut mesh = Mesh::default();
+    add(&mut mesh, wall(2.0, 0.0, 0.0), flat(Material { base_color: [0.9, 0.2, 0.1, 1.0], ..diffuse("red", 1.0) }));
+    add(&mut mesh, procedural::sphere([0.0, 0.0, 1.0], 0.5, 12, 16), flat(diffuse("grey", 0.5)));
+    mesh.lights.push(point_light([1.0, 2.0, 4.0], 50.0));
+    let scene = scene_of(&mesh);
+    assert!(scene.shading().effects.is_empty(), "{:?}", scene.shading().effects);
+    let cam = camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], 48);
+    let (image, counts) = render(&scene, &cam, EffectSet::of(scene.shading()));
+    assert_eq!(counts.total(), counts.get(RayKind::Primary), "{counts:?}");
+    assert_eq!(image.at(24, 24), Vec3::splat(0.5), "the sphere, unlit");
+    assert_eq!(image.at(8, 24), Vec3::new(0.9, 0.2, 0.1), "the wall, unlit");
+    // One lit surface brings the shadows back, for it alone.
+    add(&mut mesh, wall(0.3, 1.6, 0.0), diffuse("lit", 0.8));
+    let scene = scene_of(&mesh);
+    assert!(scene.shading().has(Effect::Shadows));
+    let (_, counts) = render(&scene, &cam, EffectSet::of(scene.shading()));
+    let lit_pixels = counts.get(RayKind::Shadow);
+    assert!(lit_pixels > 0 && lit_pixels < 48 * 48 / 4, "{lit_pixels} shadow rays");
+}
+
+/// Glass with the index of air is no interface: no reflection is decided or traced,
+/// and what lies behind it shows unchanged.
+#[test]
+fn a_sphere_with_the_index_of_air_is_invisible() {
+    let air = Material { transmission: 1.0, ior: 1.0, roughness: 0.0, ..diffuse("air", 1.0) };
+    let without = scene_of(&base_scene(|m| m.lights.push(point_light([0.5, 3.0, 4.0], 40.0))));
+    let with = scene_of(&base_scene(|m| {
+        m.lights.push(point_light([0.5, 3.0, 4.0], 40.0));
+        add(m, procedural::sphere([0.4, 1.2, 2.0], 0.7, 16, 24), air.clone());
+    }));
+    let decided: Vec<Effect> = with.shading().effects.iter().map(|e| e.effect).collect();
+    assert_eq!(decided, [Effect::Shadows, Effect::Refraction]);
+    let cam = camera([0.0, 1.5, 5.0], [0.0, 0.8, 0.0], 64);
+    let (a, _) = render(&without, &cam, EffectSet::of(without.shading()));
+    let (b, counts) = render(&with, &cam, EffectSet::of(with.shading()).with(Effect::Reflection));
+    assert_eq!(counts.get(RayKind::Reflection), 0, "{counts:?}");
+    assert!(counts.get(RayKind::Refraction) > 200, "{counts:?}");
+    for (i, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
+        assert!((*p - *q).abs().max_element() <= 1e-4 * (1.0 + p.max_element()), "pixel {i}: {p} vs {q}");
+    }
+}
+
+/// Energy: glass in empty space, no light (so no local highlight): every ray that
+/// leaves sees the background, so a pixel on the glass sees the background times its
+/// reflectance plus its transmittance. Fresnel from the index, counted once, sums to 1
+/// (less what the depth limit cuts); the second mirror term glass used to get on top
+/// of its Fresnel reflection pushed it above 1.
+#[test]
+fn glass_reflects_and_transmits_no_more_than_it_receives() {
+    let background = Vec3::new(0.08, 0.08, 0.1);
+    for ior in [1.2f32, 1.5, 2.4] {
+        let mut mesh = Mesh::default();
+        let glass = Material { transmission: 1.0, ior, roughness: 0.0, metallic: 0.0, ..diffuse("glass", 1.0) };
+        add(&mut mesh, procedural::sphere([0.0; 3], 1.0, 24, 32), glass);
+        let scene = scene_of(&mesh);
+        let options = RenderOptions { max_depth: 12, ..RenderOptions::for_scene(scene.shading()) };
+        let cam = camera([0.0, 0.0, 3.0], [0.0; 3], 40);
+        let (image, counts) = render_effects(&scene, &cam, &options, &|_| {});
+        assert!(counts.get(RayKind::Reflection) > 0 && counts.get(RayKind::Refraction) > 0);
+        for p in &image.pixels {
+            let ratio = *p / background;
+            assert!(ratio.max_element() <= 1.0 + 1e-5, "ior {ior}: a pixel sees {ratio} of the background");
+            assert!(ratio.min_element() >= 0.97, "ior {ior}: a pixel sees only {ratio} of the background");
+        }
+        let on_glass = cam.rays().iter().filter(|r| scene.intersect(r).is_some()).count();
+        assert!(on_glass > 400, "ior {ior}: {on_glass} pixels on the glass");
+    }
+}
+
+/// An orthographic camera's rays are parallel, one through each pixel of its view
+/// rectangle, and it renders (the sample's second camera, `render --camera 1`).
+#[test]
+fn orthographic_cameras_cast_parallel_rays_over_their_height() {
+    let scene = Scene::from_baked(bake(&leaf(), &BuildParams::auto()).unwrap()).unwrap();
+    let c = &scene.shading().cameras[1];
+    let cam = Camera::from_scene(c, 45.0, 40, 30);
+    let (first, last) = (cam.ray(0, 0), cam.ray(39, 29));
+    assert_eq!(first.dir, last.dir);
+    assert_eq!(first.dir, Vec3::from(c.forward));
+    // Opposite pixel centres lie (1 - 1/30) of the height apart, vertically in view.
+    let span = (last.origin - first.origin).dot(Vec3::from(c.up)).abs();
+    assert!((span - 2.0 * 1.8 * (1.0 - 1.0 / 30.0)).abs() < 1e-4, "{span}");
+    let (image, counts) = render_effects(&scene, &cam, &RenderOptions::for_scene(scene.shading()), &|_| {});
+    assert_eq!(counts.get(RayKind::Primary), 40 * 30);
+    assert!(image.pixels.iter().any(|p| p.y > 2.0 * p.x), "the leaf is in view");
+}
