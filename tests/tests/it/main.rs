@@ -3,6 +3,7 @@
 mod bunny;
 mod effects;
 mod format;
+mod gltf_lenient;
 mod gpu;
 mod hard_cases;
 mod hostile;

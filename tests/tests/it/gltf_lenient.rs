@@ -1,0 +1,140 @@
+//! glTF files that bend the spec load as viewers load them, with a warning naming the
+//! element; what octrace cannot honour is refused by name; errors say where.
+
+use octrace_bake::{Error, Mesh};
+use octrace_format::{Filter, TEXEL_WORDS};
+use octrace_tests::data;
+
+/// `tests/data/extensions.gltf` with `edit` applied to its text, loaded from a folder
+/// of its own (with `files` beside it).
+fn load_edited(edit: impl Fn(String) -> String, files: &[(&str, &[u8])]) -> Result<Mesh, Error> {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(data("extensions.gltf")).unwrap();
+    let edited = edit(text.clone());
+    assert_ne!(edited, text, "the edit changed nothing");
+    std::fs::write(dir.path().join("scene.gltf"), edited).unwrap();
+    for (name, bytes) in files {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    }
+    Mesh::load(dir.path().join("scene.gltf"))
+}
+
+fn warned(mesh: &Mesh, needle: &str) -> bool {
+    mesh.warnings.iter().any(|w| w.contains(needle))
+}
+
+#[test]
+fn a_camera_without_type_loads_with_a_warning_naming_it() {
+    let mesh = load_edited(|t| t.replace(r#""type":"perspective","#, ""), &[]).unwrap();
+    assert!(
+        warned(&mesh, r#"camera 0 'cam' has no "type"; taken as perspective, from its "perspective" object"#),
+        "{:?}",
+        mesh.warnings
+    );
+    assert_eq!(mesh.cameras.len(), 1);
+    assert_eq!(mesh.cameras[0].yfov, 0.8);
+}
+
+#[test]
+fn a_byte_stride_of_zero_is_taken_as_tightly_packed() {
+    let mesh = load_edited(|t| t.replacen(r#""byteLength""#, r#""byteStride":0,"byteLength""#, 2), &[]);
+    let mesh = mesh.unwrap();
+    assert!(warned(&mesh, "buffer view 0 has byteStride 0; taken as tightly packed"), "{:?}", mesh.warnings);
+    assert_eq!(mesh.triangles.len(), 5);
+}
+
+#[test]
+fn required_extensions_load_only_when_honoured_and_ignored_ones_are_warned_about_once() {
+    let required = |list: &'static str| {
+        move |t: String| {
+            t.replacen(r#""extensionsUsed""#, &format!(r#""extensionsRequired":{list},"extensionsUsed""#), 1)
+        }
+    };
+    let mesh = load_edited(required(r#"["KHR_materials_transmission","KHR_lights_punctual"]"#), &[]).unwrap();
+    assert_eq!(mesh.materials[1].transmission, 0.9);
+    let err = load_edited(required(r#"["KHR_materials_transmission","KHR_draco_mesh_compression"]"#), &[]).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, Error::Parse { ref element, .. } if element == "extensionsRequired"), "{msg}");
+    assert!(msg.contains("requires extension 'KHR_draco_mesh_compression', which octrace cannot honour"), "{msg}");
+    let used = |t: String| t.replacen(r#""extensionsUsed":["#, r#""extensionsUsed":["KHR_materials_clearcoat","#, 1);
+    let mesh = load_edited(used, &[]).unwrap();
+    let notes: Vec<_> = mesh.warnings.iter().filter(|w| w.contains("KHR_materials_clearcoat")).collect();
+    assert_eq!(notes.len(), 1, "{:?}", mesh.warnings);
+    assert!(notes[0].ends_with("extension 'KHR_materials_clearcoat' is used by the file but ignored by octrace"));
+}
+
+#[test]
+fn errors_name_the_json_path_or_the_line() {
+    let err = load_edited(|t| t.replace(r#""yfov":0.8"#, r#""yfov":"wide""#), &[]).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, Error::Parse { ref element, .. } if element == "cameras[0].perspective.yfov"), "{msg}");
+    let err = load_edited(|t| t.replacen(r#""scene":0,"#, r#""scene":0,,"#, 1), &[]).unwrap_err();
+    assert!(err.to_string().contains("line 4 column"), "{err}");
+}
+
+#[test]
+fn unlit_materials_load_as_unlit() {
+    let unlit = |t: String| {
+        t.replace(r#"{"name":"chrome","#, r#"{"name":"chrome","extensions":{"KHR_materials_unlit":{}},"#).replacen(
+            r#""extensionsUsed":["#,
+            r#""extensionsUsed":["KHR_materials_unlit","#,
+            1,
+        )
+    };
+    let mesh = load_edited(unlit, &[]).unwrap();
+    assert!(mesh.warnings.is_empty(), "{:?}", mesh.warnings);
+    assert!(mesh.materials[0].unlit && !mesh.materials[1].unlit);
+}
+
+/// A material of `extensions.gltf` given a base colour texture from image `uri`.
+fn textured(uri: &'static str) -> impl Fn(String) -> String {
+    move |t: String| {
+        t.replace(
+            r#"{"name":"smoke","alphaMode":"BLEND","pbrMetallicRoughness":{"#,
+            r#"{"name":"smoke","alphaMode":"BLEND","pbrMetallicRoughness":{"baseColorTexture":{"index":0},"#,
+        )
+        .replacen(
+            r#""materials":"#,
+            &format!(r#""textures":[{{"source":0,"sampler":0}}],"samplers":[{{"magFilter":9728}}],"images":[{{"uri":"{uri}"}}],"materials":"#),
+            1,
+        )
+    }
+}
+
+#[test]
+fn jpeg_textures_decode_to_their_colours() {
+    let jpeg = std::fs::read(data("textured/colours.jpg")).unwrap();
+    let mesh = load_edited(textured("colours.jpg"), &[("colours.jpg", &jpeg)]).unwrap();
+    assert!(mesh.warnings.is_empty(), "{:?}", mesh.warnings);
+    let t = &mesh.textures[0];
+    assert_eq!((t.width, t.height, t.filter, t.min_alpha), (4, 2, Filter::Nearest, 1.0));
+    assert_eq!(mesh.materials[4].base_color_texture, Some(0));
+    // Red, green, blue, white / black, grey, yellow, cyan (sRGB), stored linear.
+    let srgb = [[255, 0, 0], [0, 255, 0], [0, 0, 255], [255; 3], [0; 3], [128; 3], [255, 255, 0], [0, 255, 255]];
+    for (i, want) in srgb.iter().enumerate() {
+        let w = &mesh.texels[i * TEXEL_WORDS..][..TEXEL_WORDS];
+        let got = [w[0] & 0xffff, w[0] >> 16, w[1] & 0xffff];
+        for c in 0..3 {
+            let want = octrace_format::srgb_to_linear16(want[c]) as i64;
+            // JPEG is lossy (quality 100, no chroma subsampling): within two 8-bit
+            // levels, at most 1,300 of 65,535 in linear light (near white).
+            assert!((got[c] as i64 - want).abs() <= 1_500, "texel {i} channel {c}: {} vs {want}", got[c]);
+        }
+        assert_eq!(w[1] >> 16, 0xffff);
+    }
+}
+
+#[test]
+fn textures_that_cannot_be_read_are_left_out_with_a_warning_naming_the_image() {
+    for (uri, why) in [
+        ("missing.png", "No such file"),
+        ("../outside.png", "outside"),
+        ("not-an-image.png", "neither a PNG nor a JPEG"),
+    ] {
+        let mesh = load_edited(textured(uri), &[("not-an-image.png", b"GIF89a")]).unwrap();
+        let note = mesh.warnings.iter().find(|w| w.contains(&format!("image 0 '{uri}'")));
+        let note = note.unwrap_or_else(|| panic!("{uri}: {:?}", mesh.warnings));
+        assert!(note.contains("base colour texture of material 'smoke'") && note.contains(why), "{note}");
+        assert!(mesh.textures.is_empty() && mesh.materials[4].base_color_texture.is_none());
+    }
+}
