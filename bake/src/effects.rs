@@ -16,7 +16,8 @@ use crate::mesh::Mesh;
 ///   reflection);
 /// * refraction: a lit material with transmission above zero;
 /// * alpha: coverage ([`Material::coverage_at`]) below one somewhere: the alpha
-///   factor times the smallest alpha of the material's texture.
+///   factor times the smallest alpha of the material's texture and of the vertex
+///   colours of its triangles.
 ///
 /// # Example
 /// ```
@@ -26,11 +27,18 @@ use crate::mesh::Mesh;
 /// ```
 pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     let mut counts = vec![0usize; mesh.materials.len()];
+    // The smallest vertex-colour alpha on each material's triangles.
+    let mut vertex_alpha = vec![1.0f32; mesh.materials.len()];
     for &t in used {
         if let Some(&m) = mesh.material_ids.get(t as usize) {
             counts[m as usize] += 1;
+            if let Some(c) = mesh.colors.get(t as usize) {
+                let alpha = c.iter().map(|k| k[3]).min().unwrap_or(u16::MAX);
+                vertex_alpha[m as usize] = vertex_alpha[m as usize].min(alpha as f32 / 65535.0);
+            }
         }
     }
+    let index_of = |m: &Material| mesh.materials.iter().position(|x| std::ptr::eq(x, m)).unwrap_or(0);
     let used_materials: Vec<(&Material, usize)> = mesh.materials.iter().zip(counts).filter(|&(_, n)| n > 0).collect();
     let emitters: Vec<(&Material, usize)> = used_materials.iter().copied().filter(|(m, _)| m.is_emissive()).collect();
     let mut effects = Vec::new();
@@ -77,7 +85,8 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     });
     add(Effect::Refraction, glass.collect());
     let texture = |m: &Material| m.base_color_texture.and_then(|t| mesh.textures.get(t as usize));
-    let min_alpha = |m: &Material| m.base_color[3] * texture(m).map_or(1.0, |t| t.min_alpha);
+    let min_alpha =
+        |m: &Material| m.base_color[3] * texture(m).map_or(1.0, |t| t.min_alpha) * vertex_alpha[index_of(m)];
     let cut = used_materials.iter().filter(|(m, _)| m.coverage_at(min_alpha(m)) < 1.0).map(|(m, _)| {
         let alpha = min_alpha(m);
         // "alpha 0.30", or "alpha down to 0.00 (texture 'leaves.png')".

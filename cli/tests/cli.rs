@@ -35,7 +35,7 @@ cube map           4 x 4 texels a face, level 2
 bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
 bake               max depth 3, leaf size 2, margin 9.536743e-7 of the root edge; time not recorded (reproducible file)
 bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0.0, 0.0], edge 1
-scene data         0 materials, 0 lights, 0 cameras, 0 textures; per triangle: none
+scene data         1 mesh part, 0 materials, 0 lights, 0 cameras, 0 textures; per triangle: none
 effects            none (primary rays only)
 ";
     assert_eq!(text, expected);
@@ -77,7 +77,7 @@ fn inspect_lists_each_effect_with_its_reason_and_render_turns_them_off() {
     assert_eq!(
         tail,
         [
-            "scene data         3 materials, 0 lights, 0 cameras, 0 textures; per triangle: material ids",
+            "scene data         3 mesh parts, 3 materials, 0 lights, 0 cameras, 0 textures; per triangle: material ids",
             "effects            shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangle",
             "                   soft-shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangle",
             "                   reflection: material 'chrome', illum 3, Ks (0.90, 0.90, 0.90) (and 1 more)",

@@ -362,6 +362,7 @@ pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> Sc
         material_ids: bytemuck::cast_slice(a.material_ids.as_slice()),
         normals: bytemuck::cast_slice(a.normals.as_slice()),
         uvs: bytemuck::cast_slice(a.uvs.as_slice()),
+        colors: bytemuck::cast_slice(a.colors.as_slice()),
         texels: bytemuck::cast_slice(a.texels.as_slice()),
         root: a.root.to_native(),
         shading,
@@ -374,6 +375,7 @@ pub(crate) static EMPTY_SHADING: Shading = Shading {
     lights: Vec::new(),
     cameras: Vec::new(),
     textures: Vec::new(),
+    parts: Vec::new(),
     effects: Vec::new(),
 };
 

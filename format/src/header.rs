@@ -25,11 +25,12 @@ pub const SECTION_NAMES: [&str; SECTION_COUNT] = [
     "material_ids",
     "normals",
     "uvs",
+    "colors",
     "texels",
     "root",
 ];
 /// Number of sections in a version 4.0 file.
-pub const SECTION_COUNT: usize = 12;
+pub const SECTION_COUNT: usize = 13;
 /// Header length in bytes, section table included; the archive starts right after it.
 pub const HEADER_LEN: usize = FIXED_HEADER_LEN + SECTION_COUNT * SECTION_ENTRY_LEN;
 /// Alignment of the archive within the file and in memory.
@@ -49,6 +50,7 @@ const SECTION_LABELS: [&str; SECTION_COUNT] = [
     "section material_ids",
     "section normals",
     "section uvs",
+    "section colors",
     "section texels",
     "section root",
 ];

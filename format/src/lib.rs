@@ -48,10 +48,11 @@ pub use input::{open_regular_file, read_regular_file};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{
-    AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, Shading, DIELECTRIC_F0, VISIBLE_WEIGHT,
+    AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, MeshPart, Shading, DIELECTRIC_F0,
+    VISIBLE_WEIGHT,
 };
 pub use texture::{srgb_to_linear16, Filter, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS};
-pub use view::{LeafRecord, SceneView};
+pub use view::{LeafRecord, SceneView, COLOR_SCALE, COLOR_WORDS};
 pub use write::write_atomically;
 
 #[doc(hidden)]
@@ -107,6 +108,7 @@ pub mod testing {
             material_ids: vec![],
             normals: vec![],
             uvs: vec![],
+            colors: vec![],
             texels: vec![],
             root: 0,
             shading: Default::default(),
@@ -143,8 +145,12 @@ pub mod testing {
                     }
                 }
                 14 => poke_words(&mut s.material_ids, &mut pick),
-                _ if pick(2) == 0 => poke_floats(&mut s.normals, &mut pick),
-                _ => poke_floats(&mut s.uvs, &mut pick),
+                _ => match pick(4) {
+                    0 => poke_floats(&mut s.normals, &mut pick),
+                    1 => poke_floats(&mut s.uvs, &mut pick),
+                    2 => poke_words(&mut s.colors, &mut pick),
+                    _ => poke_words(&mut s.texels, &mut pick),
+                },
             }
         }
     }

@@ -82,6 +82,10 @@ pub struct BakedScene {
     pub normals: Vec<f32>,
     /// Texture coordinates of each stored triangle's three corners (six `f32`), or empty.
     pub uvs: Vec<f32>,
+    /// Vertex colours (glTF `COLOR_0`) of each stored triangle's three corners, linear
+    /// RGBA at 16 bits a channel, two words a corner (`r | g << 16`, `b | a << 16`),
+    /// or empty.
+    pub colors: Vec<u32>,
     /// The texels of every texture ([`crate::Texture`], [`crate::TEXEL_WORDS`] words a
     /// texel), or empty.
     pub texels: Vec<u32>,
@@ -113,6 +117,7 @@ impl BakedScene {
             material_ids: &self.material_ids,
             normals: &self.normals,
             uvs: &self.uvs,
+            colors: &self.colors,
             texels: &self.texels,
             root: self.root,
             shading: &self.shading,

@@ -234,6 +234,22 @@ pub struct Camera {
     pub orthographic: Option<f32>,
 }
 
+/// A part of the input mesh: a glTF primitive of a node, or an OBJ object or group.
+/// Its triangles are consecutive in the input (`first .. first + count`), so a hit's
+/// input triangle names its part and its index within it
+/// ([`Shading::part_of`]).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Eq)]
+#[rkyv(derive(Debug))]
+pub struct MeshPart {
+    /// What the file calls it: `node 3 'wheel', mesh 1 'tyre', primitive 0` (glTF), or
+    /// `object 'lid'` (OBJ; the object or group name).
+    pub name: String,
+    /// Index of its first triangle in the input.
+    pub first: u32,
+    /// Its triangles.
+    pub count: u32,
+}
+
 /// An effect a renderer may have to simulate.
 #[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 #[rkyv(derive(Debug))]
@@ -296,12 +312,36 @@ pub struct Shading {
     /// Texture images, indexed by [`Material::base_color_texture`]; their texels are
     /// [`crate::BakedScene::texels`].
     pub textures: Vec<Texture>,
+    /// The parts of the input mesh, in input order, each a run of its triangles
+    /// (empty for a mesh that was not loaded from a file).
+    pub parts: Vec<MeshPart>,
     /// The effects the scene calls for, one entry each, in [`Effect::ALL`] order; empty
     /// when primary rays suffice.
     pub effects: Vec<EffectReason>,
 }
 
 impl Shading {
+    /// The part input triangle `triangle` belongs to (a hit's [`triangle`]), and its
+    /// index within the part.
+    ///
+    /// [`triangle`]: https://docs.rs/octrace-runtime/latest/octrace_runtime/struct.Hit.html#structfield.triangle
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_format::{MeshPart, Shading};
+    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count };
+    /// let shading = Shading { parts: vec![part("object 'lid'", 0, 10), part("object 'pot'", 10, 90)], ..Default::default() };
+    /// let (pot, i) = shading.part_of(12).unwrap();
+    /// assert_eq!((pot.name.as_str(), i), ("object 'pot'", 2));
+    /// assert!(shading.part_of(100).is_none());
+    /// ```
+    pub fn part_of(&self, triangle: u32) -> Option<(&MeshPart, u32)> {
+        let after = self.parts.partition_point(|p| p.first <= triangle);
+        let part = self.parts.get(after.checked_sub(1)?)?;
+        let within = triangle - part.first;
+        (within < part.count).then_some((part, within))
+    }
+
     /// Whether the scene calls for `effect`.
     pub fn has(&self, effect: Effect) -> bool {
         self.effects.iter().any(|e| e.effect == effect)
@@ -356,6 +396,13 @@ impl Shading {
                     self.textures.len()
                 )));
             }
+        }
+        let mut end = 0u64;
+        for p in &self.parts {
+            if u64::from(p.first) < end || p.count == 0 {
+                return Err(corrupt(format!("mesh part '{}' is empty or overlaps the one before", p.name)));
+            }
+            end = u64::from(p.first) + u64::from(p.count);
         }
         for (i, e) in self.effects.iter().enumerate() {
             if self.effects[..i].iter().any(|f| f.effect == e.effect) {

@@ -18,7 +18,7 @@ pub struct ArrayBytes {
     pub cube_map: u64,
     /// The point-location tree.
     pub point_location: u64,
-    /// The shading arrays: material ids, normals, texture coordinates, texels.
+    /// The shading arrays: material ids, normals, texture coordinates, vertex colours, texels.
     pub shading: u64,
 }
 
@@ -93,7 +93,13 @@ impl SceneStatistics {
                 boxes: four(view.boxes.len()),
                 cube_map: four(view.cube_map.len()),
                 point_location: four(view.nodes.len()),
-                shading: four(view.material_ids.len() + view.normals.len() + view.uvs.len() + view.texels.len()),
+                shading: four(
+                    view.material_ids.len()
+                        + view.normals.len()
+                        + view.uvs.len()
+                        + view.colors.len()
+                        + view.texels.len(),
+                ),
             },
         })
     }

@@ -19,6 +19,18 @@ pub enum Wrap {
     ClampToEdge,
 }
 
+impl Wrap {
+    /// The mode's name in glTF's words, lower case: `repeat`, `mirrored repeat`,
+    /// `clamp to edge`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Wrap::Repeat => "repeat",
+            Wrap::MirroredRepeat => "mirrored repeat",
+            Wrap::ClampToEdge => "clamp to edge",
+        }
+    }
+}
+
 /// How a texture is read between texel centres (glTF sampler `magFilter`; there are
 /// no mipmaps, so minification uses the same filter).
 #[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -31,6 +43,16 @@ pub enum Filter {
     /// viewer; this is octrace's).
     #[default]
     Linear,
+}
+
+impl Filter {
+    /// `nearest` or `linear`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Filter::Nearest => "nearest",
+            Filter::Linear => "linear",
+        }
+    }
 }
 
 /// Texels along a texture's side at most: [`Texture::sample`]'s fixed point needs
@@ -75,10 +97,14 @@ impl Texture {
     /// The texture's value at `uv` (linear RGBA in `[0, 1]`), from `texels` (the
     /// scene's texel array): the wrap modes, then the nearest texel or the bilinear
     /// blend of four with 8-bit weights, all in integers; only the final scale is a
-    /// floating-point operation. A texture whose texels lie outside `texels` reads
-    /// as white (the validator refuses such files).
+    /// floating-point operation. A texture that is empty, or whose texels lie outside
+    /// `texels`, reads as white (the validator refuses such files; the trusted path
+    /// may see them).
     pub fn sample(&self, texels: &[u32], uv: [f32; 2]) -> [f32; 4] {
         let (w, h) = (self.width as i64, self.height as i64);
+        if w == 0 || h == 0 {
+            return [1.0; 4];
+        }
         let texel = |x: i64, y: i64| -> [u32; 4] {
             let i = (self.first as usize).saturating_add((y * w + x) as usize).saturating_mul(TEXEL_WORDS);
             match texels.get(i..i.saturating_add(TEXEL_WORDS)) {

@@ -171,6 +171,7 @@ impl SceneView<'_> {
             ("material-id", self.material_ids.len(), 1),
             ("normal", self.normals.len(), TRIANGLE_FLOATS),
             ("texture-coordinate", self.uvs.len(), UV_FLOATS),
+            ("vertex-colour", self.colors.len(), crate::COLOR_WORDS),
         ] {
             if len != 0 && Some(len) != n.checked_mul(per) {
                 return Err(Error::corrupt(format!(
@@ -187,6 +188,15 @@ impl SceneView<'_> {
             return Err(Error::corrupt(format!("material id {bad} out of range ({materials} materials)")));
         }
         self.shading.validate()?;
+        if let Some(last) = self.shading.parts.last() {
+            let end = u64::from(last.first) + u64::from(last.count);
+            if end > self.stats.input_triangles {
+                return Err(Error::corrupt(format!(
+                    "mesh part '{}' ends at triangle {end}; the input has {}",
+                    last.name, self.stats.input_triangles
+                )));
+            }
+        }
         self.shading.validate_texels(self.texels.len())
     }
 

@@ -6,6 +6,11 @@ use crate::layout::{
 };
 use crate::scene::{BakeParams, BakeStats, Bounds};
 
+/// Words a stored triangle's vertex colours take in [`SceneView::colors`].
+pub const COLOR_WORDS: usize = 6;
+/// `1 / 65535`: from a 16-bit vertex colour channel to `[0, 1]`.
+pub const COLOR_SCALE: f32 = 1.0 / 65535.0;
+
 /// The arrays of a baked scene as plain slices, borrowed from a file or from a
 /// [`crate::BakedScene`].
 ///
@@ -41,6 +46,8 @@ pub struct SceneView<'a> {
     pub normals: &'a [f32],
     /// Texture coordinates, six `f32` a stored triangle, or empty.
     pub uvs: &'a [f32],
+    /// Vertex colours, six words a stored triangle, or empty.
+    pub colors: &'a [u32],
     /// Texels of the scene's textures, or empty.
     pub texels: &'a [u32],
     /// Root reference of the point-location tree.
@@ -78,7 +85,7 @@ impl LeafRecord<'_> {
 impl<'a> SceneView<'a> {
     /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
     /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs,
-    /// texels):
+    /// colors, texels):
     /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
@@ -92,6 +99,7 @@ impl<'a> SceneView<'a> {
             self.material_ids,
             bytemuck::cast_slice(self.normals),
             bytemuck::cast_slice(self.uvs),
+            self.colors,
             self.texels,
         ]
     }
@@ -125,16 +133,36 @@ impl<'a> SceneView<'a> {
         [0, 1].map(|c| (t0[c] as f64 * w as f64 + t1[c] as f64 * u as f64 + t2[c] as f64 * v as f64) as f32)
     }
 
-    /// The base colour (and alpha) of `material` at barycentrics `(u, v)` of stored
-    /// triangle `index`: its factor times its texture there, channel by channel; the
-    /// factor alone when it has no texture.
-    pub fn base_color_at(&self, material: &crate::Material, index: u32, u: f32, v: f32) -> [f32; 4] {
-        let factor = material.base_color;
-        let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) else {
-            return factor;
+    /// The vertex colour at barycentrics `(u, v)` of stored triangle `index`, when the
+    /// scene has vertex colours: the corners' values (16 bits a channel, scaled by
+    /// [`COLOR_SCALE`]) mixed as [`SceneView::uv_at`] mixes coordinates.
+    pub fn color_at(&self, index: u32, u: f32, v: f32) -> Option<[f32; 4]> {
+        let at = (index as usize).checked_mul(COLOR_WORDS)?;
+        let w = self.colors.get(at..at.checked_add(COLOR_WORDS)?)?;
+        let corner = |k: usize| {
+            let (a, b) = (w[2 * k], w[2 * k + 1]);
+            [a & 0xffff, a >> 16, b & 0xffff, b >> 16].map(|c| c as f32 * COLOR_SCALE)
         };
-        let texel = texture.sample(self.texels, self.uv_at(index, u, v));
-        [0, 1, 2, 3].map(|c| factor[c] * texel[c])
+        let [c0, c1, c2] = [corner(0), corner(1), corner(2)];
+        let b0 = 1.0 - u - v;
+        Some(
+            [0, 1, 2, 3].map(|c| (c0[c] as f64 * b0 as f64 + c1[c] as f64 * u as f64 + c2[c] as f64 * v as f64) as f32),
+        )
+    }
+
+    /// The base colour (and alpha) of `material` at barycentrics `(u, v)` of stored
+    /// triangle `index`: its factor times its texture there times the vertex colour
+    /// there, channel by channel, in that order; the factor alone when it has neither.
+    pub fn base_color_at(&self, material: &crate::Material, index: u32, u: f32, v: f32) -> [f32; 4] {
+        let mut color = material.base_color;
+        if let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) {
+            let texel = texture.sample(self.texels, self.uv_at(index, u, v));
+            color = [0, 1, 2, 3].map(|c| color[c] * texel[c]);
+        }
+        if let Some(vertex) = self.color_at(index, u, v) {
+            color = [0, 1, 2, 3].map(|c| color[c] * vertex[c]);
+        }
+        color
     }
 
     /// Number of leaves.

@@ -16,8 +16,8 @@ use crate::error::{Error, Result};
 /// depth-first order, then their primitives in order), so a hit can name it; with the
 /// materials, lights and cameras the file describes.
 ///
-/// The per-triangle attributes (`material_ids`, `normals`, `uvs`) are either empty or
-/// one entry per triangle.
+/// The per-triangle attributes (`material_ids`, `normals`, `uvs`, `colors`) are either
+/// empty or one entry per triangle.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     /// The triangles' vertices, world space.
@@ -30,6 +30,9 @@ pub struct Mesh {
     /// Texture coordinates of each triangle's corners, or empty (zeros for the parts of
     /// the file without them).
     pub uvs: Vec<[[f32; 2]; 3]>,
+    /// Vertex colours (glTF `COLOR_0`) of each triangle's corners, linear RGBA at 16
+    /// bits a channel, or empty (white for the parts of the file without them).
+    pub colors: Vec<[[u16; 4]; 3]>,
     /// Materials (glTF materials, MTL materials), in file order, then a `"default"`
     /// one when some triangles have none.
     pub materials: Vec<octrace_format::Material>,
@@ -37,6 +40,9 @@ pub struct Mesh {
     pub lights: Vec<octrace_format::Light>,
     /// Cameras (glTF), world space.
     pub cameras: Vec<octrace_format::Camera>,
+    /// The parts of the mesh (glTF primitives of nodes, OBJ objects or groups), in
+    /// order, each a run of `triangles`.
+    pub parts: Vec<octrace_format::MeshPart>,
     /// Texture images (glTF base colour textures), their texels in `texels`.
     pub textures: Vec<octrace_format::Texture>,
     /// The textures' texels, decoded and linear ([`octrace_format::Texture`]).
@@ -77,6 +83,34 @@ impl Mesh {
             self.uvs.resize(before, [[0.0; 2]; 3]);
             self.uvs.push(uvs.unwrap_or([[0.0; 2]; 3]));
         }
+        if !self.colors.is_empty() {
+            self.colors.push([[u16::MAX; 4]; 3]);
+        }
+    }
+
+    /// [`Mesh::push`], then the triangle's vertex colours: the first triangle that has
+    /// them gives the earlier ones white.
+    pub fn push_colored(
+        &mut self,
+        triangle: [[f32; 3]; 3],
+        normals: Option<[[f32; 3]; 3]>,
+        uvs: Option<[[f32; 2]; 3]>,
+        colors: Option<[[u16; 4]; 3]>,
+    ) {
+        self.push(triangle, normals, uvs);
+        if let Some(c) = colors {
+            self.colors.resize(self.triangles.len() - 1, [[u16::MAX; 4]; 3]);
+            self.colors.push(c);
+        }
+    }
+
+    /// Ends a part: the triangles pushed since the last part (none: nothing).
+    pub fn end_part(&mut self, name: impl FnOnce() -> String) {
+        let first = self.parts.last().map_or(0, |p| p.first as usize + p.count as usize);
+        let count = self.triangles.len().saturating_sub(first);
+        if count > 0 {
+            self.parts.push(octrace_format::MeshPart { name: name(), first: first as u32, count: count as u32 });
+        }
     }
 
     /// Checks that each attribute array is empty or one entry a triangle, and that
@@ -91,9 +125,12 @@ impl Mesh {
             element: what.into(),
             message: format!("{len} entries for {n} triangles"),
         };
-        for (what, len) in
-            [("material ids", self.material_ids.len()), ("normals", self.normals.len()), ("uvs", self.uvs.len())]
-        {
+        for (what, len) in [
+            ("material ids", self.material_ids.len()),
+            ("normals", self.normals.len()),
+            ("uvs", self.uvs.len()),
+            ("colors", self.colors.len()),
+        ] {
             if len != 0 && len != n {
                 return Err(bad(what, len));
             }

@@ -80,6 +80,7 @@ pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Lo
             );
             material_ids.push(m.material_id.filter(|&i| i < mesh.materials.len()));
         }
+        mesh.end_part(|| format!("object '{}'", model.name));
     }
     // Faces without a (known) material get a default one, when there are materials.
     if !mesh.materials.is_empty() {
@@ -121,13 +122,18 @@ fn check_face_indices(bytes: &[u8], path: &Path) -> Result<()> {
                         };
                         if !fine {
                             let what = ["vertex", "texture coordinate", "normal"][kind];
+                            let many = ["vertices", "texture coordinates", "normals"][kind];
+                            let so_far = if counts[kind] == 1 {
+                                format!("1 {what}")
+                            } else {
+                                format!("{} {many}", counts[kind])
+                            };
                             return Err(Error::Parse {
                                 path: path.into(),
                                 element: format!("line {}", n + 1),
                                 message: format!(
-                                    "{what} index {i}: indices count from 1 (or back from -1, within the {} {what}s \
-                                     so far) and stay below 2^32",
-                                    counts[kind]
+                                    "{what} index {i}: indices count from 1 (or back from -1, within the {so_far} \
+                                     so far) and stay below 2^32"
                                 ),
                             });
                         }
@@ -225,11 +231,76 @@ fn obj_error(err: tobj::LoadError, bytes: &[u8], path: &Path) -> Error {
             return Error::IndexOutOfRange { path: path.into(), element: format!("line {line}"), index, count };
         }
     }
-    let element = match err {
-        tobj::LoadError::PositionParseError => first_line_starting(bytes, "v ").map(|l| format!("near line {l}")),
-        _ => None,
+    let (element, message) = match locate(&err, bytes) {
+        Some((line, text)) => {
+            let text: String = text.trim().chars().take(80).collect();
+            (format!("line {line}"), format!("{err}: '{text}'"))
+        }
+        None => ("file".into(), err.to_string()),
     };
-    Error::Parse { path: path.into(), element: element.unwrap_or_else(|| "file".into()), message: err.to_string() }
+    Error::Parse { path: path.into(), element, message }
+}
+
+/// The line (1-based, with its text) tobj's error `err` comes from, found again by
+/// tobj's own rules for each statement: three numbers for `v` (then none, a `w`
+/// that is not 0, or three colour values), two for `vt`, three for `vn`; face
+/// corners `v`, `v/vt`, `v//vn` or `v/vt/vn` with indices in range; a name for `o`
+/// and `g`.
+fn locate(err: &tobj::LoadError, bytes: &[u8]) -> Option<(usize, String)> {
+    use tobj::LoadError as E;
+    let text = String::from_utf8_lossy(bytes);
+    let numbers = |words: &[&str], n: usize| words.len() >= n && words[..n].iter().all(|w| w.parse::<f32>().is_ok());
+    // Vertices, texture coordinates and normals so far.
+    let mut counts = [0i64; 3];
+    let corner_bad = |corner: &str, counts: &[i64; 3], slots: &[usize]| {
+        let parts: Vec<&str> = corner.split('/').collect();
+        if parts.len() > 3 || parts[0].is_empty() {
+            return slots.contains(&0) && slots.len() == 3;
+        }
+        slots.iter().any(|&s| match parts.get(s) {
+            None | Some(&"") => false,
+            Some(w) => match w.parse::<i64>() {
+                Ok(i) => {
+                    let resolved = if i < 0 { counts[s] + i } else { i - 1 };
+                    i == 0 || resolved < 0 || resolved >= counts[s]
+                }
+                Err(_) => slots.len() == 3,
+            },
+        })
+    };
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let key = words.next();
+        let rest: Vec<&str> = words.collect();
+        let bad = match (key, err) {
+            (Some("v"), E::PositionParseError | E::ColorParseError | E::ScalingByZeroError) => {
+                !numbers(&rest, 3)
+                    || match rest.len() {
+                        3 => false,
+                        4 => rest[3].parse::<f32>().map_or(true, |w| w == 0.0),
+                        6 => false,
+                        _ => true,
+                    }
+            }
+            (Some("vt"), E::TexcoordParseError) => !numbers(&rest, 2),
+            (Some("vn"), E::NormalParseError) => !numbers(&rest, 3),
+            (Some("f" | "l"), E::FaceParseError) => rest.iter().any(|c| corner_bad(c, &counts, &[0, 1, 2])),
+            (Some("f" | "l"), E::FaceTexCoordOutOfBounds) => rest.iter().any(|c| corner_bad(c, &counts, &[1])),
+            (Some("f" | "l"), E::FaceNormalOutOfBounds) => rest.iter().any(|c| corner_bad(c, &counts, &[2])),
+            (Some("o" | "g"), E::InvalidObjectName) => rest.is_empty(),
+            _ => false,
+        };
+        if bad {
+            return Some((n + 1, line.to_string()));
+        }
+        match key {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            _ => {}
+        }
+    }
+    None
 }
 
 /// The first face line whose vertex index is out of range: (line, index, vertices so far).
@@ -253,13 +324,4 @@ fn find_bad_face(bytes: &[u8]) -> Option<(usize, i64, usize)> {
         }
     }
     None
-}
-
-/// The first line (1-based) starting with `prefix` whose numbers do not parse.
-fn first_line_starting(bytes: &[u8], prefix: &str) -> Option<usize> {
-    let text = String::from_utf8_lossy(bytes);
-    text.lines().enumerate().find_map(|(n, line)| {
-        let rest = line.strip_prefix(prefix)?;
-        rest.split_whitespace().any(|w| w.parse::<f32>().is_err()).then_some(n + 1)
-    })
 }

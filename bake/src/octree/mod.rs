@@ -184,11 +184,16 @@ pub fn bake_with_progress(
     let material_ids = stored(&mesh.material_ids, &triangle_ids, |m| m);
     let normals = stored(&mesh.normals, &triangle_ids, |n| n.concat()).concat();
     let uvs = stored(&mesh.uvs, &triangle_ids, |t| t.concat()).concat();
+    let colors = stored(&mesh.colors, &triangle_ids, |c| {
+        c.map(|[r, g, b, a]| [r as u32 | (g as u32) << 16, b as u32 | (a as u32) << 16]).concat()
+    })
+    .concat();
     let shading = octrace_format::Shading {
         materials: mesh.materials.clone(),
         lights: mesh.lights.clone(),
         cameras: mesh.cameras.clone(),
         textures: mesh.textures.clone(),
+        parts: mesh.parts.clone(),
         effects: crate::effects::decide(mesh, &ids),
     };
     Ok(BakedScene {
@@ -214,6 +219,7 @@ pub fn bake_with_progress(
         material_ids,
         normals,
         uvs,
+        colors,
         texels: mesh.texels.clone(),
         root: arrays.root,
         shading,

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use octrace_format::stats::SceneStatistics;
-use octrace_format::SceneView;
+use octrace_format::{SceneView, Wrap};
 use serde_json::json;
 
 use crate::output::{counted, mb, thousands};
@@ -177,6 +177,7 @@ impl<'a> Report<'a> {
             (!v.material_ids.is_empty()).then_some("material ids"),
             (!v.normals.is_empty()).then_some("normals"),
             (!v.uvs.is_empty()).then_some("uvs"),
+            (!v.colors.is_empty()).then_some("vertex colours"),
         ]
         .into_iter()
         .flatten()
@@ -184,7 +185,8 @@ impl<'a> Report<'a> {
         let attrs = if per_triangle.is_empty() { "none".to_string() } else { per_triangle.join(", ") };
         let n = |count: usize, thing: &str| counted(count as u64, thing);
         let mut text = format!(
-            "scene data         {}, {}, {}, {}; per triangle: {attrs}",
+            "scene data         {}, {}, {}, {}, {}; per triangle: {attrs}",
+            n(sh.parts.len(), "mesh part"),
             n(sh.materials.len(), "material"),
             n(sh.lights.len(), "light"),
             n(sh.cameras.len(), "camera"),
@@ -202,8 +204,14 @@ impl<'a> Report<'a> {
         for (i, t) in sh.textures.iter().enumerate() {
             let label = if i == 0 { "textures" } else { "" };
             text.push_str(&format!(
-                "\n{label:<18} {}: {} x {}, {:?} filter, wrap {:?} / {:?}, alpha down to {:.2}",
-                t.name, t.width, t.height, t.filter, t.wrap[0], t.wrap[1], t.min_alpha
+                "\n{label:<18} {}: {} x {}, {} filter, wrap {} / {}, alpha down to {:.2}",
+                t.name,
+                t.width,
+                t.height,
+                t.filter.name(),
+                t.wrap[0].name(),
+                t.wrap[1].name(),
+                t.min_alpha
             ));
         }
         text
@@ -240,10 +248,12 @@ impl<'a> Report<'a> {
                     "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
                     "unlit": m.unlit, "base_color_texture": m.base_color_texture,
                 })).collect::<Vec<_>>(),
+                "parts": v.shading.parts.iter().map(|p| json!({
+                    "name": p.name, "first_triangle": p.first, "triangles": p.count,
+                })).collect::<Vec<_>>(),
                 "textures": v.shading.textures.iter().map(|t| json!({
                     "name": t.name, "width": t.width, "height": t.height,
-                    "filter": format!("{:?}", t.filter).to_lowercase(),
-                    "wrap": t.wrap.map(|w| format!("{w:?}").to_lowercase()), "min_alpha": t.min_alpha,
+                    "filter": t.filter.name(), "wrap": t.wrap.map(Wrap::name), "min_alpha": t.min_alpha,
                 })).collect::<Vec<_>>(),
                 "lights": v.shading.lights.iter().map(|l| json!({
                     "name": l.name, "kind": format!("{:?}", l.kind).to_lowercase(), "color": l.color,
@@ -258,7 +268,7 @@ impl<'a> Report<'a> {
                 })).collect::<Vec<_>>(),
                 "per_triangle": {
                     "material_ids": !v.material_ids.is_empty(), "normals": !v.normals.is_empty(),
-                    "uvs": !v.uvs.is_empty(),
+                    "uvs": !v.uvs.is_empty(), "colors": !v.colors.is_empty(),
                 },
             },
             "effects": v.shading.effects.iter().map(|e| json!({

@@ -51,7 +51,9 @@ pub(super) struct RenderParams {
     has_uvs: u32,
     o_textures: u32,
     o_texels: u32,
-    pad: [u32; 3],
+    o_colors: u32,
+    has_colors: u32,
+    pad: u32,
 }
 
 #[cfg(test)]
@@ -314,6 +316,9 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     params.o_uvs = words.len() as u32;
     params.has_uvs = u32::from(!view.uvs.is_empty());
     f(&mut words, view.uvs);
+    params.o_colors = words.len() as u32;
+    params.has_colors = u32::from(!view.colors.is_empty());
+    words.extend_from_slice(view.colors);
     params.o_textures = words.len() as u32;
     for t in &shading.textures {
         let wrap = |w: Wrap| match w {
@@ -416,13 +421,14 @@ pub(super) fn render_source(trace: &str, max_depth: u32) -> String {
     format!(
         "{trace}\nconst STACK_SIZE: u32 = {}u;\nconst GAMMA_7: f32 = {:e}f;\n\
          const SQRT_2: f32 = {:e}f;\nconst LOG2_E: f32 = {:e}f;\nconst LN_2: f32 = {:e}f;\n\
-         const SAMPLE_SCALE: f32 = {:e}f;\n{}{}{}",
+         const SAMPLE_SCALE: f32 = {:e}f;\nconst COLOR_SCALE: f32 = {:e}f;\n{}{}{}",
         2 * max_depth + 1,
         gamma(7),
         std::f32::consts::SQRT_2,
         std::f32::consts::LOG2_E,
         std::f32::consts::LN_2,
         octrace_format::TEXEL_SCALE,
+        octrace_format::COLOR_SCALE,
         floats("POWER_LN", &lighting::POWER_LN),
         floats("POWER_EXP", &lighting::POWER_EXP),
         include_str!("render.wgsl")

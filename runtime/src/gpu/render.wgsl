@@ -49,9 +49,10 @@ struct RenderParams {
     has_uvs: u32,
     o_textures: u32,
     o_texels: u32,
+    // Vertex colours (absent when has_colors is 0): six words a triangle.
+    o_colors: u32,
+    has_colors: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
@@ -221,6 +222,27 @@ fn uv_at(prim: u32, u: f32, v: f32) -> vec2<f32> {
     return vec2<f32>(uv_mix(sf(at), sf(at + 2u), sf(at + 4u), w, u, v), uv_mix(sf(at + 1u), sf(at + 3u), sf(at + 5u), w, u, v));
 }
 
+// One corner's vertex colour, its 16-bit channels scaled.
+fn corner_color(at: u32) -> vec4<f32> {
+    let a = shade[at];
+    let b = shade[at + 1u];
+    return vec4<f32>(vec4<u32>(a & 0xffffu, a >> 16u, b & 0xffffu, b >> 16u)) * COLOR_SCALE;
+}
+
+// SceneView::color_at: the corners mixed as `uv_at` mixes (no loop: loops count
+// against a driver's loop cap).
+fn color_at(prim: u32, u: f32, v: f32) -> vec4<f32> {
+    let at = rp.o_colors + 6u * prim;
+    let c = array<vec4<f32>, 3>(corner_color(at), corner_color(at + 2u), corner_color(at + 4u));
+    let w = 1.0 - u - v;
+    return vec4<f32>(
+        uv_mix(c[0].x, c[1].x, c[2].x, w, u, v),
+        uv_mix(c[0].y, c[1].y, c[2].y, w, u, v),
+        uv_mix(c[0].z, c[1].z, c[2].z, w, u, v),
+        uv_mix(c[0].w, c[1].w, c[2].w, w, u, v),
+    );
+}
+
 // Texture::reduce.
 fn reduce(wrap: u32, c: f32) -> f32 {
     if c - c != 0.0 {
@@ -286,16 +308,21 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
     return vec4<f32>(sum >> vec4<u32>(8u)) * SAMPLE_SCALE;
 }
 
-// Context::surface: the material at a hit, its base colour times its texture there,
-// and what shading derives from the base colour computed again from it, in the
-// CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
+// Context::surface: the material at a hit, its base colour times its texture and its
+// vertex colour there, and what shading derives from the base colour computed again
+// from it, in the CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
 fn surface(hit: HitOut) -> Material {
     var m = material(hit.prim);
-    if m.texture == 0u {
+    if m.texture == 0u && rp.has_colors == 0u {
         return m;
     }
-    let texel = sample(m.texture - 1u, uv_at(hit.prim, hit.u, hit.v));
-    let bc = m.factor * texel;
+    var bc = m.factor;
+    if m.texture != 0u {
+        bc = bc * sample(m.texture - 1u, uv_at(hit.prim, hit.u, hit.v));
+    }
+    if rp.has_colors != 0u {
+        bc = bc * color_at(hit.prim, hit.u, hit.v);
+    }
     let base = clamp(bc.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
     m.base = base;
     m.albedo = base * m.keep_metal;

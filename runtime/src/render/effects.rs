@@ -453,10 +453,10 @@ impl<'a> Context<'a> {
     }
 
     /// The material at `hit`, its base colour taken where the hit is (times its
-    /// texture there, when it has one).
+    /// texture and the vertex colour there, when there are).
     fn surface(&self, hit: &Hit) -> Cow<'a, Material> {
         let m = self.material(hit.prim);
-        if m.base_color_texture.is_none() {
+        if m.base_color_texture.is_none() && self.view.colors.is_empty() {
             return Cow::Borrowed(m);
         }
         let base_color = self.view.base_color_at(m, hit.prim, hit.u, hit.v);

@@ -448,3 +448,21 @@ fn textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu() {
         renders_agree(&c.name, ctx, &cpu, &g);
     }
 }
+
+/// Vertex colours (`COLOR_0`, the Khronos sample) on the GPU: the CPU's image and rays.
+#[test]
+fn vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu() {
+    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    let Some(ctx) = gpu("vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu") else { return };
+    let mesh = octrace_bake::Mesh::load(octrace_tests::data("gltf/BoxVertexColors.gltf")).unwrap();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let options = RenderOptions::for_scene(scene.shading());
+    let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 512, 512);
+    let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
+    let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
+    for kind in RayKind::ALL {
+        assert_eq!(gc.get(kind), cc.get(kind), "{} rays, GPU against CPU", kind.name());
+    }
+    renders_agree("vertex colours", ctx, &cpu, &g);
+}

@@ -295,3 +295,30 @@ fn orthographic_cameras_cast_parallel_rays_over_their_height() {
     assert_eq!(counts.get(RayKind::Primary), 40 * 30);
     assert!(image.pixels.iter().any(|p| p.y > 2.0 * p.x), "the leaf is in view");
 }
+
+/// `COLOR_0` multiplies the base colour: the Khronos sample's corners show their
+/// colours exactly, and a face's middle their mix.
+#[test]
+fn vertex_colours_multiply_the_base_colour() {
+    let mesh = Mesh::load(data("gltf/BoxVertexColors.gltf")).unwrap();
+    assert_eq!(mesh.colors.len(), 12);
+    let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
+    let view = scene.view();
+    let material = view.material(0).unwrap();
+    let stored = |i: u32| mesh.colors[view.triangle_ids[i as usize] as usize];
+    for prim in 0..view.triangle_count() as u32 {
+        let corners = stored(prim).map(|c| c.map(|x| x as f32 / 65535.0));
+        for (k, (u, v)) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)].into_iter().enumerate() {
+            let got = view.base_color_at(material, prim, u, v);
+            let want: [f32; 4] = [0, 1, 2, 3].map(|c| material.base_color[c] * corners[k][c]);
+            for c in 0..4 {
+                assert!((got[c] - want[c]).abs() <= 1e-6, "triangle {prim} corner {k}: {got:?} vs {want:?}");
+            }
+        }
+        let middle = view.color_at(prim, 1.0 / 3.0, 1.0 / 3.0).unwrap();
+        for c in 0..4 {
+            let mean = (corners[0][c] + corners[1][c] + corners[2][c]) / 3.0;
+            assert!((middle[c] - mean).abs() <= 1e-6, "triangle {prim}: {middle:?}");
+        }
+    }
+}

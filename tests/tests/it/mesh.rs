@@ -119,6 +119,32 @@ fn obj_faces_are_fan_triangulated_in_file_order_across_objects() {
             [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
         ]
     );
+    // Each object is a part, so a hit names it.
+    let parts: Vec<_> = m.parts.iter().map(|p| (p.name.as_str(), p.first, p.count)).collect();
+    assert_eq!(parts, [("object 'first'", 0, 2), ("object 'second'", 2, 1)]);
+}
+
+/// A hit names its mesh part (glTF node, mesh and primitive) and its triangle within
+/// the part, from the file as from the bake.
+#[test]
+fn a_hit_names_its_gltf_node_mesh_and_primitive() {
+    let mesh = gltf("SimpleMeshes.gltf");
+    let parts: Vec<_> = mesh.parts.iter().map(|p| (p.name.as_str(), p.first, p.count)).collect();
+    assert_eq!(parts, [("node 0, mesh 0, primitive 0", 0, 1), ("node 1, mesh 0, primitive 0", 1, 1)]);
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("simple.oct");
+    octrace_bake::bake(&mesh, &Default::default()).unwrap().write(&file, 0).unwrap();
+    let scene = octrace_runtime::Scene::open(&file).unwrap();
+    // The second instance is the first moved by +1 in x: aim at its middle.
+    let [a, b, c] = mesh.triangles[1];
+    let centre = glam::Vec3::from(a).lerp(glam::Vec3::from(b), 0.5).lerp(glam::Vec3::from(c), 1.0 / 3.0);
+    let ray = octrace_runtime::Ray::new(centre + glam::Vec3::Z, -glam::Vec3::Z);
+    let hit = scene.intersect(&ray).expect("a hit");
+    let (part, within) = scene.shading().part_of(hit.triangle).unwrap();
+    assert_eq!((part.name.as_str(), within), ("node 1, mesh 0, primitive 0", 0));
+    let leaf = Mesh::load(octrace_tests::data("textured/leaf.gltf")).unwrap();
+    let names: Vec<_> = leaf.parts.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["node 0 'floor', mesh 0 'floor', primitive 0", "node 1 'leaf', mesh 1 'leaf', primitive 0"]);
 }
 
 #[test]
@@ -137,6 +163,26 @@ fn bad_meshes_give_named_errors() {
     let err = Mesh::load(&range).unwrap_err();
     assert!(matches!(err, Error::IndexOutOfRange { index: 9, count: 3, .. }), "{err}");
     assert!(err.to_string().contains("line 5"), "{err}");
+
+    // Every statement tobj refuses is named by its line and text.
+    let head = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n";
+    for (name, bad, says) in [
+        ("face", "f a b c", "face parse error: 'f a b c'"),
+        ("face index 0", "f 0 1 2", "vertex index 0: indices count from 1 (or back from -1, within the 3 vertices"),
+        ("texture index", "f 1/1 2/7 3/1", "'f 1/1 2/7 3/1'"),
+        ("normal index", "f 1//1 2//1 3//4", "'f 1//1 2//1 3//4'"),
+        ("position", "v 1 x 0", "position parse error: 'v 1 x 0'"),
+        ("colour", "v 1 0 0 1 1", "'v 1 0 0 1 1'"),
+        ("w of zero", "v 1 0 0 0", "'v 1 0 0 0'"),
+        ("texture coordinate", "vt 0.5", "texcoord parse error: 'vt 0.5'"),
+        ("normal", "vn 0 1", "normal parse error: 'vn 0 1'"),
+    ] {
+        let file = obj(d, "bad.obj", &format!("{head}f 1/1/1 2/1/1 3/1/1\n{bad}\nf 1 2 3\n"));
+        let err = Mesh::load(&file).unwrap_err();
+        let msg = err.to_string();
+        let line = matches!(&err, Error::Parse { element, .. } | Error::IndexOutOfRange { element, .. } if element == "line 7");
+        assert!(line && msg.contains(says), "{name}: {msg}");
+    }
 
     let empty = obj(d, "empty.obj", "# nothing\nv 0 0 0\n");
     assert!(matches!(Mesh::load(&empty), Err(Error::EmptyScene { .. })));

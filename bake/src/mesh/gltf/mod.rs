@@ -281,6 +281,17 @@ impl Loader<'_> {
             for prim in mesh.primitives() {
                 let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
                 self.primitive(&prim, &world, element)?;
+                let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
+                self.mesh.end_part(|| {
+                    format!(
+                        "node {}{}, mesh {}{}, primitive {}",
+                        node.index(),
+                        quoted(node.name()),
+                        mesh.index(),
+                        quoted(mesh.name()),
+                        prim.index()
+                    )
+                });
             }
         }
         for child in node.children() {
@@ -413,6 +424,25 @@ impl Loader<'_> {
         Some(out.map(|t| if t.iter().all(|v| v.is_finite()) { map.apply(t) } else { [0.0; 2] }).collect())
     }
 
+    /// The primitive's `COLOR_0` (RGB or RGBA; floats, or normalized unsigned bytes or
+    /// shorts), linear, at 16 bits a channel, when it has usable ones (as
+    /// [`Loader::normals`]).
+    fn colors(&mut self, prim: &gltf::Primitive<'_>, vertices: usize, element: &str) -> Option<Vec<[u16; 4]>> {
+        use gltf::accessor::{DataType, Dimensions};
+        let a = prim.get(&gltf::Semantic::Colors(0))?;
+        let usable = matches!(a.data_type(), DataType::F32 | DataType::U8 | DataType::U16)
+            && matches!(a.dimensions(), Dimensions::Vec3 | Dimensions::Vec4)
+            && (a.data_type() == DataType::F32 || a.normalized());
+        if let Err(why) = self.attribute_usable(&a, usable, vertices) {
+            self.mesh.warnings.push(format!("{}: {element}: COLOR_0 left out: {why}", self.path.display()));
+            return None;
+        }
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let out = reader.read_colors(0)?.into_rgba_f32().take(vertices);
+        let channel = |c: f32| if c.is_finite() { (c.clamp(0.0, 1.0) * 65535.0).round() as u16 } else { u16::MAX };
+        Some(out.map(|c| c.map(channel)).collect())
+    }
+
     /// Whether a vertex attribute can be read: the spec's type, ranges inside the
     /// buffers, and one value a vertex.
     fn attribute_usable(
@@ -518,12 +548,14 @@ impl Loader<'_> {
         };
         let normals = self.normals(prim, world, verts.len(), &element);
         let uvs = self.uvs(prim, verts.len(), &element);
+        let colors = self.colors(prim, verts.len(), &element);
         let material = self.material_of(prim);
         for c in corners {
             let tri = c.map(|i| verts[i as usize]);
             let n = normals.as_ref().map(|n| c.map(|i| n[i as usize]));
             let t = uvs.as_ref().map(|t| c.map(|i| t[i as usize]));
-            self.mesh.push(tri, n, t);
+            let k = colors.as_ref().map(|k| c.map(|i| k[i as usize]));
+            self.mesh.push_colored(tri, n, t, k);
             self.mesh.material_ids.push(material);
         }
         Ok(())
