@@ -10,36 +10,52 @@ pub(crate) struct Rgba8 {
     pub pixels: Vec<[u8; 4]>,
 }
 
+/// Pixels an image may decode to per byte of its encoding, beyond
+/// [`PIXELS_SLACK`]: real textures compress 3 to 20 times; a flat image declaring
+/// thousands of pixels per byte is a bomb.
+pub(crate) const PIXELS_PER_ENCODED_BYTE: usize = 256;
+/// Pixels any image may have whatever its encoded size (a 2048 x 2048 texture).
+pub(crate) const PIXELS_SLACK: usize = 1 << 22;
+
 /// Decodes a PNG or JPEG (told apart by their signatures, whatever the file's MIME
-/// type says).
+/// type says), if its declared size is at most `max_pixels` and
+/// [`PIXELS_PER_ENCODED_BYTE`] times its encoding (plus [`PIXELS_SLACK`]): checked
+/// from the header, before the pixels are allocated.
 ///
 /// # Errors
 /// A message for an image of another format, a malformed one, or one larger than
-/// [`MAX_TEXTURE_SIDE`] on a side.
-pub(crate) fn decode(bytes: &[u8]) -> Result<Rgba8, String> {
+/// [`MAX_TEXTURE_SIDE`] on a side or than the limits.
+pub(crate) fn decode(bytes: &[u8], max_pixels: usize) -> Result<Rgba8, String> {
+    let limit = max_pixels.min(bytes.len().saturating_mul(PIXELS_PER_ENCODED_BYTE).saturating_add(PIXELS_SLACK));
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        png(bytes)
+        png(bytes, limit)
     } else if bytes.starts_with(&[0xff, 0xd8, 0xff]) {
-        jpeg(bytes)
+        jpeg(bytes, limit)
     } else {
         Err("neither a PNG nor a JPEG image".into())
     }
 }
 
-fn check_size(width: usize, height: usize) -> Result<(), String> {
+fn check_size(width: usize, height: usize, limit: usize) -> Result<(), String> {
     let side = MAX_TEXTURE_SIDE as usize;
     if width == 0 || height == 0 || width > side || height > side {
         return Err(format!("{width} x {height} pixels; textures may have 1 to {side} a side"));
     }
+    if width * height > limit {
+        return Err(format!(
+            "{width} x {height} pixels, more than the {limit} allowed (the scene's texel budget, or \
+             {PIXELS_PER_ENCODED_BYTE} a byte of the encoded image)"
+        ));
+    }
     Ok(())
 }
 
-fn png(bytes: &[u8]) -> Result<Rgba8, String> {
+fn png(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::normalize_to_color8());
     let mut reader = decoder.read_info().map_err(|e| format!("PNG: {e}"))?;
     let (width, height) = (reader.info().width as usize, reader.info().height as usize);
-    check_size(width, height)?;
+    check_size(width, height, limit)?;
     let mut buffer = vec![0; reader.output_buffer_size()];
     let frame = reader.next_frame(&mut buffer).map_err(|e| format!("PNG: {e}"))?;
     let data = &buffer[..frame.buffer_size()];
@@ -66,7 +82,7 @@ fn png(bytes: &[u8]) -> Result<Rgba8, String> {
     Ok(Rgba8 { width: width as u32, height: height as u32, pixels })
 }
 
-fn jpeg(bytes: &[u8]) -> Result<Rgba8, String> {
+fn jpeg(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     use zune_core::{bytestream::ZCursor, colorspace::ColorSpace, options::DecoderOptions};
     let side = MAX_TEXTURE_SIDE as usize;
     let options =
@@ -75,7 +91,7 @@ fn jpeg(bytes: &[u8]) -> Result<Rgba8, String> {
     decoder.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;
     let info = decoder.info().ok_or("JPEG: no image header")?;
     let (width, height) = (info.width as usize, info.height as usize);
-    check_size(width, height)?;
+    check_size(width, height, limit)?;
     let data = decoder.decode().map_err(|e| format!("JPEG: {e:?}"))?;
     if data.len() != width * height * 4 {
         return Err(format!("JPEG: {} bytes decoded for {width} x {height} pixels", data.len()));

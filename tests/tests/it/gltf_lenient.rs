@@ -138,3 +138,37 @@ fn textures_that_cannot_be_read_are_left_out_with_a_warning_naming_the_image() {
         assert!(mesh.textures.is_empty() && mesh.materials[4].base_color_texture.is_none());
     }
 }
+
+/// A PNG whose header declares 4096 x 4096 pixels in a few dozen bytes: refused from
+/// its header, before 64 MiB of pixels are allocated, and left out with a warning.
+#[test]
+fn an_image_declaring_far_more_pixels_than_its_bytes_hold_is_refused_before_decoding() {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+            }
+        }
+        !crc
+    }
+    let chunk = |kind: &[u8], data: &[u8]| {
+        let mut out = (data.len() as u32).to_be_bytes().to_vec();
+        out.extend_from_slice(kind);
+        out.extend_from_slice(data);
+        out.extend_from_slice(&crc32(&[kind, data].concat()).to_be_bytes());
+        out
+    };
+    let mut header = 4096u32.to_be_bytes().to_vec();
+    header.extend_from_slice(&4096u32.to_be_bytes());
+    header.extend_from_slice(&[8, 6, 0, 0, 0]);
+    let mut bomb = b"\x89PNG\r\n\x1a\n".to_vec();
+    bomb.extend(chunk(b"IHDR", &header));
+    bomb.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
+    bomb.extend(chunk(b"IEND", &[]));
+    let mesh = load_edited(textured("bomb.png"), &[("bomb.png", &bomb)]).unwrap();
+    let note = mesh.warnings.iter().find(|w| w.contains("image 0 'bomb.png'")).expect("a warning");
+    assert!(note.contains("4096 x 4096 pixels, more than the"), "{note}");
+    assert!(mesh.textures.is_empty() && mesh.texels.is_empty());
+}

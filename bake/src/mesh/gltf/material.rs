@@ -10,6 +10,10 @@ use super::super::refs::{self, LoadOptions};
 use super::super::{image, Mesh};
 use crate::error::{Error, Result};
 
+/// Texels a scene may hold in all (2 GiB of texel data): a bound on what a small file
+/// of many images can make the bake allocate.
+pub(super) const MAX_SCENE_TEXELS: usize = 1 << 28;
+
 /// How a material's texture coordinates are found: the `TEXCOORD_n` set its base
 /// colour texture reads, and the affine map `KHR_texture_transform` applies to it
 /// (`[[a, b, c], [d, e, f]]`: `u' = a u + b v + c`, `v' = d u + e v + f`).
@@ -117,7 +121,8 @@ impl Materials<'_> {
             }
             _ => format!("image {}", image.index()),
         };
-        let decoded = self.image_bytes(&image, mesh).and_then(|bytes| image::decode(&bytes));
+        let budget = MAX_SCENE_TEXELS.saturating_sub(mesh.texels.len() / octrace_format::TEXEL_WORDS);
+        let decoded = self.image_bytes(&image, mesh).and_then(|bytes| image::decode(&bytes, budget));
         let index = match decoded {
             Ok(rgba) => {
                 use gltf::texture::{MagFilter, WrappingMode};
