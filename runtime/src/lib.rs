@@ -48,11 +48,6 @@ pub use glam;
 /// types the runtime hands out.
 pub use octrace_format as format;
 
-/// The README's code, compiled (not run: it opens a file) with the doctests.
-#[cfg(doctest)]
-#[doc = include_str!("../../README.md")]
-pub struct ReadmeDoctests;
-
 pub use cpu::{ExitTest, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};
