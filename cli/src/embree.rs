@@ -1,12 +1,13 @@
-//! Embree 3 (Debian's `libembree-dev`) on the scene's triangles: the second peer of
-//! `report`, behind the `embree` cargo feature. Hand-written bindings to the eleven
+//! Embree 3 (Debian's `libembree-dev`) on the scene's triangles: a peer of `report`
+//! and `bench`, behind the `embree` cargo feature. Hand-written bindings to the twelve
 //! calls used, from Embree 3.13's headers (`rtcore_ray.h`, `rtcore_common.h`).
 //!
 //! Scenes are built with Embree's default (medium) quality on all cores, in its fast
 //! mode or with `RTC_SCENE_FLAG_ROBUST` ("avoid optimizations that reduce arithmetic
 //! accuracy": its watertight mode); rays are traced one at a time (`rtcIntersect1`,
 //! `rtcOccluded1`) with an incoherent context, on the calling thread, as the octree
-//! traces them.
+//! traces them, or sixteen at a time (`rtcIntersect16`, a coherent context) for
+//! camera rays in 4 x 4 pixel packets.
 
 use std::ffi::{c_char, c_void, CStr};
 use std::time::{Duration, Instant};
@@ -70,6 +71,32 @@ struct RtcRayHit {
     hit: RtcHit,
 }
 
+/// `RTCRayHit16`: sixteen rays and hits, structure of arrays.
+#[repr(C, align(64))]
+struct RtcRayHit16 {
+    org: [[f32; 16]; 3],
+    tnear: [f32; 16],
+    dir: [[f32; 16]; 3],
+    time: [f32; 16],
+    tfar: [f32; 16],
+    mask: [u32; 16],
+    id: [u32; 16],
+    flags: [u32; 16],
+    ng: [[f32; 16]; 3],
+    u: [f32; 16],
+    v: [f32; 16],
+    prim_id: [u32; 16],
+    geom_id: [u32; 16],
+    inst_id: [u32; 16],
+}
+
+/// The `valid` mask of `rtcIntersect16`: -1 for a lane to trace, 0 for one to skip.
+#[repr(C, align(64))]
+struct Valid16([i32; 16]);
+
+/// `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`.
+const CONTEXT_COHERENT: u32 = 1;
+
 #[link(name = "embree3")]
 extern "C" {
     fn rtcNewDevice(config: *const c_char) -> Device;
@@ -93,6 +120,7 @@ extern "C" {
     fn rtcCommitScene(scene: Scene);
     fn rtcIntersect1(scene: Scene, context: *mut IntersectContext, rayhit: *mut RtcRayHit);
     fn rtcOccluded1(scene: Scene, context: *mut IntersectContext, ray: *mut RtcRay);
+    fn rtcIntersect16(valid: *const Valid16, scene: Scene, context: *mut IntersectContext, rayhit: *mut RtcRayHit16);
 }
 
 /// An Embree device and a committed scene of one triangle mesh.
@@ -186,6 +214,33 @@ impl Embree {
         unsafe { rtcIntersect1(self.scene, &mut context, &mut rayhit) };
         let h = rayhit.hit;
         (h.geom_id != INVALID_ID).then_some((rayhit.ray.tfar, h.prim_id, h.u, h.v))
+    }
+
+    /// The nearest hits of up to sixteen rays traced as one packet (`rtcIntersect16`,
+    /// coherent context), as [`Embree::nearest`] gives them, into `out`.
+    pub(crate) fn nearest16(&self, rays: &[Ray], out: &mut [Option<(f32, u32, f32, f32)>]) {
+        assert!(rays.len() <= 16 && out.len() == rays.len());
+        let mut valid = Valid16([0; 16]);
+        // SAFETY: RtcRayHit16 is plain numbers, for which all zeros is a valid value.
+        let mut p: RtcRayHit16 = unsafe { std::mem::zeroed() };
+        for (k, r) in rays.iter().enumerate() {
+            if !r.is_traceable() {
+                continue;
+            }
+            valid.0[k] = -1;
+            for a in 0..3 {
+                p.org[a][k] = r.origin[a];
+                p.dir[a][k] = r.dir[a];
+            }
+            (p.tnear[k], p.tfar[k], p.mask[k]) = (r.tmin, r.tmax, u32::MAX);
+            (p.geom_id[k], p.prim_id[k], p.inst_id[k]) = (INVALID_ID, INVALID_ID, INVALID_ID);
+        }
+        let mut context = IntersectContext { flags: CONTEXT_COHERENT, ..Self::context() };
+        // SAFETY: a committed scene, a valid context, 64-byte aligned mask and packet.
+        unsafe { rtcIntersect16(&valid, self.scene, &mut context, &mut p) };
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = (valid.0[k] != 0 && p.geom_id[k] != INVALID_ID).then(|| (p.tfar[k], p.prim_id[k], p.u[k], p.v[k]));
+        }
     }
 
     /// Whether anything blocks `r`.

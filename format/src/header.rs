@@ -58,7 +58,7 @@ const SECTION_LABELS: [&str; SECTION_COUNT] = [
 /// The rkyv settings the archive was written with, one byte each:
 /// endianness (1 = little), alignment (1 = aligned primitives), pointer width in bits,
 /// and the archive's alignment in bytes. A reader refuses other settings.
-pub const RKYV_SETTINGS: [u8; 4] = [1, 1, 32, ARCHIVE_ALIGN as u8];
+pub const RKYV_SETTINGS: [u8; 4] = [1, 1, 64, ARCHIVE_ALIGN as u8];
 
 /// The flags this build understands (none yet: every bit is reserved).
 pub const KNOWN_FLAGS: u32 = 0;

@@ -20,7 +20,8 @@ impl BakedScene {
     /// same archive bytes.
     ///
     /// # Errors
-    /// [`Error::Corrupt`] if rkyv cannot serialize the scene (arrays beyond 4 GiB).
+    /// [`Error::Corrupt`] if rkyv cannot serialize the scene (its relative pointers
+    /// are 64-bit, so no size this machine can hold is refused for its size).
     pub fn to_file_bytes(&self, bake_time_us: u64) -> Result<Vec<u8>> {
         let (header, payload) = self.archive(bake_time_us)?;
         let mut out = Vec::with_capacity(crate::header::HEADER_LEN + payload.len());

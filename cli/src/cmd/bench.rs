@@ -18,6 +18,11 @@ use crate::output::{mb, thousands};
 /// interleaved, and the ratio octrace / obvhs is printed: the median of the runs'
 /// ratios, each run timing octrace then obvhs on one thread back to back, which holds
 /// steadier than a ratio of medians on a shared machine.
+///
+/// In a build with the `embree` feature, Embree 3 (fast mode) joins on one thread:
+/// one ray a call (`rtcIntersect1`, `rtcOccluded1`) on every set, and 4 x 4 pixel
+/// packets (`rtcIntersect16`) on the primary rays; beside it octrace's one-ray calls
+/// (`Scene::intersect` / `Scene::occluded` once per ray), and the ratios.
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// A .oct scene, or a mesh to bake first.
@@ -31,7 +36,7 @@ pub(crate) struct Args {
     /// Timed runs per figure (at least 5).
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
-    /// Skip the obvhs comparison.
+    /// Skip the peers (obvhs; Embree too in a build with the `embree` feature).
     #[arg(long)]
     pub no_peer: bool,
     /// Trace with the Möller-Trumbore triangle test instead of the watertight one
@@ -126,6 +131,23 @@ struct SetResult {
     /// ray is occluded; what the GPU's answers are compared with.
     nearest: Vec<Option<Hit>>,
     occluded: Vec<bool>,
+    /// Embree and octrace's one-ray calls, when the build has Embree.
+    embree: Option<EmbreeFigures>,
+}
+
+/// One thread, interleaved with octrace's batch runs: Embree one ray a call, in
+/// packets (primary rays), and octrace's one-ray calls.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+struct EmbreeFigures {
+    embree_one_ray: Spread,
+    embree_packets: Option<Spread>,
+    octrace_one_ray: Spread,
+    /// Rays Embree finds hit (or occluded): the checksum's count, to compare.
+    embree_hits: usize,
+    /// octrace batch / Embree's best (packets where measured), median of the runs'.
+    ratio_batch: f64,
+    /// octrace one-ray calls / Embree one-ray calls, median of the runs'.
+    ratio_one_ray: f64,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -154,9 +176,17 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         tracer.intersect_batch(&primary, &mut hits);
         sets.push(("shadow", raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim)))), true));
     }
+    #[cfg(feature = "embree")]
+    let embree = (!args.no_peer).then(|| crate::embree::Embree::build(&view, false)).transpose()?;
     let mut results = Vec::new();
     for (name, rays, occlusion) in &sets {
-        results.push(measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?);
+        #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
+        let mut r = measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?;
+        #[cfg(feature = "embree")]
+        if let Some(e) = &embree {
+            r.embree = Some(embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs));
+        }
+        results.push(r);
     }
     let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &sets, &results, args.runs)?) } else { None };
     #[cfg(feature = "obvhs")]
@@ -226,7 +256,85 @@ fn measure(
         ratio,
         nearest: if occlusion { Vec::new() } else { hits },
         occluded: if occlusion { occluded } else { Vec::new() },
+        embree: None,
     })
+}
+
+/// Embree's figures on one set, and octrace's one-ray calls, `runs` times interleaved
+/// with octrace's batch: each run times octrace's batch, Embree one ray a call,
+/// Embree's packets (primary), and octrace one ray a call, back to back.
+#[cfg(feature = "embree")]
+fn embree_figures(
+    e: &crate::embree::Embree,
+    scene: &Scene,
+    name: &str,
+    rays: &[Ray],
+    occlusion: bool,
+    tracer: &Tracer<'_>,
+    runs: usize,
+) -> EmbreeFigures {
+    let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+    let timed = |f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        f();
+        mrays(t.elapsed())
+    };
+    // The primary set is the standard camera's 1024 x 1024 rays, row by row: 4 x 4
+    // pixel packets.
+    let packets: Option<Vec<[usize; 16]>> = (name == "primary" && rays.len() == 1 << 20).then(|| {
+        let tile = |tx: usize, ty: usize| std::array::from_fn(|k| (4 * ty + k / 4) * 1024 + 4 * tx + k % 4);
+        (0..256).flat_map(|ty| (0..256).map(move |tx| tile(tx, ty))).collect()
+    });
+    let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut hits = vec![None; rays.len()];
+    let mut occluded = vec![false; rays.len()];
+    let mut embree_hits = 0;
+    for _ in 0..runs {
+        batch.push(timed(&mut || {
+            if occlusion {
+                tracer.occluded_batch(rays, &mut occluded);
+            } else {
+                tracer.intersect_batch(rays, &mut hits);
+            }
+        }));
+        one.push(timed(&mut || {
+            embree_hits = if occlusion {
+                rays.iter().filter(|r| e.occluded(r)).count()
+            } else {
+                rays.iter().filter(|r| e.nearest(r).is_some()).count()
+            };
+        }));
+        if let Some(packets) = &packets {
+            let mut out = [None; 16];
+            packet.push(timed(&mut || {
+                let mut n = 0;
+                for p in packets {
+                    let group: [Ray; 16] = p.map(|i| rays[i]);
+                    e.nearest16(&group, &mut out);
+                    n += out.iter().flatten().count();
+                }
+                std::hint::black_box(n);
+            }));
+        }
+        ours.push(timed(&mut || {
+            let n = if occlusion {
+                rays.iter().filter(|r| scene.occluded(r)).count()
+            } else {
+                rays.iter().filter(|r| scene.intersect(r).is_some()).count()
+            };
+            std::hint::black_box(n);
+        }));
+    }
+    let best: Vec<f64> =
+        if packet.is_empty() { one.clone() } else { one.iter().zip(&packet).map(|(a, b)| a.max(*b)).collect() };
+    EmbreeFigures {
+        ratio_batch: Spread::of(batch.iter().zip(&best).map(|(o, e)| o / e).collect()).median,
+        ratio_one_ray: Spread::of(ours.iter().zip(&one).map(|(o, e)| o / e).collect()).median,
+        embree_one_ray: Spread::of(one),
+        embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
+        octrace_one_ray: Spread::of(ours),
+        embree_hits,
+    }
 }
 
 /// Rays that hit and the sum of their distances (`+ 0.0`: an empty sum is -0.0).
@@ -253,6 +361,7 @@ fn report(
                     "hits": r.hits, "sum_t": r.sum_t,
                     "obvhs_cwbvh_single": r.peer.map(|p| json!({ "mrays": p.0, "hits": p.1, "sum_t": p.2 })),
                     "ratio_single": r.ratio,
+                    "embree_3_fast_single": r.embree,
                 })
             })
             .collect();
@@ -309,6 +418,33 @@ fn report(
             check,
             peer_check
         );
+    }
+    if results.iter().any(|r| r.embree.is_some()) {
+        crate::out!(
+            "\nEmbree 3 (fast mode), 1 thread, the same runs:\n{:<11} {:>22} {:>22} {:>22} {:>22} {:>10} {:>10}",
+            "set",
+            "octrace batch",
+            "octrace 1-ray calls",
+            "Embree 1-ray calls",
+            "Embree 16-ray packets",
+            "batch/best",
+            "1-ray/1-ray"
+        );
+        for r in results {
+            let Some(e) = &r.embree else { continue };
+            crate::out!(
+                "{:<11} {:>22} {:>22} {:>22} {:>22} {:>9.2}x {:>9.2}x  (Embree {} {})",
+                r.name,
+                fmt(&r.single),
+                fmt(&e.octrace_one_ray),
+                fmt(&e.embree_one_ray),
+                e.embree_packets.as_ref().map_or("-".into(), fmt),
+                e.ratio_batch,
+                e.ratio_one_ray,
+                thousands(e.embree_hits as u64),
+                if r.name == "shadow" { "occluded" } else { "hits" }
+            );
+        }
     }
     if let Some(g) = gpu {
         crate::out!("{}", g.text());

@@ -172,3 +172,35 @@ fn an_image_declaring_far_more_pixels_than_its_bytes_hold_is_refused_before_deco
     assert!(note.contains("4096 x 4096 pixels, more than the"), "{note}");
     assert!(mesh.textures.is_empty() && mesh.texels.is_empty());
 }
+
+/// Found by fuzzing `load_gltf`: the gltf crate unwraps an image's `uri` (or, for an
+/// image in a buffer view, its `mimeType`), so an image with neither panicked inside
+/// it. Now one without either is an error naming it, and one in a buffer view without
+/// `mimeType` loads, its type read from its bytes.
+#[test]
+fn images_without_a_source_or_a_mime_type_are_an_error_or_repaired() {
+    let err = load_edited(
+        |t| textured("x.png")(t).replace(r#""images":[{"uri":"x.png"}]"#, r#""images":[{"name":"none"}]"#),
+        &[],
+    )
+    .unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, Error::Parse { ref element, .. } if element == "images[0]"), "{msg}");
+    assert!(msg.contains("neither a uri nor a bufferView"), "{msg}");
+    // The texture's PNG as a second buffer, in a buffer view of its own, no mimeType.
+    let png = std::fs::read(data("textured/leaf.png")).unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&textured("x.png")(std::fs::read_to_string(data("extensions.gltf")).unwrap())).unwrap();
+    let views = doc["bufferViews"].as_array().unwrap().len();
+    doc["buffers"].as_array_mut().unwrap().push(serde_json::json!({"uri": "leaf.bin", "byteLength": png.len()}));
+    doc["bufferViews"].as_array_mut().unwrap().push(serde_json::json!({"buffer": 1, "byteLength": png.len()}));
+    doc["images"] = serde_json::json!([{ "bufferView": views }]);
+    let text = doc.to_string();
+    let mesh = load_edited(|_| text.clone(), &[("leaf.bin", &png)]).unwrap();
+    assert!(
+        warned(&mesh, "image 0 has a bufferView but no mimeType; its type is read from its bytes"),
+        "{:?}",
+        mesh.warnings
+    );
+    assert_eq!((mesh.textures.len(), mesh.textures[0].width), (1, 64));
+}

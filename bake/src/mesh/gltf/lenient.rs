@@ -22,7 +22,8 @@ pub(super) const HONOURED_EXTENSIONS: [&str; 6] = [
 /// repairs made (each one a line in `warnings`).
 ///
 /// Repaired: a camera without `type` (taken from the projection object it has), a
-/// `byteStride` of 0 (meaning tightly packed, as when absent). Warned about once
+/// `byteStride` of 0 (meaning tightly packed, as when absent), an image in a buffer
+/// view without `mimeType` (its bytes say). Warned about once
 /// each: extensions used but not honoured ([`HONOURED_EXTENSIONS`]).
 ///
 /// # Errors
@@ -67,6 +68,20 @@ pub(super) fn document(
             if view.get("byteStride").and_then(Value::as_u64) == Some(0) {
                 view.remove("byteStride");
                 warn(warnings, format!("buffer view {i} has byteStride 0; taken as tightly packed"));
+            }
+        }
+    }
+    // The gltf crate unwraps an image's mimeType when it has a bufferView, and its uri
+    // otherwise: a missing one is repaired (octrace tells PNG from JPEG by their
+    // bytes) or refused here, not a panic there.
+    if let Some(images) = value.get_mut("images").and_then(Value::as_array_mut) {
+        for (i, image) in images.iter_mut().enumerate() {
+            let Some(image) = image.as_object_mut() else { continue };
+            if image.contains_key("bufferView") && !image.contains_key("mimeType") {
+                image.insert("mimeType".into(), Value::String("application/octet-stream".into()));
+                warn(warnings, format!("image {i} has a bufferView but no mimeType; its type is read from its bytes"));
+            } else if !image.contains_key("bufferView") && !image.contains_key("uri") {
+                return Err(parse_error(&format!("images[{i}]"), "has neither a uri nor a bufferView".into()));
             }
         }
     }
