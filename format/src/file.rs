@@ -218,6 +218,7 @@ impl SceneFile {
     }
 
     /// The archive's bytes.
+    #[inline]
     pub fn payload(&self) -> &[u8] {
         payload_of(&self.storage)
     }
@@ -228,11 +229,13 @@ impl SceneFile {
     }
 
     /// The scene's arrays, borrowed.
+    #[inline]
     pub fn view(&self) -> SceneView<'_> {
         view_of(self.archived(), &self.shading)
     }
 
     /// The archive's root.
+    #[inline]
     fn archived(&self) -> &ArchivedBakedScene {
         // SAFETY: every constructor ran `rkyv::access` (bytecheck, in `structured`) on
         // these exact bytes, which do not change (a map's caller promised as much). The
@@ -329,7 +332,9 @@ fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
     Ok((map, header))
 }
 
-/// Builds a view with native-typed slices over an archive.
+/// Builds a view with native-typed slices over an archive (inlined: a view is a few
+/// hundred bytes, and a call per ray returning it by value was mostly `memmove`).
+#[inline]
 pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> SceneView<'a> {
     let v3 = |x: &[rkyv::rend::f32_le; 3]| [x[0].to_native(), x[1].to_native(), x[2].to_native()];
     SceneView {
@@ -386,6 +391,7 @@ fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {
 }
 
 /// The archive's bytes: past the header of a map, or the copy in memory.
+#[inline]
 fn payload_of(storage: &Storage) -> &[u8] {
     match storage {
         Storage::Mapped(map) => &map[HEADER_LEN..],

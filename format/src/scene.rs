@@ -102,6 +102,7 @@ impl BakedScene {
     }
 
     /// A borrowed view of the arrays, the same type the tracers read from a file.
+    #[inline]
     pub fn view(&self) -> crate::SceneView<'_> {
         crate::SceneView {
             params: self.params,

@@ -32,9 +32,20 @@ enum Source {
 ///   validated earlier by the same pipeline, [`Scene::map_unchecked`] (microseconds);
 /// * zstd-compressed files (`.oct.zst`) cannot be mapped: [`Scene::open`] reads them.
 pub struct Scene {
+    /// The tracer the one-ray calls use, made on the first: it borrows from `*inner`.
+    /// Declared first, so that it is dropped before what it borrows.
+    shared: std::sync::OnceLock<Tracer<'static>>,
+    /// Boxed, so that what the shared tracer borrows stays put when the scene moves.
+    inner: Box<Inner>,
+}
+
+/// What a scene owns.
+struct Inner {
     source: Source,
     /// Point location's top levels, built on the first tracer.
     grid: std::sync::OnceLock<LocateGrid>,
+    /// The tracers' frame, computed once.
+    frame: std::sync::OnceLock<crate::cpu::TreeFrame>,
 }
 
 impl std::fmt::Debug for Scene {
@@ -114,12 +125,14 @@ impl Scene {
     }
 
     fn with(source: Source) -> Scene {
-        Scene { source, grid: std::sync::OnceLock::new() }
+        let inner = Inner { source, grid: std::sync::OnceLock::new(), frame: std::sync::OnceLock::new() };
+        Scene { shared: std::sync::OnceLock::new(), inner: Box::new(inner) }
     }
 
     /// The scene's arrays.
+    #[inline]
     pub fn view(&self) -> SceneView<'_> {
-        match &self.source {
+        match &self.inner.source {
             Source::File(f) => f.view(),
             Source::Baked(b) => b.view(),
         }
@@ -127,7 +140,7 @@ impl Scene {
 
     /// The scene's materials, lights, cameras and effects.
     pub fn shading(&self) -> &octrace_format::Shading {
-        match &self.source {
+        match &self.inner.source {
             Source::File(f) => f.shading(),
             Source::Baked(b) => &b.shading,
         }
@@ -135,7 +148,7 @@ impl Scene {
 
     /// The file behind the scene, when it came from one.
     pub fn file(&self) -> Option<&SceneFile> {
-        match &self.source {
+        match &self.inner.source {
             Source::File(f) => Some(f),
             Source::Baked(_) => None,
         }
@@ -143,20 +156,35 @@ impl Scene {
 
     /// A CPU tracer over the scene; build one per batch of rays. (The first one also
     /// builds the scene's point-location grid, a few milliseconds.)
+    #[inline]
     pub fn tracer(&self) -> Tracer<'_> {
         let view = self.view();
-        let grid = self.grid.get_or_init(|| LocateGrid::build(&view));
-        Tracer::new(view).with_locate_grid(grid)
+        let grid = self.inner.grid.get_or_init(|| LocateGrid::build(&view));
+        let frame = *self.inner.frame.get_or_init(|| crate::cpu::TreeFrame::of(&view));
+        Tracer::with_frame(view, frame).with_locate_grid(grid)
+    }
+
+    /// The scene's own tracer, made once: the one-ray calls pay no setup.
+    fn shared_tracer(&self) -> &Tracer<'_> {
+        self.shared.get_or_init(|| {
+            let tracer = self.tracer();
+            // SAFETY: the tracer borrows only from `*self.inner` (the source's arrays
+            // and shading data, the grid): heap memory (or a map) owned by the box,
+            // which no method changes and which does not move when the scene does.
+            // `shared` is dropped before `inner` (field order), and it is only handed
+            // out as `&Tracer<'_>` tied to `&self`, so no borrow outlives the data.
+            unsafe { std::mem::transmute::<Tracer<'_>, Tracer<'static>>(tracer) }
+        })
     }
 
     /// The nearest hit of `ray` in `[tmin, tmax]`.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.tracer().intersect(ray)
+        self.shared_tracer().intersect(ray)
     }
 
     /// Whether anything lies on `ray` in `[tmin, tmax]`.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.tracer().occluded(ray)
+        self.shared_tracer().occluded(ray)
     }
 
     /// Nearest hits of many rays, on all cores: each core walks sixteen rays at a time

@@ -91,14 +91,12 @@ fn trace_cpu(scene: &octrace_runtime::Scene, rays: &[Ray], args: &Args) -> anyho
     let tracer = scene.tracer();
     crate::with_threads(args.threads, || {
         let t = Instant::now();
-        let hits: Vec<Option<Hit>> = if args.occluded {
-            use rayon::prelude::*;
-            rays.par_iter().map(|r| tracer.occluder(r)).collect()
+        let mut hits = vec![None; rays.len()];
+        if args.occluded {
+            tracer.par_occluder_batch(rays, &mut hits);
         } else {
-            let mut out = vec![None; rays.len()];
-            tracer.par_intersect_batch(rays, &mut out);
-            out
-        };
+            tracer.par_intersect_batch(rays, &mut hits);
+        }
         (hits, t.elapsed().as_secs_f64())
     })
 }

@@ -8,7 +8,7 @@ mod triangle;
 pub mod watertight;
 
 pub(crate) use traverse::{box_slack, clip, exit_along_moving_axes, point_at, BOX_T_SLACK};
-pub use traverse::{mesh_box, root_corners, ExitTest, LocateGrid, Tracer, TriangleTest, WalkStats};
+pub use traverse::{mesh_box, root_corners, ExitTest, LocateGrid, Tracer, TreeFrame, TriangleTest, WalkStats};
 
 use rayon::prelude::*;
 
@@ -169,6 +169,21 @@ impl Tracer<'_> {
     pub fn par_occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
         rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.occluded_batch(r, o));
+    }
+
+    /// For each ray of a batch, a hit that occludes it ([`Tracer::occluder`]'s, the
+    /// same triangle and distance), or `None`: the batch walk of
+    /// [`Tracer::occluded_batch`], keeping the hit.
+    pub fn occluder_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        let done = |i: usize, h: Option<Hit>| out[i] = h;
+        traverse::with_tests!(self; true; Self::interleaved; self, rays, done);
+    }
+
+    /// [`Tracer::occluder_batch`] on all threads of the current rayon pool.
+    pub fn par_occluder_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.occluder_batch(r, o));
     }
 }
 

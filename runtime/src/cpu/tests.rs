@@ -93,11 +93,14 @@ fn the_simd_walk_equals_the_scalar_walk_bit_for_bit() {
             t.intersect_batch(&rays, &mut batch);
             let mut occluded = vec![false; rays.len()];
             t.occluded_batch(&rays, &mut occluded);
+            let mut occluders = vec![None; rays.len()];
+            t.occluder_batch(&rays, &mut occluders);
             for (i, r) in rays.iter().enumerate() {
                 let scalar = t.intersect_scalar(r);
                 assert_eq!(t.intersect(r), scalar, "ray {r:?}");
                 assert_eq!(batch[i], scalar, "batch, ray {r:?}");
                 assert_eq!(occluded[i], t.occluded_scalar(r), "occluded, ray {r:?}");
+                assert_eq!(occluders[i], t.occluder(r), "occluder, ray {r:?}");
             }
         }
     }

@@ -37,6 +37,24 @@ use crate::ray::{Hit, Ray};
 #[derive(Clone, Debug)]
 pub struct Tracer<'a> {
     view: SceneView<'a>,
+    frame: TreeFrame,
+    test: TriangleTest,
+    exit: ExitTest,
+    /// The top levels of point location as a grid, when the scene has one.
+    grid: Option<&'a LocateGrid>,
+    /// Whether the walks run the code compiled for x86-64-v3 (where the processor
+    /// has it).
+    v3: bool,
+    /// Whether batch calls may step eight walks at once (with `v3`).
+    lanes: bool,
+}
+
+/// What a tracer derives from a scene's parameters before it walks: the root cube and
+/// mesh box, the cell edge at each level, the step bound, whether the cube map fits.
+/// Computed once a scene ([`crate::Scene`] keeps it), so a tracer costs nothing to
+/// make for a single ray.
+#[derive(Clone, Copy, Debug)]
+pub struct TreeFrame {
     root_lo: [f32; 3],
     root_hi: [f32; 3],
     /// The mesh's box, enlarged by [`box_slack`]: a ray that misses it misses every
@@ -52,15 +70,41 @@ pub struct Tracer<'a> {
     /// The cube map's level, when the map fits the tree (always, in a valid file; a
     /// hostile one on the trusted path enters from the root instead).
     cube_level: Option<u32>,
-    test: TriangleTest,
-    exit: ExitTest,
-    /// The top levels of point location as a grid, when the scene has one.
-    grid: Option<&'a LocateGrid>,
-    /// Whether the walks run the code compiled for x86-64-v3 (where the processor
-    /// has it).
+    /// Whether the processor has x86-64-v3 (asked once, not per tracer).
     v3: bool,
-    /// Whether batch calls may step eight walks at once (with `v3`).
-    lanes: bool,
+}
+
+impl TreeFrame {
+    /// The frame of `view`'s tree.
+    pub fn of(view: &SceneView<'_>) -> TreeFrame {
+        let b = view.bounds;
+        // The format's own limit: a file that claims more (on the trusted path) is
+        // walked as if it said 20, so no shift overflows and the step bound holds.
+        let max_depth = view.params.max_depth.min(MAX_LEVEL);
+        let (root_lo, root_hi) = root_corners(view);
+        let (box_lo, box_hi) = mesh_box(view);
+        TreeFrame {
+            root_lo,
+            root_hi,
+            box_lo,
+            box_hi,
+            grid_scale: (1u64 << max_depth) as f64 / b.root_size as f64,
+            sizes: std::array::from_fn(|l| (b.root_size as f64 / (1u64 << l) as f64) as f32),
+            max_depth,
+            // A line crosses at most 3 * 2^depth planes of the finest grid, and each
+            // step crosses one (or sits on an edge or corner and crosses one at no
+            // distance, at most twice more): 3x that, plus slack for tiny trees. And a
+            // line enters a convex cell once, so a walk visits no leaf more than three
+            // times: 9x the leaves bounds it too, and the smaller bound wins (a small
+            // hostile file claiming a deep tree ends its cycles sooner).
+            max_steps: (9 * (1u32 << max_depth) + 64).min(9 * view.leaf_count().min(1 << 26) as u32 + 64),
+            cube_level: Some(view.params.cube_level).filter(|&level| {
+                let res = 1usize << level.min(MAX_LEVEL);
+                level <= max_depth && view.cube_map.len() == 6 * res * res
+            }),
+            v3: wider_simd_available(),
+        }
+    }
 }
 
 /// The ray/triangle test a tracer uses.
@@ -251,36 +295,21 @@ impl RayWalk {
 impl<'a> Tracer<'a> {
     /// Prepares a tracer for a validated view.
     pub fn new(view: SceneView<'a>) -> Tracer<'a> {
-        let b = view.bounds;
-        // The format's own limit: a file that claims more (on the trusted path) is
-        // walked as if it said 20, so no shift overflows and the step bound holds.
-        let max_depth = view.params.max_depth.min(MAX_LEVEL);
-        let (root_lo, root_hi) = root_corners(&view);
-        let (box_lo, box_hi) = mesh_box(&view);
+        let frame = TreeFrame::of(&view);
+        Tracer::with_frame(view, frame)
+    }
+
+    /// A tracer over `view` with its frame computed already ([`TreeFrame::of`] the
+    /// same view): what [`crate::Scene`]'s one-ray calls use, at no setup cost.
+    #[inline]
+    pub fn with_frame(view: SceneView<'a>, frame: TreeFrame) -> Tracer<'a> {
         Tracer {
-            root_lo,
-            root_hi,
-            box_lo,
-            box_hi,
-            grid_scale: (1u64 << max_depth) as f64 / b.root_size as f64,
-            sizes: std::array::from_fn(|l| (b.root_size as f64 / (1u64 << l) as f64) as f32),
-            max_depth,
-            // A line crosses at most 3 * 2^depth planes of the finest grid, and each
-            // step crosses one (or sits on an edge or corner and crosses one at no
-            // distance, at most twice more): 3x that, plus slack for tiny trees. And a
-            // line enters a convex cell once, so a walk visits no leaf more than three
-            // times: 9x the leaves bounds it too, and the smaller bound wins (a small
-            // hostile file claiming a deep tree ends its cycles sooner).
-            max_steps: (9 * (1u32 << max_depth) + 64).min(9 * view.leaf_count().min(1 << 26) as u32 + 64),
-            cube_level: Some(view.params.cube_level).filter(|&level| {
-                let res = 1usize << level.min(MAX_LEVEL);
-                level <= max_depth && view.cube_map.len() == 6 * res * res
-            }),
+            frame,
             view,
             test: TriangleTest::default(),
             exit: ExitTest::default(),
             grid: None,
-            v3: wider_simd_available(),
+            v3: frame.v3,
             lanes: true,
         }
     }
@@ -314,6 +343,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// The same tracer locating points with `grid` (built for this scene).
+    #[inline]
     pub fn with_locate_grid(mut self, grid: &'a LocateGrid) -> Self {
         self.grid = Some(grid);
         self
@@ -365,7 +395,7 @@ impl<'a> Tracer<'a> {
 
     /// The most leaves one walk may visit; see the module docs.
     pub fn max_steps(&self) -> u32 {
-        self.max_steps
+        self.frame.max_steps
     }
 
     /// The nearest hit in `[tmin, tmax]`, if any.
@@ -420,20 +450,20 @@ impl<'a> Tracer<'a> {
 
     /// The root cube's low corner.
     pub(crate) fn root_lo(&self) -> [f32; 3] {
-        self.root_lo
+        self.frame.root_lo
     }
 
     /// Cell edges by level (32 of them: a level masked to five bits indexes it).
     #[inline(always)]
     pub(crate) fn cell_sizes(&self) -> &[f32; 32] {
-        &self.sizes
+        &self.frame.sizes
     }
 
     /// The edge of a cell at `level` (masked into the table: a hostile level cannot
     /// index out of bounds).
     #[inline(always)]
     pub(crate) fn cell_size(&self, level: u32) -> f32 {
-        self.sizes[level as usize & 31]
+        self.frame.sizes[level as usize & 31]
     }
 
     /// Prepares a ray's walk: clips it to the root cube and finds its first leaf, or
@@ -445,11 +475,11 @@ impl<'a> Tracer<'a> {
         }
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
-        let (t_enter, t_leave, entry_axis) = clip(o, d, self.root_lo, self.root_hi)?;
+        let (t_enter, t_leave, entry_axis) = clip(o, d, self.frame.root_lo, self.frame.root_hi)?;
         // Beyond the (enlarged) mesh box there is nothing to hit: a ray that misses it
         // costs nothing more, and a walk stops where the ray leaves it (a little later:
         // a relative slack for the rounding of distances far from the origin).
-        let (box_enter, box_leave, _) = clip(o, d, self.box_lo, self.box_hi)?;
+        let (box_enter, box_leave, _) = clip(o, d, self.frame.box_lo, self.frame.box_hi)?;
         let t_start = t_enter.max(ray.tmin);
         let t_stop = ray.tmax.min(box_leave + box_leave.abs() * BOX_T_SLACK);
         if t_start > t_leave.min(ray.tmax) || t_start.max(box_enter) > t_stop {
@@ -499,7 +529,7 @@ impl<'a> Tracer<'a> {
         let v = &self.view;
         stats.leaves += 1;
         *steps += 1;
-        if *steps > self.max_steps {
+        if *steps > self.frame.max_steps {
             stats.stopped_at_bound = true;
             return None;
         }
@@ -600,7 +630,7 @@ impl<'a> Tracer<'a> {
     #[inline(always)]
     pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut WalkStats) -> bool {
         let v = &self.view;
-        let lo = self.root_lo;
+        let lo = self.frame.root_lo;
         let a = w.address as usize;
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
         let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d } };
@@ -613,7 +643,7 @@ impl<'a> Tracer<'a> {
         //    integer times a power of two is exact, and one rounding follows), then
         //    the exit face from the signs of three Plücker products.
         let (cell, level) = (w.cell, w.level);
-        let size = self.sizes[level as usize & 31];
+        let size = self.frame.sizes[level as usize & 31];
         let corner = |k: usize| (lo[k] + (cell[k] + w.high[k]) as f32 * size) - w.o[k];
         // (Closures called three times: `[0, 1, 2].map` is not inlined in this loop.)
         let off = [corner(0), corner(1), corner(2)];
@@ -773,11 +803,12 @@ impl Tracer<'_> {
     /// Finest-grid coordinates of a point, clamped into the root.
     #[inline(always)]
     fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
-        let last = ((1u64 << self.max_depth) - 1) as f64;
+        let last = ((1u64 << self.frame.max_depth) - 1) as f64;
         // Clamped to [0, last] first, so truncation is the floor; NaN clamps to 0.
         // Rounding can only move a point to a neighbouring cell, which the bake
         // margin covers.
-        let q = |a: usize| ((p[a] as f64 - self.root_lo[a] as f64) * self.grid_scale).max(0.0).min(last) as u32;
+        let q =
+            |a: usize| ((p[a] as f64 - self.frame.root_lo[a] as f64) * self.frame.grid_scale).max(0.0).min(last) as u32;
         [q(0), q(1), q(2)]
     }
 
@@ -793,7 +824,7 @@ impl Tracer<'_> {
         let q = self.grid_coords(p);
         match self.grid {
             Some(grid) => {
-                let (word, level) = grid.entry(q, self.max_depth);
+                let (word, level) = grid.entry(q, self.frame.max_depth);
                 self.descend(word, level, q)
             }
             None => self.descend(self.view.root, 0, q),
@@ -804,8 +835,8 @@ impl Tracer<'_> {
     /// `q`: its address, level and cell.
     #[inline(always)]
     fn descend(&self, word: u32, level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
-        let (address, level) = descend_to(&self.view, word, level, q, self.max_depth, self.max_depth);
-        let shift = self.max_depth.saturating_sub(level).min(31);
+        let (address, level) = descend_to(&self.view, word, level, q, self.frame.max_depth, self.frame.max_depth);
+        let shift = self.frame.max_depth.saturating_sub(level).min(31);
         (address, level, q.map(|c| c >> shift))
     }
 
@@ -815,14 +846,14 @@ impl Tracer<'_> {
     fn enter_through_cube_map(&self, o: [f32; 3], d: [f32; 3], t: f32, axis: usize) -> (u32, u32, [u32; 3]) {
         let mut q = self.grid_coords(point_at(o, d, t));
         let high = d[axis] < 0.0;
-        q[axis] = if high { (1u32 << self.max_depth) - 1 } else { 0 };
+        q[axis] = if high { (1u32 << self.frame.max_depth) - 1 } else { 0 };
         let face = 2 * axis + high as usize;
-        let Some(level) = self.cube_level else {
+        let Some(level) = self.frame.cube_level else {
             return self.descend(self.view.root, 0, q);
         };
         let res = 1usize << level;
         let (u, v) = other_axes(axis);
-        let shift = self.max_depth - level;
+        let shift = self.frame.max_depth - level;
         let texel = texel_index(face, res, (q[u] >> shift) as usize, (q[v] >> shift) as usize);
         let word = self.view.cube_map[texel];
         match NodeRef::decode(word) {
@@ -841,7 +872,7 @@ impl Tracer<'_> {
                 // (rounding of the planes moves an edge by far less than a factor 2).
                 let ratio = self.view.bounds.root_size as f64 / edge * std::f64::consts::SQRT_2;
                 let leaf_level = (((ratio.to_bits() >> 52) & 0x7FF) as i64 - 1023).clamp(0, level as i64) as u32;
-                let shift = self.max_depth - leaf_level;
+                let shift = self.frame.max_depth - leaf_level;
                 (address, leaf_level, [q[0] >> shift, q[1] >> shift, q[2] >> shift])
             }
         }
