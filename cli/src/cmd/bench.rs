@@ -379,14 +379,14 @@ fn report(
         return Ok(());
     }
     crate::out!(
-        "{}: {}{}, open {:.1} ms validated / {} header only; {} triangle test; {} threads, median (min-max) of {} runs",
+        "{}: {}{}, open {:.1} ms validated / {} header only; {} triangle test; {}, median (min-max) of {} runs",
         crate::show(&args.input),
         mb(l.bytes),
         l.bake.map_or(String::new(), |b| format!(", baked in {:.2} s", b.as_secs_f64())),
         l.open_validated.as_secs_f64() * 1e3,
         l.open_trusted.map_or("n/a (compressed)".into(), |d| format!("{:.3} ms", d.as_secs_f64() * 1e3)),
         if args.moller_trumbore { "Möller-Trumbore" } else { "watertight" },
-        threads,
+        crate::output::counted(threads as u64, "thread"),
         args.runs
     );
     if let Some(b) = peer_build {

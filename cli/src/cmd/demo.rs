@@ -79,10 +79,10 @@ fn effects(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::
     bar.finish();
     radiance.to_image().write_png(output)?;
     crate::out!(
-        "rendered {} (800 x 600, every effect, {} soft-shadow samples) in {secs:.2} s on {} threads: {} rays",
+        "rendered {} (800 x 600, every effect, {} soft-shadow samples) in {secs:.2} s on {}: {} rays",
         crate::show(output),
         options.soft_samples,
-        rayon::current_num_threads(),
+        crate::output::counted(rayon::current_num_threads() as u64, "thread"),
         thousands(counts.total())
     );
     for kind in RayKind::ALL {
@@ -123,10 +123,10 @@ fn bunny(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::Re
     tracer.par_intersect_batch(&rays, &mut hits);
     let all = t.elapsed().as_secs_f64();
     crate::out!(
-        "primary rays (1024 x 1024, shared/bench/RAYS.md): {:.2} Mrays/s on one thread, {:.2} Mrays/s on {} threads; {} hits",
+        "primary rays (1024 x 1024, shared/bench/RAYS.md): {:.2} Mrays/s on one thread, {:.2} Mrays/s on {}; {} hits",
         rays.len() as f64 / best / 1e6,
         rays.len() as f64 / all / 1e6,
-        rayon::current_num_threads(),
+        crate::output::counted(rayon::current_num_threads() as u64, "thread"),
         thousands(hits.iter().flatten().count() as u64)
     );
     Ok(())

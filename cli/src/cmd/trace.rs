@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use octrace_runtime::{Hit, Ray};
 
-use crate::output::thousands;
+use crate::output::{counted, thousands};
 
 /// `octrace trace`'s arguments; the formats are in its long help.
 #[derive(clap::Args, Debug)]
@@ -65,7 +65,14 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         (hits, timings.kernel.as_secs_f64(), format!("kernel only, {}", gpu.describe()))
     } else {
         let (hits, seconds) = trace_cpu(&scene, &rays, &args)?;
-        (hits, seconds, format!("tracing only, {} threads", args.threads.unwrap_or_else(rayon::current_num_threads)))
+        (
+            hits,
+            seconds,
+            format!(
+                "tracing only, {}",
+                counted(args.threads.unwrap_or_else(rayon::current_num_threads) as u64, "thread")
+            ),
+        )
     };
     let mut out = Vec::with_capacity(8 * rays.len());
     for (r, h) in rays.iter().zip(&hits) {
