@@ -94,6 +94,21 @@ pub enum Error {
         /// Triangles found.
         count: u64,
     },
+    /// The octree the mesh needs does not fit the format's 32-bit indices: leaf
+    /// records addressed below 2^31 words (the top bit marks internal nodes),
+    /// triangle references counted in 32 bits. Found before the arrays are laid out.
+    #[error(
+        "the octree needs {needed} {what}; the format holds at most {limit} (use a larger --leaf-size or a smaller \
+         --max-depth, or split the mesh)"
+    )]
+    Limit {
+        /// What overflows: "words of leaf records", "triangle references".
+        what: &'static str,
+        /// How many the octree needs.
+        needed: u64,
+        /// The format's limit.
+        limit: u64,
+    },
     /// The scene's size or position is beyond what the tracer's `f32` arithmetic
     /// serves: an extent below `2^-60` or a size or coordinate above `2^60`
     /// (`octree::MIN_ROOT_EDGE`, `octree::MAX_COORDINATE`). Rays would leak or miss.

@@ -131,8 +131,13 @@ pub(crate) fn arrays(
     root_lo: [f32; 3],
     root_size: f32,
     cube_level: u32,
-) -> Arrays {
+) -> crate::error::Result<Arrays> {
     let leaves = flat.leaf_cells.len();
+    let references: u64 = flat.leaf_tris.iter().map(|t| t.len() as u64).sum();
+    if references > u64::from(u32::MAX) {
+        let limit = u64::from(u32::MAX);
+        return Err(crate::Error::Limit { what: "triangle references", needed: references, limit });
+    }
     // Records with links by ordinal first, in chunks (one allocation each): `nCount`
     // then the links. Addresses are known once every record's length is.
     const CHUNK: usize = 4096;
@@ -150,6 +155,13 @@ pub(crate) fn arrays(
             out
         })
         .collect();
+    // Leaf addresses are words below the internal-node bit of a node reference.
+    let words: u64 =
+        chunks.iter().map(|c| c.len() as u64).sum::<u64>() + (LEAF_HEADER_WORDS as u64 - 1) * leaves as u64;
+    if words > u64::from(octrace_format::layout::INTERNAL_BIT) {
+        let limit = u64::from(octrace_format::layout::INTERNAL_BIT);
+        return Err(crate::Error::Limit { what: "words of leaf records", needed: words, limit });
+    }
     let mut address = Vec::with_capacity(leaves);
     let mut next = 0u32;
     for chunk in &chunks {
@@ -206,5 +218,5 @@ pub(crate) fn arrays(
             encode(flat.locate((cube_level, cell)))
         })
         .collect();
-    Arrays { octree, tri_refs, tri_order, boxes, cube_map, nodes, root: encode(flat.root) }
+    Ok(Arrays { octree, tri_refs, tri_order, boxes, cube_map, nodes, root: encode(flat.root) })
 }

@@ -170,7 +170,7 @@ pub fn bake_with_progress(
     progress(BakeStage::Link);
     let flat = FlatTree::new(root);
     let cube = cube_level(flat.leaf_cells.len(), resolved.max_depth);
-    let arrays = flatten::arrays(&flat, kept.len(), root_lo, root_size, cube);
+    let arrays = flatten::arrays(&flat, kept.len(), root_lo, root_size, cube)?;
     debug_assert_eq!(arrays.tri_order.len(), kept.len(), "every triangle lies in some leaf");
     let triangles = arrays.tri_order.iter().flat_map(|&t| kept[t as usize].concat()).collect();
     let triangle_ids: Vec<u32> = arrays.tri_order.iter().map(|&t| ids[t as usize]).collect();
