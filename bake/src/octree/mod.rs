@@ -157,11 +157,13 @@ pub fn bake_with_progress(
     progress: &(dyn Fn(BakeStage) + Sync),
 ) -> Result<BakedScene> {
     progress(BakeStage::Prepare);
-    let Prepared { lo, hi, ids, kept, root_lo, root_size, resolved } = prepare(mesh, params)?;
-    let builder = builder(&kept, root_lo, root_size, &resolved);
+    let Prepared { lo, hi, ids, root_lo, root_size, resolved } = prepare(mesh, params)?;
+    // The build reads the mesh's own triangles by input index: no copy of them.
+    let builder = builder(&mesh.triangles, root_lo, root_size, &resolved);
+    let kept = ids.len();
 
     progress(BakeStage::Build);
-    let mut root: Node = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
+    let mut root: Node = builder.build((0, [0; 3]), ids);
     let leaves_before_balance = root.leaf_count() as u64;
 
     progress(BakeStage::Balance);
@@ -170,10 +172,12 @@ pub fn bake_with_progress(
     progress(BakeStage::Link);
     let flat = FlatTree::new(root);
     let cube = cube_level(flat.leaf_cells.len(), resolved.max_depth);
-    let arrays = flatten::arrays(&flat, kept.len(), root_lo, root_size, cube)?;
-    debug_assert_eq!(arrays.tri_order.len(), kept.len(), "every triangle lies in some leaf");
-    let triangles = arrays.tri_order.iter().flat_map(|&t| kept[t as usize].concat()).collect();
-    let triangle_ids: Vec<u32> = arrays.tri_order.iter().map(|&t| ids[t as usize]).collect();
+    let arrays = flatten::arrays(&flat, mesh.triangles.len(), root_lo, root_size, cube)?;
+    drop(flat);
+    debug_assert_eq!(arrays.tri_order.len(), kept, "every triangle lies in some leaf");
+    let triangles = arrays.tri_order.iter().flat_map(|&t| mesh.triangles[t as usize].concat()).collect();
+    // The stored order, as input indices.
+    let triangle_ids: Vec<u32> = arrays.tri_order;
     // Per-triangle attributes follow the stored order, when the mesh has them.
     fn stored<T: Copy, U>(attr: &[T], ids: &[u32], f: impl Fn(T) -> U) -> Vec<U> {
         if attr.is_empty() {
@@ -194,7 +198,7 @@ pub fn bake_with_progress(
         cameras: mesh.cameras.clone(),
         textures: mesh.textures.clone(),
         parts: mesh.parts.clone(),
-        effects: crate::effects::decide(mesh, &ids),
+        effects: crate::effects::decide(mesh, &triangle_ids),
     };
     Ok(BakedScene {
         params: BakeParams {
@@ -206,7 +210,7 @@ pub fn bake_with_progress(
         bounds: Bounds { mesh_lo: lo, mesh_hi: hi, root_lo, root_size },
         stats: BakeStats {
             input_triangles: mesh.triangles.len() as u64,
-            degenerate_triangles: (mesh.triangles.len() - kept.len()) as u64,
+            degenerate_triangles: (mesh.triangles.len() - kept) as u64,
             leaves_before_balance,
         },
         octree: arrays.octree,
@@ -231,9 +235,8 @@ struct Prepared {
     /// The mesh's bounds.
     lo: [f32; 3],
     hi: [f32; 3],
-    /// Input index of each kept (non-degenerate) triangle, and the triangles.
+    /// Input index of each kept (non-degenerate) triangle.
     ids: Vec<u32>,
-    kept: Vec<[[f32; 3]; 3]>,
     root_lo: [f32; 3],
     root_size: f32,
     resolved: ResolvedParams,
@@ -260,11 +263,10 @@ fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     }
     let ids: Vec<u32> =
         (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
-    let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
     let (root_lo, root_size) = root_cube(lo, hi)?;
-    let mut resolved = params.resolve(kept.len());
+    let mut resolved = params.resolve(ids.len());
     resolved.max_depth = resolved.max_depth.min(precision_depth(root_lo, root_size));
-    Ok(Prepared { lo, hi, ids, kept, root_lo, root_size, resolved })
+    Ok(Prepared { lo, hi, ids, root_lo, root_size, resolved })
 }
 
 fn builder<'a>(kept: &'a [[[f32; 3]; 3]], root_lo: [f32; 3], root_size: f32, resolved: &ResolvedParams) -> Builder<'a> {
@@ -315,7 +317,8 @@ pub struct Unbalanced {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn build_unbalanced(mesh: &Mesh, params: &BuildParams) -> Result<Unbalanced> {
-    let Prepared { ids, kept, root_lo, root_size, resolved, .. } = prepare(mesh, params)?;
+    let Prepared { ids, root_lo, root_size, resolved, .. } = prepare(mesh, params)?;
+    let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
     let builder = builder(&kept, root_lo, root_size, &resolved);
     let root = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
     let mut leaves = Vec::with_capacity(root.leaf_count());

@@ -30,16 +30,18 @@ pub(super) const HONOURED_EXTENSIONS: [&str; 6] = [
 /// [`Error::Parse`] for JSON that does not parse (with its line and column), a
 /// document that does not fit glTF's schema (with the JSON path of the element), or
 /// an extension in `extensionsRequired` octrace cannot honour (naming it).
-pub(super) fn document(
-    bytes: &[u8],
+pub(super) fn document<'a>(
+    bytes: &'a [u8],
     path: &Path,
     warnings: &mut Vec<String>,
-) -> Result<(gltf::json::Root, Option<Vec<u8>>)> {
+) -> Result<(gltf::json::Root, Option<super::Buffer<'a>>)> {
     let parse_error =
         |element: &str, message: String| Error::Parse { path: path.into(), element: element.into(), message };
     let (json, blob) = if bytes.starts_with(b"glTF") {
         let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| parse_error("GLB container", e.to_string()))?;
-        (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
+        // The binary chunk stays borrowed from the file's bytes: no copy of what can
+        // be most of a big file.
+        (glb.json.into_owned(), glb.bin)
     } else {
         (bytes.to_vec(), None)
     };

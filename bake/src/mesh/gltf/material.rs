@@ -42,7 +42,7 @@ pub(super) struct Materials<'a> {
     pub path: &'a Path,
     pub base: Option<&'a Path>,
     pub options: &'a LoadOptions,
-    pub buffers: &'a [gltf::buffer::Data],
+    pub buffers: &'a [super::Buffer<'a>],
     /// Textures already loaded: (image, sampler) to the index in `mesh.textures`, or
     /// `None` when the image could not be used.
     pub loaded: HashMap<(usize, Option<usize>), Option<u32>>,
@@ -173,7 +173,7 @@ impl Materials<'_> {
     fn image_bytes(&self, image: &gltf::Image<'_>, mesh: &mut Mesh) -> std::result::Result<Vec<u8>, String> {
         match image.source() {
             gltf::image::Source::View { view, .. } => {
-                let buffer = self.buffers.get(view.buffer().index()).map_or(&[][..], |d| &d.0[..]);
+                let buffer = self.buffers.get(view.buffer().index()).map_or(&[][..], |d| &d[..]);
                 let range = view.offset()..view.offset().saturating_add(view.length());
                 buffer
                     .get(range)

@@ -15,6 +15,10 @@ use super::refs::{self, LoadOptions};
 use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 use material::UvMap;
+use std::borrow::Cow;
+
+/// A buffer's bytes: borrowed from the file for a GLB's binary chunk, else owned.
+pub(super) type Buffer<'a> = Cow<'a, [u8]>;
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
     // The gltf crate (gltf-json 1.4) indexes arrays with unchecked indices while it
@@ -76,7 +80,7 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         return Err(Error::EmptyScene { path: path.into() });
     };
-    let input_bytes = bytes.len() + buffers.iter().map(|b| b.0.len()).sum::<usize>();
+    let input_bytes = bytes.len() + buffers.iter().map(|b| b.len()).sum::<usize>();
     let mut mesh = Mesh { sources, warnings, ..Mesh::default() };
     let mut materials = material::Materials { path, base, options, buffers: &buffers, loaded: Default::default() };
     let mut uv_maps = Vec::new();
@@ -101,14 +105,14 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
 /// Every buffer's bytes: the GLB blob, a `data:` URI, or a file the URI names, read
 /// only where `options` allow (`refs::resolve`) and only if it is a regular file within
 /// the size limit. A buffer shorter than its declared length is an error.
-fn load_buffers(
+fn load_buffers<'a>(
     document: &gltf::Document,
-    mut blob: Option<Vec<u8>>,
+    mut blob: Option<Buffer<'a>>,
     path: &Path,
     base: Option<&Path>,
     options: &LoadOptions,
     sources: &mut Vec<std::path::PathBuf>,
-) -> Result<Vec<gltf::buffer::Data>> {
+) -> Result<Vec<Buffer<'a>>> {
     let mut out = Vec::new();
     for buffer in document.buffers() {
         let element = || format!("buffer {}", buffer.index());
@@ -118,11 +122,11 @@ fn load_buffers(
                 element: element(),
                 message: "refers to the GLB binary chunk, which the file lacks (or an earlier buffer took)".into(),
             })?,
-            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => Cow::Owned(
                 gltf::buffer::Data::from_source(buffer.source(), None)
                     .map_err(|e| Error::Parse { path: path.into(), element: element(), message: e.to_string() })?
-                    .0
-            }
+                    .0,
+            ),
             gltf::buffer::Source::Uri(uri) => {
                 let refused = |reason: String| Error::Reference {
                     path: path.into(),
@@ -135,7 +139,7 @@ fn load_buffers(
                 let data = octrace_format::read_regular_file(&file, options.max_file_bytes)
                     .map_err(|e| refused(e.to_string()))?;
                 sources.push(file);
-                data
+                Cow::Owned(data)
             }
         };
         if data.len() < buffer.length() {
@@ -146,9 +150,9 @@ fn load_buffers(
             });
         }
         while data.len() % 4 != 0 {
-            data.push(0);
+            data.to_mut().push(0);
         }
-        out.push(gltf::buffer::Data(data));
+        out.push(data);
     }
     Ok(out)
 }
@@ -166,7 +170,7 @@ pub(super) fn uri_path(uri: &str) -> std::result::Result<String, String> {
 
 struct Loader<'a> {
     path: &'a Path,
-    buffers: &'a [gltf::buffer::Data],
+    buffers: &'a [Buffer<'a>],
     /// Bytes of the document and its buffers: what bounds the elements an accessor
     /// without a buffer view may declare.
     input_bytes: usize,
@@ -194,7 +198,7 @@ const VIEWLESS_SLACK: usize = 1 << 16;
 /// fit in a buffer view of `view_len` bytes, and that the view fits in its buffer.
 fn check_range(
     view: &gltf::buffer::View<'_>,
-    buffers: &[gltf::buffer::Data],
+    buffers: &[Buffer<'_>],
     offset: usize,
     count: usize,
     elem: usize,
@@ -217,7 +221,7 @@ fn check_range(
         ));
     }
     let buffer = view.buffer().index();
-    let available = buffers.get(buffer).map_or(0, |d| d.0.len());
+    let available = buffers.get(buffer).map_or(0, |d| d.len());
     match view.offset().checked_add(view.length()) {
         Some(view_end) if view_end <= available => Ok(()),
         _ => Err(format!(
@@ -391,7 +395,7 @@ impl Loader<'_> {
             self.mesh.warnings.push(format!("{}: {element}: NORMAL left out: {why}", self.path.display()));
             return None;
         }
-        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d[..]));
         let normal_matrix = glam::DMat3::from_mat4(*world).inverse().transpose();
         let out = reader.read_normals()?.take(vertices).map(|n| {
             let w = (normal_matrix * DVec3::from(n.map(f64::from))).normalize_or_zero();
@@ -419,7 +423,7 @@ impl Loader<'_> {
             ));
             return None;
         }
-        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d[..]));
         let out = reader.read_tex_coords(map.set)?.into_f32().take(vertices);
         Some(out.map(|t| if t.iter().all(|v| v.is_finite()) { map.apply(t) } else { [0.0; 2] }).collect())
     }
@@ -437,7 +441,7 @@ impl Loader<'_> {
             self.mesh.warnings.push(format!("{}: {element}: COLOR_0 left out: {why}", self.path.display()));
             return None;
         }
-        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d[..]));
         let out = reader.read_colors(0)?.into_rgba_f32().take(vertices);
         let channel = |c: f32| if c.is_finite() { (c.clamp(0.0, 1.0) * 65535.0).round() as u16 } else { u16::MAX };
         Some(out.map(|c| c.map(channel)).collect())
@@ -507,7 +511,7 @@ impl Loader<'_> {
                 })?;
             }
         }
-        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d[..]));
         let Some(positions) = reader.read_positions() else {
             self.mesh.warnings.push(format!("{}: {element}: no POSITION, skipped", self.path.display()));
             return Ok(());
@@ -550,6 +554,10 @@ impl Loader<'_> {
         let uvs = self.uvs(prim, verts.len(), &element);
         let colors = self.colors(prim, verts.len(), &element);
         let material = self.material_of(prim);
+        // Room for them all at once: growing by doubling holds up to three times a
+        // big primitive's triangles while it copies.
+        self.mesh.triangles.reserve(corners.len());
+        self.mesh.material_ids.reserve(corners.len());
         for c in corners {
             let tri = c.map(|i| verts[i as usize]);
             let n = normals.as_ref().map(|n| c.map(|i| n[i as usize]));
