@@ -96,6 +96,8 @@ impl GpuContext {
             max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
             max_buffer_size: limits.max_buffer_size,
             max_storage_buffers_per_shader_stage: limits.max_storage_buffers_per_shader_stage,
+            max_buffers_and_acceleration_structures_per_shader_stage: limits
+                .max_buffers_and_acceleration_structures_per_shader_stage,
             ..wgpu::Limits::defaults()
         };
         let required_features = adapter.features() & wgpu::Features::SHADER_F64;
@@ -319,15 +321,9 @@ impl<'s> GpuTracer<'s> {
         let arrays: [&[u32]; TRACE_ARRAYS] = std::array::from_fn(|i| words[i]);
         let offsets = offsets_of(&arrays)?;
         let chunks = offsets.total.div_ceil(chunk_words).max(1);
-        // The rays and hits take two storage bindings besides the scene's.
-        if chunks + 2 > u64::from(limits.max_storage_buffers_per_shader_stage) {
-            return Err(GpuError::TooLarge(format!(
-                "{} MB of scene words need {chunks} bindings of {} MB; the device allows {} storage buffers",
-                offsets.total * 4 / 1_000_000,
-                chunk_words * 4 / 1_000_000,
-                limits.max_storage_buffers_per_shader_stage
-            )));
-        }
+        // The rays and hits take two storage bindings besides the scene's, and the
+        // parameters a uniform one; the render kernel adds its own (`render::check_bindings`).
+        check_bindings(&limits, chunks, TRACE_EXTRA_BINDINGS, offsets.total * 4, chunk_words * 4)?;
         let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
         let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
         let cap = loop_cap(device, queue)?;
@@ -818,6 +814,34 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         g += &plane_distance_source("f32");
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
+}
+
+/// Bindings a kernel has besides the scene's chunks: (storage, all buffers). Tracing:
+/// rays and hits, and the parameters.
+pub(super) const TRACE_EXTRA_BINDINGS: (u64, u64) = (2, 3);
+
+/// Whether `chunks` scene bindings plus `extra` (storage, all buffers) fit the device's
+/// limits on buffers per shader stage; a scene that needs more is
+/// [`GpuError::TooLarge`], naming the limit, before wgpu is asked (it would panic).
+pub(super) fn check_bindings(
+    limits: &wgpu::Limits,
+    chunks: u64,
+    (storage, buffers): (u64, u64),
+    scene_bytes: u64,
+    chunk_bytes: u64,
+) -> GpuResult<()> {
+    let storage_limit = u64::from(limits.max_storage_buffers_per_shader_stage);
+    let buffer_limit = u64::from(limits.max_buffers_and_acceleration_structures_per_shader_stage);
+    if chunks + storage > storage_limit || chunks + buffers > buffer_limit {
+        return Err(GpuError::TooLarge(format!(
+            "{} MB of scene words need {chunks} bindings of {} MB, {} in all with the kernel's own; the device \
+             allows {storage_limit} storage buffers and {buffer_limit} buffers a shader stage",
+            scene_bytes / 1_000_000,
+            chunk_bytes / 1_000_000,
+            chunks + buffers
+        )));
+    }
+    Ok(())
 }
 
 /// `plane_distance(o, d, at)`: where the ray meets the plane of the triangle at word

@@ -121,8 +121,15 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         }
         let device = &tracer.device;
         use wgpu::BufferUsages as U;
-        let (words, mut params, headlight) = shading_words(tracer.scene());
         let limits = device.limits();
+        // The tracer's bindings, and the render kernel's: parameters, shading data,
+        // pixels and ray counts.
+        let (storage, buffers) = super::TRACE_EXTRA_BINDINGS;
+        let chunks = tracer.scene_buffers.len() as u64;
+        let scene_bytes = tracer.scene_buffers.iter().map(wgpu::Buffer::size).sum();
+        let chunk_bytes = tracer.scene_buffers.first().map_or(0, wgpu::Buffer::size);
+        super::check_bindings(&limits, chunks, (storage + 3, buffers + 4), scene_bytes, chunk_bytes)?;
+        let (words, mut params, headlight) = shading_words(tracer.scene());
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
