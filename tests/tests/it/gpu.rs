@@ -144,6 +144,46 @@ fn a_scene_split_across_bindings_gives_the_same_answers() {
     assert_eq!(whole.occluded(&rays).unwrap(), split.occluded(&rays).unwrap());
 }
 
+/// A scene that needs more bindings than the device allows is a clear error, for the
+/// trace kernel and for the render kernel (which needs four more), never a wgpu
+/// panic (a 4 GB scene on lavapipe: 29 bindings traced, 36 refused for rendering).
+#[test]
+fn a_scene_needing_too_many_bindings_is_a_clear_error() {
+    use octrace_runtime::gpu::{GpuError, GpuRenderer};
+    use octrace_runtime::render::effects::RenderOptions;
+    let Some(gpu) = gpu("a_scene_needing_too_many_bindings_is_a_clear_error") else { return };
+    let scene = bunny_scene();
+    let limits = gpu.device.limits();
+    let storage = u64::from(limits.max_storage_buffers_per_shader_stage);
+    let words = scene.view().section_words()[..7].iter().map(|a| a.len() as u64).sum::<u64>();
+    // Chunks of a power of two words: the largest size giving more chunks than allowed.
+    let chunk = |n: u64| 4 << (words / n).max(1).ilog2();
+    let options = GpuOptions { max_binding_bytes: Some(chunk(storage)) };
+    match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) {
+        Err(GpuError::TooLarge(why)) => assert!(why.contains("storage buffers"), "{why}"),
+        other => panic!("{} words in chunks of {} bytes: {other:?}", words, chunk(storage)),
+    }
+    // Every split the tracer takes: the renderer, three storage bindings more, is made
+    // exactly when they fit, and refused by name otherwise.
+    let buffers = u64::from(limits.max_buffers_and_acceleration_structures_per_shader_stage);
+    let mut refused_render = 0;
+    for shift in 12..24 {
+        let options = GpuOptions { max_binding_bytes: Some(1 << shift) };
+        let Ok(tracer) = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) else { continue };
+        let chunks = tracer.scene_bindings() as u64;
+        let fits = chunks + 5 <= storage && chunks + 7 <= buffers;
+        match GpuRenderer::new(&tracer, &RenderOptions::for_scene(scene.shading())) {
+            Ok(_) => assert!(fits, "{chunks} bindings"),
+            Err(GpuError::TooLarge(why)) => {
+                assert!(!fits && why.contains("storage buffers"), "{chunks} bindings: {why}");
+                refused_render += 1;
+            }
+            Err(e) => panic!("{chunks} bindings: {e}"),
+        }
+    }
+    eprintln!("{refused_render} splits traced but refused for rendering");
+}
+
 /// Rays from inside the scene start by point location; rays that cannot hit (NaN,
 /// zero direction, tmin > tmax, missing the root) are defined misses, as on the CPU.
 #[test]
