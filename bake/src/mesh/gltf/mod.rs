@@ -524,11 +524,9 @@ impl Loader<'_> {
             check_finite(v, self.path, || format!("{element}, vertex {i} after the node transform"))?;
             verts.push(v);
         }
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(idx) => idx.into_u32().collect(),
-            None => (0..verts.len() as u32).collect(),
-        };
-        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= verts.len()) {
+        // Without indices, vertex j is index j: nothing is made for them.
+        let indices: Option<Vec<u32>> = reader.read_indices().map(|idx| idx.into_u32().collect());
+        if let Some(&bad) = indices.iter().flatten().find(|&&i| i as usize >= verts.len()) {
             return Err(Error::IndexOutOfRange {
                 path: self.path.into(),
                 element,
@@ -536,19 +534,22 @@ impl Loader<'_> {
                 count: verts.len(),
             });
         }
-        // Corner indices of each triangle, in the file's winding.
-        let corners: Vec<[u32; 3]> = match mode {
-            Mode::Triangles => indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+        let index = |j: usize| indices.as_ref().map_or(j as u32, |i| i[j]);
+        let n = indices.as_ref().map_or(verts.len(), Vec::len);
+        // Corner indices of triangle k, in the file's winding (no list of them is
+        // made: a big primitive's would be as large as its indices).
+        let (count, corner): (usize, &dyn Fn(usize) -> [u32; 3]) = match mode {
+            Mode::Triangles => (n / 3, &|k| [index(3 * k), index(3 * k + 1), index(3 * k + 2)]),
             // Every other strip triangle swaps its first two corners to keep the winding.
-            Mode::TriangleStrip => indices
-                .windows(3)
-                .enumerate()
-                .map(|(k, t)| if k % 2 == 0 { [t[0], t[1], t[2]] } else { [t[1], t[0], t[2]] })
-                .collect(),
-            _ => match indices.split_first() {
-                Some((&first, rest)) => rest.windows(2).map(|t| [first, t[0], t[1]]).collect(),
-                None => Vec::new(),
-            },
+            Mode::TriangleStrip => (n.saturating_sub(2), &|k| {
+                let t = [index(k), index(k + 1), index(k + 2)];
+                if k % 2 == 0 {
+                    t
+                } else {
+                    [t[1], t[0], t[2]]
+                }
+            }),
+            _ => (n.saturating_sub(2), &|k| [index(0), index(k + 1), index(k + 2)]),
         };
         let normals = self.normals(prim, world, verts.len(), &element);
         let uvs = self.uvs(prim, verts.len(), &element);
@@ -556,9 +557,9 @@ impl Loader<'_> {
         let material = self.material_of(prim);
         // Room for them all at once: growing by doubling holds up to three times a
         // big primitive's triangles while it copies.
-        self.mesh.triangles.reserve(corners.len());
-        self.mesh.material_ids.reserve(corners.len());
-        for c in corners {
+        self.mesh.triangles.reserve(count);
+        self.mesh.material_ids.reserve(count);
+        for c in (0..count).map(corner) {
             let tri = c.map(|i| verts[i as usize]);
             let n = normals.as_ref().map(|n| c.map(|i| n[i as usize]));
             let t = uvs.as_ref().map(|t| c.map(|i| t[i as usize]));
