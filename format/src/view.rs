@@ -11,6 +11,14 @@ pub const COLOR_WORDS: usize = 6;
 /// `1 / 65535`: from a 16-bit vertex colour channel to `[0, 1]`.
 pub const COLOR_SCALE: f32 = 1.0 / 65535.0;
 
+/// The corners' values `x` mixed at barycentrics `(u, v)` (the first corner's weight
+/// `1 - u - v` in `f32`): each product exact in `f64`, the sum rounded once to `f32`.
+/// The GPU kernel's generated `uv_mix` does the same operations.
+fn mix(x: [f32; 3], u: f32, v: f32) -> f32 {
+    let w = 1.0 - u - v;
+    (x[0] as f64 * w as f64 + x[1] as f64 * u as f64 + x[2] as f64 * v as f64) as f32
+}
+
 /// The arrays of a baked scene as plain slices, borrowed from a file or from a
 /// [`crate::BakedScene`].
 ///
@@ -129,8 +137,7 @@ impl<'a> SceneView<'a> {
     /// where it has `f64`, finds the same texels.
     pub fn uv_at(&self, index: u32, u: f32, v: f32) -> [f32; 2] {
         let Some([t0, t1, t2]) = self.corner_uvs(index) else { return [0.0; 2] };
-        let w = 1.0 - u - v;
-        [0, 1].map(|c| (t0[c] as f64 * w as f64 + t1[c] as f64 * u as f64 + t2[c] as f64 * v as f64) as f32)
+        [0, 1].map(|c| mix([t0[c], t1[c], t2[c]], u, v))
     }
 
     /// The vertex colour at barycentrics `(u, v)` of stored triangle `index`, when the
@@ -144,10 +151,7 @@ impl<'a> SceneView<'a> {
             [a & 0xffff, a >> 16, b & 0xffff, b >> 16].map(|c| c as f32 * COLOR_SCALE)
         };
         let [c0, c1, c2] = [corner(0), corner(1), corner(2)];
-        let b0 = 1.0 - u - v;
-        Some(
-            [0, 1, 2, 3].map(|c| (c0[c] as f64 * b0 as f64 + c1[c] as f64 * u as f64 + c2[c] as f64 * v as f64) as f32),
-        )
+        Some([0, 1, 2, 3].map(|c| mix([c0[c], c1[c], c2[c]], u, v)))
     }
 
     /// The base colour (and alpha) of `material` at barycentrics `(u, v)` of stored
