@@ -111,9 +111,21 @@ impl Material {
             return [0.0; 3];
         }
         let m = self.metallic.clamp(0.0, 1.0);
-        let gloss = (1.0 - self.roughness.clamp(0.0, 1.0)).powi(2);
-        let dielectric = (1.0 - m) * (1.0 - self.transmission.clamp(0.0, 1.0)) * self.dielectric_f0();
+        let (dielectric, gloss) = (self.dielectric_mirror(), self.gloss());
         [0, 1, 2].map(|c| (dielectric + m * self.base_color[c].clamp(0.0, 1.0)) * gloss)
+    }
+
+    /// `(1 - roughness)^2`: how much of a mirror image (and of a sharp highlight) the
+    /// surface keeps.
+    pub fn gloss(&self) -> f32 {
+        (1.0 - self.roughness.clamp(0.0, 1.0)).powi(2)
+    }
+
+    /// [`Material::mirror`]'s dielectric part before gloss: the share that is neither
+    /// metal nor transmitted, times [`Material::dielectric_f0`].
+    pub fn dielectric_mirror(&self) -> f32 {
+        let m = self.metallic.clamp(0.0, 1.0);
+        (1.0 - m) * (1.0 - self.transmission.clamp(0.0, 1.0)) * self.dielectric_f0()
     }
 
     /// Reflectance at normal incidence of the material as a dielectric:

@@ -369,10 +369,6 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
         record[4 * i..4 * i + 4].copy_from_slice(&[v.x, v.y, v.z, *w]);
     }
     let metallic = m.metallic.clamp(0.0, 1.0);
-    let gloss = (1.0 - m.roughness.clamp(0.0, 1.0)).powi(2);
-    let metal = if m.illum.is_some() { 0.0 } else { metallic * gloss };
-    let transmission = m.transmission.clamp(0.0, 1.0);
-    let shadow_f0 = ((1.0 - m.ior) / (1.0 + m.ior)).powi(2);
     let bits = |u: u32| f32::from_bits(u);
     let alpha_mode = match m.alpha_mode {
         AlphaMode::Opaque => 0,
@@ -387,12 +383,12 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
         bits(m.base_color_texture.map_or(0, |t| t + 1)),
         bits(u32::from(m.unlit)),
         metallic,
-        gloss,
-        1.0 - metal,
-        1.0 - transmission,
-        (1.0 - metallic) * (1.0 - transmission) * m.dielectric_f0(),
+        m.gloss(),
+        1.0 - lighting::metal(m),
+        1.0 - m.transmission.clamp(0.0, 1.0),
+        m.dielectric_mirror(),
         m.dielectric_f0() * (1.0 - metallic),
-        1.0 - shadow_f0,
+        lighting::shadow_keep(m),
         bits(alpha_mode),
         m.alpha_cutoff,
     ]);

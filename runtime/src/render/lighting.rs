@@ -32,10 +32,18 @@ pub(crate) fn base(m: &Material) -> Vec3 {
 /// mirror (`metallic * (1 - roughness)^2`: a rough metal scatters its colour like a
 /// diffuse surface, a polished one only mirrors) and less what it transmits.
 pub(crate) fn albedo(m: &Material, transmits: bool) -> Vec3 {
-    let gloss = (1.0 - m.roughness.clamp(0.0, 1.0)).powi(2);
-    let metal = if m.illum.is_some() { 0.0 } else { m.metallic.clamp(0.0, 1.0) * gloss };
     let transmission = if transmits { m.transmission.clamp(0.0, 1.0) } else { 0.0 };
-    base(m) * (1.0 - metal) * (1.0 - transmission)
+    base(m) * (1.0 - metal(m)) * (1.0 - transmission)
+}
+
+/// The share of the base colour a smooth metal mirrors instead of scattering:
+/// `metallic * (1 - roughness)^2` (none for MTL materials).
+pub(crate) fn metal(m: &Material) -> f32 {
+    if m.illum.is_some() {
+        0.0
+    } else {
+        m.metallic.clamp(0.0, 1.0) * m.gloss()
+    }
 }
 
 /// The mirror colour of `m` ([`Material::mirror`]), zero where it is too weak to see
@@ -61,8 +69,13 @@ pub(crate) fn fresnel(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
 /// The fraction of light a transmissive material lets a shadow ray through (at normal
 /// incidence, ignoring the bending: Whitted's transparent shadows).
 pub(crate) fn shadow_transmittance(m: &Material) -> Vec3 {
-    let f0 = ((1.0 - m.ior) / (1.0 + m.ior)).powi(2);
-    base(m) * m.transmission.clamp(0.0, 1.0) * (1.0 - f0)
+    base(m) * m.transmission.clamp(0.0, 1.0) * shadow_keep(m)
+}
+
+/// What a shadow ray keeps past a transmissive surface besides its colour: `1 - F0` at
+/// normal incidence, `F0 = ((1 - ior) / (1 + ior))^2`.
+pub(crate) fn shadow_keep(m: &Material) -> f32 {
+    1.0 - ((1.0 - m.ior) / (1.0 + m.ior)).powi(2)
 }
 
 /// The reflectance of `m` for light arriving along `l` and leaving along `v` (unit
@@ -143,7 +156,7 @@ pub(crate) fn highlight(m: &Material) -> (Vec3, f32) {
         Some(_) => (Vec3::ZERO, 1.0),
         None => {
             let f0 = Vec3::splat(m.dielectric_f0()).lerp(base(m), m.metallic.clamp(0.0, 1.0));
-            (f0 * (1.0 - r).powi(2), exponent(r * r))
+            (f0 * m.gloss(), exponent(r * r))
         }
     }
 }
