@@ -38,8 +38,8 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
             }
         }
     }
-    let index_of = |m: &Material| mesh.materials.iter().position(|x| std::ptr::eq(x, m)).unwrap_or(0);
-    let used_materials: Vec<(&Material, usize)> = mesh.materials.iter().zip(counts).filter(|&(_, n)| n > 0).collect();
+    let used_materials: Vec<(&Material, usize)> =
+        mesh.materials.iter().zip(counts.iter().copied()).filter(|&(_, n)| n > 0).collect();
     let emitters: Vec<(&Material, usize)> = used_materials.iter().copied().filter(|(m, _)| m.is_emissive()).collect();
     let mut effects = Vec::new();
     let mut add = |effect: Effect, reasons: Vec<String>| {
@@ -85,10 +85,10 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     });
     add(Effect::Refraction, glass.collect());
     let texture = |m: &Material| m.base_color_texture.and_then(|t| mesh.textures.get(t as usize));
-    let min_alpha =
-        |m: &Material| m.base_color[3] * texture(m).map_or(1.0, |t| t.min_alpha) * vertex_alpha[index_of(m)];
-    let cut = used_materials.iter().filter(|(m, _)| m.coverage_at(min_alpha(m)) < 1.0).map(|(m, _)| {
-        let alpha = min_alpha(m);
+    // Each used material with its smallest alpha: factor, texture and vertex colours.
+    let alphas = mesh.materials.iter().zip(&counts).zip(&vertex_alpha).filter(|((_, &n), _)| n > 0);
+    let alphas = alphas.map(|((m, _), v)| (m, m.base_color[3] * texture(m).map_or(1.0, |t| t.min_alpha) * v));
+    let cut = alphas.filter(|&(m, alpha)| m.coverage_at(alpha) < 1.0).map(|(m, alpha)| {
         // "alpha 0.30", or "alpha down to 0.00 (texture 'leaves.png')".
         let value = match texture(m) {
             Some(t) => format!("down to {alpha:.2} (texture {})", t.name),
