@@ -10,37 +10,14 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use libfuzzer_sys::fuzz_target;
-use octrace_bake::{bake, procedural, BuildParams, Mesh};
+use octrace_bake::{bake, procedural, BuildParams};
 use octrace_format::BakedScene;
 use octrace_runtime::{Ray, Scene};
 
 fn base() -> &'static BakedScene {
     static BASE: OnceLock<BakedScene> = OnceLock::new();
     BASE.get_or_init(|| {
-        let torus = procedural::torus([0.0; 3], 1.0, 0.3, 12, 6);
-        // A textured, alpha-masked material and vertex colours: every section holds bytes.
-        let material = octrace_format::Material {
-            base_color_texture: Some(0),
-            alpha_mode: octrace_format::AlphaMode::Mask,
-            ..Default::default()
-        };
-        let texture = octrace_format::Texture {
-            name: "2 x 2".into(),
-            width: 2,
-            height: 2,
-            first: 0,
-            wrap: Default::default(),
-            filter: Default::default(),
-            min_alpha: 0.0,
-        };
-        let texels = vec![0xffff_0000, 0x0000_8000, 0x0000_ffff, 0xffff_0000, 0x8000_8000, 0xffff_8000, 1, 0x8000_0001];
-        let mut mesh = Mesh { materials: vec![material], textures: vec![texture], texels, ..Default::default() };
-        for t in torus.triangles {
-            let n = Some([octrace_bake::mesh::face_normal(&t); 3]);
-            let colors = Some([[65535, 0, 0, 65535], [0, 65535, 0, 30000], [0, 0, 65535, 65535]]);
-            mesh.push_colored(t, n, Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), colors);
-            mesh.material_ids.push(0);
-        }
+        let mesh = procedural::shaded_torus(12, 6);
         bake(&mesh, &BuildParams { max_depth: Some(4), leaf_size: Some(4), ..BuildParams::auto() }).unwrap()
     })
 }

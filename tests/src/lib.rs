@@ -31,29 +31,11 @@ pub fn bunny_scene() -> &'static Scene {
     })
 }
 
-/// A torus with a textured material, shading normals, texture coordinates and vertex
-/// colours, baked to
-/// depth 5 with four triangles a leaf: every section of the file holds bytes.
+/// The shaded torus (`procedural::shaded_torus`: texture, mask, normals, texture
+/// coordinates, vertex colours), baked to depth 5 with four triangles a leaf: every
+/// section of the file holds bytes.
 pub fn torus_scene() -> octrace_format::BakedScene {
-    let torus = octrace_bake::procedural::torus([0.0; 3], 1.0, 0.3, 16, 8);
-    let material = octrace_format::Material { base_color_texture: Some(0), ..Default::default() };
-    let texture = octrace_format::Texture {
-        name: "2 x 2".into(),
-        width: 2,
-        height: 2,
-        first: 0,
-        wrap: Default::default(),
-        filter: Default::default(),
-        min_alpha: 1.0,
-    };
-    let texels = vec![0xffff_0000, 0xffff_8000, 0x0000_ffff, 0xffff_0000, 0x8000_8000, 0xffff_8000, 1, 0xffff_0001];
-    let mut mesh = Mesh { materials: vec![material], textures: vec![texture], texels, ..Default::default() };
-    for t in torus.triangles {
-        let n = Some([octrace_bake::mesh::face_normal(&t); 3]);
-        let colors = Some([[65535, 0, 0, 65535], [0, 65535, 0, 65535], [0, 0, 65535, 32768]]);
-        mesh.push_colored(t, n, Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), colors);
-        mesh.material_ids.push(0);
-    }
+    let mesh = octrace_bake::procedural::shaded_torus(16, 8);
     bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() })
         .expect("the torus bakes")
 }

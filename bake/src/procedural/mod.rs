@@ -80,6 +80,35 @@ pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -
     mesh(tris)
 }
 
+/// A unit torus (minor radius 0.3) with every kind of shading data: one material, its
+/// base colour from a 2 x 2 texture with a transparent texel (alpha mask), face
+/// normals, texture coordinates and vertex colours. Baked, every section of the file
+/// holds bytes: for the format's tests and the trusted-path fuzz target.
+pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
+    use octrace_format::{AlphaMode, Material, Texture};
+    let material = Material { base_color_texture: Some(0), alpha_mode: AlphaMode::Mask, ..Default::default() };
+    let texture = Texture {
+        name: "2 x 2".into(),
+        width: 2,
+        height: 2,
+        first: 0,
+        wrap: Default::default(),
+        filter: Default::default(),
+        min_alpha: 0.0,
+    };
+    // Linear RGBA16, two words a texel (`r | g << 16`, `b | a << 16`): the first texel's
+    // alpha is 0.
+    let texels = vec![0xffff_0000, 0x0000_8000, 0x0000_ffff, 0xffff_0000, 0x8000_8000, 0xffff_8000, 1, 0x8000_0001];
+    let mut out = Mesh { materials: vec![material], textures: vec![texture], texels, ..Mesh::default() };
+    for t in torus([0.0; 3], 1.0, 0.3, rings, sides).triangles {
+        let normals = Some([crate::mesh::face_normal(&t); 3]);
+        let colors = Some([[65535, 0, 0, 65535], [0, 65535, 0, 30000], [0, 0, 65535, 65535]]);
+        out.push_colored(t, normals, Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), colors);
+        out.material_ids.push(0);
+    }
+    out
+}
+
 /// A closed axis-aligned box, each face split into `n x n` quads.
 pub fn cube(lo: [f32; 3], hi: [f32; 3], n: u32) -> Mesh {
     let n = n.max(1);
