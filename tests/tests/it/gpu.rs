@@ -228,7 +228,7 @@ fn inside_origins_and_untraceable_rays_match_the_cpu() {
 #[test]
 fn effects_render_on_the_gpu_matches_the_cpu() {
     use octrace_format::Effect;
-    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, EffectSet, RayKind, RenderOptions};
+    use octrace_runtime::render::effects::{EffectSet, RenderOptions};
     let Some(ctx) = gpu("effects_render_on_the_gpu_matches_the_cpu") else { return };
     let mesh = octrace_bake::procedural::effects_scene();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -241,13 +241,9 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     sets.push(EffectSet::NONE);
     for effects in sets {
         let options = RenderOptions { effects, ..all };
-        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
-        let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
-        eprintln!("{:?}: cpu {cc:?}, gpu {gc:?}", effects.iter().map(Effect::name).collect::<Vec<_>>());
-        for kind in RayKind::ALL {
-            assert_eq!(gc.get(kind), cc.get(kind), "{} rays, GPU against CPU", kind.name());
-        }
-        renders_agree("effects", ctx, &cpu, &g);
+        let names = effects.iter().map(Effect::name).collect::<Vec<_>>();
+        let counts = renders_as_on_the_cpu(&format!("effects {names:?}"), ctx, &tracer, &camera, &options);
+        eprintln!("{names:?}: {counts:?}");
     }
     assert!(all.effects.iter().count() == Effect::ALL.len(), "the scene calls for every effect");
     // Deeper trees than the kernel's stack holds are refused, not cut short.
@@ -261,10 +257,8 @@ fn effects_render_on_the_gpu_matches_the_cpu() {
     let camera = raysets::Camera::standard_sized(&Frame::from_bounds(b.mesh_lo, b.mesh_hi), 64, 48);
     let options = RenderOptions::for_scene(scene.shading());
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
-    let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
-    let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
-    assert_eq!((gc, gc.total()), (cc, 64 * 48));
-    renders_agree("headlight", ctx, &cpu, &g);
+    let counts = renders_as_on_the_cpu("headlight", ctx, &tracer, &camera, &options);
+    assert_eq!(counts.total(), 64 * 48);
 }
 
 /// Rays on the octree's planes from inside the closed solids (`hard_cases::grid_rays`),
@@ -366,7 +360,7 @@ fn same_hits(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>])
 /// 13,869 refraction rays instead of 14,777, 381 pixels off by up to 212 levels).
 #[test]
 fn effects_render_at_default_settings_gives_the_cpus_rays_and_image() {
-    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    use octrace_runtime::render::effects::RenderOptions;
     let Some(ctx) = gpu("effects_render_at_default_settings_gives_the_cpus_rays_and_image") else { return };
     let mesh = octrace_bake::procedural::effects_scene();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -378,13 +372,27 @@ fn effects_render_at_default_settings_gives_the_cpus_rays_and_image() {
     assert_eq!(defaults.soft_samples, 16, "the defaults this test stands for");
     for samples in [16, 32] {
         let options = RenderOptions { soft_samples: samples, ..defaults };
-        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
-        let (c, cc) = render_effects(&scene, &camera, &options, &|_| {});
-        for kind in RayKind::ALL {
-            assert_eq!(gc.get(kind), cc.get(kind), "{samples} samples: {} rays, GPU against CPU", kind.name());
-        }
-        renders_agree(&format!("{samples} samples"), ctx, &c, &g);
+        renders_as_on_the_cpu(&format!("{samples} samples"), ctx, &tracer, &camera, &options);
     }
+}
+
+/// Renders through `camera` on the GPU and on the CPU: the same rays of every kind,
+/// exactly as many, and images that agree ([`renders_agree`]). The CPU's counts.
+fn renders_as_on_the_cpu(
+    name: &str,
+    ctx: &octrace_runtime::gpu::GpuContext,
+    tracer: &GpuTracer<'_>,
+    camera: &raysets::Camera,
+    options: &octrace_runtime::render::effects::RenderOptions,
+) -> octrace_runtime::render::effects::RayCounts {
+    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind};
+    let (g, gc) = render_effects_gpu(tracer, camera, options).unwrap();
+    let (c, cc) = render_effects(tracer.scene(), camera, options, &|_| {});
+    for kind in RayKind::ALL {
+        assert_eq!(gc.get(kind), cc.get(kind), "{name}: {} rays, GPU against CPU", kind.name());
+    }
+    renders_agree(name, ctx, &c, &g);
+    cc
 }
 
 /// Two renders of one scene agree pixel by pixel: every channel's radiance within
@@ -470,7 +478,7 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
 /// kind and gives the same image.
 #[test]
 fn textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu() {
-    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    use octrace_runtime::render::effects::{RayKind, RenderOptions};
     let Some(ctx) = gpu("textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu") else { return };
     let mesh = octrace_bake::Mesh::load(octrace_tests::data("textured/leaf.gltf")).unwrap();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -479,30 +487,20 @@ fn textured_alpha_masked_scene_renders_on_the_gpu_as_on_the_cpu() {
     for c in &scene.shading().cameras {
         let height = (1024.0 / c.aspect.unwrap()).round() as u32;
         let camera = raysets::Camera::from_scene(c, f64::from(c.yfov).to_degrees(), 1024, height);
-        let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
-        let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
-        assert!(cc.get(RayKind::Alpha) > 10_000, "{}: {cc:?}", c.name);
-        for kind in RayKind::ALL {
-            assert_eq!(gc.get(kind), cc.get(kind), "camera '{}': {} rays, GPU against CPU", c.name, kind.name());
-        }
-        renders_agree(&c.name, ctx, &cpu, &g);
+        let counts = renders_as_on_the_cpu(&format!("camera '{}'", c.name), ctx, &tracer, &camera, &options);
+        assert!(counts.get(RayKind::Alpha) > 10_000, "{}: {counts:?}", c.name);
     }
 }
 
 /// Vertex colours (`COLOR_0`, the Khronos sample) on the GPU: the CPU's image and rays.
 #[test]
 fn vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu() {
-    use octrace_runtime::render::effects::{render_effects, render_effects_gpu, RayKind, RenderOptions};
+    use octrace_runtime::render::effects::RenderOptions;
     let Some(ctx) = gpu("vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu") else { return };
     let mesh = octrace_bake::Mesh::load(octrace_tests::data("gltf/BoxVertexColors.gltf")).unwrap();
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
     let options = RenderOptions::for_scene(scene.shading());
     let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 512, 512);
-    let (g, gc) = render_effects_gpu(&tracer, &camera, &options).unwrap();
-    let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
-    for kind in RayKind::ALL {
-        assert_eq!(gc.get(kind), cc.get(kind), "{} rays, GPU against CPU", kind.name());
-    }
-    renders_agree("vertex colours", ctx, &cpu, &g);
+    renders_as_on_the_cpu("vertex colours", ctx, &tracer, &camera, &options);
 }
