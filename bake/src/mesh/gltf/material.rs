@@ -137,8 +137,10 @@ impl Materials<'_> {
                     return None;
                 };
                 let mut min_alpha = 255u8;
+                // The sRGB decoding of each 8-bit value, once rather than per channel.
+                let linear: [u32; 256] = std::array::from_fn(|c| u32::from(srgb_to_linear16(c as u8)));
                 for [r, g, b, a] in &rgba.pixels {
-                    let [r, g, b] = [*r, *g, *b].map(|c| u32::from(srgb_to_linear16(c)));
+                    let [r, g, b] = [*r, *g, *b].map(|c| linear[c as usize]);
                     mesh.texels.extend([r | g << 16, b | (u32::from(*a) * 257) << 16]);
                     min_alpha = min_alpha.min(*a);
                 }
