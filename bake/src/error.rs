@@ -96,15 +96,17 @@ pub enum Error {
     },
     /// The octree the mesh needs does not fit the format's 32-bit indices: leaf
     /// records addressed below 2^31 words (the top bit marks internal nodes),
-    /// triangle references counted in 32 bits. Found before the arrays are laid out.
+    /// triangle references counted in 32 bits. Found before the build when the
+    /// triangles alone pass a limit, else the moment the tree being built passes it
+    /// (the build stops: `needed` is what it had reached).
     #[error(
-        "the octree needs {needed} {what}; the format holds at most {limit} (use a larger --leaf-size or a smaller \
+        "the octree needs at least {needed} {what}; the format holds at most {limit} (use a larger --leaf-size or a smaller \
          --max-depth, or split the mesh)"
     )]
     Limit {
         /// What overflows: "words of leaf records", "triangle references".
         what: &'static str,
-        /// How many the octree needs.
+        /// How many the octree needs at least.
         needed: u64,
         /// The format's limit.
         limit: u64,

@@ -16,6 +16,9 @@ pub(crate) fn balance(root: &mut Node, builder: &Builder<'_>) {
     let mut by_level: Vec<Vec<[u32; 3]>> = vec![Vec::new(); builder.max_depth as usize + 1];
     root.for_each_leaf((0, [0; 3]), &mut |(l, c), _| by_level[l as usize].push(c));
     for level in (2..=builder.max_depth).rev() {
+        if builder.growth.passed() {
+            return;
+        }
         let coarse = level - 1;
         // The level-(l-1) cells across the faces of the level-l leaves, where they are
         // not the leaf's own parent.

@@ -5,6 +5,8 @@
 //! really overlaps (separating axes, [`super::overlap`]), not to every child its
 //! bounding box touches.
 
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
 use rayon::prelude::*;
 
 use super::overlap::{triangle_overlaps_box, Box3};
@@ -33,6 +35,70 @@ pub(crate) fn child_cell((level, c): Cell, child: usize) -> Cell {
     (level + 1, [0, 1, 2].map(|a| 2 * c[a] + ((child >> a) & 1) as u32))
 }
 
+/// The most the format's indices hold: leaf records are addressed below 2^31 words
+/// (the top bit of a node reference marks internal nodes), triangle references are
+/// counted in 32 bits. Lower in tests, to reach them with small meshes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Limits {
+    /// Triangle references (`tri_refs`).
+    pub refs: u64,
+    /// Words of leaf records (`octree`).
+    pub words: u64,
+}
+
+impl Limits {
+    /// The format's.
+    pub(crate) const FORMAT: Limits =
+        Limits { refs: u32::MAX as u64, words: octrace_format::layout::INTERNAL_BIT as u64 };
+}
+
+/// What the tree has grown to while it is built, so that a tree passing a limit stops
+/// growing then, not after the whole build.
+///
+/// Every leaf counts its references and [`octrace_format::layout::LEAF_HEADER_WORDS`]
+/// words (its record without links, a lower bound), and a split leaf is taken back;
+/// the counts are exact for the tree built so far, and the layout checks the exact
+/// words again ([`super::flatten::arrays`]).
+#[derive(Debug)]
+pub(crate) struct Growth {
+    limits: Limits,
+    refs: AtomicU64,
+    leaves: AtomicU64,
+    passed: AtomicBool,
+}
+
+impl Growth {
+    pub(crate) fn new(limits: Limits) -> Growth {
+        Growth { limits, refs: AtomicU64::new(0), leaves: AtomicU64::new(0), passed: AtomicBool::new(false) }
+    }
+
+    /// Counts a change of `leaves` leaves holding `refs` more references.
+    fn add(&self, leaves: i64, refs: i64) {
+        let refs = self.refs.fetch_add(refs as u64, Ordering::Relaxed).wrapping_add(refs as u64);
+        let leaves = self.leaves.fetch_add(leaves as u64, Ordering::Relaxed).wrapping_add(leaves as u64);
+        let words = leaves * octrace_format::layout::LEAF_HEADER_WORDS as u64;
+        if refs > self.limits.refs || words > self.limits.words {
+            self.passed.store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Whether a limit was passed: the build has stopped growing.
+    pub(crate) fn passed(&self) -> bool {
+        self.passed.load(Ordering::Relaxed)
+    }
+
+    /// The limit passed, as the error to report, once [`Growth::passed`].
+    pub(crate) fn error(&self) -> crate::Error {
+        let refs = self.refs.load(Ordering::Relaxed);
+        let words = self.leaves.load(Ordering::Relaxed) * octrace_format::layout::LEAF_HEADER_WORDS as u64;
+        if refs > self.limits.refs {
+            crate::Error::Limit { what: "triangle references", needed: refs, limit: self.limits.refs }
+        } else {
+            crate::Error::Limit { what: "words of leaf records", needed: words, limit: self.limits.words }
+        }
+    }
+}
+
 /// Geometry shared by the whole build.
 pub(crate) struct Builder<'a> {
     /// Non-degenerate triangles, indexed by the build's triangle index.
@@ -47,6 +113,8 @@ pub(crate) struct Builder<'a> {
     pub max_depth: u32,
     /// Leaf target.
     pub leaf_size: usize,
+    /// The tree's size so far, against the format's limits.
+    pub growth: Growth,
 }
 
 /// Above this many triangles, a node's children are built in parallel.
@@ -63,12 +131,17 @@ impl Builder<'_> {
         }
     }
 
-    /// Builds the subtree of `cell` from the triangles that overlap it.
+    /// Builds the subtree of `cell` from the triangles that overlap it. Once the tree
+    /// passes a limit ([`Growth`]), what is left to build becomes empty leaves.
     pub(crate) fn build(&self, cell: Cell, tris: Vec<u32>) -> Node {
+        if self.growth.passed() {
+            return Node::Leaf(Vec::new());
+        }
         if cell.0 >= self.max_depth || tris.len() <= self.leaf_size {
+            self.growth.add(1, tris.len() as i64);
             return Node::Leaf(tris);
         }
-        let parts = self.split(cell, &tris);
+        let parts = self.split_uncounted(cell, &tris);
         drop(tris);
         let children: Vec<Node> = if parts.iter().map(Vec::len).sum::<usize>() > PARALLEL_GRAIN {
             parts.into_par_iter().enumerate().map(|(i, p)| self.build(child_cell(cell, i), p)).collect()
@@ -85,6 +158,14 @@ impl Builder<'_> {
     /// child its box touches (it is connected), so the separating-axis test runs only
     /// for triangles crossing two or three mid-planes or poking out of the cell.
     pub(crate) fn split(&self, cell: Cell, tris: &[u32]) -> [Vec<u32>; 8] {
+        let parts = self.split_uncounted(cell, tris);
+        self.growth.add(7, parts.iter().map(|p| p.len() as i64).sum::<i64>() - tris.len() as i64);
+        parts
+    }
+
+    /// [`Builder::split`] without counting: for [`Builder::build`], whose children count
+    /// themselves as leaves.
+    fn split_uncounted(&self, cell: Cell, tris: &[u32]) -> [Vec<u32>; 8] {
         let (level, c) = cell;
         let plane = |a: usize, i: u32| grid_plane(self.root_lo[a], self.root_size, level + 1, i) as f64;
         let m = self.margin;

@@ -131,12 +131,12 @@ pub(crate) fn arrays(
     root_lo: [f32; 3],
     root_size: f32,
     cube_level: u32,
+    limits: super::build::Limits,
 ) -> crate::error::Result<Arrays> {
     let leaves = flat.leaf_cells.len();
     let references: u64 = flat.leaf_tris.iter().map(|t| t.len() as u64).sum();
-    if references > u64::from(u32::MAX) {
-        let limit = u64::from(u32::MAX);
-        return Err(crate::Error::Limit { what: "triangle references", needed: references, limit });
+    if references > limits.refs {
+        return Err(crate::Error::Limit { what: "triangle references", needed: references, limit: limits.refs });
     }
     // Records with links by ordinal first, in chunks (one allocation each): `nCount`
     // then the links. Addresses are known once every record's length is.
@@ -158,9 +158,8 @@ pub(crate) fn arrays(
     // Leaf addresses are words below the internal-node bit of a node reference.
     let words: u64 =
         chunks.iter().map(|c| c.len() as u64).sum::<u64>() + (LEAF_HEADER_WORDS as u64 - 1) * leaves as u64;
-    if words > u64::from(octrace_format::layout::INTERNAL_BIT) {
-        let limit = u64::from(octrace_format::layout::INTERNAL_BIT);
-        return Err(crate::Error::Limit { what: "words of leaf records", needed: words, limit });
+    if words > limits.words {
+        return Err(crate::Error::Limit { what: "words of leaf records", needed: words, limit: limits.words });
     }
     let mut address = Vec::with_capacity(leaves);
     let mut next = 0u32;

@@ -16,7 +16,7 @@ use octrace_format::{BakeParams, BakeStats, BakedScene, Bounds};
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use build::{Builder, Node};
+use build::{Builder, Growth, Limits, Node};
 use flatten::FlatTree;
 
 /// The stages of a bake, reported in order to a progress callback.
@@ -132,7 +132,11 @@ pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
 /// # Errors
 /// [`Error::NonFinite`] for a NaN or infinite coordinate, [`Error::EmptyScene`] for
 /// no triangles, [`Error::Scale`] for a scene smaller, larger or farther from the origin
-/// than the tracer serves.
+/// than the tracer serves, [`Error::TooLarge`] for 2^32 - 1 triangles or more, and
+/// [`Error::Limit`] for an octree past the format's indices: its non-degenerate
+/// triangles alone past 2^32 - 1 references before the build starts, else as soon
+/// as the tree being built passes 2^32 - 1 references or 2^31 words of leaf records
+/// (the build stops there).
 ///
 /// # Example
 /// ```
@@ -156,10 +160,24 @@ pub fn bake_with_progress(
     params: &BuildParams,
     progress: &(dyn Fn(BakeStage) + Sync),
 ) -> Result<BakedScene> {
+    bake_within(mesh, params, progress, Limits::FORMAT)
+}
+
+/// [`bake_with_progress`] against `limits` (the format's, or lower ones in tests).
+fn bake_within(
+    mesh: &Mesh,
+    params: &BuildParams,
+    progress: &(dyn Fn(BakeStage) + Sync),
+    limits: Limits,
+) -> Result<BakedScene> {
     progress(BakeStage::Prepare);
     let Prepared { lo, hi, ids, root_lo, root_size, resolved } = prepare(mesh, params)?;
+    // Every kept triangle is referenced by one leaf at least.
+    if ids.len() as u64 > limits.refs {
+        return Err(Error::Limit { what: "triangle references", needed: ids.len() as u64, limit: limits.refs });
+    }
     // The build reads the mesh's own triangles by input index: no copy of them.
-    let builder = builder(&mesh.triangles, root_lo, root_size, &resolved);
+    let builder = builder(&mesh.triangles, root_lo, root_size, &resolved, limits);
     let kept = ids.len();
 
     progress(BakeStage::Build);
@@ -168,11 +186,14 @@ pub fn bake_with_progress(
 
     progress(BakeStage::Balance);
     balance::balance(&mut root, &builder);
+    if builder.growth.passed() {
+        return Err(builder.growth.error());
+    }
 
     progress(BakeStage::Link);
     let flat = FlatTree::new(root);
     let cube = cube_level(flat.leaf_cells.len(), resolved.max_depth);
-    let arrays = flatten::arrays(&flat, mesh.triangles.len(), root_lo, root_size, cube)?;
+    let arrays = flatten::arrays(&flat, mesh.triangles.len(), root_lo, root_size, cube, limits)?;
     drop(flat);
     debug_assert_eq!(arrays.tri_order.len(), kept, "every triangle lies in some leaf");
     let triangles = arrays.tri_order.iter().flat_map(|&t| mesh.triangles[t as usize].concat()).collect();
@@ -250,6 +271,10 @@ fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     if mesh.triangles.is_empty() {
         return Err(Error::EmptyScene { path: name.into() });
     }
+    // Triangle indices are 32-bit (`Mesh::load` refuses the same).
+    if mesh.triangles.len() as u64 >= u64::from(u32::MAX) {
+        return Err(Error::TooLarge { path: name.into(), count: mesh.triangles.len() as u64 });
+    }
     mesh.check_attributes(name)?;
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for (i, t) in mesh.triangles.iter().enumerate() {
@@ -269,8 +294,15 @@ fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     Ok(Prepared { lo, hi, ids, root_lo, root_size, resolved })
 }
 
-fn builder<'a>(kept: &'a [[[f32; 3]; 3]], root_lo: [f32; 3], root_size: f32, resolved: &ResolvedParams) -> Builder<'a> {
+fn builder<'a>(
+    kept: &'a [[[f32; 3]; 3]],
+    root_lo: [f32; 3],
+    root_size: f32,
+    resolved: &ResolvedParams,
+    limits: Limits,
+) -> Builder<'a> {
     Builder {
+        growth: Growth::new(limits),
         triangles: kept,
         root_lo,
         root_size,
@@ -319,8 +351,11 @@ pub struct Unbalanced {
 pub fn build_unbalanced(mesh: &Mesh, params: &BuildParams) -> Result<Unbalanced> {
     let Prepared { ids, root_lo, root_size, resolved, .. } = prepare(mesh, params)?;
     let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
-    let builder = builder(&kept, root_lo, root_size, &resolved);
+    let builder = builder(&kept, root_lo, root_size, &resolved, Limits::FORMAT);
     let root = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
+    if builder.growth.passed() {
+        return Err(builder.growth.error());
+    }
     let mut leaves = Vec::with_capacity(root.leaf_count());
     root.for_each_leaf((0, [0; 3]), &mut |(level, cell), tris| leaves.push((level, cell, tris.to_vec())));
     drop(root);

@@ -230,3 +230,58 @@ fn the_root_cube_holds_the_mesh_and_has_a_power_of_two_edge() {
         }
     }
 }
+
+/// The format's index limits, lowered to what a small mesh reaches, are enforced where
+/// the documentation says: the triangles alone before the build, a tree past a limit
+/// while it grows (the build stops, and no arrays are laid out), the exact record
+/// words when the arrays are laid out; a tree exactly at a limit bakes.
+#[test]
+fn a_tree_past_a_limit_is_refused_as_soon_as_it_passes_it() {
+    use super::build::Limits;
+    use super::BakeStage;
+    let mesh = procedural::sphere([0.1, -0.2, 0.3], 1.0, 96, 128);
+    let p = params(8, 4);
+    let full = bake(&mesh, &p).unwrap();
+    let (refs, words) = (full.tri_refs.len() as u64, full.octree.len() as u64);
+    let leaf_words = full.leaf_count() as u64 * octrace_format::layout::LEAF_HEADER_WORDS as u64;
+    let kept = full.triangle_ids.len() as u64;
+    let within = |limits: Limits| {
+        let stages = std::sync::Mutex::new(Vec::new());
+        let baked = super::bake_within(&mesh, &p, &|s| stages.lock().unwrap().push(s), limits);
+        (baked, stages.into_inner().unwrap())
+    };
+    let limit_error = |baked: crate::Result<BakedScene>| match baked {
+        Err(crate::Error::Limit { what, needed, limit }) => (what, needed, limit),
+        other => panic!("expected a limit error, got {:?}", other.map(|_| "a scene")),
+    };
+
+    // Exactly at both limits: baked, the same file.
+    let (at, _) = within(Limits { refs, words });
+    assert_eq!(at.unwrap().to_file_bytes(0).unwrap(), full.to_file_bytes(0).unwrap());
+
+    // The triangles alone: refused before the build starts.
+    let (baked, stages) = within(Limits { refs: kept - 1, words });
+    assert_eq!(limit_error(baked), ("triangle references", kept, kept - 1));
+    assert_eq!(stages, [BakeStage::Prepare]);
+
+    // Past a limit while building: stopped well short of the whole tree, never laid out.
+    for (limits, what, whole) in [
+        (Limits { refs: refs / 4, words }, "triangle references", refs),
+        (Limits { refs, words: leaf_words / 4 }, "words of leaf records", leaf_words),
+    ] {
+        let (baked, stages) = within(limits);
+        let (name, needed, limit) = limit_error(baked);
+        assert_eq!(name, what);
+        let limit_set = if what == "triangle references" { limits.refs } else { limits.words };
+        assert_eq!(limit, limit_set);
+        assert!(needed > limit && needed < whole / 2, "{what}: stopped at {needed} of {whole}, limit {limit}");
+        assert!(!stages.contains(&BakeStage::Link), "{what}: {stages:?}");
+    }
+
+    // Past the words limit only by the links, which the layout counts exactly.
+    let (baked, stages) = within(Limits { refs, words: words - 1 });
+    assert_eq!(limit_error(baked), ("words of leaf records", words, words - 1));
+    assert_eq!(stages.last(), Some(&BakeStage::Link));
+    let message = within(Limits { refs, words: words - 1 }).0.unwrap_err().to_string();
+    assert!(message.contains("needs at least") && message.contains("--leaf-size"), "{message}");
+}
