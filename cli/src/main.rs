@@ -14,9 +14,11 @@ a new file over the old one (as `octrace bake` does), never by writing into them
 }
 
 mod cmd;
+mod memory;
 mod open;
 mod output;
-// Bindings to a C library: the CLI's only unsafe code, behind its feature.
+// Bindings to a C library, behind its feature (the other unsafe code: mapping files in
+// `open`, the allocator's setting in `memory`).
 #[cfg(feature = "embree")]
 #[allow(unsafe_code)]
 mod embree;

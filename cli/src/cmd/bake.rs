@@ -59,6 +59,7 @@ pub(crate) struct Args {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    crate::memory::return_large_frees();
     let params = BuildParams { max_depth: args.max_depth, leaf_size: Some(args.leaf_size), margin: args.margin };
     params.check().context("--max-depth, --leaf-size or --margin")?;
     let progress = Progress::new();
@@ -73,6 +74,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         progress.warn(w);
     }
     let (scene, bake_time) = crate::with_threads(args.threads, || bake_mesh(&mesh, &params, &progress))??;
+    // The scene holds its own copy of everything it needs: the mesh is not held through
+    // the write.
+    drop(mesh);
     progress.stage("writing");
     let time_us = if args.record_time { bake_time.as_micros() as u64 } else { 0 };
     let (bytes, on_disk) = if args.compress {
