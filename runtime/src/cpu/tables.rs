@@ -24,7 +24,7 @@
 //! cell along that axis, since its product then has the sign that says "later"; on the
 //! cell's plane both its products are zero and the code says nothing, so the walks
 //! decide every ray with a zero component by slab distances instead
-//! (`traverse::exit_along_moving_axes` states the rule).
+//! (`walk::exit_along_moving_axes` states the rule).
 
 /// Exit face by direction octant and Plücker sign code.
 pub const EXIT_FACE: [[u8; 8]; 8] = [

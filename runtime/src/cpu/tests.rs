@@ -161,7 +161,7 @@ proptest! {
 /// included.
 #[test]
 fn the_clip_agrees_with_the_scalar_clip() {
-    use super::traverse::{clip, clip_scalar};
+    use super::walk::{clip, clip_scalar};
     let mut rng = procedural::SplitMix(7);
     let (lo, hi) = ([-1.0f32, -2.0, 0.5], [3.0f32, 2.0, 4.5]);
     // Directions with equal components and origins on the box's planes make ties in

@@ -1,4 +1,4 @@
-// The octree walk of runtime/src/cpu/traverse.rs, one ray per invocation.
+// The octree walk of runtime/src/cpu/walk.rs, one ray per invocation.
 //
 // The scene is one array of 32-bit words (the file's sections octree, tri_refs,
 // triangles, triangle_ids, boxes, cube_map, nodes, back to back, at the word offsets in
@@ -30,7 +30,7 @@ struct Params {
     root_lo: vec4<f32>,
     // xyz: the root cube's high corner; w: 2^max_depth / edge.
     root_hi: vec4<f32>,
-    // The mesh box, enlarged (runtime/src/cpu/traverse.rs, box_slack); w: unused.
+    // The mesh box, enlarged (runtime/src/cpu/tracer.rs, box_slack); w: unused.
     box_lo: vec4<f32>,
     box_hi: vec4<f32>,
 }
@@ -282,7 +282,7 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let code = select(0u, 1u, p_xy > 0.0) | select(0u, 2u, p_yz > 0.0) | select(0u, 4u, p_zx > 0.0);
     var face = ((*wk).row >> (3u * code)) & 7u;
     // A zero direction component: the slab rule, never the table (exit_along_moving_axes
-    // in traverse.rs says why).
+    // in walk.rs says why).
     if d.x == 0.0 || d.y == 0.0 || d.z == 0.0 {
         face = exit_along_moving_axes(off, d, (*wk).inv);
     }

@@ -11,7 +11,7 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::TRIANGLE_FLOATS;
 
-use crate::cpu::traverse::Batch;
+use crate::cpu::walk::Batch;
 use crate::cpu::watertight::Shear;
 
 /// Triangles a batch.

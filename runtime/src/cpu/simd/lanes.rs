@@ -20,9 +20,11 @@ use std::arch::x86_64::*;
 use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2::{self, at_most, mask_of};
-use super::sse2::{prefetch, ShearSse, SseTest};
+use super::sse2::{ShearSse, SseTest};
+use crate::cpu::hw::prefetch;
 use crate::cpu::tables::{octant, EXIT_ROWS};
-use crate::cpu::traverse::{exit_along_moving_axes, LeafVisit, RayWalk, Tracer};
+use crate::cpu::tracer::Tracer;
+use crate::cpu::walk::{exit_along_moving_axes, LeafVisit, RayWalk};
 use crate::ray::{Hit, Ray};
 
 /// Walks stepped at once.
@@ -390,7 +392,7 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
         let mut face =
             _mm256_and_si256(_mm256_srlv_epi32(ldi(&v.exits), _mm256_slli_epi32::<2>(code)), _mm256_set1_epi32(0xF));
         // A ray with a zero direction component (rare) leaves by the scalar slab
-        // rule, whatever the table says (`traverse::exit_along_moving_axes`).
+        // rule, whatever the table says (`walk::exit_along_moving_axes`).
         let zeros = _mm256_or_ps(
             _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(d[0], zf), _mm256_cmp_ps::<_CMP_EQ_OQ>(d[1], zf)),
             _mm256_cmp_ps::<_CMP_EQ_OQ>(d[2], zf),

@@ -7,10 +7,10 @@ use std::arch::x86_64::*;
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2;
-use crate::cpu::traverse::{
-    exit_along_moving_axes, intersect_f64, Batch, LeafTest, LeafVisit, RayWalk, Tracer, TriRay, WalkStats, TEST_F64,
-    TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT,
-};
+use crate::cpu::hw::prefetch;
+use crate::cpu::tracer::{Tracer, WalkStats, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+use crate::cpu::triangle::{intersect_f64, TriRay};
+use crate::cpu::walk::{exit_along_moving_axes, Batch, LeafTest, LeafVisit, RayWalk};
 use crate::cpu::watertight::{plane_distance, Shear};
 use crate::ray::Hit;
 
@@ -31,7 +31,7 @@ pub(crate) struct SseWalk {
     d_s: [f32; 3],
     inv_s: [f32; 3],
     /// Whether a direction component is zero (then the slab rule decides the exit,
-    /// `traverse::exit_along_moving_axes`).
+    /// `walk::exit_along_moving_axes`).
     any_zero: bool,
     /// The ray's shear for the watertight test, in three-lane form.
     shear_sse: ShearSse,
@@ -278,7 +278,7 @@ fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
 /// over (its answer is then in `w.best`). The scalar `Tracer::step` documents each
 /// stage; this is the same computation, three lanes at a time.
 ///
-/// `TEST` is the triangle test (`TEST_*` of `traverse`) and `SLAB` the slab exit-face
+/// `TEST` is the triangle test (`TEST_*` of `tracer`) and `SLAB` the slab exit-face
 /// test, fixed at compile time so the default's step carries no test of either.
 ///
 /// No `target_feature` attribute, so that it is inlined (`inline(always)`) into the
@@ -422,17 +422,6 @@ pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
     w
 }
 
-/// Asks for the cache line of `words[at]`, if `at` is in range (a hint: no load, no
-/// fault).
-#[inline(always)]
-pub(crate) fn prefetch(words: &[u32], at: u32) {
-    if let Some(word) = words.get(at as usize) {
-        // SAFETY: a prefetch reads nothing architecturally; the address is that of a
-        // live element, and SSE (which has PREFETCHT0) is enabled for this module.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>(std::ptr::from_ref(word).cast::<i8>()) };
-    }
-}
-
 /// One step in SSE form.
 #[inline(always)]
 pub(crate) fn step_safe<const ANY: bool, const TEST: u8, const SLAB: bool>(
@@ -442,31 +431,4 @@ pub(crate) fn step_safe<const ANY: bool, const TEST: u8, const SLAB: bool>(
 ) -> bool {
     // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
     unsafe { step::<ANY, TEST, SLAB>(t, w, stats) }
-}
-
-/// `traverse::clip` on three lanes for a direction with no zero component: the six
-/// divisions as two, the same answer (lane 3 is a dummy slab from -inf to +inf).
-#[inline(always)]
-pub(crate) fn clip(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
-    debug_assert!(!d.contains(&0.0));
-    // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
-    unsafe {
-        let o4 = _mm_setr_ps(o[0], o[1], o[2], 0.0);
-        let d4 = _mm_setr_ps(d[0], d[1], d[2], 1.0);
-        let ta = _mm_div_ps(_mm_sub_ps(_mm_setr_ps(lo[0], lo[1], lo[2], f32::NEG_INFINITY), o4), d4);
-        let tb = _mm_div_ps(_mm_sub_ps(_mm_setr_ps(hi[0], hi[1], hi[2], f32::INFINITY), o4), d4);
-        // `if ta < tb { (ta, tb) } else { (tb, ta) }`, lane by lane.
-        let m = _mm_cmplt_ps(ta, tb);
-        let near = _mm_or_ps(_mm_and_ps(m, ta), _mm_andnot_ps(m, tb));
-        let far = _mm_or_ps(_mm_and_ps(m, tb), _mm_andnot_ps(m, ta));
-        // The largest near, the first lane holding it, and the smallest far (no NaN:
-        // a traceable ray's origin is finite, and no component of `d` is zero).
-        let mx = _mm_max_ps(near, _mm_shuffle_ps::<0b01_00_11_10>(near, near));
-        let mx = _mm_max_ps(mx, _mm_shuffle_ps::<0b10_11_00_01>(mx, mx));
-        let mn = _mm_min_ps(far, _mm_shuffle_ps::<0b01_00_11_10>(far, far));
-        let mn = _mm_min_ps(mn, _mm_shuffle_ps::<0b10_11_00_01>(mn, mn));
-        let axis = (_mm_movemask_ps(_mm_cmpeq_ps(near, mx)) as u32 & 7).trailing_zeros() as usize & 3;
-        let (t0, t1) = (_mm_cvtss_f32(mx), _mm_cvtss_f32(mn));
-        (t0 <= t1).then_some((t0, t1, axis))
-    }
 }

@@ -379,7 +379,7 @@ fn nan_inf_inverted_and_zero_rays_are_defined_misses() {
 }
 
 /// Termination: a walk visits at most `Tracer::max_steps` leaves (9 * 2^depth + 64,
-/// see `runtime/src/cpu/traverse.rs`); every build stops there and says so. Long walks
+/// see `runtime/src/cpu/walk.rs`); every build stops there and says so. Long walks
 /// through the deepest trees stay well inside the bound.
 #[test]
 fn walks_stay_within_the_proven_step_bound() {

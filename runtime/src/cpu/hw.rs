@@ -1,0 +1,54 @@
+//! What the processor offers beneath the walks: whether it has x86-64-v3, cache hints,
+//! and the SSE2 clip every x86-64 processor runs. Below both the scalar walk and the
+//! SIMD steps (`simd/`), which use these and nothing of each other's here.
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+use std::arch::x86_64::*;
+
+/// Whether the processor has x86-64-v3's features (AVX2 and friends).
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+pub(crate) fn x86_64_v3() -> bool {
+    use std::arch::is_x86_feature_detected as has;
+    has!("avx2") && has!("bmi1") && has!("bmi2") && has!("fma") && has!("lzcnt") && has!("popcnt")
+}
+
+/// Asks for the cache line of `words[at]`, if `at` is in range (a hint: no load, no
+/// fault).
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[inline(always)]
+pub(crate) fn prefetch(words: &[u32], at: u32) {
+    if let Some(word) = words.get(at as usize) {
+        // SAFETY: a prefetch reads nothing architecturally; the address is that of a
+        // live element, and SSE (which has PREFETCHT0) is part of every x86-64
+        // target this is compiled for.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(std::ptr::from_ref(word).cast::<i8>()) };
+    }
+}
+
+/// `walk::clip` on three lanes for a direction with no zero component: the six
+/// divisions as two, the same answer (lane 3 is a dummy slab from -inf to +inf).
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[inline(always)]
+pub(crate) fn clip_sse2(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> Option<(f32, f32, usize)> {
+    debug_assert!(!d.contains(&0.0));
+    // SAFETY: SSE2 is part of every x86-64 target this is compiled for.
+    unsafe {
+        let o4 = _mm_setr_ps(o[0], o[1], o[2], 0.0);
+        let d4 = _mm_setr_ps(d[0], d[1], d[2], 1.0);
+        let ta = _mm_div_ps(_mm_sub_ps(_mm_setr_ps(lo[0], lo[1], lo[2], f32::NEG_INFINITY), o4), d4);
+        let tb = _mm_div_ps(_mm_sub_ps(_mm_setr_ps(hi[0], hi[1], hi[2], f32::INFINITY), o4), d4);
+        // `if ta < tb { (ta, tb) } else { (tb, ta) }`, lane by lane.
+        let m = _mm_cmplt_ps(ta, tb);
+        let near = _mm_or_ps(_mm_and_ps(m, ta), _mm_andnot_ps(m, tb));
+        let far = _mm_or_ps(_mm_and_ps(m, tb), _mm_andnot_ps(m, ta));
+        // The largest near, the first lane holding it, and the smallest far (no NaN:
+        // a traceable ray's origin is finite, and no component of `d` is zero).
+        let mx = _mm_max_ps(near, _mm_shuffle_ps::<0b01_00_11_10>(near, near));
+        let mx = _mm_max_ps(mx, _mm_shuffle_ps::<0b10_11_00_01>(mx, mx));
+        let mn = _mm_min_ps(far, _mm_shuffle_ps::<0b01_00_11_10>(far, far));
+        let mn = _mm_min_ps(mn, _mm_shuffle_ps::<0b10_11_00_01>(mn, mn));
+        let axis = (_mm_movemask_ps(_mm_cmpeq_ps(near, mx)) as u32 & 7).trailing_zeros() as usize & 3;
+        let (t0, t1) = (_mm_cvtss_f32(mx), _mm_cvtss_f32(mn));
+        (t0 <= t1).then_some((t0, t1, axis))
+    }
+}

@@ -1,0 +1,161 @@
+//! Point location: the leaf holding a point (rays that start inside the root), the
+//! leaf a ray from outside enters first (through the cube map), and the grid of the
+//! point-location tree's top levels.
+
+use octrace_format::layout::{other_axes, texel_index, NodeRef, MAX_LEVEL};
+use octrace_format::SceneView;
+
+use super::tracer::Tracer;
+use super::walk::point_at;
+
+impl Tracer<'_> {
+    /// Finest-grid coordinates of a point, clamped into the root.
+    #[inline(always)]
+    fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
+        let last = ((1u64 << self.frame.max_depth) - 1) as f64;
+        // Clamped to [0, last] first, so truncation is the floor; NaN clamps to 0.
+        // Rounding can only move a point to a neighbouring cell, which the bake
+        // margin covers.
+        let q =
+            |a: usize| ((p[a] as f64 - self.frame.root_lo[a] as f64) * self.frame.grid_scale).max(0.0).min(last) as u32;
+        [q(0), q(1), q(2)]
+    }
+
+    /// The address of the leaf holding point `p` (clamped into the root).
+    pub fn locate(&self, p: [f32; 3]) -> u32 {
+        self.locate_cell(p).0
+    }
+
+    /// The leaf holding point `p`: its address, level and cell. With a locate grid,
+    /// one load replaces the top levels of the descent.
+    #[inline(always)]
+    pub(super) fn locate_cell(&self, p: [f32; 3]) -> (u32, u32, [u32; 3]) {
+        let q = self.grid_coords(p);
+        match self.grid {
+            Some(grid) => {
+                let (word, level) = grid.entry(q, self.frame.max_depth);
+                self.descend(word, level, q)
+            }
+            None => self.descend(self.view.root, 0, q),
+        }
+    }
+
+    /// Descends from `word` (a node at `level`) to the leaf holding finest-grid cell
+    /// `q`: its address, level and cell.
+    #[inline(always)]
+    fn descend(&self, word: u32, level: u32, q: [u32; 3]) -> (u32, u32, [u32; 3]) {
+        let (address, level) = descend_to(&self.view, word, level, q, self.frame.max_depth, self.frame.max_depth);
+        let shift = self.frame.max_depth.saturating_sub(level).min(31);
+        (address, level, q.map(|c| c >> shift))
+    }
+
+    /// The leaf a ray from outside enters first (address, level, cell): the cube-map
+    /// texel under its entry point holds that leaf, or the node to descend from.
+    #[inline(always)]
+    pub(super) fn enter_through_cube_map(&self, o: [f32; 3], d: [f32; 3], t: f32, axis: usize) -> (u32, u32, [u32; 3]) {
+        let mut q = self.grid_coords(point_at(o, d, t));
+        let high = d[axis] < 0.0;
+        q[axis] = if high { (1u32 << self.frame.max_depth) - 1 } else { 0 };
+        let face = 2 * axis + high as usize;
+        let Some(level) = self.frame.cube_level else {
+            return self.descend(self.view.root, 0, q);
+        };
+        let res = 1usize << level;
+        let (u, v) = other_axes(axis);
+        let shift = self.frame.max_depth - level;
+        let texel = texel_index(face, res, (q[u] >> shift) as usize, (q[v] >> shift) as usize);
+        let word = self.view.cube_map[texel];
+        match NodeRef::decode(word) {
+            NodeRef::Internal(_) => self.descend(word, level, q),
+            // The texel's leaf may be coarser than the texel: its level is read off its
+            // box, whose edge is the root's divided by a power of two.
+            NodeRef::Leaf(address) => {
+                let view = &self.view;
+                let edge =
+                    view.octree.get(address as usize + 2).and_then(|&b| view.boxes.get(b as usize * 6..)?.get(..6));
+                // A leaf or box past its array (a hostile file): from the root instead.
+                let Some(edge) = edge.map(|b| b[3] as f64 - b[0] as f64) else {
+                    return self.descend(view.root, 0, q);
+                };
+                // Edges are the root's over powers of two: compare binary exponents
+                // (rounding of the planes moves an edge by far less than a factor 2).
+                let ratio = self.view.bounds.root_size as f64 / edge * std::f64::consts::SQRT_2;
+                let leaf_level = (((ratio.to_bits() >> 52) & 0x7FF) as i64 - 1023).clamp(0, level as i64) as u32;
+                let shift = self.frame.max_depth - leaf_level;
+                (address, leaf_level, [q[0] >> shift, q[1] >> shift, q[2] >> shift])
+            }
+        }
+    }
+}
+
+/// Descends the point-location tree from `word` (a node at `level`) towards
+/// finest-grid cell `q` until a leaf or level `stop`: (the word there, its level). A
+/// valid tree has no internal node at `max_depth`; a hostile one (on the trusted path)
+/// stops there too, so the descent is bounded whatever the file.
+#[inline(always)]
+fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], stop: u32, depth: u32) -> (u32, u32) {
+    // `q` is on the grid of `depth`, the depth the tracer uses (the file's, at most the
+    // format's limit); `stop <= depth`, so the shift cannot underflow.
+    debug_assert!(stop <= depth);
+    while let NodeRef::Internal(i) = NodeRef::decode(word) {
+        if level >= stop {
+            break;
+        }
+        let shift = (depth - level - 1).min(31);
+        let child = (q[0] >> shift & 1) | (q[1] >> shift & 1) << 1 | (q[2] >> shift & 1) << 2;
+        word = view.nodes.get(8 * i as usize + child as usize).copied().unwrap_or(0);
+        level += 1;
+    }
+    (word, level)
+}
+
+/// The point-location tree's top levels as a grid: for each cell of level `level`, the
+/// leaf that holds it (and that leaf's level) or the internal node at that level. A
+/// point is located with one load and a short descent instead of up to `max_depth`
+/// dependent loads. Built once per scene (`Scene` keeps it).
+#[derive(Debug)]
+pub struct LocateGrid {
+    level: u32,
+    words: Vec<u32>,
+    levels: Vec<u8>,
+}
+
+impl LocateGrid {
+    /// Grid cells a side at most: 2^6 (262,144 cells, 1.25 MB).
+    const MAX_LEVEL: u32 = 6;
+
+    /// The grid of a validated scene.
+    pub fn build(view: &SceneView<'_>) -> LocateGrid {
+        let depth = view.params.max_depth.min(MAX_LEVEL);
+        let level = depth.min(Self::MAX_LEVEL);
+        let res = 1u32 << level;
+        let shift = depth - level;
+        let cells = (res as usize).pow(3);
+        let (mut words, mut levels) = (Vec::with_capacity(cells), Vec::with_capacity(cells));
+        for z in 0..res {
+            for y in 0..res {
+                for x in 0..res {
+                    let q = [x << shift, y << shift, z << shift];
+                    let (word, l) = descend_to(view, view.root, 0, q, level, depth);
+                    words.push(word);
+                    levels.push(l as u8);
+                }
+            }
+        }
+        LocateGrid { level, words, levels }
+    }
+
+    /// The word and level to descend from for finest-grid cell `q`.
+    #[inline(always)]
+    fn entry(&self, q: [u32; 3], max_depth: u32) -> (u32, u32) {
+        let shift = max_depth.saturating_sub(self.level).min(31);
+        let res = 1usize << self.level;
+        let mask = res - 1;
+        let i = (((q[2] >> shift) as usize & mask) * res + ((q[1] >> shift) as usize & mask)) * res
+            + ((q[0] >> shift) as usize & mask);
+        match (self.words.get(i), self.levels.get(i)) {
+            (Some(&w), Some(&l)) => (w, l as u32),
+            _ => (0, 0),
+        }
+    }
+}

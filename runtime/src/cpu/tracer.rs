@@ -1,0 +1,307 @@
+//! The tracer: a scene's view, the frame derived from it, and the options a walk
+//! runs with (triangle test, exit test, x86-64-v3, lanes, locate grid). The walk
+//! itself is in `walk.rs` (scalar), `simd/` (SSE, eight lanes), and the calls that pick
+//! one are in `one_ray.rs` and `batch.rs`.
+
+use octrace_format::layout::MAX_LEVEL;
+use octrace_format::SceneView;
+
+use super::locate::LocateGrid;
+use super::triangle::{intersect, intersect_f64, TriRay};
+use super::watertight::Shear;
+
+/// Traces rays through one scene. Cheap to build (no allocation): make one per batch.
+#[derive(Clone, Debug)]
+pub struct Tracer<'a> {
+    pub(super) view: SceneView<'a>,
+    pub(super) frame: TreeFrame,
+    pub(super) test: TriangleTest,
+    pub(super) exit: ExitTest,
+    /// The top levels of point location as a grid, when the scene has one.
+    pub(super) grid: Option<&'a LocateGrid>,
+    /// Whether the walks run the code compiled for x86-64-v3 (where the processor
+    /// has it).
+    pub(super) v3: bool,
+    /// Whether batch calls may step eight walks at once (with `v3`).
+    pub(super) lanes: bool,
+}
+
+/// What a tracer derives from a scene's parameters before it walks: the root cube and
+/// mesh box, the cell edge at each level, the step bound, whether the cube map fits.
+/// Computed once a scene ([`crate::Scene`] keeps it), so a tracer costs nothing to
+/// make for a single ray.
+#[derive(Clone, Copy, Debug)]
+pub struct TreeFrame {
+    pub(super) root_lo: [f32; 3],
+    pub(super) root_hi: [f32; 3],
+    /// The mesh's box, enlarged by [`box_slack`]: a ray that misses it misses every
+    /// triangle, and a walk ends where the ray leaves it.
+    pub(super) box_lo: [f32; 3],
+    pub(super) box_hi: [f32; 3],
+    /// `2^max_depth / root_size`: world to finest-grid coordinates.
+    pub(super) grid_scale: f64,
+    /// Cell edge at each level, `root_size / 2^level` (exact: the edge is a power of two).
+    pub(super) sizes: [f32; 32],
+    pub(super) max_depth: u32,
+    pub(super) max_steps: u32,
+    /// The cube map's level, when the map fits the tree (always, in a valid file; a
+    /// hostile one on the trusted path enters from the root instead).
+    pub(super) cube_level: Option<u32>,
+    /// Whether the processor has x86-64-v3 (asked once, not per tracer).
+    pub(super) v3: bool,
+}
+
+impl TreeFrame {
+    /// The frame of `view`'s tree.
+    pub fn of(view: &SceneView<'_>) -> TreeFrame {
+        let b = view.bounds;
+        // The format's own limit: a file that claims more (on the trusted path) is
+        // walked as if it said 20, so no shift overflows and the step bound holds.
+        let max_depth = view.params.max_depth.min(MAX_LEVEL);
+        let (root_lo, root_hi) = root_corners(view);
+        let (box_lo, box_hi) = mesh_box(view);
+        TreeFrame {
+            root_lo,
+            root_hi,
+            box_lo,
+            box_hi,
+            grid_scale: (1u64 << max_depth) as f64 / b.root_size as f64,
+            sizes: std::array::from_fn(|l| (b.root_size as f64 / (1u64 << l) as f64) as f32),
+            max_depth,
+            // A line crosses at most 3 * 2^depth planes of the finest grid, and each
+            // step crosses one (or sits on an edge or corner and crosses one at no
+            // distance, at most twice more): 3x that, plus slack for tiny trees. And a
+            // line enters a convex cell once, so a walk visits no leaf more than three
+            // times: 9x the leaves bounds it too, and the smaller bound wins (a small
+            // hostile file claiming a deep tree ends its cycles sooner).
+            max_steps: (9 * (1u32 << max_depth) + 64).min(9 * view.leaf_count().min(1 << 26) as u32 + 64),
+            cube_level: Some(view.params.cube_level).filter(|&level| {
+                let res = 1usize << level.min(MAX_LEVEL);
+                level <= max_depth && view.cube_map.len() == 6 * res * res
+            }),
+            v3: wider_simd_available(),
+        }
+    }
+}
+
+/// The ray/triangle test a tracer uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TriangleTest {
+    /// Woop, Benthin & Wald's watertight test: no ray passes between triangles that
+    /// share an edge (the default).
+    #[default]
+    Watertight,
+    /// Möller & Trumbore: a ray through a shared edge can, rarely, miss both
+    /// triangles.
+    MollerTrumbore,
+    /// Möller & Trumbore in `f64` (the oracle's arithmetic, `reference::intersect_f64`,
+    /// on the `f32` ray and vertices): the slowest; for measuring what `f32` costs.
+    F64,
+}
+
+/// [`TriangleTest`]s as the const parameters of the SIMD step.
+pub(crate) const TEST_WATERTIGHT: u8 = 0;
+pub(crate) const TEST_MOLLER_TRUMBORE: u8 = 1;
+pub(crate) const TEST_F64: u8 = 2;
+
+/// `with_tests!(tracer; ANY; f; args)` calls `f::<ANY, TEST, SLAB>(args)` with the
+/// tracer's triangle and exit tests as const generics: one dispatch a call, none a step.
+macro_rules! with_tests {
+    ($tracer:expr; $any:tt; $($f:ident)::+; $($args:expr),*) => {{
+        use $crate::cpu::tracer::{ExitTest as E, TriangleTest as T, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+        match ($tracer.triangle_test(), $tracer.exit_test()) {
+            (T::Watertight, E::Plucker) => $($f)::+::<$any, TEST_WATERTIGHT, false>($($args),*),
+            (T::Watertight, E::Slab) => $($f)::+::<$any, TEST_WATERTIGHT, true>($($args),*),
+            (T::MollerTrumbore, E::Plucker) => $($f)::+::<$any, TEST_MOLLER_TRUMBORE, false>($($args),*),
+            (T::MollerTrumbore, E::Slab) => $($f)::+::<$any, TEST_MOLLER_TRUMBORE, true>($($args),*),
+            (T::F64, E::Plucker) => $($f)::+::<$any, TEST_F64, false>($($args),*),
+            (T::F64, E::Slab) => $($f)::+::<$any, TEST_F64, true>($($args),*),
+        }
+    }};
+}
+pub(crate) use with_tests;
+
+/// How a walk picks the face it leaves a leaf by.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ExitTest {
+    /// The paper's: the signs of three Plücker products with the edges at the exit
+    /// corner, a 3-bit code into a table (the default).
+    #[default]
+    Plucker,
+    /// Slab distances: the nearest of the three planes at the exit corner, compared
+    /// (ties to the lowest axis). For measuring what the Plücker test buys.
+    Slab,
+}
+
+/// What a walk did, for the cells view and for statistics.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WalkStats {
+    /// Leaves visited.
+    pub leaves: u32,
+    /// Triangle tests run.
+    pub triangle_tests: u32,
+    /// Whether the walk was stopped by [`Tracer::max_steps`] (never for a valid file:
+    /// the bound is proven; a hostile file opened on the trusted path can reach it).
+    pub stopped_at_bound: bool,
+}
+
+impl<'a> Tracer<'a> {
+    /// Prepares a tracer for a validated view.
+    pub fn new(view: SceneView<'a>) -> Tracer<'a> {
+        let frame = TreeFrame::of(&view);
+        Tracer::with_frame(view, frame)
+    }
+
+    /// A tracer over `view` with its frame computed already ([`TreeFrame::of`] the
+    /// same view): what [`crate::Scene`]'s one-ray calls use, at no setup cost.
+    #[inline]
+    pub fn with_frame(view: SceneView<'a>, frame: TreeFrame) -> Tracer<'a> {
+        Tracer {
+            frame,
+            view,
+            test: TriangleTest::default(),
+            exit: ExitTest::default(),
+            grid: None,
+            v3: frame.v3,
+            lanes: true,
+        }
+    }
+
+    /// The same tracer with or without the walk compiled for x86-64-v3 (AVX2, BMI;
+    /// on by default where the processor has it, and never where it does not). Both
+    /// give the same answers bit for bit; off runs the SSE2 baseline, for tests and
+    /// comparisons.
+    pub fn with_x86_64_v3(mut self, on: bool) -> Self {
+        self.v3 = on && wider_simd_available();
+        self
+    }
+
+    /// Whether the walks run the code compiled for x86-64-v3.
+    pub fn uses_x86_64_v3(&self) -> bool {
+        self.v3
+    }
+
+    /// The same tracer with or without the batch calls' eight-lane walk (on by
+    /// default where the processor has x86-64-v3; off, batches step one walk at a time,
+    /// several in flight). The answers are the same bits either way; off is for
+    /// measuring what the lanes buy (the slab exit test always runs without them).
+    pub fn with_lanes(mut self, on: bool) -> Self {
+        self.lanes = on;
+        self
+    }
+
+    /// Whether batch calls may use the eight-lane walk.
+    pub(crate) fn uses_lanes(&self) -> bool {
+        self.lanes
+    }
+
+    /// The same tracer locating points with `grid` (built for this scene).
+    #[inline]
+    pub fn with_locate_grid(mut self, grid: &'a LocateGrid) -> Self {
+        self.grid = Some(grid);
+        self
+    }
+
+    /// The same tracer with another triangle test.
+    pub fn with_triangle_test(mut self, test: TriangleTest) -> Self {
+        self.test = test;
+        self
+    }
+
+    /// The triangle test in use.
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.test
+    }
+
+    /// The same tracer with another exit-face test.
+    pub fn with_exit_test(mut self, exit: ExitTest) -> Self {
+        self.exit = exit;
+        self
+    }
+
+    /// The exit-face test in use.
+    pub fn exit_test(&self) -> ExitTest {
+        self.exit
+    }
+
+    /// Tests one triangle (nine floats) with the tracer's triangle test.
+    #[inline(always)]
+    pub(crate) fn hit_triangle(
+        &self,
+        shear: &Shear,
+        tri: &TriRay,
+        t: &[f32],
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
+        match self.test {
+            TriangleTest::Watertight => shear.intersect(t, tmin, tmax),
+            TriangleTest::MollerTrumbore => intersect(tri, t, tmin, tmax),
+            TriangleTest::F64 => intersect_f64(tri, t, tmin, tmax),
+        }
+    }
+
+    /// The view this tracer reads.
+    pub fn view(&self) -> &SceneView<'a> {
+        &self.view
+    }
+
+    /// The most leaves one walk may visit; see the module docs.
+    pub fn max_steps(&self) -> u32 {
+        self.frame.max_steps
+    }
+
+    /// The root cube's low corner.
+    pub(crate) fn root_lo(&self) -> [f32; 3] {
+        self.frame.root_lo
+    }
+
+    /// Cell edges by level (32 of them: a level masked to five bits indexes it).
+    #[inline(always)]
+    pub(crate) fn cell_sizes(&self) -> &[f32; 32] {
+        &self.frame.sizes
+    }
+
+    /// The edge of a cell at `level` (masked into the table: a hostile level cannot
+    /// index out of bounds).
+    #[inline(always)]
+    pub(crate) fn cell_size(&self, level: u32) -> f32 {
+        self.frame.sizes[level as usize & 31]
+    }
+}
+
+/// Whether this processor runs the walks compiled for x86-64-v3.
+fn wider_simd_available() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    return super::hw::x86_64_v3();
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    false
+}
+
+/// Relative slack on the distance where a ray leaves the mesh box: f32 distances far
+/// from the origin carry a relative error of a few ulps (2^-21); this is 32 times that.
+pub(crate) const BOX_T_SLACK: f32 = 1.0 / (1 << 16) as f32;
+
+/// How far the mesh box is enlarged on every side: 2^-16 of the root edge, and at least
+/// 16 f32 spacings of the root's largest coordinate, so that rounding in the clip never
+/// moves a triangle on the box's faces outside it.
+pub(crate) fn box_slack(root_lo: [f32; 3], root_hi: [f32; 3], root_size: f32) -> f32 {
+    let largest = root_lo.iter().chain(&root_hi).fold(0.0f32, |m, c| m.max(c.abs()));
+    (root_size / (1 << 16) as f32).max(16.0 * f32::EPSILON * largest)
+}
+
+/// The mesh box enlarged on every side (by 2^-16 of the root edge, and at least 16 f32
+/// spacings of the root's largest coordinate), as the walks clip to it.
+pub fn mesh_box(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
+    let b = view.bounds;
+    let (root_lo, root_hi) = root_corners(view);
+    let slack = box_slack(root_lo, root_hi, b.root_size);
+    (b.mesh_lo.map(|c| c - slack), b.mesh_hi.map(|c| c + slack))
+}
+
+/// The root cube's low and high corners, as the format computes cell planes.
+pub fn root_corners(view: &SceneView<'_>) -> ([f32; 3], [f32; 3]) {
+    let b = view.bounds;
+    let r = octrace_format::layout::cell_box(b.root_lo, b.root_size, 0, [0; 3]);
+    ([r[0], r[1], r[2]], [r[3], r[4], r[5]])
+}
