@@ -141,6 +141,10 @@ struct SetResult {
 struct EmbreeFigures {
     embree_one_ray: Spread,
     embree_packets: Option<Spread>,
+    /// Embree's one-ray calls on the rays in the order octrace's batch walks them,
+    /// where that is not the given order (`Tracer::memory_order`), and octrace batch /
+    /// that, median of the runs'.
+    embree_memory_order: Option<(Spread, f64)>,
     octrace_one_ray: Spread,
     /// Rays Embree finds hit (or occluded): the checksum's count, to compare.
     embree_hits: usize,
@@ -285,7 +289,11 @@ fn embree_figures(
         let tile = |tx: usize, ty: usize| std::array::from_fn(|k| (4 * ty + k / 4) * 1024 + 4 * tx + k % 4);
         (0..256).flat_map(|ty| (0..256).map(move |tx| tile(tx, ty))).collect()
     });
+    // Rays octrace's batch sorts (incoherent ones), in its order: Embree timed on them
+    // too, so that the ratio says what the order buys either tracer.
+    let ordered: Option<Vec<Ray>> = tracer.memory_order(rays).map(|o| o.iter().map(|&i| rays[i as usize]).collect());
     let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut one_ordered = Vec::new();
     let mut hits = vec![None; rays.len()];
     let mut occluded = vec![false; rays.len()];
     let mut embree_hits = 0;
@@ -304,6 +312,16 @@ fn embree_figures(
                 rays.iter().filter(|r| e.nearest(r).is_some()).count()
             };
         }));
+        if let Some(ordered) = &ordered {
+            one_ordered.push(timed(&mut || {
+                let n = if occlusion {
+                    ordered.iter().filter(|r| e.occluded(r)).count()
+                } else {
+                    ordered.iter().filter(|r| e.nearest(r).is_some()).count()
+                };
+                std::hint::black_box(n);
+            }));
+        }
         if let Some(packets) = &packets {
             let mut out = [None; 16];
             packet.push(timed(&mut || {
@@ -332,6 +350,10 @@ fn embree_figures(
         ratio_one_ray: Spread::of(ours.iter().zip(&one).map(|(o, e)| o / e).collect()).median,
         embree_one_ray: Spread::of(one),
         embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
+        embree_memory_order: (!one_ordered.is_empty()).then(|| {
+            let ratio = Spread::of(batch.iter().zip(&one_ordered).map(|(o, e)| o / e).collect()).median;
+            (Spread::of(one_ordered), ratio)
+        }),
         octrace_one_ray: Spread::of(ours),
         embree_hits,
     }
@@ -443,6 +465,18 @@ fn report(
                 e.ratio_one_ray,
                 thousands(e.embree_hits as u64),
                 if r.name == "shadow" { "occluded" } else { "hits" }
+            );
+        }
+        for r in results {
+            let Some((spread, ratio)) = r.embree.as_ref().and_then(|e| e.embree_memory_order.as_ref()) else {
+                continue;
+            };
+            crate::out!(
+                "{:<11} Embree 1-ray calls on the rays in octrace's memory order (its batch sorts these): {}, \
+                 octrace batch / that {:.2}x",
+                r.name,
+                fmt(spread),
+                ratio
             );
         }
     }

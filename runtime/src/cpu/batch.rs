@@ -1,8 +1,10 @@
 //! The batch calls: many rays walked on one thread with several in flight (their
-//! memory loads overlap), or on all threads of the rayon pool.
+//! memory loads overlap), or on all threads of the rayon pool; incoherent batches in
+//! memory order (`order.rs`).
 
 use rayon::prelude::*;
 
+use super::order::memory_order;
 use super::simd;
 use super::tracer::{with_tests, Tracer, WalkStats};
 use crate::ray::{Hit, Ray};
@@ -44,11 +46,75 @@ mod scalar_batch {
 const IN_FLIGHT: usize = 8;
 
 impl Tracer<'_> {
-    /// Nearest hits of a batch, on this thread (several rays in flight, interleaved).
+    /// Nearest hits of a batch, on this thread (several rays in flight, interleaved;
+    /// an incoherent batch in memory order, [`Tracer::with_memory_order`]).
     pub fn intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        self.in_memory_order(rays, out, |r, o| self.nearest_as_given(r, o));
+    }
+
+    /// [`Tracer::intersect_batch`] in the order given.
+    fn nearest_as_given(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         let done = |i: usize, h: Option<Hit>| out[i] = h;
         with_tests!(self; false; Self::interleaved; self, rays, done);
+    }
+
+    /// [`Tracer::occluder_batch`] in the order given.
+    fn any_as_given(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let done = |i: usize, h: Option<Hit>| out[i] = h;
+        with_tests!(self; true; Self::interleaved; self, rays, done);
+    }
+
+    /// [`Tracer::occluded_batch`] in the order given.
+    fn occluded_as_given(&self, rays: &[Ray], out: &mut [bool]) {
+        let done = |i: usize, h: Option<Hit>| out[i] = h.is_some();
+        with_tests!(self; true; Self::interleaved; self, rays, done);
+    }
+
+    /// The order the batch calls walk `rays` in, as indices into `rays`, or `None`
+    /// where they walk them as given ([`MemoryOrder`](crate::MemoryOrder) says when): rays sorted by the
+    /// cell of a 64^3 grid over the scene that their origin lies in (Morton order),
+    /// then by their direction's octant. For callers who want the same locality
+    /// elsewhere: to shade hits in that order, or to hand another tracer the same rays
+    /// in the same order.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{MemoryOrder, Ray, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let mut rng = procedural::SplitMix(1);
+    /// let mut unit = || 2.0 * rng.unit() - 1.0;
+    /// let rays: Vec<Ray> =
+    ///     (0..10_000).map(|_| Ray::new([unit(), unit(), unit()].into(), [unit(), unit(), unit()].into())).collect();
+    /// // A small scene stays in the cache: walked as given, unless asked.
+    /// assert!(scene.tracer().memory_order(&rays).is_none());
+    /// let tracer = scene.tracer().with_memory_order(MemoryOrder::Incoherent);
+    /// let mut order = tracer.memory_order(&rays).expect("random rays are reordered");
+    /// order.sort_unstable();
+    /// assert!(order.iter().enumerate().all(|(i, &j)| j as usize == i)); // a permutation
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn memory_order(&self, rays: &[Ray]) -> Option<Vec<u32>> {
+        memory_order(self, rays, self.memory_order)
+    }
+
+    /// Runs `walk` (a batch call in the order given) on `rays`, sorted into memory
+    /// order first where `order.rs` says it pays, each answer put back in its ray's
+    /// slot.
+    fn in_memory_order<T: Copy + Default + Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        walk: impl FnOnce(&[Ray], &mut [T]),
+    ) {
+        let Some(order) = self.memory_order(rays) else { return walk(rays, out) };
+        let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
+        let mut answers = vec![T::default(); rays.len()];
+        walk(&sorted, &mut answers);
+        for (&i, answer) in order.iter().zip(answers) {
+            out[i as usize] = answer;
+        }
     }
 
     /// Walks `rays` with up to [`IN_FLIGHT`] in progress, one step each in turn;
@@ -141,20 +207,19 @@ impl Tracer<'_> {
     /// Nearest hits of a batch, on all threads of the current rayon pool.
     pub fn par_intersect_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.intersect_batch(r, o));
+        self.in_memory_order(rays, out, |r, o| self.in_parallel(r, o, Self::nearest_as_given));
     }
 
     /// Occlusion of a batch, on this thread (several rays in flight, interleaved).
     pub fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        let done = |i: usize, h: Option<Hit>| out[i] = h.is_some();
-        with_tests!(self; true; Self::interleaved; self, rays, done);
+        self.in_memory_order(rays, out, |r, o| self.occluded_as_given(r, o));
     }
 
     /// Occlusion of a batch, on all threads of the current rayon pool.
     pub fn par_occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.occluded_batch(r, o));
+        self.in_memory_order(rays, out, |r, o| self.in_parallel(r, o, Self::occluded_as_given));
     }
 
     /// For each ray of a batch, a hit that occludes it ([`Tracer::occluder`]'s, the
@@ -162,13 +227,17 @@ impl Tracer<'_> {
     /// [`Tracer::occluded_batch`], keeping the hit.
     pub fn occluder_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        let done = |i: usize, h: Option<Hit>| out[i] = h;
-        with_tests!(self; true; Self::interleaved; self, rays, done);
+        self.in_memory_order(rays, out, |r, o| self.any_as_given(r, o));
     }
 
     /// [`Tracer::occluder_batch`] on all threads of the current rayon pool.
     pub fn par_occluder_batch(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.occluder_batch(r, o));
+        self.in_memory_order(rays, out, |r, o| self.in_parallel(r, o, Self::any_as_given));
+    }
+
+    /// `walk` on chunks of the batch, on all threads of the current rayon pool.
+    fn in_parallel<T: Send>(&self, rays: &[Ray], out: &mut [T], walk: fn(&Self, &[Ray], &mut [T])) {
+        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| walk(self, r, o));
     }
 }

@@ -5,7 +5,8 @@
 //!   (the always-compiled reference the SIMD forms are tested against, bit for bit);
 //! * `locate.rs`: where a walk starts (point location, the cube map);
 //! * `simd/`: the SSE step and the eight-lane AVX2 step, on `hw.rs`'s primitives;
-//! * `one_ray.rs` and `batch.rs`: the calls, which pick a form.
+//! * `one_ray.rs` and `batch.rs`: the calls, which pick a form (`order.rs`: the
+//!   memory order of incoherent batches).
 //!
 //! Dependencies go one way: `hw`, `tables`, `triangle`, `watertight` below the walk
 //! (`tracer`, `walk`, `locate`), the walk below `simd/`, `simd/` below the calls.
@@ -14,6 +15,7 @@ mod batch;
 mod hw;
 mod locate;
 mod one_ray;
+mod order;
 mod simd;
 pub mod tables;
 mod tracer;
@@ -23,7 +25,7 @@ pub mod watertight;
 
 pub use locate::LocateGrid;
 pub(crate) use tracer::{box_slack, BOX_T_SLACK};
-pub use tracer::{mesh_box, root_corners, ExitTest, Tracer, TreeFrame, TriangleTest, WalkStats};
+pub use tracer::{mesh_box, root_corners, ExitTest, MemoryOrder, Tracer, TreeFrame, TriangleTest, WalkStats};
 pub(crate) use walk::{clip, exit_along_moving_axes, point_at};
 
 #[cfg(test)]

@@ -4,7 +4,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 
 use crate::reference::{Agreement, Reference};
-use crate::{Ray, Scene};
+use crate::{MemoryOrder, Ray, Scene};
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
 
 fn scene_of(mesh: &Mesh, params: BuildParams) -> (Scene, Reference) {
@@ -196,5 +196,65 @@ fn the_clip_agrees_with_the_scalar_clip() {
             _ => false,
         };
         assert!(same, "o {o:?} d {d:?}: {a:?} against {b:?}");
+    }
+}
+
+/// Incoherent batches are walked in memory order and coherent ones as given, and
+/// either way every batch call (one thread and all, nearest, occluded, occluder)
+/// answers each ray as the one-ray calls do, bit for bit, with the order on or off.
+/// The rays include untraceable ones (NaN, zero direction, inverted interval) and
+/// rays with zero direction components, whose keys must not disturb the sort.
+#[test]
+fn batches_in_memory_order_answer_each_ray_as_the_one_ray_calls() {
+    let mut mesh = procedural::sphere([0.0; 3], 1.0, 24, 32);
+    mesh.triangles.extend(procedural::soup(5, 3000, 2.5, 0.2).triangles);
+    let (scene, _) = scene_of(&mesh, BuildParams::auto());
+    let (lo, hi) = bounds(&mesh);
+    let mut incoherent = random_rays(11, 20_000, lo, hi);
+    for (i, r) in incoherent.iter_mut().enumerate().step_by(97) {
+        match i % 4 {
+            0 => r.origin.x = f32::NAN,
+            1 => r.dir = Vec3::ZERO,
+            2 => (r.tmin, r.tmax) = (2.0, 1.0),
+            _ => r.dir.y = if i % 8 == 3 { 0.0 } else { -0.0 },
+        }
+    }
+    let camera: Vec<Ray> = (0..128 * 128)
+        .map(|i| {
+            let (x, y) = ((i % 128) as f32 / 64.0 - 1.0, (i / 128) as f32 / 64.0 - 1.0);
+            Ray::new(Vec3::new(0.3, 0.2, 4.0), Vec3::new(x, y, -2.0).normalize())
+        })
+        .collect();
+    // The scene is small: in memory order only when asked.
+    assert!(scene.tracer().memory_order(&incoherent).is_none(), "a scene in the cache, as given");
+    let tracer = scene.tracer().with_memory_order(MemoryOrder::Incoherent);
+    assert!(tracer.memory_order(&incoherent).is_some(), "random rays are sorted");
+    assert!(tracer.memory_order(&camera).is_none(), "camera rays are walked as given");
+    assert!(tracer.memory_order(&incoherent[..4000]).is_none(), "short batches as given");
+    for (name, rays) in [("incoherent", &incoherent), ("camera", &camera)] {
+        let nearest: Vec<_> = rays.iter().map(|r| tracer.intersect(r)).collect();
+        let any: Vec<_> = rays.iter().map(|r| tracer.occluder(r)).collect();
+        let occluded: Vec<_> = rays.iter().map(|r| tracer.occluded(r)).collect();
+        let hit = nearest.iter().filter(|h| h.is_some()).count();
+        assert!(hit > rays.len() / 20, "{name}: {hit} of {} rays hit", rays.len());
+        for t in [tracer.clone(), tracer.clone().with_memory_order(MemoryOrder::Off), scene.tracer()] {
+            let mut hits = vec![None; rays.len()];
+            let mut flags = vec![false; rays.len()];
+            t.intersect_batch(rays, &mut hits);
+            assert_eq!(hits, nearest, "{name}: intersect_batch");
+            hits.fill(None);
+            t.par_intersect_batch(rays, &mut hits);
+            assert_eq!(hits, nearest, "{name}: par_intersect_batch");
+            t.occluder_batch(rays, &mut hits);
+            assert_eq!(hits, any, "{name}: occluder_batch");
+            hits.fill(None);
+            t.par_occluder_batch(rays, &mut hits);
+            assert_eq!(hits, any, "{name}: par_occluder_batch");
+            t.occluded_batch(rays, &mut flags);
+            assert_eq!(flags, occluded, "{name}: occluded_batch");
+            flags.fill(false);
+            t.par_occluded_batch(rays, &mut flags);
+            assert_eq!(flags, occluded, "{name}: par_occluded_batch");
+        }
     }
 }
