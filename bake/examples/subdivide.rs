@@ -1,9 +1,12 @@
 //! Makes a big test mesh without committing one: splits every triangle of a mesh into
 //! four (at its edges' midpoints), `n` times, and writes the result as a binary glTF
-//! (one non-indexed triangle list: 36 bytes a triangle, at most 4 GiB).
+//! (one non-indexed triangle list: 36 bytes a triangle, at most 4 GiB), or as OBJ for
+//! an output named `.obj` (three `v` lines and an `f -3 -2 -1` a triangle, coordinates
+//! written so that they read back exactly).
 //!
 //! ```sh
 //! cargo run --release -p octrace-bake --example subdivide -- ../shared/meshes/dragon.obj 3 dragon64.glb
+//! cargo run --release -p octrace-bake --example subdivide -- ../shared/meshes/dragon.obj 1 dragon4.obj
 //! ```
 //!
 //! The dragon (871,414 triangles) split 1, 2 and 3 times gives 3.5 M, 13.9 M and
@@ -14,12 +17,25 @@ use std::io::Write;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let [_, input, times, output] = &args[..] else {
-        return Err("usage: subdivide MESH TIMES OUT.glb".into());
+        return Err("usage: subdivide MESH TIMES OUT.glb|OUT.obj".into());
     };
     let times: u32 = times.parse()?;
     let mut triangles = octrace_bake::Mesh::load(input)?.triangles;
     for _ in 0..times {
         triangles = triangles.iter().flat_map(split).collect();
+    }
+    if output.ends_with(".obj") {
+        let mut out = std::io::BufWriter::with_capacity(1 << 22, std::fs::File::create(output)?);
+        writeln!(out, "# {} split {times} times by octrace-bake examples/subdivide", input)?;
+        for t in &triangles {
+            for v in t {
+                writeln!(out, "v {} {} {}", v[0], v[1], v[2])?;
+            }
+            writeln!(out, "f -3 -2 -1")?;
+        }
+        out.flush()?;
+        println!("{} triangles ({} split {times} times) -> {output}", triangles.len(), input);
+        return Ok(());
     }
     let bytes = triangles.len() as u64 * 36;
     if bytes + 1024 > u64::from(u32::MAX) {

@@ -3,6 +3,7 @@
 mod gltf;
 mod image;
 mod obj;
+mod obj_plain;
 mod refs;
 
 pub use refs::{LoadOptions, References, DEFAULT_MAX_FILE_BYTES, MAX_MTL_BYTES};

@@ -1,4 +1,5 @@
-//! Wavefront OBJ through tobj: every object and group, polygons fan-triangulated.
+//! Wavefront OBJ through tobj: every object and group, polygons fan-triangulated
+//! (files of positions and triangles alone: `obj_plain`, in parallel).
 
 use std::path::Path;
 
@@ -9,6 +10,15 @@ use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+    // Positions and triangles only: parsed in parallel, the same mesh tobj makes.
+    match super::obj_plain::parse(bytes) {
+        Some(mesh) => Ok(mesh),
+        None => parse_with_tobj(bytes, path, base, options),
+    }
+}
+
+/// Any OBJ file, through tobj.
+pub(super) fn parse_with_tobj(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
     check_face_indices(bytes, path)?;
     let load_options =
         tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
