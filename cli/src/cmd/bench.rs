@@ -294,6 +294,14 @@ fn embree_figures(
     let ordered: Option<Vec<Ray>> = tracer.memory_order(rays).map(|o| o.iter().map(|&i| rays[i as usize]).collect());
     let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut one_ordered = Vec::new();
+    // Embree's one-ray calls on `rays`: how many hit (or are occluded).
+    let embree_count = |rays: &[Ray]| {
+        if occlusion {
+            rays.iter().filter(|r| e.occluded(r)).count()
+        } else {
+            rays.iter().filter(|r| e.nearest(r).is_some()).count()
+        }
+    };
     let mut hits = vec![None; rays.len()];
     let mut occluded = vec![false; rays.len()];
     let mut embree_hits = 0;
@@ -305,21 +313,10 @@ fn embree_figures(
                 tracer.intersect_batch(rays, &mut hits);
             }
         }));
-        one.push(timed(&mut || {
-            embree_hits = if occlusion {
-                rays.iter().filter(|r| e.occluded(r)).count()
-            } else {
-                rays.iter().filter(|r| e.nearest(r).is_some()).count()
-            };
-        }));
+        one.push(timed(&mut || embree_hits = embree_count(rays)));
         if let Some(ordered) = &ordered {
             one_ordered.push(timed(&mut || {
-                let n = if occlusion {
-                    ordered.iter().filter(|r| e.occluded(r)).count()
-                } else {
-                    ordered.iter().filter(|r| e.nearest(r).is_some()).count()
-                };
-                std::hint::black_box(n);
+                std::hint::black_box(embree_count(ordered));
             }));
         }
         if let Some(packets) = &packets {
