@@ -152,6 +152,20 @@ struct EmbreeFigures {
     ratio_batch: f64,
     /// octrace one-ray calls / Embree one-ray calls, median of the runs'.
     ratio_one_ray: f64,
+    /// The batch and Embree's calls on all threads, where there are several.
+    all_threads: Option<EmbreeAllThreads>,
+}
+
+/// octrace's parallel batch call and Embree's calls spread over the same threads
+/// (rayon, chunks of 1,024 rays or 64 packets).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+struct EmbreeAllThreads {
+    threads: usize,
+    octrace_batch: Spread,
+    embree_one_ray: Spread,
+    embree_packets: Option<Spread>,
+    /// octrace batch / Embree's best, median of the runs'.
+    ratio_batch: f64,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -188,7 +202,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         let mut r = measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?;
         #[cfg(feature = "embree")]
         if let Some(e) = &embree {
-            r.embree = Some(embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs));
+            let mut figures = embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs);
+            if threads > 1 {
+                figures.all_threads = Some(crate::with_threads(args.threads, || {
+                    embree_all_threads(e, name, rays, *occlusion, &tracer, args.runs)
+                })?);
+            }
+            r.embree = Some(figures);
         }
         results.push(r);
     }
@@ -283,12 +303,7 @@ fn embree_figures(
         f();
         mrays(t.elapsed())
     };
-    // The primary set is the standard camera's 1024 x 1024 rays, row by row: 4 x 4
-    // pixel packets.
-    let packets: Option<Vec<[usize; 16]>> = (name == "primary" && rays.len() == 1 << 20).then(|| {
-        let tile = |tx: usize, ty: usize| std::array::from_fn(|k| (4 * ty + k / 4) * 1024 + 4 * tx + k % 4);
-        (0..256).flat_map(|ty| (0..256).map(move |tx| tile(tx, ty))).collect()
-    });
+    let packets = camera_packets(name, rays);
     // Rays octrace's batch sorts (incoherent ones), in its order: Embree timed on them
     // too, so that the ratio says what the order buys either tracer.
     let ordered: Option<Vec<Ray>> = tracer.memory_order(rays).map(|o| o.iter().map(|&i| rays[i as usize]).collect());
@@ -353,6 +368,82 @@ fn embree_figures(
         }),
         octrace_one_ray: Spread::of(ours),
         embree_hits,
+        all_threads: None,
+    }
+}
+
+/// The standard camera's 1024 x 1024 rays (row by row) as 4 x 4 pixel packets, for
+/// the primary set.
+#[cfg(feature = "embree")]
+fn camera_packets(name: &str, rays: &[Ray]) -> Option<Vec<[usize; 16]>> {
+    (name == "primary" && rays.len() == 1 << 20).then(|| {
+        let tile = |tx: usize, ty: usize| std::array::from_fn(|k| (4 * ty + k / 4) * 1024 + 4 * tx + k % 4);
+        (0..256).flat_map(|ty| (0..256).map(move |tx| tile(tx, ty))).collect()
+    })
+}
+
+/// [`embree_figures`]'s batch and Embree figures on all threads of the current pool.
+#[cfg(feature = "embree")]
+fn embree_all_threads(
+    e: &crate::embree::Embree,
+    name: &str,
+    rays: &[Ray],
+    occlusion: bool,
+    tracer: &Tracer<'_>,
+    runs: usize,
+) -> EmbreeAllThreads {
+    use rayon::prelude::*;
+    let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+    let timed = |f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        f();
+        mrays(t.elapsed())
+    };
+    let packets = camera_packets(name, rays);
+    let (mut batch, mut one, mut packet) = (Vec::new(), Vec::new(), Vec::new());
+    let mut hits = vec![None; rays.len()];
+    let mut occluded = vec![false; rays.len()];
+    let embree_count = |rays: &[Ray]| {
+        if occlusion {
+            rays.iter().filter(|r| e.occluded(r)).count()
+        } else {
+            rays.iter().filter(|r| e.nearest(r).is_some()).count()
+        }
+    };
+    for _ in 0..runs {
+        batch.push(timed(&mut || {
+            if occlusion {
+                tracer.par_occluded_batch(rays, &mut occluded);
+            } else {
+                tracer.par_intersect_batch(rays, &mut hits);
+            }
+        }));
+        one.push(timed(&mut || {
+            std::hint::black_box(rays.par_chunks(1024).map(embree_count).sum::<usize>());
+        }));
+        if let Some(packets) = &packets {
+            packet.push(timed(&mut || {
+                let n = packets.par_chunks(64).map(|chunk| {
+                    let mut out = [None; 16];
+                    let mut n = 0;
+                    for p in chunk {
+                        e.nearest16(&p.map(|i| rays[i]), &mut out);
+                        n += out.iter().flatten().count();
+                    }
+                    n
+                });
+                std::hint::black_box(n.sum::<usize>());
+            }));
+        }
+    }
+    let best: Vec<f64> =
+        if packet.is_empty() { one.clone() } else { one.iter().zip(&packet).map(|(a, b)| a.max(*b)).collect() };
+    EmbreeAllThreads {
+        threads: rayon::current_num_threads(),
+        ratio_batch: Spread::of(batch.iter().zip(&best).map(|(o, e)| o / e).collect()).median,
+        octrace_batch: Spread::of(batch),
+        embree_one_ray: Spread::of(one),
+        embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
     }
 }
 
@@ -463,6 +554,28 @@ fn report(
                 thousands(e.embree_hits as u64),
                 if r.name == "shadow" { "occluded" } else { "hits" }
             );
+        }
+        if let Some(n) = results.iter().find_map(|r| r.embree.as_ref()?.all_threads.as_ref().map(|a| a.threads)) {
+            crate::out!(
+                "\nEmbree 3, all {n} threads (rayon: chunks of 1,024 rays, or of 64 packets), the same runs:\n\
+                 {:<11} {:>22} {:>22} {:>22} {:>10}",
+                "set",
+                "octrace batch",
+                "Embree 1-ray calls",
+                "Embree 16-ray packets",
+                "batch/best"
+            );
+            for r in results {
+                let Some(a) = r.embree.as_ref().and_then(|e| e.all_threads.as_ref()) else { continue };
+                crate::out!(
+                    "{:<11} {:>22} {:>22} {:>22} {:>9.2}x",
+                    r.name,
+                    fmt(&a.octrace_batch),
+                    fmt(&a.embree_one_ray),
+                    a.embree_packets.as_ref().map_or("-".into(), fmt),
+                    a.ratio_batch
+                );
+            }
         }
         for r in results {
             let Some((spread, ratio)) = r.embree.as_ref().and_then(|e| e.embree_memory_order.as_ref()) else {
