@@ -184,4 +184,71 @@ mod tests {
         }
         assert!(parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\xff\nf 1 2 3\n").is_none(), "not UTF-8");
     }
+
+    /// Random files of the plain statements with tricky words mixed in (signs,
+    /// exponents, zeros, huge and relative indices, stray tokens, CRLF, tabs):
+    /// wherever this parser takes a file, tobj takes it too and makes the same mesh;
+    /// wherever tobj refuses one, this parser leaves it to tobj.
+    #[test]
+    fn random_plain_files_are_tobjs_or_left_to_it() {
+        let floats = ["0", "-0", "1", "-1.5", "+2", "1e-3", "3.25E2", ".5", "5.", "1e39", "nan", "-inf", "0x1", "1,5"];
+        let indices = ["1", "2", "3", "-1", "-2", "-3", "4", "0", "-0", "+1", "99", "1/1", "1//1", "x", "4294967296"];
+        let mut rng = crate::procedural::SplitMix(7);
+        let mut pick = |n: usize| (rng.next_u64() % n as u64) as usize;
+        let (mut taken, mut left) = (0, 0);
+        for case in 0..3000 {
+            let mut text = String::new();
+            for _ in 0..1 + pick(12) {
+                let end = if pick(5) == 0 { "\r\n" } else { "\n" };
+                let sep = if pick(6) == 0 { "\t" } else { " " };
+                match pick(10) {
+                    0..=4 => {
+                        let n = if pick(8) == 0 { 2 + pick(3) } else { 3 };
+                        let words: Vec<&str> = (0..n)
+                            .map(|_| {
+                                if pick(4) == 0 {
+                                    floats[pick(floats.len())]
+                                } else {
+                                    ["0.5", "1", "2.25", "-3"][pick(4)]
+                                }
+                            })
+                            .collect();
+                        text += &format!("v{sep}{}{end}", words.join(sep));
+                    }
+                    5..=7 => {
+                        let n = if pick(8) == 0 { 2 + 2 * pick(2) } else { 3 };
+                        let words: Vec<&str> = (0..n)
+                            .map(|_| {
+                                if pick(3) == 0 {
+                                    indices[pick(indices.len())]
+                                } else {
+                                    ["1", "2", "3", "-1"][pick(4)]
+                                }
+                            })
+                            .collect();
+                        text += &format!("f{sep}{}{end}", words.join(sep));
+                    }
+                    8 => text += &["# c", "#c", "", "   ", "g x", "vn 0 0 1", "s off"][pick(7)],
+                    _ => text += end,
+                }
+                if pick(7) == 0 {
+                    text += "\n";
+                }
+            }
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(1 + case % 3).build().unwrap();
+            let fast = pool.install(|| parse(text.as_bytes()));
+            match (fast, tobj(&text)) {
+                (Some(got), Some(want)) => {
+                    assert!(got == want, "{text:?}: not tobj's mesh");
+                    taken += 1;
+                }
+                (Some(_), None) => panic!("{text:?}: taken here, refused by tobj"),
+                (None, _) => left += 1,
+            }
+        }
+        assert!(
+            taken > 300 && left > 300,
+            "{taken} files taken, {left} left to tobj: the generator should exercise both"
+        );
+    }
 }
