@@ -228,7 +228,7 @@ mod tests {
                             .collect();
                         text += &format!("f{sep}{}{end}", words.join(sep));
                     }
-                    8 => text += &["# c", "#c", "", "   ", "g x", "vn 0 0 1", "s off"][pick(7)],
+                    8 => text += ["# c", "#c", "", "   ", "g x", "vn 0 0 1", "s off"][pick(7)],
                     _ => text += end,
                 }
                 if pick(7) == 0 {
