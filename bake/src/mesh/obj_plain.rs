@@ -28,24 +28,30 @@ pub(super) fn parse(bytes: &[u8]) -> Option<Mesh> {
     let text = std::str::from_utf8(bytes).ok()?;
     let pieces = (rayon::current_num_threads() * CHUNKS_PER_THREAD).max(1);
     let chunks: Vec<Chunk> = split(text, pieces).par_iter().map(|t| parse_chunk(t)).collect::<Option<_>>()?;
-    let total: usize = chunks.iter().map(|c| c.positions.len()).sum();
-    let mut positions = Vec::with_capacity(total);
+    // Positions stay in their chunks (no copy of them all): `starts[c]` is chunk `c`'s
+    // first position's index in the file.
+    let starts: Vec<usize> = std::iter::once(0)
+        .chain(chunks.iter().scan(0, |n, c| {
+            *n += c.positions.len();
+            Some(*n)
+        }))
+        .collect();
+    let position = |k: usize| {
+        // The last chunk starting at or before `k` holds it (an empty chunk never is
+        // that one: the next starts at the same index), or `k` is past every position.
+        let c = starts.partition_point(|&s| s <= k) - 1;
+        chunks.get(c)?.positions.get(k - starts[c]).copied()
+    };
     let mut mesh = Mesh::default();
     mesh.triangles.reserve(chunks.iter().map(|c| c.faces.len()).sum());
-    for chunk in &chunks {
-        positions.extend_from_slice(&chunk.positions);
-    }
-    for chunk_faces in chunks.iter().scan(0i64, |before, c| {
-        let start = *before;
-        *before += c.positions.len() as i64;
-        Some((start, &c.faces))
-    }) {
-        let (before, faces) = chunk_faces;
-        for &(face, local) in faces {
+    for (chunk, &before) in chunks.iter().zip(&starts) {
+        for &(face, local) in &chunk.faces {
             let mut tri = [[0.0f32; 3]; 3];
             for (corner, &i) in tri.iter_mut().zip(&face) {
-                let index = if i < 0 { before + local as i64 + i } else { i - 1 };
-                *corner = *usize::try_from(index).ok().and_then(|k| positions.get(k))?;
+                // tobj's rule: `-k` is the k-th position before the face, `p` the p-th
+                // of the file (any, once the file is read).
+                let index = if i < 0 { before as i64 + local as i64 + i } else { i - 1 };
+                *corner = usize::try_from(index).ok().and_then(position)?;
             }
             mesh.push(tri, None, None);
         }
