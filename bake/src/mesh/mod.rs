@@ -114,6 +114,21 @@ impl Mesh {
         }
     }
 
+    /// What a mesh must be to bake, checked where it is loaded and again where it is
+    /// baked (a mesh may be made in code): attributes that fit
+    /// ([`Mesh::check_attributes`]), some triangles ([`Error::EmptyScene`]), and fewer
+    /// than 2^32 - 1 of them, the format's 32-bit triangle indices ([`Error::TooLarge`]).
+    pub(crate) fn check_bakeable(&self, path: &Path) -> Result<()> {
+        self.check_attributes(path)?;
+        if self.triangles.is_empty() {
+            return Err(Error::EmptyScene { path: path.into() });
+        }
+        if self.triangles.len() as u64 >= u64::from(u32::MAX) {
+            return Err(Error::TooLarge { path: path.into(), count: self.triangles.len() as u64 });
+        }
+        Ok(())
+    }
+
     /// Checks that each attribute array is empty or one entry a triangle, and that
     /// material ids are in range.
     ///
@@ -247,13 +262,7 @@ impl Mesh {
             MeshFormat::Obj => obj::parse(bytes, name, base, options)?,
             MeshFormat::Gltf => gltf::parse(bytes, name, base, options)?,
         };
-        mesh.check_attributes(name)?;
-        if mesh.triangles.is_empty() {
-            return Err(Error::EmptyScene { path: name.into() });
-        }
-        if mesh.triangles.len() as u64 >= u32::MAX as u64 {
-            return Err(Error::TooLarge { path: name.into(), count: mesh.triangles.len() as u64 });
-        }
+        mesh.check_bakeable(name)?;
         Ok(mesh)
     }
 }

@@ -268,14 +268,7 @@ struct Prepared {
 fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     let name = std::path::Path::new("mesh");
     params.check()?;
-    if mesh.triangles.is_empty() {
-        return Err(Error::EmptyScene { path: name.into() });
-    }
-    // Triangle indices are 32-bit (`Mesh::load` refuses the same).
-    if mesh.triangles.len() as u64 >= u64::from(u32::MAX) {
-        return Err(Error::TooLarge { path: name.into(), count: mesh.triangles.len() as u64 });
-    }
-    mesh.check_attributes(name)?;
+    mesh.check_bakeable(name)?;
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for (i, t) in mesh.triangles.iter().enumerate() {
         for v in t {
