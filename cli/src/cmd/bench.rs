@@ -297,26 +297,14 @@ fn embree_figures(
     tracer: &Tracer<'_>,
     runs: usize,
 ) -> EmbreeFigures {
-    let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
-    let timed = |f: &mut dyn FnMut()| {
-        let t = Instant::now();
-        f();
-        mrays(t.elapsed())
-    };
+    let timed = |f: &mut dyn FnMut()| mrays_of(rays.len(), f);
     let packets = camera_packets(name, rays);
     // Rays octrace's batch sorts (incoherent ones), in its order: Embree timed on them
     // too, so that the ratio says what the order buys either tracer.
     let ordered: Option<Vec<Ray>> = tracer.memory_order(rays).map(|o| o.iter().map(|&i| rays[i as usize]).collect());
     let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut one_ordered = Vec::new();
-    // Embree's one-ray calls on `rays`: how many hit (or are occluded).
-    let embree_count = |rays: &[Ray]| {
-        if occlusion {
-            rays.iter().filter(|r| e.occluded(r)).count()
-        } else {
-            rays.iter().filter(|r| e.nearest(r).is_some()).count()
-        }
-    };
+    let embree_count = |rays: &[Ray]| embree_one_ray_count(e, rays, occlusion);
     let mut hits = vec![None; rays.len()];
     let mut occluded = vec![false; rays.len()];
     let mut embree_hits = 0;
@@ -335,15 +323,8 @@ fn embree_figures(
             }));
         }
         if let Some(packets) = &packets {
-            let mut out = [None; 16];
             packet.push(timed(&mut || {
-                let mut n = 0;
-                for p in packets {
-                    let group: [Ray; 16] = p.map(|i| rays[i]);
-                    e.nearest16(&group, &mut out);
-                    n += out.iter().flatten().count();
-                }
-                std::hint::black_box(n);
+                std::hint::black_box(embree_packet_hits(e, rays, packets));
             }));
         }
         ours.push(timed(&mut || {
@@ -355,21 +336,66 @@ fn embree_figures(
             std::hint::black_box(n);
         }));
     }
-    let best: Vec<f64> =
-        if packet.is_empty() { one.clone() } else { one.iter().zip(&packet).map(|(a, b)| a.max(*b)).collect() };
     EmbreeFigures {
-        ratio_batch: Spread::of(batch.iter().zip(&best).map(|(o, e)| o / e).collect()).median,
-        ratio_one_ray: Spread::of(ours.iter().zip(&one).map(|(o, e)| o / e).collect()).median,
+        ratio_batch: median_ratio(&batch, &best_of(&one, &packet)),
+        ratio_one_ray: median_ratio(&ours, &one),
         embree_one_ray: Spread::of(one),
         embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
         embree_memory_order: (!one_ordered.is_empty()).then(|| {
-            let ratio = Spread::of(batch.iter().zip(&one_ordered).map(|(o, e)| o / e).collect()).median;
+            let ratio = median_ratio(&batch, &one_ordered);
             (Spread::of(one_ordered), ratio)
         }),
         octrace_one_ray: Spread::of(ours),
         embree_hits,
         all_threads: None,
     }
+}
+
+/// Mrays/s of `f`, which traces `rays` rays.
+#[cfg(feature = "embree")]
+fn mrays_of(rays: usize, f: &mut dyn FnMut()) -> f64 {
+    let t = Instant::now();
+    f();
+    rays as f64 / t.elapsed().as_secs_f64().max(1e-9) / 1e6
+}
+
+/// Embree's one-ray calls on `rays`: how many hit (or, for `occlusion`, are occluded).
+#[cfg(feature = "embree")]
+fn embree_one_ray_count(e: &crate::embree::Embree, rays: &[Ray], occlusion: bool) -> usize {
+    if occlusion {
+        rays.iter().filter(|r| e.occluded(r)).count()
+    } else {
+        rays.iter().filter(|r| e.nearest(r).is_some()).count()
+    }
+}
+
+/// Embree's 16-ray packets of `rays` (indices, [`camera_packets`]): how many hit.
+#[cfg(feature = "embree")]
+fn embree_packet_hits(e: &crate::embree::Embree, rays: &[Ray], packets: &[[usize; 16]]) -> usize {
+    let mut out = [None; 16];
+    packets
+        .iter()
+        .map(|p| {
+            e.nearest16(&p.map(|i| rays[i]), &mut out);
+            out.iter().flatten().count()
+        })
+        .sum()
+}
+
+/// Run by run, Embree's best: the better of one-ray calls and packets where packets ran.
+#[cfg(feature = "embree")]
+fn best_of(one: &[f64], packet: &[f64]) -> Vec<f64> {
+    if packet.is_empty() {
+        one.to_vec()
+    } else {
+        one.iter().zip(packet).map(|(a, b)| a.max(*b)).collect()
+    }
+}
+
+/// The median of the runs' ratios `a / b`.
+#[cfg(feature = "embree")]
+fn median_ratio(a: &[f64], b: &[f64]) -> f64 {
+    Spread::of(a.iter().zip(b).map(|(x, y)| x / y).collect()).median
 }
 
 /// The standard camera's 1024 x 1024 rays (row by row) as 4 x 4 pixel packets, for
@@ -393,23 +419,11 @@ fn embree_all_threads(
     runs: usize,
 ) -> EmbreeAllThreads {
     use rayon::prelude::*;
-    let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
-    let timed = |f: &mut dyn FnMut()| {
-        let t = Instant::now();
-        f();
-        mrays(t.elapsed())
-    };
+    let timed = |f: &mut dyn FnMut()| mrays_of(rays.len(), f);
     let packets = camera_packets(name, rays);
     let (mut batch, mut one, mut packet) = (Vec::new(), Vec::new(), Vec::new());
     let mut hits = vec![None; rays.len()];
     let mut occluded = vec![false; rays.len()];
-    let embree_count = |rays: &[Ray]| {
-        if occlusion {
-            rays.iter().filter(|r| e.occluded(r)).count()
-        } else {
-            rays.iter().filter(|r| e.nearest(r).is_some()).count()
-        }
-    };
     for _ in 0..runs {
         batch.push(timed(&mut || {
             if occlusion {
@@ -419,28 +433,17 @@ fn embree_all_threads(
             }
         }));
         one.push(timed(&mut || {
-            std::hint::black_box(rays.par_chunks(1024).map(embree_count).sum::<usize>());
+            std::hint::black_box(rays.par_chunks(1024).map(|c| embree_one_ray_count(e, c, occlusion)).sum::<usize>());
         }));
         if let Some(packets) = &packets {
             packet.push(timed(&mut || {
-                let n = packets.par_chunks(64).map(|chunk| {
-                    let mut out = [None; 16];
-                    let mut n = 0;
-                    for p in chunk {
-                        e.nearest16(&p.map(|i| rays[i]), &mut out);
-                        n += out.iter().flatten().count();
-                    }
-                    n
-                });
-                std::hint::black_box(n.sum::<usize>());
+                std::hint::black_box(packets.par_chunks(64).map(|c| embree_packet_hits(e, rays, c)).sum::<usize>());
             }));
         }
     }
-    let best: Vec<f64> =
-        if packet.is_empty() { one.clone() } else { one.iter().zip(&packet).map(|(a, b)| a.max(*b)).collect() };
     EmbreeAllThreads {
         threads: rayon::current_num_threads(),
-        ratio_batch: Spread::of(batch.iter().zip(&best).map(|(o, e)| o / e).collect()).median,
+        ratio_batch: median_ratio(&batch, &best_of(&one, &packet)),
         octrace_batch: Spread::of(batch),
         embree_one_ray: Spread::of(one),
         embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
