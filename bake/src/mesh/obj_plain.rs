@@ -191,6 +191,17 @@ mod tests {
         assert!(parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\xff\nf 1 2 3\n").is_none(), "not UTF-8");
     }
 
+    /// `n` words for a statement: one in `one_in` from `tricky`, the others from `usual`.
+    fn words<'w>(
+        pick: &mut impl FnMut(usize) -> usize,
+        n: usize,
+        one_in: usize,
+        tricky: &[&'w str],
+        usual: &[&'w str],
+    ) -> Vec<&'w str> {
+        (0..n).map(|_| if pick(one_in) == 0 { tricky[pick(tricky.len())] } else { usual[pick(usual.len())] }).collect()
+    }
+
     /// Random files of the plain statements with tricky words mixed in (signs,
     /// exponents, zeros, huge and relative indices, stray tokens, CRLF, tabs):
     /// wherever this parser takes a file, tobj takes it too and makes the same mesh;
@@ -210,28 +221,12 @@ mod tests {
                 match pick(10) {
                     0..=4 => {
                         let n = if pick(8) == 0 { 2 + pick(3) } else { 3 };
-                        let words: Vec<&str> = (0..n)
-                            .map(|_| {
-                                if pick(4) == 0 {
-                                    floats[pick(floats.len())]
-                                } else {
-                                    ["0.5", "1", "2.25", "-3"][pick(4)]
-                                }
-                            })
-                            .collect();
+                        let words = words(&mut pick, n, 4, &floats, &["0.5", "1", "2.25", "-3"]);
                         text += &format!("v{sep}{}{end}", words.join(sep));
                     }
                     5..=7 => {
                         let n = if pick(8) == 0 { 2 + 2 * pick(2) } else { 3 };
-                        let words: Vec<&str> = (0..n)
-                            .map(|_| {
-                                if pick(3) == 0 {
-                                    indices[pick(indices.len())]
-                                } else {
-                                    ["1", "2", "3", "-1"][pick(4)]
-                                }
-                            })
-                            .collect();
+                        let words = words(&mut pick, n, 3, &indices, &["1", "2", "3", "-1"]);
                         text += &format!("f{sep}{}{end}", words.join(sep));
                     }
                     8 => text += ["# c", "#c", "", "   ", "g x", "vn 0 0 1", "s off"][pick(7)],
