@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 
 use super::order::memory_order;
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::simd;
 use super::tracer::{with_tests, Tracer, WalkStats};
 use crate::ray::{Hit, Ray};
@@ -22,8 +23,8 @@ use scalar_batch::{step, to_walk, Walk};
 
 #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 mod scalar_batch {
-    pub(super) use super::walk::RayWalk as Walk;
     use super::{Tracer, WalkStats};
+    pub(super) use crate::cpu::walk::RayWalk as Walk;
     pub(super) fn to_walk(_: &Tracer<'_>, w: &Walk) -> Walk {
         w.clone()
     }

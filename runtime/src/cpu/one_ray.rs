@@ -1,6 +1,8 @@
 //! The one-ray calls: one walk, on the SIMD step where the build has one.
 
-use super::tracer::{with_tests, Tracer, WalkStats};
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+use super::tracer::with_tests;
+use super::tracer::{Tracer, WalkStats};
 use crate::ray::{Hit, Ray};
 
 impl Tracer<'_> {
