@@ -7,12 +7,17 @@
 //! whole file goes through tobj instead ([`super::obj`]), which makes the same mesh of
 //! a plain file (the tests compare them) and says what is wrong with the rest.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 use super::Mesh;
 
 /// Chunks a core, so that uneven lines still balance.
 const CHUNKS_PER_THREAD: usize = 4;
+
+/// Lines between two looks at whether another chunk was refused.
+const REFUSED_EVERY: usize = 4096;
 
 /// What one chunk holds: its positions, and its faces' corners as given (1-based,
 /// or negative: relative to the positions before the face).
@@ -27,7 +32,18 @@ struct Chunk {
 pub(super) fn parse(bytes: &[u8]) -> Option<Mesh> {
     let text = std::str::from_utf8(bytes).ok()?;
     let pieces = (rayon::current_num_threads() * CHUNKS_PER_THREAD).max(1);
-    let chunks: Vec<Chunk> = split(text, pieces).par_iter().map(|t| parse_chunk(t)).collect::<Option<_>>()?;
+    // The first chunk that is not plain stops the others: the file goes to tobj.
+    let refused = AtomicBool::new(false);
+    let chunks: Vec<Chunk> = split(text, pieces)
+        .par_iter()
+        .map(|t| {
+            let chunk = parse_chunk(t, &refused);
+            if chunk.is_none() {
+                refused.store(true, Ordering::Relaxed);
+            }
+            chunk
+        })
+        .collect::<Option<_>>()?;
     // Positions stay in their chunks (no copy of them all): `starts[c]` is chunk `c`'s
     // first position's index in the file.
     let starts: Vec<usize> = std::iter::once(0)
@@ -76,10 +92,14 @@ fn split(text: &str, pieces: usize) -> Vec<&str> {
     parts
 }
 
-/// One chunk's positions and faces, or `None` at the first line that is not plain.
-fn parse_chunk(text: &str) -> Option<Chunk> {
+/// One chunk's positions and faces, or `None` at the first line that is not plain, or
+/// once another chunk has been `refused` (asked every [`REFUSED_EVERY`] lines).
+fn parse_chunk(text: &str, refused: &AtomicBool) -> Option<Chunk> {
     let mut chunk = Chunk::default();
-    for line in text.lines() {
+    for (n, line) in text.lines().enumerate() {
+        if n % REFUSED_EVERY == 0 && refused.load(Ordering::Relaxed) {
+            return None;
+        }
         let mut words = line.split_whitespace();
         match words.next() {
             None => {}
