@@ -18,7 +18,7 @@ use crate::ray::Ray;
 
 /// Batches shorter than this are walked as given: too few rays share a leaf for the
 /// sort to pay.
-pub(crate) const MIN_RAYS: usize = 4096;
+const MIN_RAYS: usize = 4096;
 
 /// Bits of each coordinate in the sort key: cells of a 64^3 grid over the root cube
 /// (10 bits, 1024^3, sorted no better on the dragon).
