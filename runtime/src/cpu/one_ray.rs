@@ -4,6 +4,7 @@
 use super::tracer::with_tests;
 use super::tracer::{Tracer, WalkStats};
 use crate::ray::{Hit, Ray};
+use octrace_format::layout::LEAF_HEADER_WORDS;
 
 impl Tracer<'_> {
     /// The nearest hit in `[tmin, tmax]`, if any.
@@ -41,6 +42,43 @@ impl Tracer<'_> {
     pub fn intersect_with_stats(&self, ray: &Ray) -> (Option<Hit>, WalkStats) {
         let mut stats = WalkStats::default();
         (self.walk::<false>(ray, &mut stats), stats)
+    }
+
+    /// The leaves the walk for [`Tracer::intersect`] visits, in order, each named by
+    /// its box index (as [`Hit::leaf`] names the leaf of a hit): the same leaves
+    /// whichever walk traces the ray (one-ray, batch, SIMD or scalar; the tests
+    /// check their answers bit for bit). For tools and statistics: which cells a ray
+    /// crosses, how often the rays of a tile stand in the same leaf. Empty for a ray
+    /// that cannot hit (it misses the scene's box, or is not traceable).
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{Ray, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let tracer = scene.tracer();
+    /// let ray = Ray::new([-3.0, 0.1, 0.2].into(), [1.0, 0.0, 0.0].into());
+    /// let leaves = tracer.leaves_visited(&ray);
+    /// let hit = tracer.intersect(&ray).expect("the ray meets the sphere");
+    /// assert!(leaves.contains(&hit.leaf)); // found in a leaf the walk visited
+    /// assert_eq!(leaves.len() as u32, tracer.intersect_with_stats(&ray).1.leaves);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn leaves_visited(&self, ray: &Ray) -> Vec<u32> {
+        let mut leaves = Vec::new();
+        let Some(mut w) = self.begin(ray) else { return leaves };
+        let mut stats = WalkStats::default();
+        loop {
+            let a = w.address() as usize;
+            // The record's box index (a hostile file's link past the array: the step
+            // ends the walk there, and no leaf is named).
+            if let Some(&box_index) = self.view().octree.get(a..a + LEAF_HEADER_WORDS).and_then(|r| r.get(2)) {
+                leaves.push(box_index);
+            }
+            if self.step::<false>(&mut w, &mut stats) {
+                return leaves;
+            }
+        }
     }
 
     /// Any hit for `ANY`, else the nearest: on the SIMD step where the build has one.

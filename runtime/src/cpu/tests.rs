@@ -258,3 +258,44 @@ fn batches_in_memory_order_answer_each_ray_as_the_one_ray_calls() {
         }
     }
 }
+
+/// `leaves_visited` names the walk's leaves in order: as many as the walk counts,
+/// each the face neighbour of the one before (their boxes share a plane on one axis
+/// and overlap on the other two), the hit found in one of them; random rays and rays
+/// in cell planes (zero direction components of both signs on every axis).
+#[test]
+fn leaves_visited_are_the_walks_leaves_neighbour_after_neighbour() {
+    let mut mesh = procedural::sphere([0.0; 3], 1.0, 24, 32);
+    mesh.triangles.extend(procedural::soup(7, 2000, 2.5, 0.2).triangles);
+    let (lo, hi) = bounds(&mesh);
+    let mut rays = random_rays(13, 6000, lo, hi);
+    for (i, r) in rays.iter_mut().enumerate().skip(1).step_by(3) {
+        let axis = i % 3;
+        r.dir[axis] = if i % 2 == 0 { 0.0 } else { -0.0 };
+        r.origin[axis] = 0.0; // the plane through the centre: a cell plane at every level
+    }
+    for params in [BuildParams::auto(), BuildParams { max_depth: Some(6), leaf_size: Some(3), ..BuildParams::auto() }] {
+        let (scene, _) = scene_of(&mesh, params);
+        let t = scene.tracer();
+        let boxes = &scene.view().boxes;
+        let b = |leaf: u32| &boxes[leaf as usize * 6..leaf as usize * 6 + 6];
+        let (mut walked, mut steps) = (0, 0);
+        for r in &rays {
+            let leaves = t.leaves_visited(r);
+            let (hit, stats) = t.intersect_with_stats(r);
+            assert_eq!(leaves.len() as u32, stats.leaves, "ray {r:?}");
+            if let Some(h) = hit {
+                assert!(leaves.contains(&h.leaf), "hit in leaf {} not visited, ray {r:?}", h.leaf);
+            }
+            for pair in leaves.windows(2) {
+                let (p, q) = (b(pair[0]), b(pair[1]));
+                let touching = (0..3).filter(|&k| p[k + 3] == q[k] || q[k + 3] == p[k]).count();
+                let overlapping = (0..3).filter(|&k| p[k] < q[k + 3] && q[k] < p[k + 3]).count();
+                assert!(touching == 1 && overlapping == 2, "leaves {pair:?} are not face neighbours, ray {r:?}");
+            }
+            walked += !leaves.is_empty() as usize;
+            steps += leaves.len();
+        }
+        assert!(walked > rays.len() / 4 && steps > 3 * walked, "{walked} walks, {steps} leaves");
+    }
+}
