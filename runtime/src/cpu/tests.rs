@@ -199,6 +199,55 @@ fn the_clip_agrees_with_the_scalar_clip() {
     }
 }
 
+/// The lanes' clip of eight rays against the mesh box marks a ray as missing it
+/// exactly when the clip `begin` runs returns `None` (rays without a zero direction
+/// component), and never marks a ray with a zero component; a ray it marks that is
+/// not traceable (NaN, infinities, inverted interval) is one `begin` refuses anyway.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[test]
+fn eight_rays_miss_the_box_as_the_clip_says() {
+    use super::simd::avx2::box_misses;
+    use super::walk::clip;
+    if !std::arch::is_x86_feature_detected!("avx2") {
+        return; // the lanes (the only caller) do not run here either
+    }
+    let mut rng = procedural::SplitMix(17);
+    let (lo, hi) = ([-1.0f32, -2.0, 0.5], [3.0f32, 2.0, 4.5]);
+    let odd = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e-30, f32::MAX, 3.0, -1.0];
+    let mut rays = Vec::new();
+    for i in 0..40_000 {
+        let mut o = [rng.unit() * 8.0 - 3.0, rng.unit() * 8.0 - 4.0, rng.unit() * 8.0 - 2.0];
+        let mut d = [rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5];
+        match i % 5 {
+            // On the box's planes, along its axes, with equal distances.
+            1 => (o, d) = (o.map(f32::round), d.map(|c| (c * 4.0).round() / 4.0)),
+            // An odd value (zeros of both signs, NaN, infinities, extremes) somewhere.
+            2 => d[i / 5 % 3] = odd[i / 15 % odd.len()],
+            3 => o[i / 5 % 3] = odd[i / 15 % odd.len()],
+            _ => {}
+        }
+        rays.push(Ray::segment(o.into(), d.into(), 0.0, if i % 7 == 0 { -1.0 } else { f32::INFINITY }));
+    }
+    let mut marked = 0;
+    for block in rays.chunks_exact(8) {
+        // SAFETY: the processor has AVX2 (checked above).
+        let misses = unsafe { box_misses(block.try_into().unwrap(), lo, hi) };
+        for (i, r) in block.iter().enumerate() {
+            let (o, d) = (r.origin.to_array(), r.dir.to_array());
+            let marked_here = misses >> i & 1 != 0;
+            marked += marked_here as usize;
+            if d.contains(&0.0) {
+                assert!(!marked_here, "a zero component is the scalar clip's: {r:?}");
+            } else if r.origin.is_finite() && r.dir.is_finite() {
+                assert_eq!(marked_here, clip(o, d, lo, hi).is_none(), "{r:?}");
+            } else {
+                assert!(!marked_here || !r.is_traceable(), "{r:?}");
+            }
+        }
+    }
+    assert!(marked > rays.len() / 10, "{marked} rays marked");
+}
+
 /// Incoherent batches are walked in memory order and coherent ones as given, and
 /// either way every batch call (one thread and all, nearest, occluded, occluder)
 /// answers each ray as the one-ray calls do, bit for bit, with the order on or off.

@@ -302,6 +302,12 @@ impl<'a> Tracer<'a> {
         self.frame.root_lo
     }
 
+    /// The (enlarged) mesh box a walk is clipped to: a ray that misses it cannot hit.
+    #[inline(always)]
+    pub(crate) fn walked_box(&self) -> ([f32; 3], [f32; 3]) {
+        (self.frame.box_lo, self.frame.box_hi)
+    }
+
     /// Cell edges by level (32 of them: a level masked to five bits indexes it).
     #[inline(always)]
     pub(crate) fn cell_sizes(&self) -> &[f32; 32] {

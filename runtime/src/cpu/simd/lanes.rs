@@ -124,10 +124,11 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
     debug_assert!(fits(t) && t.uses_x86_64_v3());
     let mut groups: [Group; GROUPS] = Default::default();
     let mut recent = Recent([u32::MAX; RECENT]);
-    let mut next = 0;
+    let mut feed = Feed::default();
     for g in groups.iter_mut() {
         for lane in 0..LANES {
-            refill(t, rays, &mut next, &mut done, g, lane);
+            // SAFETY: AVX2 is this function's.
+            unsafe { refill(t, rays, &mut feed, &mut done, g, lane) };
         }
     }
     while groups.iter().any(|g| g.active != 0) {
@@ -143,27 +144,53 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
                 if let Some(w) = g.walks[lane].take() {
                     done(w.index, t.answer(w.best));
                 }
-                refill(t, rays, &mut next, &mut done, g, lane);
+                // SAFETY: AVX2 is this function's.
+                unsafe { refill(t, rays, &mut feed, &mut done, g, lane) };
             }
         }
     }
 }
 
-/// Starts the next ray of `rays[*next..]` that needs a walk in `lane`; rays that
-/// cannot hit are answered at once. The lane is left inactive when none is left.
+/// Where the batch stands: the next ray to begin, and which rays of its block of
+/// eight (rays `8k..8k + 8`) miss the mesh box, found for the whole block when its
+/// first ray comes up.
+#[derive(Debug, Default)]
+struct Feed {
+    next: usize,
+    misses: u32,
+}
+
+/// Starts the next ray of the batch that needs a walk in `lane`; rays that cannot
+/// hit are answered at once (those that miss the mesh box eight at a time, without
+/// `Tracer::begin`). The lane is left inactive when none is left.
+///
+/// # Safety
+/// AVX2 must be available (inlined into `trace`).
 #[inline(always)]
-fn refill(
+unsafe fn refill(
     t: &Tracer<'_>,
     rays: &[Ray],
-    next: &mut usize,
+    feed: &mut Feed,
     done: &mut impl FnMut(usize, Option<Hit>),
     g: &mut Group,
     lane: usize,
 ) {
     g.active &= !(1 << lane);
-    while *next < rays.len() {
-        let i = *next;
-        *next += 1;
+    while feed.next < rays.len() {
+        let i = feed.next;
+        feed.next += 1;
+        if i.is_multiple_of(LANES) {
+            let (lo, hi) = t.walked_box();
+            feed.misses = match rays.get(i..i + LANES).and_then(|b| <&[Ray; LANES]>::try_from(b).ok()) {
+                // SAFETY: AVX2 is the caller's.
+                Some(block) => unsafe { avx2::box_misses(block, lo, hi) },
+                None => 0,
+            };
+        }
+        if feed.misses >> (i % LANES) & 1 != 0 {
+            done(i, None);
+            continue;
+        }
         match t.begin(&rays[i]) {
             Some(w) => {
                 prefetch(t.view().octree, w.address());
