@@ -40,6 +40,7 @@ pub const EXIT_FACE: [[u8; 8]; 8] = [
 
 /// The rows of [`EXIT_FACE`] packed four bits a code (code `c` in bits `4c..4c + 4`),
 /// for the vector step's lane-by-lane lookup.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 pub(crate) const EXIT_ROWS: [u32; 8] = {
     let mut rows = [0u32; 8];
     let mut oct = 0;

@@ -229,6 +229,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// Whether batch calls may use the eight-lane walk.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     pub(crate) fn uses_lanes(&self) -> bool {
         self.lanes
     }
@@ -298,17 +299,20 @@ impl<'a> Tracer<'a> {
     }
 
     /// The root cube's low corner.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     pub(crate) fn root_lo(&self) -> [f32; 3] {
         self.frame.root_lo
     }
 
     /// The (enlarged) mesh box a walk is clipped to: a ray that misses it cannot hit.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     #[inline(always)]
     pub(crate) fn walked_box(&self) -> ([f32; 3], [f32; 3]) {
         (self.frame.box_lo, self.frame.box_hi)
     }
 
     /// Cell edges by level (32 of them: a level masked to five bits indexes it).
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     #[inline(always)]
     pub(crate) fn cell_sizes(&self) -> &[f32; 32] {
         &self.frame.sizes
@@ -316,6 +320,7 @@ impl<'a> Tracer<'a> {
 
     /// The edge of a cell at `level` (masked into the table: a hostile level cannot
     /// index out of bounds).
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     #[inline(always)]
     pub(crate) fn cell_size(&self, level: u32) -> f32 {
         self.frame.sizes[level as usize & 31]

@@ -81,7 +81,10 @@ pub(crate) trait LeafTest {
     }
 }
 
-/// What a batch of triangles tested at once answered ([`LeafTest::batch`]).
+/// What a batch of triangles tested at once answered ([`LeafTest::batch`]). Only the
+/// SIMD test (`simd::avx2::hit8`) answers `Miss` or `Hit`; without it every batch is
+/// `OneByOne`.
+#[cfg_attr(not(all(target_arch = "x86_64", target_feature = "sse2")), allow(dead_code))]
 pub(crate) enum Batch {
     /// No triangle hit within `[tmin, tmax]`.
     Miss,
