@@ -1,5 +1,5 @@
 //! What the processor offers beneath the walks: whether it has x86-64-v3, cache hints,
-//! and the SSE2 clip every x86-64 processor runs. Below both the scalar walk and the
+//! the size of its largest cache, and the SSE2 clip every x86-64 processor runs. Below both the scalar walk and the
 //! SIMD steps (`simd/`), which use these and nothing of each other's here.
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
@@ -10,6 +10,28 @@ use std::arch::x86_64::*;
 pub(crate) fn x86_64_v3() -> bool {
     use std::arch::is_x86_feature_detected as has;
     has!("avx2") && has!("bmi1") && has!("bmi2") && has!("fma") && has!("lzcnt") && has!("popcnt")
+}
+
+/// The processor's largest cache in bytes, from Linux's sysfs (the first processor's
+/// `cache/index*/size`), asked once; 32 MiB where it cannot be read.
+pub(crate) fn last_level_cache() -> u64 {
+    static SIZE: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *SIZE.get_or_init(|| {
+        let sizes = std::fs::read_dir("/sys/devices/system/cpu/cpu0/cache").into_iter().flatten().filter_map(|e| {
+            let text = std::fs::read_to_string(e.ok()?.path().join("size")).ok()?;
+            let text = text.trim();
+            let (digits, unit) = text.split_at(text.find(|c: char| !c.is_ascii_digit()).unwrap_or(text.len()));
+            let scale = match unit {
+                "K" => 1 << 10,
+                "M" => 1 << 20,
+                "G" => 1 << 30,
+                "" => 1,
+                _ => return None,
+            };
+            digits.parse::<u64>().ok().map(|n| n * scale)
+        });
+        sizes.max().unwrap_or(32 << 20)
+    })
 }
 
 /// Asks for the cache line of `words[at]`, if `at` is in range (a hint: no load, no

@@ -35,7 +35,7 @@ pub(crate) fn memory_order(t: &Tracer<'_>, rays: &[Ray], rule: MemoryOrder) -> O
     let wanted = match rule {
         MemoryOrder::Off => false,
         MemoryOrder::Incoherent => true,
-        MemoryOrder::Auto => 2 * walked_bytes(t) > last_level_cache(),
+        MemoryOrder::Auto => t.outgrows_cache(),
     };
     if !wanted || rays.len() < MIN_RAYS || rays.len() > u32::MAX as usize {
         return None;
@@ -54,34 +54,6 @@ pub(crate) fn memory_order(t: &Tracer<'_>, rays: &[Ray], rule: MemoryOrder) -> O
     let mut keyed: Vec<u64> = rays.iter().enumerate().map(|(i, r)| (key.of(r) as u64) << 32 | i as u64).collect();
     radix_sort(&mut keyed, Key::BITS);
     Some(keyed.into_iter().map(|k| k as u32).collect())
-}
-
-/// Bytes of what walks read: leaf records, triangle references, triangles.
-fn walked_bytes(t: &Tracer<'_>) -> u64 {
-    let v = t.view();
-    4 * (v.octree.len() + v.tri_refs.len() + v.triangles.len()) as u64
-}
-
-/// The processor's largest cache in bytes, from Linux's sysfs (the first processor's
-/// `cache/index*/size`), asked once; 32 MiB where it cannot be read.
-fn last_level_cache() -> u64 {
-    static SIZE: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
-    *SIZE.get_or_init(|| {
-        let sizes = std::fs::read_dir("/sys/devices/system/cpu/cpu0/cache").into_iter().flatten().filter_map(|e| {
-            let text = std::fs::read_to_string(e.ok()?.path().join("size")).ok()?;
-            let text = text.trim();
-            let (digits, unit) = text.split_at(text.find(|c: char| !c.is_ascii_digit()).unwrap_or(text.len()));
-            let scale = match unit {
-                "K" => 1 << 10,
-                "M" => 1 << 20,
-                "G" => 1 << 30,
-                "" => 1,
-                _ => return None,
-            };
-            digits.parse::<u64>().ok().map(|n| n * scale)
-        });
-        sizes.max().unwrap_or(32 << 20)
-    })
 }
 
 /// A ray's sort key: the Morton code of the grid cell holding its origin (clamped
