@@ -1,6 +1,7 @@
 //! What the processor offers beneath the walks: whether it has x86-64-v3, cache hints,
-//! the size of its largest cache, and the SSE2 clip every x86-64 processor runs. Below both the scalar walk and the
-//! SIMD steps (`simd/`), which use these and nothing of each other's here.
+//! the size of its largest cache, and the SSE2 clip every x86-64 processor runs.
+//! Below both the scalar walk and the SIMD steps (`simd/`), which use these and
+//! nothing of each other's here.
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use std::arch::x86_64::*;

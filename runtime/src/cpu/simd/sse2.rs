@@ -59,7 +59,7 @@ impl SseWalk {
     /// in whatever features it is compiled with.)
     #[inline(always)]
     pub(crate) fn from_scalar(t: &Tracer<'_>, w: &RayWalk, alone: bool) -> SseWalk {
-        let (lo, hi, o) = (t.root_lo(), t.root_box().1, w.o());
+        let ((lo, hi), o) = (t.root_box(), w.o());
         let ahead = alone && t.reads_ahead() && (0..3).all(|k| lo[k] <= o[k] && o[k] <= hi[k]);
         // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
         unsafe { Self::from_scalar_sse2(w, lo, ahead) }
@@ -310,9 +310,10 @@ pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
     unsafe {
         let v = t.view();
         let a = w.address as usize;
-        // 0. Where the scene outgrows the cache, the next record is asked for now, on
-        //    every face the ray can leave by, so that its load overlaps the triangle
-        //    tests and the exit below (a lone walk has nothing else to overlap it with).
+        // 0. A walk that reads ahead (a one-ray nearest-hit walk from inside the root
+        //    cube) asks now for the next record on every face the ray can leave by, so
+        //    that its load overlaps the triangle tests and the exit below (a lone walk
+        //    has nothing else to overlap it with).
         if w.ahead {
             read_ahead(v.octree, a, &w.faces);
         }
