@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::order::memory_order;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::simd;
-use super::tracer::{with_tests, Tracer, WalkStats};
+use super::tracer::{with_tests, NoTally, Tracer};
 use crate::ray::{Hit, Ray};
 
 /// Rays per rayon task in the parallel batch calls: large enough to amortise the
@@ -23,7 +23,8 @@ use scalar_batch::{step, to_walk, Walk};
 
 #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 mod scalar_batch {
-    use super::{Tracer, WalkStats};
+    use super::Tracer;
+    use crate::cpu::tracer::Tally;
     pub(super) use crate::cpu::walk::RayWalk as Walk;
     pub(super) fn to_walk(_: &Tracer<'_>, w: &Walk) -> Walk {
         w.clone()
@@ -34,7 +35,7 @@ mod scalar_batch {
     pub(super) fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
         t: &Tracer<'_>,
         w: &mut Walk,
-        s: &mut WalkStats,
+        s: &mut impl Tally,
     ) -> bool {
         t.step::<ANY>(w, s)
     }
@@ -168,7 +169,7 @@ impl Tracer<'_> {
         rays: &[Ray],
         mut done: impl FnMut(usize, Option<Hit>),
     ) {
-        let mut stats = WalkStats::default();
+        let mut stats = NoTally;
         let mut next = 0;
         let mut slots: [Option<(usize, Walk)>; IN_FLIGHT] =
             std::array::from_fn(|_| self.start_next(rays, &mut next, &mut done));

@@ -26,7 +26,7 @@
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
 use super::tables::{exit_code, octant, EXIT_FACE};
-use super::tracer::{ExitTest, Tracer, WalkStats, BOX_T_SLACK};
+use super::tracer::{ExitTest, Tally, Tracer, BOX_T_SLACK};
 use super::triangle::TriRay;
 use super::watertight::Shear;
 use crate::ray::{Hit, Ray};
@@ -216,14 +216,14 @@ impl Tracer<'_> {
         address: u32,
         steps: &mut u32,
         walk: &mut LeafVisit<'_>,
-        stats: &mut WalkStats,
+        stats: &mut impl Tally,
         test: &impl LeafTest,
     ) -> Option<(u32, u32)> {
         let v = &self.view;
-        stats.leaves += 1;
+        stats.leaf();
         *steps += 1;
         if *steps > self.frame.max_steps {
-            stats.stopped_at_bound = true;
+            stats.bound();
             return None;
         }
         let a = address as usize;
@@ -231,7 +231,7 @@ impl Tracer<'_> {
         // ends the walk here.
         let rec = v.octree.get(a..a + LEAF_HEADER_WORDS)?;
         let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
-        stats.triangle_tests = stats.triangle_tests.saturating_add(count);
+        stats.tests(count);
         (!self.test_leaf::<ANY>(count, offset, box_index, walk, test)).then_some((box_index, ncount))
     }
 
@@ -321,7 +321,7 @@ impl Tracer<'_> {
     /// Visits the walk's current leaf and moves to the next; returns whether the walk
     /// is over (its answer is then in `w.best`).
     #[inline(always)]
-    pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut WalkStats) -> bool {
+    pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut impl Tally) -> bool {
         let v = &self.view;
         let lo = self.frame.root_lo;
         let a = w.address as usize;

@@ -8,7 +8,7 @@ use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2;
 use crate::cpu::hw::prefetch;
-use crate::cpu::tracer::{Tracer, WalkStats, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+use crate::cpu::tracer::{Tally, Tracer, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
 use crate::cpu::triangle::{intersect_f64, TriRay};
 use crate::cpu::walk::{exit_along_moving_axes, Batch, LeafTest, LeafVisit, RayWalk};
 use crate::cpu::watertight::{plane_distance, Shear};
@@ -304,7 +304,7 @@ fn broadcast_lane(v: __m128, mask: __m128i) -> __m128 {
 pub(crate) unsafe fn step<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     w: &mut SseWalk,
-    stats: &mut WalkStats,
+    stats: &mut impl Tally,
 ) -> bool {
     // SAFETY: SSE2 is enabled at compile time for this module (the caller's contract).
     unsafe {
@@ -408,7 +408,7 @@ fn read_ahead(octree: &[u32], a: usize, faces: &[u32; 3]) {
 pub(crate) fn walk<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     start: &RayWalk,
-    stats: &mut WalkStats,
+    stats: &mut impl Tally,
 ) -> Option<Hit> {
     if t.uses_x86_64_v3() {
         // SAFETY: the processor has the features (`uses_x86_64_v3` is never true
@@ -426,7 +426,7 @@ pub(crate) fn walk<const ANY: bool, const TEST: u8, const SLAB: bool>(
 unsafe fn walk_v3<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     start: &RayWalk,
-    stats: &mut WalkStats,
+    stats: &mut impl Tally,
 ) -> Option<Hit> {
     walk_loop::<ANY, TEST, SLAB>(t, start, stats)
 }
@@ -435,7 +435,7 @@ unsafe fn walk_v3<const ANY: bool, const TEST: u8, const SLAB: bool>(
 fn walk_loop<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     start: &RayWalk,
-    stats: &mut WalkStats,
+    stats: &mut impl Tally,
 ) -> Option<Hit> {
     // SAFETY: SSE2 is enabled at compile time for this module
     // (`cfg(target_feature = "sse2")` in `simd/mod.rs`), so the target-feature
@@ -463,7 +463,7 @@ pub(crate) fn begin(t: &Tracer<'_>, start: &RayWalk) -> SseWalk {
 pub(crate) fn step_safe<const ANY: bool, const TEST: u8, const SLAB: bool>(
     t: &Tracer<'_>,
     w: &mut SseWalk,
-    stats: &mut WalkStats,
+    stats: &mut impl Tally,
 ) -> bool {
     // SAFETY: as in `walk`: SSE2 is enabled at compile time for this module.
     unsafe { step::<ANY, TEST, SLAB>(t, w, stats) }
