@@ -1,5 +1,6 @@
 //! What the processor offers beneath the walks: whether it has x86-64-v3, cache hints,
-//! the size of its largest cache, and the SSE2 clip every x86-64 processor runs.
+//! the size of its largest cache, and the SSE2 clip and grid coordinates every x86-64
+//! processor runs.
 //! Below both the scalar walk and the SIMD steps (`simd/`), which use these and
 //! nothing of each other's here.
 
@@ -73,5 +74,30 @@ pub(crate) fn clip_sse2(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) ->
         let axis = (_mm_movemask_ps(_mm_cmpeq_ps(near, mx)) as u32 & 7).trailing_zeros() as usize & 3;
         let (t0, t1) = (_mm_cvtss_f32(mx), _mm_cvtss_f32(mn));
         (t0 <= t1).then_some((t0, t1, axis))
+    }
+}
+
+/// `Tracer::grid_coords` (finest-grid coordinates of point `p`, clamped into the
+/// root) in SSE2's two-lane `f64`: the same operations in the same order, so the
+/// same cells. `scale` is the frame's `grid_scale`, `last` the last cell's index. A
+/// NaN coordinate clamps to 0 as in the scalar form: `maxpd(x, 0)` answers its second
+/// operand when either is NaN. About 60 fewer instructions a walk than the scalar
+/// form, whose `f64::max` and `min` each take a NaN check.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[inline(always)]
+pub(crate) fn grid_coords_sse2(p: [f32; 3], lo: [f32; 3], scale: f64, last: f64) -> [u32; 3] {
+    // SAFETY: SSE2 is part of every x86-64 target this is compiled for.
+    unsafe {
+        let (p4, lo4) = (_mm_setr_ps(p[0], p[1], p[2], 0.0), _mm_setr_ps(lo[0], lo[1], lo[2], 0.0));
+        let (scale, zero, last) = (_mm_set1_pd(scale), _mm_setzero_pd(), _mm_set1_pd(last));
+        // `((p - lo) * scale).max(0.0).min(last)`, then truncated (in 0..=last, so
+        // the truncation is `as u32`'s).
+        let q = |p: __m128, lo: __m128| {
+            let x = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(p), _mm_cvtps_pd(lo)), scale);
+            _mm_cvttpd_epi32(_mm_min_pd(_mm_max_pd(x, zero), last))
+        };
+        let xy = q(p4, lo4);
+        let z = q(_mm_movehl_ps(p4, p4), _mm_movehl_ps(lo4, lo4));
+        [_mm_cvtsi128_si32(xy) as u32, _mm_cvtsi128_si32(_mm_srli_si128::<4>(xy)) as u32, _mm_cvtsi128_si32(z) as u32]
     }
 }

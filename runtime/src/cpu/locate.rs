@@ -9,10 +9,28 @@ use super::tracer::Tracer;
 use super::walk::point_at;
 
 impl Tracer<'_> {
-    /// Finest-grid coordinates of a point, clamped into the root.
+    /// Finest-grid coordinates of a point, clamped into the root: in SSE2 where the
+    /// build has it (`hw::grid_coords_sse2`, the same cells).
     #[inline(always)]
-    fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
-        let last = ((1u64 << self.frame.max_depth) - 1) as f64;
+    pub(super) fn grid_coords(&self, p: [f32; 3]) -> [u32; 3] {
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        return super::hw::grid_coords_sse2(p, self.frame.root_lo, self.frame.grid_scale, self.grid_last());
+        #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+        self.grid_coords_scalar(p)
+    }
+
+    /// The last finest-grid cell's index on each axis.
+    #[inline(always)]
+    fn grid_last(&self) -> f64 {
+        ((1u64 << self.frame.max_depth) - 1) as f64
+    }
+
+    /// [`Tracer::grid_coords`] in portable scalar arithmetic (what the SSE2 form is
+    /// tested against).
+    #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
+    #[inline(always)]
+    pub(super) fn grid_coords_scalar(&self, p: [f32; 3]) -> [u32; 3] {
+        let last = self.grid_last();
         // Clamped to [0, last] first, so truncation is the floor; NaN clamps to 0.
         // Rounding can only move a point to a neighbouring cell, which the bake
         // margin covers.

@@ -204,6 +204,38 @@ fn the_clip_agrees_with_the_scalar_clip() {
     }
 }
 
+/// Point location's grid coordinates (SSE2 where the build has it) are the scalar
+/// form's, cell for cell: points inside and outside the root, on cell planes, and
+/// with NaN, infinite, zero (both signs) and extreme coordinates, at several depths.
+#[test]
+fn grid_coordinates_agree_with_the_scalar_form() {
+    let mut rng = procedural::SplitMix(23);
+    let odd = [0.0f32, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, f32::MIN, 1e-38, -1e30];
+    let mut compared = 0;
+    for depth in [1, 4, 7, 10] {
+        let params = BuildParams { max_depth: Some(depth), ..BuildParams::auto() };
+        let scene =
+            Scene::from_baked(bake(&procedural::sphere([0.5, -1.0, 2.0], 1.5, 12, 16), &params).unwrap()).unwrap();
+        let t = scene.tracer();
+        let (lo, size) = (scene.view().bounds.root_lo, scene.view().bounds.root_size);
+        let cell = size / (1u32 << depth) as f32;
+        for i in 0..20_000 {
+            let mut p: [f32; 3] = std::array::from_fn(|k| lo[k] - 1.0 + rng.unit() * (size + 2.0));
+            match i % 4 {
+                // On a cell plane (as rounding puts it) on every axis.
+                1 => p = std::array::from_fn(|k| lo[k] + (p[k] - lo[k]).div_euclid(cell) * cell),
+                // An odd value on one axis.
+                2 => p[i / 4 % 3] = odd[i / 12 % odd.len()],
+                3 => p = [odd[i / 4 % odd.len()], odd[i / 36 % odd.len()], p[2]],
+                _ => {}
+            }
+            assert_eq!(t.grid_coords(p), t.grid_coords_scalar(p), "depth {depth}, point {p:?}");
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 80_000);
+}
+
 /// The lanes' clip of eight rays against the mesh box marks a ray as missing it
 /// exactly when the clip `begin` runs returns `None` (rays without a zero direction
 /// component), and never marks a ray with a zero component; a ray it marks that is
