@@ -135,6 +135,8 @@ fn descend_to(view: &SceneView<'_>, mut word: u32, mut level: u32, q: [u32; 3], 
 pub struct LocateGrid {
     level: u32,
     words: Vec<u32>,
+    /// A level a cell, then three bytes of padding: the eight-ray begin
+    /// (`simd::begin8`) gathers them as four-byte words from any cell's byte.
     levels: Vec<u8>,
 }
 
@@ -160,7 +162,30 @@ impl LocateGrid {
                 }
             }
         }
+        levels.extend_from_slice(&[0; 3]);
         LocateGrid { level, words, levels }
+    }
+
+    /// The grid's level (its cells a side: `2^level`).
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    #[inline(always)]
+    pub(crate) fn level(&self) -> u32 {
+        self.level
+    }
+
+    /// The word to descend from for each cell (x fastest, then y, then z).
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    #[inline(always)]
+    pub(crate) fn words(&self) -> &[u32] {
+        &self.words
+    }
+
+    /// That word's level for each cell, followed by three bytes of padding (a
+    /// four-byte read from any cell's byte stays inside).
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    #[inline(always)]
+    pub(crate) fn padded_levels(&self) -> &[u8] {
+        &self.levels
     }
 
     /// The word and level to descend from for finest-grid cell `q`.

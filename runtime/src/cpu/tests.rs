@@ -236,53 +236,86 @@ fn grid_coordinates_agree_with_the_scalar_form() {
     assert_eq!(compared, 80_000);
 }
 
-/// The lanes' clip of eight rays against the mesh box marks a ray as missing it
-/// exactly when the clip `begin` runs returns `None` (rays without a zero direction
-/// component), and never marks a ray with a zero component; a ray it marks that is
-/// not traceable (NaN, infinities, inverted interval) is one `begin` refuses anyway.
+/// The eight-ray begin of the lanes (`simd::begin8`) answers each ray as
+/// `Tracer::begin` does: a ray it marks as missing is one `begin` refuses, and a ray
+/// it begins starts in `begin`'s leaf (address, level, cell) with its stopping
+/// distance. Rays from inside the root and from outside it, through the mesh box's
+/// faces and the root's, on cell planes, with zeros of both signs, NaN, infinities,
+/// extremes and inverted intervals mixed in, in scenes of several depths (and one
+/// tracer without a locate grid, which begins none). Most rays must be decided here,
+/// so that the check is not vacuous.
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 #[test]
-fn eight_rays_miss_the_box_as_the_clip_says() {
-    use super::simd::avx2::box_misses;
-    use super::walk::clip;
+fn eight_rays_begin_as_begin_does() {
+    use super::simd::begin8::begin8;
     if !std::arch::is_x86_feature_detected!("avx2") {
         return; // the lanes (the only caller) do not run here either
     }
     let mut rng = procedural::SplitMix(17);
-    let (lo, hi) = ([-1.0f32, -2.0, 0.5], [3.0f32, 2.0, 4.5]);
     let odd = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e-30, f32::MAX, 3.0, -1.0];
-    let mut rays = Vec::new();
-    for i in 0..40_000 {
-        let mut o = [rng.unit() * 8.0 - 3.0, rng.unit() * 8.0 - 4.0, rng.unit() * 8.0 - 2.0];
-        let mut d = [rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5];
-        match i % 5 {
-            // On the box's planes, along its axes, with equal distances.
-            1 => (o, d) = (o.map(f32::round), d.map(|c| (c * 4.0).round() / 4.0)),
-            // An odd value (zeros of both signs, NaN, infinities, extremes) somewhere.
-            2 => d[i / 5 % 3] = odd[i / 15 % odd.len()],
-            3 => o[i / 5 % 3] = odd[i / 15 % odd.len()],
-            _ => {}
+    for (depth, leaf) in [(3, 4), (7, 2), (9, 1)] {
+        let params = BuildParams { max_depth: Some(depth), leaf_size: Some(leaf), ..BuildParams::auto() };
+        let mesh = procedural::sphere([0.5, -1.0, 2.0], 1.5, 24, 32);
+        let scene = Scene::from_baked(bake(&mesh, &params).unwrap()).unwrap();
+        let (lo, size) = (scene.view().bounds.root_lo, scene.view().bounds.root_size);
+        let cell = size / (1u32 << depth) as f32;
+        let mut rays = Vec::new();
+        for i in 0..40_000 {
+            let mut o: [f32; 3] = std::array::from_fn(|k| lo[k] - 0.5 * size + rng.unit() * 2.0 * size);
+            let mut d = [rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5];
+            match i % 6 {
+                // On cell planes, with equal slab distances.
+                1 => {
+                    (o, d) =
+                        (o.map(|c| lo[0] + ((c - lo[0]) / cell).round() * cell), d.map(|c| (c * 4.0).round() / 4.0))
+                }
+                // An odd value (zeros of both signs, NaN, infinities, extremes) somewhere.
+                2 => d[i / 6 % 3] = odd[i / 18 % odd.len()],
+                3 => o[i / 6 % 3] = odd[i / 18 % odd.len()],
+                // From far outside, towards the sphere.
+                4 => d = std::array::from_fn(|k| [0.5, -1.0, 2.0][k] + rng.unit() - 0.5 - o[k]),
+                _ => {}
+            }
+            let (tmin, tmax) = match i % 7 {
+                0 => (0.0, -1.0),
+                1 => (rng.unit() * size, rng.unit() * 3.0 * size),
+                2 => (0.0, f32::NAN),
+                _ => (0.0, f32::INFINITY),
+            };
+            rays.push(Ray::segment(o.into(), d.into(), tmin, tmax));
         }
-        rays.push(Ray::segment(o.into(), d.into(), 0.0, if i % 7 == 0 { -1.0 } else { f32::INFINITY }));
-    }
-    let mut marked = 0;
-    for block in rays.chunks_exact(8) {
-        // SAFETY: the processor has AVX2 (checked above).
-        let misses = unsafe { box_misses(block.try_into().unwrap(), lo, hi) };
-        for (i, r) in block.iter().enumerate() {
-            let (o, d) = (r.origin.to_array(), r.dir.to_array());
-            let marked_here = misses >> i & 1 != 0;
-            marked += marked_here as usize;
-            if d.contains(&0.0) {
-                assert!(!marked_here, "a zero component is the scalar clip's: {r:?}");
-            } else if r.origin.is_finite() && r.dir.is_finite() {
-                assert_eq!(marked_here, clip(o, d, lo, hi).is_none(), "{r:?}");
+        let tracer = scene.tracer();
+        let without_grid = crate::Tracer::new(scene.view());
+        for t in [&tracer, &without_grid] {
+            let (mut missed, mut begun) = (0, 0);
+            for block in rays.chunks_exact(8) {
+                // SAFETY: the processor has AVX2 (checked above).
+                let b = unsafe { begin8(t, block.try_into().unwrap()) };
+                assert_eq!(b.misses & b.begun, 0);
+                for (l, r) in block.iter().enumerate() {
+                    let w = t.begin(r);
+                    if b.misses >> l & 1 != 0 {
+                        assert!(w.is_none(), "depth {depth}: marked as missing, but begun: {r:?}");
+                        missed += 1;
+                    } else if b.begun >> l & 1 != 0 {
+                        let w = w.unwrap_or_else(|| panic!("depth {depth}: begun, but begin refuses it: {r:?}"));
+                        let cell = [b.cell[0][l], b.cell[1][l], b.cell[2][l]];
+                        assert_eq!((b.address[l], b.level[l], cell), (w.address(), w.level(), w.cell()), "{r:?}");
+                        assert!(b.tmax[l] == w.tmax(), "depth {depth}: tmax {} against {}: {r:?}", b.tmax[l], w.tmax());
+                        begun += 1;
+                    }
+                }
+            }
+            if std::ptr::eq(t, &without_grid) {
+                assert_eq!(begun, 0, "a tracer without a grid leaves the walks to the scalar begin");
             } else {
-                assert!(!marked_here || !r.is_traceable(), "{r:?}");
+                assert!(
+                    begun > rays.len() / 10 && missed > rays.len() / 5,
+                    "depth {depth}: {begun} begun, {missed} missed"
+                );
             }
         }
     }
-    assert!(marked > rays.len() / 10, "{marked} rays marked");
 }
 
 /// Incoherent batches are walked in memory order and coherent ones as given, and

@@ -7,8 +7,8 @@
 //! Only the batch loop and single-ray walk compiled for x86-64-v3 call it (where it
 //! is inlined); elsewhere the step tests one triangle at a time.
 //!
-//! Also here: the clip of eight rays against the mesh box ([`box_misses`]), which
-//! answers the rays that miss it before a walk is begun for them.
+//! Also here: the transpose of eight records of floats into rows, which the test and
+//! the eight-ray begin (`begin8`) read their inputs with.
 
 use std::arch::x86_64::*;
 
@@ -16,7 +16,6 @@ use octrace_format::layout::TRIANGLE_FLOATS;
 
 use crate::cpu::walk::Batch;
 use crate::cpu::watertight::Shear;
-use crate::ray::Ray;
 
 /// Triangles a batch.
 pub(crate) const LANES: usize = 8;
@@ -37,7 +36,7 @@ unsafe fn pair(lo: *const f32, hi: *const f32) -> __m256 {
 /// # Safety
 /// AVX must be available (where this is inlined); the reads in bounds.
 #[inline(always)]
-unsafe fn transpose(p: &[*const f32; LANES], off: usize) -> [__m256; 4] {
+pub(super) unsafe fn transpose(p: &[*const f32; LANES], off: usize) -> [__m256; 4] {
     // SAFETY: the caller's.
     unsafe {
         let r0 = pair(p[0].add(off), p[4].add(off));
@@ -254,46 +253,6 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         let Some((lane, t)) = best else { return Batch::Miss };
         let det = lane_of(det, lane);
         Batch::Hit(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det)
-    }
-}
-
-/// The rays of `rays` (as bits, ray `i` bit `i`) that miss the box `lo..hi` by
-/// `walk::clip`'s own arithmetic: for a ray with no zero direction component, the
-/// slab distances `(lo - o) / d` and `(hi - o) / d` of `hw::clip_sse2`, ordered,
-/// the largest near against the smallest far. Such a ray misses exactly when that
-/// clip returns `None`, and `Tracer::begin` then returns `None` too (the mesh box
-/// clip is one of its conditions), so its answer is a miss without a walk: 57 % of
-/// the standard camera rays, each spared `begin`'s scalar clips (about a hundred
-/// instructions). A ray with a zero component is never in the mask (`clip` takes
-/// the scalar path for it), nor one the comparison cannot order (NaN: `begin`
-/// refuses it anyway). The signs of zero distances may differ from the scalar
-/// clip's maximum (`max` of `-0.0` and `+0.0` keeps either), which no comparison
-/// sees.
-///
-/// # Safety
-/// AVX must be available (where this is inlined).
-#[inline(always)]
-pub(crate) unsafe fn box_misses(rays: &[Ray; LANES], lo: [f32; 3], hi: [f32; 3]) -> u32 {
-    // SAFETY: the caller's; a `Ray` is eight `f32` (`repr(C)`, 32 bytes), which the
-    // two transposes read.
-    unsafe {
-        let p: [*const f32; LANES] = std::array::from_fn(|i| std::ptr::from_ref(&rays[i]).cast::<f32>());
-        let [ox, oy, oz, _] = transpose(&p, 0);
-        let [dx, dy, dz, _] = transpose(&p, 4);
-        let zero = _mm256_setzero_ps();
-        let (mut near, mut far) = (_mm256_set1_ps(f32::NEG_INFINITY), _mm256_set1_ps(f32::INFINITY));
-        let mut flat = zero;
-        for (k, (o, d)) in [(ox, dx), (oy, dy), (oz, dz)].into_iter().enumerate() {
-            let ta = _mm256_div_ps(_mm256_sub_ps(_mm256_set1_ps(lo[k]), o), d);
-            let tb = _mm256_div_ps(_mm256_sub_ps(_mm256_set1_ps(hi[k]), o), d);
-            // `if ta < tb { (ta, tb) } else { (tb, ta) }`, lane by lane.
-            let m = _mm256_cmp_ps::<_CMP_LT_OQ>(ta, tb);
-            near = _mm256_max_ps(near, _mm256_blendv_ps(tb, ta, m));
-            far = _mm256_min_ps(far, _mm256_blendv_ps(ta, tb, m));
-            flat = _mm256_or_ps(flat, _mm256_cmp_ps::<_CMP_EQ_OQ>(d, zero));
-        }
-        let misses = _mm256_cmp_ps::<_CMP_GT_OQ>(near, far);
-        _mm256_movemask_ps(_mm256_andnot_ps(flat, misses)) as u32
     }
 }
 

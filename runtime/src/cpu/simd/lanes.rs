@@ -20,11 +20,13 @@ use std::arch::x86_64::*;
 use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2::{self, at_most, mask_of};
+use super::begin8::{begin8, Begun};
 use super::sse2::{ShearSse, SseTest};
 use crate::cpu::hw::prefetch;
 use crate::cpu::tables::{octant, EXIT_ROWS};
 use crate::cpu::tracer::Tracer;
 use crate::cpu::walk::{exit_along_moving_axes, LeafVisit, RayWalk};
+use crate::cpu::watertight::Shear;
 use crate::ray::{Hit, Ray};
 
 /// Walks stepped at once.
@@ -151,18 +153,18 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
     }
 }
 
-/// Where the batch stands: the next ray to begin, and which rays of its block of
-/// eight (rays `8k..8k + 8`) miss the mesh box, found for the whole block when its
-/// first ray comes up.
+/// Where the batch stands: the next ray to begin, and what [`begin8`] found for its
+/// block of eight (rays `8k..8k + 8`), begun for the whole block when its first ray
+/// comes up.
 #[derive(Debug, Default)]
 struct Feed {
     next: usize,
-    misses: u32,
+    block: Begun,
 }
 
 /// Starts the next ray of the batch that needs a walk in `lane`; rays that cannot
-/// hit are answered at once (those that miss the mesh box eight at a time, without
-/// `Tracer::begin`). The lane is left inactive when none is left.
+/// hit are answered at once. Rays are begun eight at a time ([`begin8`]); those it
+/// leaves take `Tracer::begin`. The lane is left inactive when none is left.
 ///
 /// # Safety
 /// AVX2 must be available (inlined into `trace`).
@@ -179,22 +181,40 @@ unsafe fn refill(
     while feed.next < rays.len() {
         let i = feed.next;
         feed.next += 1;
-        if i.is_multiple_of(LANES) {
-            let (lo, hi) = t.walked_box();
-            feed.misses = match rays.get(i..i + LANES).and_then(|b| <&[Ray; LANES]>::try_from(b).ok()) {
+        let (l, b) = (i % LANES, &mut feed.block);
+        if l == 0 {
+            *b = match rays.get(i..i + LANES).and_then(|b| <&[Ray; LANES]>::try_from(b).ok()) {
                 // SAFETY: AVX2 is the caller's.
-                Some(block) => unsafe { avx2::box_misses(block, lo, hi) },
-                None => 0,
+                Some(block) => unsafe { begin8(t, block) },
+                None => Begun::default(),
             };
         }
-        if feed.misses >> (i % LANES) & 1 != 0 {
-            done(i, None);
-            continue;
-        }
-        match t.begin(&rays[i]) {
-            Some(w) => {
-                prefetch(t.view().octree, w.address());
-                g.walks[lane] = Some(start(&mut g.v, lane, i, &w));
+        let start = if b.misses >> l & 1 != 0 {
+            None
+        } else if b.begun >> l & 1 != 0 {
+            let (ray, cell) = (&rays[i], [b.cell[0][l], b.cell[1][l], b.cell[2][l]]);
+            let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
+            let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]];
+            let shear = Shear::new(o, d);
+            Some(Start {
+                o,
+                d,
+                inv,
+                shear,
+                tmin: ray.tmin,
+                tmax: b.tmax[l],
+                t_best: ray.tmax,
+                address: b.address[l],
+                level: b.level[l],
+                cell,
+            })
+        } else {
+            t.begin(&rays[i]).map(|w| Start::of(&w))
+        };
+        match start {
+            Some(s) => {
+                prefetch(t.view().octree, s.address);
+                g.walks[lane] = Some(s.write(&mut g.v, lane, i));
                 g.active |= 1 << lane;
                 return;
             }
@@ -203,33 +223,66 @@ unsafe fn refill(
     }
 }
 
-/// Writes walk `w` (ray `index`) into `lane`.
-#[inline(always)]
-fn start(v: &mut Vectors, lane: usize, index: usize, w: &RayWalk) -> Walk {
-    let (o, d, inv, high, cell) = (w.o(), w.d(), w.inv(), w.high(), w.cell());
-    for k in 0..3 {
-        v.o[k].0[lane] = o[k];
-        v.d[k].0[lane] = d[k];
-        v.inv[k].0[lane] = inv[k];
-        v.high[k].0[lane] = high[k] as f32;
-        v.cell[k].0[lane] = cell[k];
-    }
-    v.level.0[lane] = w.level();
-    v.address.0[lane] = w.address();
-    v.tmax.0[lane] = w.tmax();
-    v.t_best.0[lane] = w.t_best();
-    v.steps.0[lane] = 0;
-    v.exits.0[lane] = EXIT_ROWS[octant(d)];
-    // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
-    unsafe {
-        Walk {
-            index,
-            shear: ShearSse::new(&w.shear()),
-            o: _mm_setr_ps(o[0], o[1], o[2], 0.0),
-            d: _mm_setr_ps(d[0], d[1], d[2], 0.0),
-            d_s: d,
+/// A walk's starting state, from `Tracer::begin` or from [`begin8`] (the same
+/// values either way).
+struct Start {
+    o: [f32; 3],
+    d: [f32; 3],
+    inv: [f32; 3],
+    shear: Shear,
+    tmin: f32,
+    tmax: f32,
+    t_best: f32,
+    address: u32,
+    level: u32,
+    cell: [u32; 3],
+}
+
+impl Start {
+    #[inline(always)]
+    fn of(w: &RayWalk) -> Start {
+        Start {
+            o: w.o(),
+            d: w.d(),
+            inv: w.inv(),
+            shear: w.shear(),
             tmin: w.tmin(),
-            best: None,
+            tmax: w.tmax(),
+            t_best: w.t_best(),
+            address: w.address(),
+            level: w.level(),
+            cell: w.cell(),
+        }
+    }
+
+    /// Writes the walk (ray `index`) into `lane`.
+    #[inline(always)]
+    fn write(&self, v: &mut Vectors, lane: usize, index: usize) -> Walk {
+        let Start { o, d, inv, .. } = *self;
+        for k in 0..3 {
+            v.o[k].0[lane] = o[k];
+            v.d[k].0[lane] = d[k];
+            v.inv[k].0[lane] = inv[k];
+            v.high[k].0[lane] = !d[k].is_sign_negative() as u32 as f32;
+            v.cell[k].0[lane] = self.cell[k];
+        }
+        v.level.0[lane] = self.level;
+        v.address.0[lane] = self.address;
+        v.tmax.0[lane] = self.tmax;
+        v.t_best.0[lane] = self.t_best;
+        v.steps.0[lane] = 0;
+        v.exits.0[lane] = EXIT_ROWS[octant(d)];
+        // SAFETY: SSE2 is enabled at compile time for this module (`simd/mod.rs`).
+        unsafe {
+            Walk {
+                index,
+                shear: ShearSse::new(&self.shear),
+                o: _mm_setr_ps(o[0], o[1], o[2], 0.0),
+                d: _mm_setr_ps(d[0], d[1], d[2], 0.0),
+                d_s: d,
+                tmin: self.tmin,
+                best: None,
+            }
         }
     }
 }
