@@ -150,8 +150,11 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
         if eligible == 0 {
             return out;
         }
-        // The clips and interval tests of `begin`, with its operand order wherever a
-        // NaN could decide (`a.max(b)` keeps `a` when `b` is NaN, as `maxps(b, a)`).
+        // The clips and interval tests of `begin`. Where a value may be NaN (the
+        // stopping distance of a ray leaving the box at -inf: -inf + inf), `maxps` and
+        // `minps` take it first: they answer their second operand when either is NaN,
+        // as `f32::max` and `min` answer the other one; the second operands (the ray's
+        // interval, `t_start`) are never NaN in these lanes.
         let (t_enter, t_leave, in_root) = clip8(&o, &d, root_lo, root_hi);
         let (box_enter, box_leave, in_box) = clip8(&o, &d, box_lo, box_hi);
         let t_start = _mm256_max_ps(t_enter, tmin);
