@@ -21,7 +21,7 @@ use octrace_format::layout::{COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2::{self, at_most, mask_of};
 use super::begin8::{begin8, Begun};
-use super::sse2::{ShearSse, SseTest};
+use super::sse2::SseTest;
 use crate::cpu::hw::prefetch;
 use crate::cpu::tables::{octant, EXIT_ROWS};
 use crate::cpu::tracer::Tracer;
@@ -67,7 +67,10 @@ struct Vectors {
 struct Walk {
     /// The ray's index in the batch.
     index: usize,
-    shear: ShearSse,
+    /// The ray's shear, scalar: its triangles go eight at a time (`avx2::hit8`, which
+    /// reads the scalar form); the vector form's broadcasts cost a walk more to make
+    /// and copy than the rare one-by-one tests gain from them.
+    shear: Shear,
     o: __m128,
     d: __m128,
     d_s: [f32; 3],
@@ -143,7 +146,8 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
             while ended != 0 {
                 let lane = ended.trailing_zeros() as usize;
                 ended &= ended - 1;
-                if let Some(w) = g.walks[lane].take() {
+                // Read in place (the refill overwrites the slot, or empties it).
+                if let Some(w) = &g.walks[lane] {
                     done(w.index, t.answer(w.best));
                 }
                 // SAFETY: AVX2 is this function's.
@@ -164,7 +168,7 @@ struct Feed {
 
 /// Starts the next ray of the batch that needs a walk in `lane`; rays that cannot
 /// hit are answered at once. Rays are begun eight at a time ([`begin8`]); those it
-/// leaves take `Tracer::begin`. The lane is left inactive when none is left.
+/// leaves take `Tracer::begin`. The lane is left inactive and empty when none is left.
 ///
 /// # Safety
 /// AVX2 must be available (inlined into `trace`).
@@ -221,6 +225,7 @@ unsafe fn refill(
             None => done(i, None),
         }
     }
+    g.walks[lane] = None;
 }
 
 /// A walk's starting state, from `Tracer::begin` or from [`begin8`] (the same
@@ -276,7 +281,7 @@ impl Start {
         unsafe {
             Walk {
                 index,
-                shear: ShearSse::new(&self.shear),
+                shear: self.shear,
                 o: _mm_setr_ps(o[0], o[1], o[2], 0.0),
                 d: _mm_setr_ps(d[0], d[1], d[2], 0.0),
                 d_s: d,
@@ -441,7 +446,7 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
                 let Some(w) = walks[lane].as_mut() else { continue };
                 let a = v.address.0[lane] as usize;
                 let (offset, box_index) = (octree[a + 1], octree[a + 2]);
-                let test = SseTest::<TEST> { shear: &w.shear, o: w.o, d: w.d, d_s: w.d_s, wide: true };
+                let test = SseTest::<TEST, Shear> { shear: &w.shear, o: w.o, d: w.d, d_s: w.d_s, wide: true };
                 let mut t_best = v.t_best.0[lane];
                 let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut t_best, best: &mut w.best };
                 if t.test_leaf::<ANY>(counts.0[lane], offset, box_index, &mut visit, &test) {

@@ -228,11 +228,43 @@ impl ShearSse {
     }
 }
 
+/// The watertight test of one triangle, in either form: [`ShearSse`] (the SSE step's)
+/// or the scalar [`Shear`] (the lanes', whose triangles go eight at a time through
+/// `avx2::hit8` and only the rare leftovers one by one). Both give the same bits.
+pub(crate) trait WatertightTest {
+    /// The hit `(t, u, v)` of the triangle (nine floats) within `[tmin, tmax]`.
+    fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)>;
+    /// The ray's shear, for the eight-wide test.
+    fn scalar(&self) -> &Shear;
+}
+
+impl WatertightTest for ShearSse {
+    #[inline(always)]
+    fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        ShearSse::intersect(self, t, tmin, tmax)
+    }
+    #[inline(always)]
+    fn scalar(&self) -> &Shear {
+        &self.scalar
+    }
+}
+
+impl WatertightTest for Shear {
+    #[inline(always)]
+    fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        Shear::intersect(self, t, tmin, tmax)
+    }
+    #[inline(always)]
+    fn scalar(&self) -> &Shear {
+        self
+    }
+}
+
 /// The SSE step's triangle test, `TEST` fixed at compile time.
-pub(crate) struct SseTest<'w, const TEST: u8> {
+pub(crate) struct SseTest<'w, const TEST: u8, S: WatertightTest = ShearSse> {
     /// Borrowed from the walk: a copy cost 29 instructions a step (callgrind), 3-7 %
     /// of the time.
-    pub(crate) shear: &'w ShearSse,
+    pub(crate) shear: &'w S,
     pub(crate) o: __m128,
     pub(crate) d: __m128,
     pub(crate) d_s: [f32; 3],
@@ -241,7 +273,7 @@ pub(crate) struct SseTest<'w, const TEST: u8> {
     pub(crate) wide: bool,
 }
 
-impl<const TEST: u8> LeafTest for SseTest<'_, TEST> {
+impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
     #[inline(always)]
     fn hit(&self, tri: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         match TEST {
@@ -268,7 +300,7 @@ impl<const TEST: u8> LeafTest for SseTest<'_, TEST> {
     fn batch<const ANY: bool>(&self, triangles: &[f32], refs: &[u32], tmin: f32, tmax: f32) -> Batch {
         // SAFETY: `wide` is set only where the processor has AVX2 (the tracer's
         // x86-64-v3 walk); `batch_size` is 0 otherwise and the step does not call this.
-        unsafe { avx2::hit8::<ANY>(&self.shear.scalar, triangles, refs, tmin, tmax) }
+        unsafe { avx2::hit8::<ANY>(self.shear.scalar(), triangles, refs, tmin, tmax) }
     }
 }
 
