@@ -331,7 +331,7 @@ fn is_compressed(file: &mut File) -> std::io::Result<bool> {
 /// it is written next, when it spans at least two: a walk reads its records, references
 /// and triangles at random across the scene, and with 4 KiB pages a scene larger than
 /// the TLB's reach (12 MiB here) pays a page walk on most loads. Measured on the dragon
-/// (61 MB) read into memory, one thread: incoherent rays one a call 1.22x, in a batch
+/// (61 MB) read into memory, one thread: incoherent rays one a call 1.17x, in a batch
 /// 1.05x (BENCHMARKS.md). Only the 2 MiB-aligned part of the allocation is advised; a
 /// kernel without transparent huge pages, or one set to `never`, ignores it (the answer
 /// is then `false`), and so does every other system. Returns whether the advice was

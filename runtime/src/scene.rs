@@ -56,7 +56,11 @@ impl std::fmt::Debug for Scene {
 }
 
 impl Scene {
-    /// Reads and validates a `.oct` file into memory.
+    /// Reads and validates a `.oct` file into memory. On Linux the memory is backed by
+    /// transparent huge pages where the kernel allows: for a scene larger than the
+    /// processor's TLB reaches (tens of megabytes), walks run faster than on a
+    /// [`Scene::map`] of the same file (the dragon's incoherent rays one a call:
+    /// 0.76-0.86 against 0.64-0.74 Mrays/s here), at the cost of a private copy.
     ///
     /// # Errors
     /// The format crate's errors: I/O, bad magic, unsupported version, checksum,
