@@ -9,7 +9,7 @@ macro_rules! mapped_scene_help {
         "The scene is memory-mapped: if the file is truncated or rewritten in place while this
 runs, the process may die of SIGBUS or read wrong data. Replace baked files by renaming
 a new file over the old one (as `octrace bake` does), never by writing into them; a
-.oct.zst scene, and on Linux one of 16 MiB or more, is read into memory instead."
+.oct.zst scene, and on Linux one of 16 MiB to 2 GiB, is read into memory instead."
     };
 }
 

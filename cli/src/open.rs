@@ -5,17 +5,18 @@ use std::path::Path;
 use anyhow::Context;
 use octrace_runtime::Scene;
 
-/// Scenes at least this large are read into memory on Linux rather than mapped: the
-/// copy is backed by transparent huge pages, and walks over a scene past the TLB's
-/// reach run faster on them (the dragon, 61 MB: incoherent rays one a call 1.17x, in a
-/// batch 1.05x; BENCHMARKS.md). Validating reads every byte either way.
-const READ_FROM: u64 = 16 << 20;
+/// Scenes of this size are read into memory on Linux rather than mapped: the copy is
+/// backed by transparent huge pages, and walks over a scene past the TLB's reach run
+/// faster on them (the dragon, 61 MB: incoherent rays one a call 1.17x, in a batch
+/// 1.05x; BENCHMARKS.md). Validating reads every byte either way. Past 2 GiB the map
+/// stays, sparing the machine a private copy of a file that large.
+const READ_SIZES: std::ops::RangeInclusive<u64> = (16 << 20)..=(2 << 30);
 
 /// Opens and fully validates a scene: memory-mapped, or read into memory where that
-/// is faster to trace ([`READ_FROM`]) or the file is zstd-compressed (it cannot be
+/// is faster to trace ([`READ_SIZES`]) or the file is zstd-compressed (it cannot be
 /// mapped).
 pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
-    let large = cfg!(target_os = "linux") && std::fs::metadata(path).is_ok_and(|m| m.len() >= READ_FROM);
+    let large = cfg!(target_os = "linux") && std::fs::metadata(path).is_ok_and(|m| READ_SIZES.contains(&m.len()));
     if large || octrace_format::is_compressed_file(path)? {
         return Scene::open(path).with_context(|| format!("cannot open scene {}", path.display()));
     }
