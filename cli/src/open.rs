@@ -16,11 +16,17 @@ const READ_SIZES: std::ops::RangeInclusive<u64> = (16 << 20)..=(2 << 30);
 /// is faster to trace ([`READ_SIZES`]) or the file is zstd-compressed (it cannot be
 /// mapped).
 pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
-    let large = cfg!(target_os = "linux") && std::fs::metadata(path).is_ok_and(|m| READ_SIZES.contains(&m.len()));
-    if large || octrace_format::is_compressed_file(path)? {
+    let read = std::fs::metadata(path).is_ok_and(|m| reads_into_memory(m.len()));
+    if read || octrace_format::is_compressed_file(path)? {
         return Scene::open(path).with_context(|| format!("cannot open scene {}", path.display()));
     }
     map_scene(path, Trust::Validate)
+}
+
+/// Whether [`open_scene`] reads an uncompressed file of `len` bytes into memory
+/// rather than mapping it.
+fn reads_into_memory(len: u64) -> bool {
+    cfg!(target_os = "linux") && READ_SIZES.contains(&len)
 }
 
 /// How much of a file to check when opening it.
@@ -52,4 +58,27 @@ pub(crate) fn map_scene(path: &Path, trust: Trust) -> anyhow::Result<Scene> {
         Trust::HeaderOnly => unsafe { Scene::map_unchecked(path) },
     };
     scene.with_context(|| format!("cannot open scene {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Files of 16 MiB to 2 GiB are read into memory on Linux, the rest mapped; a
+    /// small scene opens mapped.
+    #[test]
+    fn large_scenes_are_read_and_small_ones_mapped() {
+        let linux = cfg!(target_os = "linux");
+        for (len, read) in
+            [(0, false), ((16 << 20) - 1, false), (16 << 20, linux), (2 << 30, linux), ((2 << 30) + 1, false)]
+        {
+            assert_eq!(reads_into_memory(len), read, "{len} bytes");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("small.oct");
+        let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 8, 12);
+        octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap().write(&path, 0).unwrap();
+        let scene = open_scene(&path).unwrap();
+        assert!(scene.file().is_some_and(|f| f.is_mapped()));
+    }
 }
