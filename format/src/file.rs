@@ -332,10 +332,10 @@ fn is_compressed(file: &mut File) -> std::io::Result<bool> {
 /// and triangles at random across the scene, and with 4 KiB pages a scene larger than
 /// the TLB's reach (12 MiB here) pays a page walk on most loads. Measured on the dragon
 /// (61 MB) read into memory, one thread: incoherent rays one a call 1.17x, in a batch
-/// 1.05x (BENCHMARKS.md). Only the 2 MiB-aligned part of the allocation is advised; a
-/// kernel without transparent huge pages, or one set to `never`, ignores it (the answer
-/// is then `false`), and so does every other system. Returns whether the advice was
-/// taken.
+/// 1.05x (BENCHMARKS.md). Only the 2 MiB-aligned part of the allocation is advised. A
+/// kernel built without transparent huge pages refuses the advice (the answer is then
+/// `false`); one set to `never` takes it and backs the buffer as before; other systems
+/// are not asked. Returns whether the kernel took the advice.
 fn huge_pages(buffer: &mut AlignedVec<ARCHIVE_ALIGN>) -> bool {
     #[cfg(target_os = "linux")]
     {
