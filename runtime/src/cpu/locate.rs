@@ -21,7 +21,7 @@ impl Tracer<'_> {
 
     /// The last finest-grid cell's index on each axis.
     #[inline(always)]
-    fn grid_last(&self) -> f64 {
+    pub(super) fn grid_last(&self) -> f64 {
         ((1u64 << self.frame.max_depth) - 1) as f64
     }
 

@@ -185,8 +185,7 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
         }
         let t_at = _mm256_blendv_ps(t_start, box_enter, at_box);
         // `point_at`: o + t * d, no fused multiply-add.
-        let (last, scale, max_depth) =
-            (((1u64 << t.frame.max_depth) - 1) as f64, t.frame.grid_scale, t.frame.max_depth);
+        let (last, scale, max_depth) = (t.grid_last(), t.frame.grid_scale, t.frame.max_depth);
         let mut q = [_mm256_setzero_si256(); 3];
         for k in 0..3 {
             q[k] = grid_axis(_mm256_add_ps(o[k], _mm256_mul_ps(t_at, d[k])), root_lo[k], scale, last);
