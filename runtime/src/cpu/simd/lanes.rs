@@ -196,22 +196,7 @@ unsafe fn refill(
         let start = if b.misses >> l & 1 != 0 {
             None
         } else if b.begun >> l & 1 != 0 {
-            let (ray, cell) = (&rays[i], [b.cell[0][l], b.cell[1][l], b.cell[2][l]]);
-            let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
-            let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]];
-            let shear = Shear::new(o, d);
-            Some(Start {
-                o,
-                d,
-                inv,
-                shear,
-                tmin: ray.tmin,
-                tmax: b.tmax[l],
-                t_best: ray.tmax,
-                address: b.address[l],
-                level: b.level[l],
-                cell,
-            })
+            Some(Start::begun(&rays[i], b, l))
         } else {
             t.begin(&rays[i]).map(|w| Start::of(&w))
         };
@@ -257,6 +242,25 @@ impl Start {
             address: w.address(),
             level: w.level(),
             cell: w.cell(),
+        }
+    }
+
+    /// The start [`begin8`] found for `ray`, lane `l` of block `b`: what
+    /// `Tracer::begin` makes of the ray's own fields, the rest from the block.
+    #[inline(always)]
+    fn begun(ray: &Ray, b: &Begun, l: usize) -> Start {
+        let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
+        Start {
+            o,
+            d,
+            inv: [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]],
+            shear: Shear::new(o, d),
+            tmin: ray.tmin,
+            tmax: b.tmax[l],
+            t_best: ray.tmax,
+            address: b.address[l],
+            level: b.level[l],
+            cell: [b.cell[0][l], b.cell[1][l], b.cell[2][l]],
         }
     }
 
