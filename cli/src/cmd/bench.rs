@@ -22,7 +22,10 @@ use crate::output::{mb, thousands};
 /// In a build with the `embree` feature, Embree 3 (fast mode) joins on one thread:
 /// one ray a call (`rtcIntersect1`, `rtcOccluded1`) on every set, and 4 x 4 pixel
 /// packets (`rtcIntersect16`) on the primary rays; beside it octrace's one-ray calls
-/// (`Scene::intersect` / `Scene::occluded` once per ray), and the ratios.
+/// (`Scene::intersect` / `Scene::occluded` once per ray), and the ratios. With more
+/// than one thread the same is timed again on all of them: octrace's parallel batch
+/// call, and both tracers' one-ray calls and Embree's packets spread over the same
+/// rayon pool (chunks of 1,024 rays, or of 64 packets).
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// A .oct scene, or a mesh to bake first.
@@ -152,20 +155,24 @@ struct EmbreeFigures {
     ratio_batch: f64,
     /// octrace one-ray calls / Embree one-ray calls, median of the runs'.
     ratio_one_ray: f64,
-    /// The batch and Embree's calls on all threads, where there are several.
+    /// octrace's and Embree's calls on all threads, where there are several.
     all_threads: Option<EmbreeAllThreads>,
 }
 
-/// octrace's parallel batch call and Embree's calls spread over the same threads
-/// (rayon, chunks of 1,024 rays or 64 packets).
+/// octrace's parallel batch call, and octrace's and Embree's one-ray calls and
+/// Embree's packets spread over the same threads (rayon, chunks of 1,024 rays or 64
+/// packets).
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 struct EmbreeAllThreads {
     threads: usize,
     octrace_batch: Spread,
+    octrace_one_ray: Spread,
     embree_one_ray: Spread,
     embree_packets: Option<Spread>,
     /// octrace batch / Embree's best, median of the runs'.
     ratio_batch: f64,
+    /// octrace one-ray calls / Embree one-ray calls, median of the runs'.
+    ratio_one_ray: f64,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -205,7 +212,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             let mut figures = embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs);
             if threads > 1 {
                 figures.all_threads = Some(crate::with_threads(args.threads, || {
-                    embree_all_threads(e, name, rays, *occlusion, &tracer, args.runs)
+                    embree_all_threads(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs)
                 })?);
             }
             r.embree = Some(figures);
@@ -328,12 +335,7 @@ fn embree_figures(
             }));
         }
         ours.push(timed(&mut || {
-            let n = if occlusion {
-                rays.iter().filter(|r| scene.occluded(r)).count()
-            } else {
-                rays.iter().filter(|r| scene.intersect(r).is_some()).count()
-            };
-            std::hint::black_box(n);
+            std::hint::black_box(octrace_one_ray_count(scene, rays, occlusion));
         }));
     }
     EmbreeFigures {
@@ -357,6 +359,17 @@ fn mrays_of(rays: usize, f: &mut dyn FnMut()) -> f64 {
     let t = Instant::now();
     f();
     rays as f64 / t.elapsed().as_secs_f64().max(1e-9) / 1e6
+}
+
+/// octrace's one-ray calls (`Scene::intersect`, `Scene::occluded`) on `rays`: how many
+/// hit (or, for `occlusion`, are occluded).
+#[cfg(feature = "embree")]
+fn octrace_one_ray_count(scene: &Scene, rays: &[Ray], occlusion: bool) -> usize {
+    if occlusion {
+        rays.iter().filter(|r| scene.occluded(r)).count()
+    } else {
+        rays.iter().filter(|r| scene.intersect(r).is_some()).count()
+    }
 }
 
 /// Embree's one-ray calls on `rays`: how many hit (or, for `occlusion`, are occluded).
@@ -408,10 +421,11 @@ fn camera_packets(name: &str, rays: &[Ray]) -> Option<Vec<[usize; 16]>> {
     })
 }
 
-/// [`embree_figures`]'s batch and Embree figures on all threads of the current pool.
+/// [`embree_figures`]'s figures on all threads of the current pool.
 #[cfg(feature = "embree")]
 fn embree_all_threads(
     e: &crate::embree::Embree,
+    scene: &Scene,
     name: &str,
     rays: &[Ray],
     occlusion: bool,
@@ -421,7 +435,7 @@ fn embree_all_threads(
     use rayon::prelude::*;
     let timed = |f: &mut dyn FnMut()| mrays_of(rays.len(), f);
     let packets = camera_packets(name, rays);
-    let (mut batch, mut one, mut packet) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut hits = vec![None; rays.len()];
     let mut occluded = vec![false; rays.len()];
     for _ in 0..runs {
@@ -440,11 +454,18 @@ fn embree_all_threads(
                 std::hint::black_box(packets.par_chunks(64).map(|c| embree_packet_hits(e, rays, c)).sum::<usize>());
             }));
         }
+        ours.push(timed(&mut || {
+            std::hint::black_box(
+                rays.par_chunks(1024).map(|c| octrace_one_ray_count(scene, c, occlusion)).sum::<usize>(),
+            );
+        }));
     }
     EmbreeAllThreads {
         threads: rayon::current_num_threads(),
         ratio_batch: median_ratio(&batch, &best_of(&one, &packet)),
+        ratio_one_ray: median_ratio(&ours, &one),
         octrace_batch: Spread::of(batch),
+        octrace_one_ray: Spread::of(ours),
         embree_one_ray: Spread::of(one),
         embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
     }
@@ -561,22 +582,26 @@ fn report(
         if let Some(n) = results.iter().find_map(|r| r.embree.as_ref()?.all_threads.as_ref().map(|a| a.threads)) {
             crate::out!(
                 "\nEmbree 3, all {n} threads (rayon: chunks of 1,024 rays, or of 64 packets), the same runs:\n\
-                 {:<11} {:>22} {:>22} {:>22} {:>10}",
+                 {:<11} {:>22} {:>22} {:>22} {:>22} {:>10} {:>10}",
                 "set",
                 "octrace batch",
+                "octrace 1-ray calls",
                 "Embree 1-ray calls",
                 "Embree 16-ray packets",
-                "batch/best"
+                "batch/best",
+                "1-ray/1-ray"
             );
             for r in results {
                 let Some(a) = r.embree.as_ref().and_then(|e| e.all_threads.as_ref()) else { continue };
                 crate::out!(
-                    "{:<11} {:>22} {:>22} {:>22} {:>9.2}x",
+                    "{:<11} {:>22} {:>22} {:>22} {:>22} {:>9.2}x {:>9.2}x",
                     r.name,
                     fmt(&a.octrace_batch),
+                    fmt(&a.octrace_one_ray),
                     fmt(&a.embree_one_ray),
                     a.embree_packets.as_ref().map_or("-".into(), fmt),
-                    a.ratio_batch
+                    a.ratio_batch,
+                    a.ratio_one_ray
                 );
             }
         }
