@@ -782,3 +782,68 @@ fn help_of_mapping_commands_warns_about_files_rewritten_in_place() {
         assert!(help.contains("SIGBUS") && help.contains("Replace baked files by renaming"), "{command}: {help}");
     }
 }
+
+/// `bench`'s checksums are those of the standard sets traced by `rays` and `trace`
+/// (rays that hit, and the sum of their distances in ray order), its figures are
+/// there for every set, and in a build with Embree its one-thread and all-threads
+/// rows are filled, one-ray calls included.
+#[test]
+fn bench_checksums_are_the_standard_sets_traced() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let out = ok(d, &["bench", "cube.oct", "--runs", "5", "--threads", "2", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!((json["threads"].as_u64(), json["runs"].as_u64()), (Some(2), Some(5)));
+    let sets = json["sets"].as_array().unwrap();
+    let names: Vec<&str> = sets.iter().map(|s| s["set"].as_str().unwrap()).collect();
+    assert_eq!(names, ["primary", "incoherent", "shadow"]);
+    for set in ["primary", "incoherent"] {
+        let b = sets.iter().find(|s| s["set"] == set).unwrap();
+        ok(d, &["rays", "cube.oct", "--set", set, "-o", "rays.bin"]);
+        ok(d, &["trace", "cube.oct", "--rays", "rays.bin", "--out", "hits.bin"]);
+        let hits = std::fs::read(d.join("hits.bin")).unwrap();
+        let records: Vec<(f32, u32)> = hits
+            .chunks(8)
+            .map(|r| (f32::from_le_bytes(r[..4].try_into().unwrap()), u32::from_le_bytes(r[4..].try_into().unwrap())))
+            .filter(|r| r.1 != u32::MAX)
+            .collect();
+        let sum_t = records.iter().map(|r| r.0 as f64).sum::<f64>();
+        assert_eq!(b["rays"].as_u64(), Some(hits.len() as u64 / 8), "{set}");
+        assert_eq!(b["hits"].as_u64(), Some(records.len() as u64), "{set}");
+        assert_eq!(b["sum_t"].as_f64(), Some(sum_t), "{set}");
+        assert!(records.len() > 1000, "{set}: the cube is hit ({})", records.len());
+    }
+    // One shadow ray a primary hit; the cube is closed, so a ray from its surface
+    // toward the light is either occluded by the cube itself or not, never more.
+    let (primary, shadow) = (&sets[0], &sets[2]);
+    assert_eq!(shadow["rays"], primary["hits"]);
+    assert!(shadow["hits"].as_u64().unwrap() <= shadow["rays"].as_u64().unwrap());
+    for s in sets {
+        for figure in ["mrays_single", "mrays_all_threads"] {
+            assert!(s[figure]["median"].as_f64().unwrap() > 0.0, "{s}");
+        }
+        let embree = &s["embree_3_fast_single"];
+        assert_eq!(embree.is_null(), !cfg!(feature = "embree"), "{s}");
+        if cfg!(feature = "embree") {
+            let all = &embree["all_threads"];
+            assert_eq!(all["threads"].as_u64(), Some(2), "{s}");
+            for (row, f) in [
+                (embree, "octrace_one_ray"),
+                (embree, "embree_one_ray"),
+                (all, "octrace_batch"),
+                (all, "octrace_one_ray"),
+                (all, "embree_one_ray"),
+            ] {
+                assert!(row[f]["median"].as_f64().unwrap() > 0.0, "{f}: {s}");
+            }
+            for ratio in ["ratio_batch", "ratio_one_ray"] {
+                for row in [embree, all] {
+                    assert!(row[ratio].as_f64().is_some_and(|r| r.is_finite() && r > 0.0), "{ratio}: {s}");
+                }
+            }
+            assert_eq!(embree["embree_packets"].is_null(), s["set"] != "primary", "{s}");
+        }
+    }
+}
