@@ -33,9 +33,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = Scene::open(&path)?;
     let view = scene.view();
     let b = &view.bounds;
-    // Every leaf's cell and whether it holds triangles, by box index.
+    // Every leaf's cell and triangle references, by box index.
     let mut cells = vec![(0u32, [0u32; 3]); view.leaf_count()];
-    let mut full = vec![false; view.leaf_count()];
     let mut occupied: HashSet<Cell> = HashSet::new();
     let mut refs_of = vec![Vec::new(); view.leaf_count()];
     for rec in view.leaves() {
@@ -45,7 +44,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let c = [0, 1, 2].map(|a| ((bx[a] - b.root_lo[a]) / size).round() as u32);
         let cell = (level, c);
         cells[rec.box_index as usize] = cell;
-        full[rec.box_index as usize] = rec.tri_count > 0;
         refs_of[rec.box_index as usize] =
             view.tri_refs[rec.tri_offset as usize..(rec.tri_offset + rec.tri_count) as usize].to_vec();
         if rec.tri_count > 0 {
@@ -73,11 +71,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut hits = vec![None; camera.len()];
     tracer.intersect_batch(&camera, &mut hits);
     let sets = [
-        ("primary", camera.clone()),
+        ("primary", camera),
         ("incoherent", incoherent(&frame, 200_000)),
         ("shadow", shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))))),
     ];
-    println!("{path}: {} leaves, {} empty", cells.len(), full.iter().filter(|f| !**f).count());
+    println!("{path}: {} leaves, {} empty", cells.len(), refs_of.iter().filter(|r| r.is_empty()).count());
     for (name, rays) in sets {
         let (mut walks, mut visits, mut empty, mut steps, mut jumps, mut jumped) = (0usize, 0, 0, 0, 0, 0);
         let (mut calls, mut calls_prev, mut calls_any, mut tests, mut tests_any) = (0usize, 0, 0, 0, 0);
@@ -111,7 +109,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let leaf = leaves[i] as usize;
                 steps += 1;
                 i += 1;
-                if full[leaf] {
+                if !refs_of[leaf].is_empty() {
                     continue;
                 }
                 empty += 1;
