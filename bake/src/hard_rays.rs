@@ -8,6 +8,13 @@
 //! ([`GridPlanes::of`]), and cycles through every case so that none is left out by
 //! chance: each kind ([`HardKind`]) on each axis, with each sign of every component
 //! (`+0.0` and `-0.0` for zero ones), at every level of the tree.
+//!
+//! Each ray is also twisted ([`Twist`]), in turn: zero components become the
+//! smallest subnormal or tiny numbers of their sign (a reflection about a nearly
+//! axis-aligned normal, a cross product of nearly parallel vectors: an `f32` product
+//! with them underflows), the origin moves a few ulps off its planes, or the whole
+//! direction is scaled to a tiny or a huge length (its hits' distances stay within
+//! `f32`).
 
 use octrace_format::layout::grid_plane;
 use octrace_format::SceneView;
@@ -77,11 +84,50 @@ impl HardKind {
     }
 }
 
+/// How a [`HardRay`] is bent from its case: the arithmetic's edges rather than the
+/// grid's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Twist {
+    /// As built.
+    Plain,
+    /// The zero components (or, where there is none, the case's axis) become `±2^-149`,
+    /// the smallest subnormal, with their sign: every product with them underflows.
+    Subnormal,
+    /// The same components become `±m 2^e`, `e` from -149 to -40 (subnormals up to
+    /// well past where the walk's `f32` products can serve them).
+    Tiny,
+    /// As [`Twist::Tiny`], and every origin coordinate moved `±2^j` ulps (`j` from 0
+    /// to 20) off its plane.
+    OffPlane,
+    /// The whole direction scaled by a power of two, to a largest component from
+    /// `2^-120` to `2^100` times the root's edge (so its hits' distances stay within
+    /// `f32`'s range); the zero components stay zero.
+    Scaled,
+}
+
+impl Twist {
+    /// Every twist, in the order the generator cycles through them.
+    pub const ALL: [Twist; 5] = [Twist::Plain, Twist::Subnormal, Twist::Tiny, Twist::OffPlane, Twist::Scaled];
+
+    /// A short name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Twist::Plain => "plain",
+            Twist::Subnormal => "subnormal",
+            Twist::Tiny => "tiny",
+            Twist::OffPlane => "off-plane",
+            Twist::Scaled => "scaled",
+        }
+    }
+}
+
 /// A ray of [`grid_rays`] and the case it covers.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HardRay {
     /// What makes it hard.
     pub kind: HardKind,
+    /// How it is bent from its case.
+    pub twist: Twist,
     /// The axis of the case: the zero component of an in-plane ray, the moving one of
     /// a ray along an edge, the zero component (if any) of a corner ray.
     pub axis: usize,
@@ -105,8 +151,9 @@ const TRIES: usize = 32;
 
 /// `n` rays built on the planes of `grid` from points `point` draws (snapped onto the
 /// planes), cycling through every case: [`HardKind`] x axis x the signs of the three
-/// components x level (1 to the depth). An origin `keep` rejects is drawn again; a case
-/// whose origins it keeps rejecting is skipped.
+/// components x level (1 to the depth), each [`Twist`] in turn (the twist cycles with
+/// period 5, the cases with 96: every twist meets every case). An origin `keep`
+/// rejects is drawn again; a case whose origins it keeps rejecting is skipped.
 ///
 /// Without `aim`, the moving components are random; with it, they point at the point
 /// `aim` draws (the zero components stay zero), so that rays meet a mesh.
@@ -142,11 +189,12 @@ pub fn grid_rays<A: FnMut(&mut SplitMix) -> [f32; 3]>(
         let axis = (case / 4 % 3) as usize;
         let signs = (case / 12 % 8) as u32;
         let level = 1 + (case / CASES % levels) as u32;
+        let twist = Twist::ALL[(case % Twist::ALL.len() as u64) as usize];
         case += 1;
         for _ in 0..TRIES {
             let p = point(&mut rng);
             let target = aim.as_mut().map(|aim| aim(&mut rng));
-            let ray = build(grid, kind, axis, signs, level, p, target, &mut rng);
+            let ray = twisted(grid, build(grid, kind, axis, signs, level, p, target, &mut rng), twist, &mut rng);
             if keep(ray.origin) {
                 rays.push(ray);
                 break;
@@ -217,7 +265,59 @@ fn build(
             o = [0, 1, 2].map(|a| c[a] - step * d[a]);
         }
     }
-    HardRay { kind, axis, level, signs, origin: o, dir: d }
+    HardRay { kind, twist: Twist::Plain, axis, level, signs, origin: o, dir: d }
+}
+
+/// `ray` bent by `twist` (see [`Twist`]).
+fn twisted(grid: &GridPlanes, mut ray: HardRay, twist: Twist, rng: &mut SplitMix) -> HardRay {
+    ray.twist = twist;
+    let d = &mut ray.dir;
+    // The components a twist makes tiny: the zero ones, else the case's axis.
+    let zeros: Vec<usize> = (0..3).filter(|&a| d[a] == 0.0).collect();
+    let tiny = if zeros.is_empty() { vec![ray.axis] } else { zeros };
+    let sign = |a: usize| if ray.signs >> a & 1 == 1 { -1.0f32 } else { 1.0 };
+    match twist {
+        Twist::Plain => {}
+        Twist::Subnormal => tiny.iter().for_each(|&a| d[a] = f32::from_bits(1) * sign(a)),
+        Twist::Tiny | Twist::OffPlane => {
+            for &a in &tiny {
+                d[a] = tiny_number(rng) * sign(a);
+            }
+            if twist == Twist::OffPlane {
+                for c in &mut ray.origin {
+                    *c = off_by_ulps(*c, rng);
+                }
+            }
+        }
+        Twist::Scaled => {
+            let largest = d.iter().fold(0.0f32, |m, c| m.max(c.abs()));
+            let root = (grid.root_size as f64).log2().floor() as i32;
+            // A largest component of 2^-120 to 2^100 root edges, within f32's range.
+            let target = (root - 120 + (rng.next_u64() % 221) as i32).clamp(-126, 126);
+            let by = target - (largest as f64).log2().floor() as i32;
+            *d = d.map(|c| (c as f64 * 2f64.powi(by)) as f32);
+        }
+    }
+    ray
+}
+
+/// `m 2^e`, `m` in `[1, 2)` and `e` from -149 to -40, rounded to `f32` (a subnormal
+/// below `2^-126`).
+fn tiny_number(rng: &mut SplitMix) -> f32 {
+    let e = -149 + (rng.next_u64() % 110) as i32;
+    ((1.0 + rng.unit() as f64) * 2f64.powi(e)) as f32
+}
+
+/// `x` moved `±2^j` of its ulps (`j` from 0 to 20); a coordinate of zero moves by
+/// subnormals.
+fn off_by_ulps(x: f32, rng: &mut SplitMix) -> f32 {
+    let steps = (1u32 << (rng.next_u64() % 21)) as f32;
+    let ulp = f32::from_bits(x.abs().to_bits() + 1) - x.abs();
+    if rng.next_u64().is_multiple_of(2) {
+        x + ulp * steps
+    } else {
+        x - ulp * steps
+    }
 }
 
 /// `d` with the sign of every zero component flipped (`+0.0` to `-0.0` and back): the
@@ -231,25 +331,38 @@ mod tests {
     use super::*;
 
     /// Every case comes out: each kind on each axis, with each sign octant, at each
-    /// level; zero components are zero, with the case's sign.
+    /// level, and each twist with every kind, axis and sign; zero components are zero
+    /// (or tiny, twisted), with the case's sign.
     #[test]
     fn every_case_is_generated() {
         let grid = GridPlanes { root_lo: [-1.5, -0.25, 3.0], root_size: 4.0, depth: 7 };
         let rays = grid_rays(
             &grid,
-            CASES as usize * 7 * 3,
+            CASES as usize * 7 * 3 * 5,
             5,
             |r| [r.unit() * 4.0 - 1.5, r.unit() * 4.0 - 0.25, r.unit() * 4.0 + 3.0],
             None::<fn(&mut SplitMix) -> [f32; 3]>,
             |_| true,
         );
         let mut seen = std::collections::HashSet::new();
+        let mut twisted = std::collections::HashSet::new();
         for r in &rays {
             seen.insert((r.kind, r.axis, r.signs, r.level));
-            let on_plane = |a: usize| r.origin[a] == grid.snap(a, r.level, r.origin[a]);
-            let zeros: Vec<usize> = (0..3).filter(|&a| r.dir[a] == 0.0).collect();
+            twisted.insert((r.kind, r.axis, r.signs, r.twist));
+            let bent = matches!(r.twist, Twist::Subnormal | Twist::Tiny | Twist::OffPlane);
+            let on_plane = |a: usize| r.twist == Twist::OffPlane || r.origin[a] == grid.snap(a, r.level, r.origin[a]);
+            // Zero components, or what a twist made of them: tiny, of the case's sign.
+            let flat = |a: usize| if bent { r.dir[a].abs() < 2f32.powi(-39) } else { r.dir[a] == 0.0 };
+            let zeros: Vec<usize> = (0..3).filter(|&a| flat(a)).collect();
             for &a in &zeros {
                 assert_eq!(r.dir[a].is_sign_negative(), r.signs >> a & 1 == 1, "{r:?}");
+            }
+            if r.twist == Twist::Subnormal {
+                assert!(zeros.iter().all(|&a| r.dir[a].abs() == f32::from_bits(1)), "{r:?}");
+            }
+            if r.twist == Twist::Scaled {
+                let largest = r.dir.iter().fold(0.0f32, |m, c| m.max(c.abs()));
+                assert!(largest >= 2f32.powi(-119) && largest < 2f32.powi(103), "{r:?}");
             }
             match r.kind {
                 HardKind::InPlane => assert!(zeros == [r.axis] && on_plane(r.axis), "{r:?}"),
@@ -258,7 +371,7 @@ mod tests {
                     assert!(zeros.iter().all(|&a| a != r.axis && on_plane(a)), "{r:?}");
                 }
                 HardKind::FromCorner => assert!((0..3).all(on_plane) && zeros.len() < 3, "{r:?}"),
-                HardKind::ThroughCorner => {
+                HardKind::ThroughCorner if r.twist == Twist::Plain => {
                     // Some step of the three takes the origin onto a grid vertex.
                     let cell = grid.root_size / (1u64 << r.level) as f32;
                     let through = [0.5, 0.25, 0.125].iter().any(|s| {
@@ -267,9 +380,11 @@ mod tests {
                     });
                     assert!(through, "{r:?}");
                 }
+                HardKind::ThroughCorner => {}
             }
         }
         assert_eq!(seen.len(), CASES as usize * 7, "some case never came out");
+        assert_eq!(twisted.len(), CASES as usize * Twist::ALL.len(), "some twist never met some case");
     }
 
     #[test]
