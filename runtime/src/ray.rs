@@ -8,6 +8,19 @@ use glam::Vec3;
 /// `ox oy oz tmin dx dy dz tmax`, little-endian `f32`, so a file of rays can be
 /// cast to `&[Ray]` with `bytemuck`. `dir` need not be normalised; `t` is measured in
 /// units of `dir`.
+///
+/// # What counts as a hit
+/// * The interval is closed: a hit at exactly `tmin` or `tmax` counts. A ray from a
+///   surface with `tmin = 0` hits that surface at `t = 0`; secondary rays start off
+///   it instead (`runtime::spawn`), or raise `tmin`.
+/// * Distances are `f32`: a hit farther than `f32::MAX` (in units of `dir`, so a tiny
+///   direction can put one there) is not reported.
+/// * Any finite nonzero direction is traced exactly as the others, its components
+///   subnormal or not, its length tiny or huge: the walk takes its exit decisions in
+///   `f64` where `f32` products would underflow or overflow (`cpu::tables::exit_rule`).
+/// * Of hits at the same distance on different triangles, the nearest-hit queries
+///   answer the one with the lowest input index (the oracle's rule too); the any-hit
+///   queries answer whichever they meet first.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Ray {

@@ -79,7 +79,9 @@ impl Reference {
         self.hits(ray).next().is_some()
     }
 
-    /// Every hit in `[tmin, tmax]`, in storage order.
+    /// Every hit in `[tmin, tmax]` (both ends included) at a distance `f32` can hold
+    /// (a tracer answers in `f32`: a hit past `f32::MAX`, which a tiny direction can
+    /// put there, is none), in storage order.
     pub fn hits<'s>(&'s self, ray: &Ray) -> impl Iterator<Item = ReferenceHit> + 's {
         let ok = ray.is_traceable();
         let o = ray.origin.as_dvec3();
@@ -87,7 +89,8 @@ impl Reference {
         let (tmin, tmax) = (ray.tmin as f64, ray.tmax as f64);
         self.triangles.iter().zip(&self.ids).filter(move |_| ok).filter_map(move |(t, &id)| {
             let (hit, u, v) = intersect_f64(o, d, t)?;
-            (hit >= tmin && hit <= tmax).then_some(ReferenceHit { t: hit, triangle: id, u, v })
+            let representable = (hit as f32).is_finite();
+            (hit >= tmin && hit <= tmax && representable).then_some(ReferenceHit { t: hit, triangle: id, u, v })
         })
     }
 }
@@ -120,10 +123,12 @@ pub enum Agreement {
     /// The same triangle, or a triangle at the same distance (within `1e-5 t`: two
     /// triangles tie there), or both miss.
     Same,
-    /// Different, but within rounding: the ray starts on a triangle (a hit at distance
-    /// zero is not counted by the tracer, as in pbrt), or the hit lies within `1e-5` of
-    /// a triangle's boundary in barycentric terms (the `f64` oracle is not watertight
-    /// there, and a ray grazing an edge may be in or out by an ulp).
+    /// Different, but within rounding: the ray starts on a triangle (its hit is at a
+    /// distance of zero within rounding, where the `f32` test and the `f64` oracle may
+    /// put it on either side of `tmin`; a hit exactly at `tmin` counts, intervals being
+    /// closed: [`Ray`]), or the hit lies within [`EDGE_SPACINGS`] of a triangle's
+    /// boundary (the `f64` oracle is not watertight there, and a ray grazing an edge
+    /// may be in or out by an ulp).
     Tie,
     /// A wrong answer.
     Different,

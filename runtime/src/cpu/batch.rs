@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use super::order::memory_order;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::simd;
+use super::tables::ExitRule;
 use super::tracer::{with_tests, NoTally, Tracer};
 use crate::ray::{Hit, Ray};
 
@@ -172,14 +173,14 @@ impl Tracer<'_> {
         let mut stats = NoTally;
         let mut next = 0;
         let mut slots: [Option<(usize, Walk)>; IN_FLIGHT] =
-            std::array::from_fn(|_| self.start_next(rays, &mut next, &mut done));
+            std::array::from_fn(|_| self.start_next::<ANY>(rays, &mut next, &mut done));
         let mut active = slots.iter().filter(|s| s.is_some()).count();
         while active > 0 {
             for slot in slots.iter_mut() {
                 let Some((i, w)) = slot else { continue };
                 if step::<ANY, TEST, SLAB>(self, w, &mut stats) {
                     done(*i, self.answer(w.best));
-                    *slot = self.start_next(rays, &mut next, &mut done);
+                    *slot = self.start_next::<ANY>(rays, &mut next, &mut done);
                     active -= slot.is_none() as usize;
                 }
             }
@@ -187,9 +188,10 @@ impl Tracer<'_> {
     }
 
     /// The next ray from `rays[*next..]` that needs a walk, and its walk; rays that
-    /// cannot hit are answered at once.
+    /// cannot hit are answered at once, and so are rays under the exact exit rule
+    /// (walked to their end on the scalar step, which alone follows it).
     #[inline(always)]
-    fn start_next(
+    fn start_next<const ANY: bool>(
         &self,
         rays: &[Ray],
         next: &mut usize,
@@ -199,6 +201,7 @@ impl Tracer<'_> {
             let i = *next;
             *next += 1;
             match self.begin(&rays[i]) {
+                Some(w) if w.rule() == ExitRule::Exact => done(i, self.walk_scalar::<ANY>(w, &mut NoTally)),
                 Some(w) => return Some((i, to_walk(self, &w))),
                 None => done(i, None),
             }

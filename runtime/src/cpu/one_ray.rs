@@ -1,8 +1,10 @@
 //! The one-ray calls: one walk, on the SIMD step where the build has one.
 
+use super::tables::ExitRule;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::tracer::with_tests;
 use super::tracer::{NoTally, Tally, Tracer, WalkStats};
+use super::walk::RayWalk;
 use crate::ray::{Hit, Ray};
 use octrace_format::layout::LEAF_HEADER_WORDS;
 
@@ -81,16 +83,21 @@ impl Tracer<'_> {
         }
     }
 
-    /// Any hit for `ANY`, else the nearest: on the SIMD step where the build has one.
+    /// Any hit for `ANY`, else the nearest: on the SIMD step where the build has one
+    /// (rays under the exact exit rule on the scalar step, which alone follows it).
     fn walk<const ANY: bool>(&self, ray: &Ray, stats: &mut impl Tally) -> Option<Hit> {
         let w = self.begin(ray)?;
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        return with_tests!(self; ANY; super::simd::sse2::walk; self, &w, stats);
-        #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-        {
-            let mut w = w;
-            while !self.step::<ANY>(&mut w, stats) {}
-            self.answer(w.best)
+        if w.rule() != ExitRule::Exact {
+            return with_tests!(self; ANY; super::simd::sse2::walk; self, &w, stats);
         }
+        self.walk_scalar::<ANY>(w, stats)
+    }
+
+    /// Walks `w` to its end on the scalar step.
+    #[inline(never)]
+    pub(super) fn walk_scalar<const ANY: bool>(&self, mut w: RayWalk, stats: &mut impl Tally) -> Option<Hit> {
+        while !self.step::<ANY>(&mut w, stats) {}
+        self.answer(w.best)
     }
 }

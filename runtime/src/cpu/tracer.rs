@@ -7,6 +7,7 @@ use octrace_format::layout::MAX_LEVEL;
 use octrace_format::SceneView;
 
 use super::locate::LocateGrid;
+use super::tables::RuleScale;
 use super::triangle::{intersect, intersect_f64, TriRay};
 use super::watertight::Shear;
 
@@ -52,6 +53,8 @@ pub struct TreeFrame {
     /// The cube map's level, when the map fits the tree (always, in a valid file; a
     /// hostile one on the trusted path enters from the root instead).
     pub(super) cube_level: Option<u32>,
+    /// What decides each ray's exit rule (`tables::exit_rule`).
+    pub(super) rule_scale: RuleScale,
     /// Whether the processor has x86-64-v3 (asked once, not per tracer).
     pub(super) v3: bool,
     /// Whether what walks read (leaf records, triangle references, triangles) is
@@ -88,6 +91,7 @@ impl TreeFrame {
                 let res = 1usize << level.min(MAX_LEVEL);
                 level <= max_depth && view.cube_map.len() == 6 * res * res
             }),
+            rule_scale: RuleScale::of(root_lo, root_hi, b.root_size),
             v3: wider_simd_available(),
             outgrows_cache: 2 * walked_bytes(view) > super::hw::last_level_cache(),
         }

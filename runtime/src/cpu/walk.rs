@@ -25,7 +25,7 @@
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
-use super::tables::{exit_code, octant, EXIT_FACE};
+use super::tables::{exact_exit, exact_side, exit_code, exit_rule, octant, ExitRule, EXIT_FACE};
 use super::tracer::{ExitTest, Tally, Tracer, BOX_T_SLACK};
 use super::triangle::TriRay;
 use super::watertight::Shear;
@@ -42,9 +42,11 @@ pub(crate) struct RayWalk {
     high: [u32; 3],
     /// Exit-face row of the ray's octant.
     exits: &'static [u8; 8],
-    /// Whether a direction component is zero (`+0.0` or `-0.0`): the exit face is
-    /// then decided by [`exit_along_moving_axes`], never by the table.
-    flat: bool,
+    /// How the exit faces are decided (`tables::exit_rule`): the table; for a zero
+    /// component (`+0.0` or `-0.0`) [`exit_along_moving_axes`]; for directions the
+    /// `f32` products cannot serve, exactly in `f64` (then only the scalar step walks
+    /// the ray).
+    rule: ExitRule,
     tmin: f32,
     /// Where the walk stops: the ray's `tmax`, or sooner where it leaves the mesh box.
     tmax: f32,
@@ -88,12 +90,13 @@ pub(crate) trait LeafTest {
 pub(crate) enum Batch {
     /// No triangle hit within `[tmin, tmax]`.
     Miss,
-    /// The hit that testing the triangles one after another would keep (the nearest;
-    /// of equal ones the last, since a test accepts `t <= t_best`; for an any-hit
-    /// query the first): index in the batch, `t`, `u`, `v`.
+    /// The hit that testing the triangles one after another would keep (the nearest,
+    /// where no other in the batch is at its distance; for an any-hit query the
+    /// first): index in the batch, `t`, `u`, `v`.
     Hit(usize, f32, f32, f32),
     /// Test these one by one (an edge function rounded to zero, which the scalar test
-    /// decides in f64; an index out of range; no batch form).
+    /// decides in f64; two hits at the same distance, which `keep` decides by input
+    /// id; an index out of range; no batch form).
     OneByOne,
 }
 
@@ -156,6 +159,9 @@ impl RayWalk {
     pub(crate) fn shear(&self) -> Shear {
         self.shear
     }
+    pub(crate) fn rule(&self) -> ExitRule {
+        self.rule
+    }
 }
 
 impl Tracer<'_> {
@@ -178,6 +184,11 @@ impl Tracer<'_> {
         if t_start > t_leave.min(ray.tmax) || t_start.max(box_enter) > t_stop {
             return None; // misses the root cube or the mesh box within [tmin, tmax]
         }
+        // A ray so slow that it reaches the cube past f32's range (a tiny direction
+        // from far away) has no hit at a representable distance.
+        if t_start.max(box_enter) == f32::INFINITY {
+            return None;
+        }
         // The entry leaf, and its cell: with the cell, every box along the walk is
         // computed rather than loaded (the paper's own suggestion, section 6).
         let (address, level, cell) = if box_enter > t_start {
@@ -193,7 +204,7 @@ impl Tracer<'_> {
             inv: [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]],
             high: [!d[0].is_sign_negative() as u32, !d[1].is_sign_negative() as u32, !d[2].is_sign_negative() as u32],
             exits: &EXIT_FACE[octant(d)],
-            flat: d.contains(&0.0),
+            rule: exit_rule(o, d, self.frame.rule_scale),
             shear: Shear::new(o, d),
             tmin: ray.tmin,
             tmax: t_stop,
@@ -300,15 +311,31 @@ impl Tracer<'_> {
     }
 
     /// Makes stored triangle `tri`'s hit `(t, u, v)` the walk's best (its `triangle`
-    /// is set by [`Tracer::answer`]).
+    /// is set by [`Tracer::answer`]). The tests accept `t <= t_best`, so a hit at the
+    /// best's own distance comes here too: of two at the same distance the lower input
+    /// id is kept, whichever leaf or batch tested it first (the nearest hit is the least
+    /// `(t, input id)`, on every path and on the GPU, as the oracle's ties go).
     #[inline(always)]
     fn keep(&self, walk: &mut LeafVisit<'_>, tri: u32, box_index: u32, (t, u, v): (f32, f32, f32)) {
+        if walk.best.is_some_and(|b| b.t == t && !self.input_id_below(tri, b.prim)) {
+            return;
+        }
         *walk.t_best = t;
         // The input id is looked up when the walk ends (`answer`): a later hit may
         // replace this one, and an any-hit query needs none. Ask for it now.
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         super::hw::prefetch(self.view.triangle_ids, tri);
         *walk.best = Some(Hit { t, triangle: u32::MAX, u, v, leaf: box_index, prim: tri });
+    }
+
+    /// Whether stored triangle `a`'s input id is below `b`'s (the tie rule of
+    /// [`Tracer::keep`]; a stored triangle without an id, in a hostile file on the
+    /// trusted path, counts as the highest). Rare: exact ties only.
+    #[cold]
+    #[inline(never)]
+    fn input_id_below(&self, a: u32, b: u32) -> bool {
+        let id = |p: u32| self.view.triangle_ids.get(p as usize).copied().unwrap_or(u32::MAX);
+        id(a) < id(b)
     }
 
     /// A finished walk's answer, its triangle named by its input id.
@@ -346,11 +373,12 @@ impl Tracer<'_> {
                 .is_none_or(|b| (0..3).all(|k| b[k + 3 * w.high[k] as usize] - w.o[k] == off[k])),
             "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
         );
-        // (A ray with a zero direction component leaves by the slab rule: see
-        // `exit_along_moving_axes` for why the table cannot serve it.)
+        // (A ray with a zero direction component leaves by the slab rule, and one the
+        // f32 products cannot serve by exact decisions: `tables::exit_rule`.)
         let mut face = w.exits[exit_code(off, w.d)] as usize;
-        if w.flat || self.exit == ExitTest::Slab {
-            face = exit_along_moving_axes(off, w.d, w.inv);
+        let mut t_exact = None;
+        if w.rule != ExitRule::Table || self.exit == ExitTest::Slab {
+            (face, t_exact) = self.careful_exit(w, off);
         }
         let axis = face >> 1;
         // Every per-axis quantity below is computed on all three lanes with fixed
@@ -368,7 +396,7 @@ impl Tracer<'_> {
         let (off_a, d_a) = (pick(off), pick(w.d));
         // 3. A candidate inside this leaf is the nearest: nothing after the exit can
         //    be nearer. Past tmax, nothing more can count.
-        let t_exit = off_a * pick(w.inv);
+        let t_exit = t_exact.unwrap_or_else(|| off_a * pick(w.inv));
         if w.best.is_some_and(|h| h.t <= t_exit) || t_exit >= w.tmax {
             return true;
         }
@@ -381,12 +409,17 @@ impl Tracer<'_> {
         }
         let half = 0.5 * size;
         let negative_a = face & 1 == 0;
+        // The face centre's offset from the origin along `k`.
+        let mid = |k: usize| (lo[k] + (2 * cell[k] + 1) as f32 * half) - w.o[k];
         let side = |k: usize| {
-            let mid = lo[k] + (2 * cell[k] + 1) as f32 * half;
-            let p = off_a * w.d[k] - (mid - w.o[k]) * d_a;
+            let p = off_a * w.d[k] - mid(k) * d_a;
             ((p > 0.0) ^ negative_a) as u32
         };
-        let sides = [side(0), side(1), side(2)];
+        let sides = if w.rule == ExitRule::Exact {
+            [0, 1, 2].map(|k| exact_side(off_a, d_a, mid(k), w.d[k], negative_a))
+        } else {
+            [side(0), side(1), side(2)]
+        };
         // The quadrant: the side bits of the two other axes, in increasing order.
         let side_bits = sides[0] | sides[1] << 1 | sides[2] << 2;
         let quadrant = (side_bits & ((1 << axis) - 1)) | ((side_bits >> (axis + 1)) << axis);
@@ -413,6 +446,22 @@ impl Tracer<'_> {
         w.cell = [next(0), next(1), next(2)];
         w.level = level.wrapping_add(finer).wrapping_sub(coarser);
         false
+    }
+}
+
+impl Tracer<'_> {
+    /// The exit face of a walk that does not follow the table (`tables::exit_rule`),
+    /// and its exit distance where the rule computes one: exactly for
+    /// [`ExitRule::Exact`]; by the slab rule for [`ExitRule::Flat`] and the slab knob
+    /// (the distance is then the step's own `offset * inverse`).
+    #[cold]
+    #[inline(never)]
+    fn careful_exit(&self, w: &RayWalk, off: [f32; 3]) -> (usize, Option<f32>) {
+        if w.rule == ExitRule::Exact {
+            let (face, t) = exact_exit(off, w.d);
+            return (face, Some(t));
+        }
+        (exit_along_moving_axes(off, w.d, w.inv), None)
     }
 }
 

@@ -358,6 +358,7 @@ impl<'s> GpuTracer<'s> {
         // path) is walked as the format's limit. (WGSL bounds-checks every buffer read.)
         let max_depth = view.params.max_depth.min(octrace_format::layout::MAX_LEVEL);
         let (lo, hi) = crate::cpu::mesh_box(&view);
+        let rule = crate::cpu::tables::RuleScale::of(root_lo, root_hi, b.root_size);
         let params = Params {
             ray_count: 0,
             max_depth,
@@ -375,8 +376,8 @@ impl<'s> GpuTracer<'s> {
             ],
             root_lo: [root_lo[0], root_lo[1], root_lo[2], b.root_size],
             root_hi: [root_hi[0], root_hi[1], root_hi[2], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
-            box_lo: [lo[0], lo[1], lo[2], 0.0],
-            box_hi: [hi[0], hi[1], hi[2], 0.0],
+            box_lo: [lo[0], lo[1], lo[2], rule.root as f32],
+            box_hi: [hi[0], hi[1], hi[2], rule.reach as f32],
         };
         Ok(GpuTracer {
             scene,
@@ -803,6 +804,14 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
               return u32(f32(clamp(x, 0.0lf, last)));\n}\n";
         g += &plane_distance_source("f64");
+        // tables::exact_exit and exact_side: exact products, the difference's sign exact.
+        g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    \
+              let p = f64(oi) * f64(dj) - f64(oj) * f64(di);\n    \
+              return select(p > 0.0lf, p < 0.0lf, is_negative(di) == is_negative(dj));\n}\n";
+        g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return f32(f64(off) / f64(d));\n}\n";
+        g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
+              let p = f64(off_a) * f64(dk) - f64(m) * f64(d_a);\n    \
+              return select(0u, 1u, (p > 0.0lf) != negative_a);\n}\n";
     } else {
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
         g += "fn product(a: f32, b: f32) -> f32 {\n    return a * b;\n}\n";
@@ -812,6 +821,14 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
         g += &plane_distance_source("f32");
+        // Without f64 the exact rule compares rounded f32 distances (no underflowing
+        // products, but the adapter's division).
+        g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    return oi / di < oj / dj;\n}\n";
+        g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return off / d;\n}\n";
+        g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
+              let x = (off_a / d_a) * dk - m;\n    \
+              let p_positive = select(x > 0.0, x < 0.0, is_negative(d_a));\n    \
+              return select(0u, 1u, p_positive != negative_a);\n}\n";
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
 }

@@ -30,7 +30,9 @@ struct Params {
     root_lo: vec4<f32>,
     // xyz: the root cube's high corner; w: 2^max_depth / edge.
     root_hi: vec4<f32>,
-    // The mesh box, enlarged (runtime/src/cpu/tracer.rs, box_slack); w: unused.
+    // The mesh box, enlarged (runtime/src/cpu/tracer.rs, box_slack); w: the exit
+    // rule's scale (runtime/src/cpu/tables.rs, RuleScale): box_lo.w the root edge's
+    // exponent, box_hi.w that of the root's largest corner coordinate.
     box_lo: vec4<f32>,
     box_hi: vec4<f32>,
 }
@@ -105,6 +107,44 @@ fn is_negative(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x80000000u) != 0u;
 }
 
+// +0.0 or -0.0, read from the bits (a driver that flushes subnormals may compare one
+// equal to zero; the exit rule must see it as the CPU does).
+fn is_zero(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7FFFFFFFu) == 0u;
+}
+
+// tables::exponent: the unbiased exponent read from the bits (-127 for zeros and
+// subnormals).
+fn exponent(x: f32) -> i32 {
+    return i32((bitcast<u32>(x) >> 23u) & 0xFFu) - 127;
+}
+
+// tables::ExitRule.
+const RULE_TABLE: u32 = 0u;
+const RULE_FLAT: u32 = 1u;
+const RULE_EXACT: u32 = 2u;
+
+// tables::exit_rule, from the same integer exponents: the table, the slab rule among
+// the moving axes (zero components), or exact decisions for the directions whose f32
+// products could underflow or overflow.
+fn exit_rule(o: vec3<f32>, d: vec3<f32>) -> u32 {
+    let zx = is_zero(d.x);
+    let zy = is_zero(d.y);
+    let zz = is_zero(d.z);
+    let e_min = min(min(select(exponent(d.x), 200, zx), select(exponent(d.y), 200, zy)), select(exponent(d.z), 200, zz));
+    let e_max = max(max(exponent(d.x), exponent(d.y)), exponent(d.z));
+    let e_origin = max(max(exponent(o.x), exponent(o.y)), exponent(o.z));
+    let reach = max(e_origin, i32(params.box_hi.w));
+    let served = e_min >= -100 && 2 * e_min + i32(params.box_lo.w) >= e_max - 119 && e_max + reach <= 100;
+    if !served {
+        return RULE_EXACT;
+    }
+    if zx || zy || zz {
+        return RULE_FLAT;
+    }
+    return RULE_TABLE;
+}
+
 // EXIT_FACE[octant] (runtime/src/cpu/tables.rs), three bits a code.
 fn exit_row(octant: u32) -> u32 {
     switch octant {
@@ -158,6 +198,8 @@ struct Walk {
     inv: vec3<f32>,
     high: vec3<u32>,
     row: u32,
+    // RULE_TABLE, RULE_FLAT or RULE_EXACT.
+    rule: u32,
     tmin: f32,
     tmax: f32,
     address: u32,
@@ -254,10 +296,15 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     for (var j = 0u; j < count && tick(); j++) {
         let tri = word(params.o_refs + offset + j);
         let h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
-        if h.w != 0.0 {
+        if h.w == 0.0 {
+            continue;
+        }
+        let id = word(params.o_ids + tri);
+        // Of two hits at the same distance the lower input id (walk.rs, `keep`).
+        if (*wk).best.triangle == MISS || h.x != (*wk).best.t || id < (*wk).best.triangle {
             (*wk).t_best = h.x;
             (*wk).best.t = h.x;
-            (*wk).best.triangle = word(params.o_ids + tri);
+            (*wk).best.triangle = id;
             (*wk).best.u = h.y;
             (*wk).best.v = h.z;
             (*wk).best.leaf = box_index;
@@ -282,15 +329,25 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let code = select(0u, 1u, p_xy > 0.0) | select(0u, 2u, p_yz > 0.0) | select(0u, 4u, p_zx > 0.0);
     var face = ((*wk).row >> (3u * code)) & 7u;
     // A zero direction component: the slab rule, never the table (exit_along_moving_axes
-    // in walk.rs says why).
-    if d.x == 0.0 || d.y == 0.0 || d.z == 0.0 {
+    // in walk.rs says why); a direction the f32 products cannot serve: exact decisions
+    // (tables::exit_rule).
+    let exact = (*wk).rule == RULE_EXACT;
+    var t_exact = 0.0;
+    if exact {
+        let e = exact_exit(off, d);
+        face = e.face;
+        t_exact = e.t;
+    } else if (*wk).rule == RULE_FLAT {
         face = exit_along_moving_axes(off, d, (*wk).inv);
     }
     let axis = face >> 1u;
     let off_a = component(off, axis);
     let d_a = component(d, axis);
     // 3. A candidate inside this leaf is the nearest; past tmax nothing more counts.
-    let t_exit = off_a * component((*wk).inv, axis);
+    var t_exit = off_a * component((*wk).inv, axis);
+    if exact {
+        t_exit = t_exact;
+    }
     if ((*wk).best.triangle != MISS && (*wk).best.t <= t_exit) || t_exit >= (*wk).tmax {
         (*wk).done = true;
         return;
@@ -304,8 +361,16 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let half = 0.5 * size;
     let negative_a = (face & 1u) == 0u;
     let mid = lo + vec3<f32>(2u * cell + 1u) * half;
-    let p = off_a * d - (mid - o) * d_a;
-    let sides = vec3<u32>(select(vec3<u32>(0u), vec3<u32>(1u), p > vec3<f32>(0.0))) ^ vec3<u32>(select(0u, 1u, negative_a));
+    let m = mid - o;
+    let p = off_a * d - m * d_a;
+    var sides = vec3<u32>(select(vec3<u32>(0u), vec3<u32>(1u), p > vec3<f32>(0.0))) ^ vec3<u32>(select(0u, 1u, negative_a));
+    if exact {
+        sides = vec3<u32>(
+            exact_side(off_a, d_a, m.x, d.x, negative_a),
+            exact_side(off_a, d_a, m.y, d.y, negative_a),
+            exact_side(off_a, d_a, m.z, d.z, negative_a),
+        );
+    }
     let side_bits = sides.x | (sides.y << 1u) | (sides.z << 2u);
     let quadrant = (side_bits & ((1u << axis) - 1u)) | ((side_bits >> (axis + 1u)) << axis);
     let link = address + LEAF_HEADER_WORDS + links_before(ncount, face) + (n >> 2u) * quadrant;
@@ -319,6 +384,29 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let next = with_component((cell << vec3<u32>(1u)) | sides, axis, across);
     (*wk).cell = next >> vec3<u32>(shift);
     (*wk).level = level + finer - coarser;
+}
+
+struct Exit {
+    face: u32,
+    t: f32,
+}
+
+// tables::exact_exit: the moving axis whose exit plane the ray meets first, decided
+// exactly (generated `exits_before`), ties to the lowest axis; its distance rounded once.
+fn exact_exit(off: vec3<f32>, d: vec3<f32>) -> Exit {
+    var axis = 3u;
+    if !is_zero(d.x) {
+        axis = 0u;
+    }
+    if !is_zero(d.y) && (axis == 3u || exits_before(off.y, d.y, component(off, axis), component(d, axis))) {
+        axis = 1u;
+    }
+    if !is_zero(d.z) && (axis == 3u || exits_before(off.z, d.z, component(off, axis), component(d, axis))) {
+        axis = 2u;
+    }
+    axis = axis % 3u;
+    let da = component(d, axis);
+    return Exit(2u * axis + select(1u, 0u, is_negative(da)), exact_distance(component(off, axis), da));
 }
 
 // The exit face of a ray with a zero direction component: the nearest exit among the
@@ -399,6 +487,10 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
     if t_start > min(root.y, tmax) || max(t_start, mesh.x) > t_stop {
         return wk;
     }
+    // Reached past f32's range (a tiny direction from far away): no representable hit.
+    if max(t_start, mesh.x) == inf() {
+        return wk;
+    }
     // The first leaf: through the cube map from outside, by point location inside.
     var leaf: vec2<u32>;
     var q: vec3<u32>;
@@ -449,6 +541,7 @@ fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
     wk.high = vec3<u32>(select(1u, 0u, is_negative(d.x)), select(1u, 0u, is_negative(d.y)), select(1u, 0u, is_negative(d.z)));
     let octant = select(0u, 1u, is_negative(d.x)) | select(0u, 2u, is_negative(d.y)) | select(0u, 4u, is_negative(d.z));
     wk.row = exit_row(octant);
+    wk.rule = exit_rule(o, d);
     wk.tmin = tmin;
     wk.tmax = t_stop;
     wk.address = leaf.x;

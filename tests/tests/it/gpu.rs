@@ -306,6 +306,51 @@ fn in_plane_reproductions_hit_on_the_gpu() {
     assert_eq!(missed, 0, "{missed} pixels see through the wall");
 }
 
+/// Issue 31's reproductions on the GPU: subnormal components from inside the cube,
+/// a whole direction of 1e-37, a hit beyond f32's range, duplicate triangles (the
+/// lowest id), a hit at tmin = 0: the CPU's answers, bit for bit where the adapter has
+/// f64 (the kernel follows the same exit rule, read from the same integer exponents).
+#[test]
+fn tiny_directions_ties_and_t_zero_answer_as_on_the_cpu() {
+    use crate::hard_cases::tiny_directions::{duplicates, ray_of, subnormal_case, tiny_direction_case};
+    let Some(gpu) = gpu("tiny_directions_ties_and_t_zero_answer_as_on_the_cpu") else { return };
+    let (_, cube, subnormal) = subnormal_case();
+    let (_, grid_cube, tiny) = tiny_direction_case();
+    let beyond = ray_of([0, 0, 0], [0x00000001, 0, 0]);
+    let on_face = Ray::new(Vec3::new(0.3, 0.2, 1.0), Vec3::new(0.1, -0.2, -1.0));
+    let (_, copies) = duplicates();
+    // From below and above, at points inside the shared triangle (z = 0.5).
+    let through_copies: Vec<Ray> = (0..64)
+        .map(|i| {
+            let from = Vec3::new(0.1, 0.1, if i % 2 == 0 { -1.0 } else { 2.0 });
+            let target = Vec3::new(0.05 + 0.003 * i as f32, 0.25 - 0.003 * i as f32, 0.5);
+            Ray::new(from, target - from)
+        })
+        .collect();
+    let cases: [(&str, &Scene, Vec<Ray>); 4] = [
+        ("subnormal components", &cube, vec![subnormal, beyond, on_face]),
+        ("a direction of 1e-37", &grid_cube, vec![tiny, Ray { dir: tiny.dir * 256.0, ..tiny }]),
+        ("duplicates", &copies, through_copies),
+        ("plain", &cube, vec![Ray::new(Vec3::new(0.3, 0.2, 0.5), Vec3::new(0.1, -0.2, -1.0))]),
+    ];
+    for (name, scene, rays) in cases {
+        let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
+        let got = tracer.intersect(&rays).unwrap();
+        let cpu = scene.intersect_all(&rays);
+        for (i, (c, g)) in cpu.iter().zip(&got).enumerate() {
+            assert_eq!(c.is_some(), g.is_some(), "{name}: ray {i} {:?}: CPU {c:?}, GPU {g:?}", rays[i]);
+            assert_eq!(c.map(|h| (h.triangle, h.t)), g.map(|h| (h.triangle, h.t)), "{name}: ray {i}");
+        }
+        let occluded = tracer.occluded(&rays).unwrap();
+        assert_eq!(occluded, cpu.iter().map(Option::is_some).collect::<Vec<_>>(), "{name}: occlusion");
+        if tracer.uses_f64() {
+            same_hits(name, &rays, &cpu, &got);
+        }
+    }
+    assert!(cube.intersect(&subnormal).is_some_and(|h| h.t == 1.0));
+    assert!(cube.intersect(&beyond).is_none());
+}
+
 /// The zig-zag polygon of slivers on the GPU: every distance within the CPU's bound of
 /// the exact plane distance (the same bits where the adapter has f64).
 #[test]

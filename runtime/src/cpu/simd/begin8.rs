@@ -4,6 +4,7 @@
 //! begin's operations in its order, so each ray starts in the same leaf with the same
 //! interval. What the eight-lane form leaves to the scalar begin: rays with a zero
 //! direction component or that are not traceable (its slab rules and refusals), rays
+//! under the exact exit rule (`tables::exit_rule`), rays
 //! entering the root through the cube map (none on the standard sets), and every ray
 //! of a tracer without a locate grid.
 //!
@@ -18,6 +19,7 @@ use std::arch::x86_64::*;
 use octrace_format::layout::INTERNAL_BIT;
 
 use super::avx2::{transpose, LANES};
+use crate::cpu::tables::{RuleScale, RULE_MAX_PRODUCT, RULE_MIN_EXPONENT, RULE_SPREAD};
 use crate::cpu::tracer::{Tracer, BOX_T_SLACK};
 use crate::ray::Ray;
 
@@ -146,7 +148,7 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
             let moving = _mm256_cmp_ps::<_CMP_NEQ_OQ>(d[k], zero);
             eligible = _mm256_and_ps(eligible, _mm256_and_ps(finite(o[k]), _mm256_and_ps(finite(d[k]), moving)));
         }
-        let eligible = _mm256_movemask_ps(eligible) as u32;
+        let eligible = _mm256_movemask_ps(eligible) as u32 & table_rule(&o, &d, t.frame.rule_scale);
         if eligible == 0 {
             return out;
         }
@@ -242,6 +244,37 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
         _mm256_storeu_ps(out.tmax.as_mut_ptr(), t_stop);
     }
     out
+}
+
+/// The lanes whose ray, if it has no zero direction component, follows the exit
+/// table (`tables::exit_rule`, from the same integer exponents): the others follow
+/// the exact rule, which only the scalar step walks, and take the scalar begin.
+///
+/// # Safety
+/// AVX2 must be available (where this is inlined).
+#[inline(always)]
+unsafe fn table_rule(o: &[__m256; 3], d: &[__m256; 3], scale: RuleScale) -> u32 {
+    // SAFETY: the caller's.
+    unsafe {
+        let exponent = |x: __m256| {
+            let biased = _mm256_and_si256(_mm256_srli_epi32::<23>(_mm256_castps_si256(x)), _mm256_set1_epi32(0xFF));
+            _mm256_sub_epi32(biased, _mm256_set1_epi32(127))
+        };
+        let e = [exponent(d[0]), exponent(d[1]), exponent(d[2])];
+        let e_min = _mm256_min_epi32(_mm256_min_epi32(e[0], e[1]), e[2]);
+        let e_max = _mm256_max_epi32(_mm256_max_epi32(e[0], e[1]), e[2]);
+        let e_origin = _mm256_max_epi32(_mm256_max_epi32(exponent(o[0]), exponent(o[1])), exponent(o[2]));
+        let reach = _mm256_max_epi32(e_origin, _mm256_set1_epi32(scale.reach));
+        // e_min >= MIN, 2 e_min + root >= e_max - SPREAD, e_max + reach <= MAX_PRODUCT.
+        let small = _mm256_cmpgt_epi32(_mm256_set1_epi32(RULE_MIN_EXPONENT), e_min);
+        let spread = _mm256_cmpgt_epi32(
+            _mm256_sub_epi32(e_max, _mm256_set1_epi32(RULE_SPREAD)),
+            _mm256_add_epi32(_mm256_add_epi32(e_min, e_min), _mm256_set1_epi32(scale.root)),
+        );
+        let large = _mm256_cmpgt_epi32(_mm256_add_epi32(e_max, reach), _mm256_set1_epi32(RULE_MAX_PRODUCT));
+        let refused = _mm256_or_si256(_mm256_or_si256(small, spread), large);
+        !(_mm256_movemask_ps(_mm256_castsi256_ps(refused)) as u32) & 0xFF
+    }
 }
 
 /// The lanes of `bits` as a mask.

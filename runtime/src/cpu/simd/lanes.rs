@@ -23,8 +23,8 @@ use super::avx2::{self, at_most, mask_of};
 use super::begin8::{begin8, Begun};
 use super::sse2::SseTest;
 use crate::cpu::hw::prefetch;
-use crate::cpu::tables::{octant, EXIT_ROWS};
-use crate::cpu::tracer::Tracer;
+use crate::cpu::tables::{octant, ExitRule, EXIT_ROWS};
+use crate::cpu::tracer::{NoTally, Tracer};
 use crate::cpu::walk::{exit_along_moving_axes, LeafVisit, RayWalk};
 use crate::cpu::watertight::Shear;
 use crate::ray::{Hit, Ray};
@@ -133,7 +133,7 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
     for g in groups.iter_mut() {
         for lane in 0..LANES {
             // SAFETY: AVX2 is this function's.
-            unsafe { refill(t, rays, &mut feed, &mut done, g, lane) };
+            unsafe { refill::<ANY>(t, rays, &mut feed, &mut done, g, lane) };
         }
     }
     while groups.iter().any(|g| g.active != 0) {
@@ -151,7 +151,7 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
                     done(w.index, t.answer(w.best));
                 }
                 // SAFETY: AVX2 is this function's.
-                unsafe { refill(t, rays, &mut feed, &mut done, g, lane) };
+                unsafe { refill::<ANY>(t, rays, &mut feed, &mut done, g, lane) };
             }
         }
     }
@@ -173,7 +173,7 @@ struct Feed {
 /// # Safety
 /// AVX2 must be available (inlined into `trace`).
 #[inline(always)]
-unsafe fn refill(
+unsafe fn refill<const ANY: bool>(
     t: &Tracer<'_>,
     rays: &[Ray],
     feed: &mut Feed,
@@ -198,7 +198,14 @@ unsafe fn refill(
         } else if b.begun >> l & 1 != 0 {
             Some(Start::begun(&rays[i], b, l))
         } else {
-            t.begin(&rays[i]).map(|w| Start::of(&w))
+            match t.begin(&rays[i]) {
+                // The exact exit rule is the scalar step's alone: walked to its end here.
+                Some(w) if w.rule() == ExitRule::Exact => {
+                    done(i, t.walk_scalar::<ANY>(w, &mut NoTally));
+                    continue;
+                }
+                w => w.map(|w| Start::of(&w)),
+            }
         };
         match start {
             Some(s) => {

@@ -18,6 +18,7 @@ pub(crate) fn oracle(mesh: &Mesh) -> Reference {
 
 pub(crate) mod grid_rays;
 pub(crate) mod slivers;
+pub(crate) mod tiny_directions;
 
 /// Every ray agrees with the oracle (see `reference::Agreement`: the same answer, or
 /// a tie within rounding, as the oracle decides it), nearest hit and occlusion (also
