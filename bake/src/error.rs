@@ -86,6 +86,27 @@ pub enum Error {
         /// The file.
         path: PathBuf,
     },
+    /// Every triangle has zero area once its vertices are `f32`: a mesh small against
+    /// its distance from the origin, whose vertices round together. Nothing would be
+    /// left to trace.
+    #[error(
+        "every one of the {triangles} triangles is degenerate at f32 precision (zero area once its vertices \
+         are rounded to f32): the mesh spans {} at coordinates up to {}, where f32's spacing is {}; \
+         move it towards the origin (or scale it up) before baking",
+        number(*extent),
+        number(*largest),
+        number(*spacing)
+    )]
+    Collapsed {
+        /// Triangles in the input.
+        triangles: u64,
+        /// The largest extent of the (rounded) mesh's box.
+        extent: f64,
+        /// The largest coordinate magnitude.
+        largest: f64,
+        /// The spacing of `f32` at that magnitude.
+        spacing: f64,
+    },
     /// The mesh is too large for the format (more than 2^32 - 1 triangles).
     #[error("{path}: {count} triangles exceed the format's limit of 2^32 - 1")]
     TooLarge {
@@ -115,9 +136,11 @@ pub enum Error {
     /// serves: an extent below `2^-60` or a size or coordinate above `2^60`
     /// (`octree::MIN_ROOT_EDGE`, `octree::MAX_COORDINATE`). Rays would leak or miss.
     #[error(
-        "scene extent {extent:e} and largest coordinate {largest:e} are beyond what the tracer serves: \
+        "scene extent {} and largest coordinate {} are beyond what the tracer serves: \
          extents from 2^-60 (8.7e-19) and coordinates up to 2^60 (1.2e18), where products of f32 \
-         coordinates stay in f32's normal range; scale the mesh (or move it towards the origin)"
+         coordinates stay in f32's normal range; scale the mesh (or move it towards the origin)",
+        number(*extent),
+        number(*largest)
     )]
     Scale {
         /// The largest extent of the mesh's box.
@@ -138,3 +161,12 @@ pub enum Error {
 
 /// The bake crate's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A length for a message: `0`, or four significant digits (`1.000e6`, `2.384e-7`).
+pub(crate) fn number(x: f64) -> String {
+    if x == 0.0 {
+        "0".to_string()
+    } else {
+        format!("{x:.3e}")
+    }
+}

@@ -125,13 +125,72 @@ pub fn cube_level(leaves: usize, max_depth: u32) -> u32 {
     k.min(max_depth)
 }
 
+/// The share of degenerate triangles past which a bake is worth a warning
+/// ([`degenerate_warning`]): real meshes carry a few (the dragon 108 of 871,414).
+pub const DEGENERATE_WARNING_SHARE: f64 = 0.01;
+
+/// How a mesh's box compares with `f32`'s spacing where it lies.
+struct Collapse {
+    extent: f64,
+    largest: f64,
+    spacing: f64,
+}
+
+impl Collapse {
+    fn of(lo: [f32; 3], hi: [f32; 3]) -> Collapse {
+        let extent = (0..3).map(|a| hi[a] as f64 - lo[a] as f64).fold(0.0, f64::max);
+        let largest = (0..3).map(|a| (lo[a] as f64).abs().max((hi[a] as f64).abs())).fold(0.0, f64::max);
+        let spacing = (largest as f32).next_up() as f64 - largest as f32 as f64;
+        Collapse { extent, largest, spacing }
+    }
+}
+
+/// A warning for a baked scene that left out more than [`DEGENERATE_WARNING_SHARE`] of
+/// its triangles as degenerate, naming the count and the share, and the likely cause
+/// when the mesh is small against `f32`'s spacing where it lies (its vertices round
+/// together). A bake that leaves out every triangle fails instead
+/// ([`Error::Collapsed`]).
+///
+/// # Example
+/// ```
+/// use octrace_bake::{bake, octree::degenerate_warning, procedural, Mesh};
+/// let mut mesh = procedural::sphere([0.0; 3], 1.0, 8, 12);
+/// assert!(degenerate_warning(&bake(&mesh, &Default::default())?).is_none());
+/// // A third of the triangles with all three vertices on one point.
+/// let n = mesh.triangles.len();
+/// mesh.triangles.extend(vec![[[0.5; 3]; 3]; n / 2]);
+/// let warning = degenerate_warning(&bake(&mesh, &Default::default())?).unwrap();
+/// assert!(warning.contains("33.3 %"), "{warning}");
+/// # Ok::<(), octrace_bake::Error>(())
+/// ```
+pub fn degenerate_warning(scene: &BakedScene) -> Option<String> {
+    let (n, bad) = (scene.stats.input_triangles, scene.stats.degenerate_triangles);
+    let share = bad as f64 / n.max(1) as f64;
+    if share <= DEGENERATE_WARNING_SHARE {
+        return None;
+    }
+    let c = Collapse::of(scene.bounds.mesh_lo, scene.bounds.mesh_hi);
+    let cause = if c.spacing * 1e4 > c.extent {
+        format!(
+            ": the mesh spans {} at coordinates up to {}, where f32's spacing is {}, so vertices round together; \
+             move it towards the origin (or scale it up)",
+            crate::error::number(c.extent),
+            crate::error::number(c.largest),
+            crate::error::number(c.spacing)
+        )
+    } else {
+        " (zero area: repeated or collinear vertices in the input)".to_string()
+    };
+    Some(format!("{bad} of {n} triangles ({:.1} %) are degenerate and left out{cause}", 100.0 * share))
+}
+
 /// Bakes a mesh into a scene, reporting stages to `progress`.
 ///
 /// Runs on the current rayon pool; the result does not depend on its thread count.
 ///
 /// # Errors
 /// [`Error::NonFinite`] for a NaN or infinite coordinate, [`Error::EmptyScene`] for
-/// no triangles, [`Error::Scale`] for a scene smaller, larger or farther from the origin
+/// no triangles, [`Error::Collapsed`] when every triangle is degenerate at `f32`, [`Error::Scale`] for a scene smaller, larger or farther from the origin
 /// than the tracer serves, [`Error::TooLarge`] for 2^32 - 1 triangles or more, and
 /// [`Error::Limit`] for an octree past the format's indices: its non-degenerate
 /// triangles alone past 2^32 - 1 references before the build starts, else as soon
@@ -281,6 +340,15 @@ fn prepare(mesh: &Mesh, params: &BuildParams) -> Result<Prepared> {
     }
     let ids: Vec<u32> =
         (0..mesh.triangles.len() as u32).filter(|&i| !is_degenerate(&mesh.triangles[i as usize])).collect();
+    if ids.is_empty() {
+        let collapse = Collapse::of(lo, hi);
+        return Err(Error::Collapsed {
+            triangles: mesh.triangles.len() as u64,
+            extent: collapse.extent,
+            largest: collapse.largest,
+            spacing: collapse.spacing,
+        });
+    }
     let (root_lo, root_size) = root_cube(lo, hi)?;
     let mut resolved = params.resolve(ids.len());
     resolved.max_depth = resolved.max_depth.min(precision_depth(root_lo, root_size));

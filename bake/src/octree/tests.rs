@@ -285,3 +285,26 @@ fn a_tree_past_a_limit_is_refused_as_soon_as_it_passes_it() {
     let message = within(Limits { refs, words: words - 1 }).0.unwrap_err().to_string();
     assert!(message.contains("needs at least") && message.contains("--leaf-size"), "{message}");
 }
+
+/// A mesh that collapses at f32 precision (the audit's icosphere of radius 1e-3 at
+/// 1e6, where f32's spacing is 1/16) is refused by name instead of baking into an
+/// empty scene; one whose triangles mostly collapse bakes with a warning naming the
+/// share and the cause.
+#[test]
+fn meshes_that_collapse_at_f32_precision_are_said_aloud() {
+    let far = crate::procedural::sphere([1e6; 3], 1e-3, 16, 24);
+    let err = bake(&far, &BuildParams::auto()).unwrap_err();
+    assert!(matches!(err, crate::Error::Collapsed { triangles, .. } if triangles == far.triangles.len() as u64));
+    let message = err.to_string();
+    assert!(message.contains("6.250e-2") && message.contains("1.000e6"), "{message}");
+    // Half of it collapsed: baked, with the share and the cause.
+    let mut mixed = crate::procedural::sphere([0.0; 3], 1.0, 16, 24);
+    let near = mixed.triangles.len();
+    mixed.triangles.extend(crate::procedural::sphere([3.0e6; 3], 1e-3, 8, 12).triangles);
+    let scene = bake(&mixed, &BuildParams::auto()).unwrap();
+    assert_eq!(scene.triangle_ids.len(), near);
+    let warning = super::degenerate_warning(&scene).expect("a warning");
+    assert!(warning.contains("left out") && warning.contains('%'), "{warning}");
+    // The extents in messages: zero as 0, not 0e0.
+    assert_eq!(crate::error::number(0.0), "0");
+}

@@ -74,6 +74,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         progress.warn(w);
     }
     let (scene, bake_time) = crate::with_threads(args.threads, || bake_mesh(&mesh, &params, &progress))??;
+    if let Some(w) = octrace_bake::octree::degenerate_warning(&scene) {
+        progress.warn(&w);
+    }
     // The scene holds its own copy of everything it needs: the mesh is not held through
     // the write.
     drop(mesh);
