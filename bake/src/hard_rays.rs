@@ -160,14 +160,19 @@ const TRIES: usize = 32;
 ///
 /// # Example
 /// ```
-/// use octrace_bake::hard_rays::{grid_rays, GridPlanes, HardKind};
+/// use octrace_bake::hard_rays::{grid_rays, GridPlanes, HardKind, Twist};
 /// let grid = GridPlanes { root_lo: [-1.0; 3], root_size: 2.0, depth: 6 };
 /// let rays = grid_rays(&grid, 960, 1, |r| [r.unit() - 0.5; 3], None::<fn(&mut _) -> [f32; 3]>, |_| true);
 /// assert_eq!(rays.len(), 960);
-/// // Every in-plane ray lies in a plane of its level, with a zero component there.
-/// for r in rays.iter().filter(|r| r.kind == HardKind::InPlane) {
-///     assert_eq!(r.dir[r.axis], 0.0);
+/// // Every in-plane ray (but those moved off it) lies in a plane of its level, with a
+/// // zero component there (plain) or the smallest subnormal (subnormal).
+/// for r in rays.iter().filter(|r| r.kind == HardKind::InPlane && r.twist != Twist::OffPlane) {
 ///     assert_eq!(r.origin[r.axis], grid.snap(r.axis, r.level, r.origin[r.axis]));
+///     match r.twist {
+///         Twist::Plain => assert_eq!(r.dir[r.axis], 0.0),
+///         Twist::Subnormal => assert_eq!(r.dir[r.axis].abs(), f32::from_bits(1)),
+///         _ => {}
+///     }
 /// }
 /// ```
 pub fn grid_rays<A: FnMut(&mut SplitMix) -> [f32; 3]>(
