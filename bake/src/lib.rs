@@ -25,6 +25,7 @@ pub mod hard_rays;
 pub mod mesh;
 pub mod octree;
 pub mod procedural;
+pub mod topology;
 
 pub use error::{Error, Result};
 pub use mesh::{LoadOptions, Mesh, MeshFormat, References, MAX_MESH_COMPRESSION_RATIO};

@@ -271,6 +271,55 @@ fn soak_counts_no_leaks_with_the_watertight_test() {
     }
 }
 
+/// `soak` takes a closed mesh of the user's (here the cube, its degenerate face left
+/// out by the bake) and soaks it with random and twisted grid rays; an open mesh is
+/// refused, naming its boundary edges.
+#[test]
+fn soak_takes_a_closed_mesh_and_refuses_an_open_one() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    let out = ok(dir.path(), &["soak", "cube.obj", "--rays", "20000", "--grid-rays", "20000", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rows = json["meshes"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{out}");
+    for row in rows {
+        assert_eq!((row["mesh"].as_str(), row["leaks"].as_u64()), (Some("cube.obj"), Some(0)), "{row}");
+        assert!(row["rays"].as_u64().unwrap() >= 20_000, "{row}");
+    }
+    assert_eq!(json["grid_ray_twists"].as_array().unwrap().len(), 5);
+    // The cube without its top face: open.
+    let open: String =
+        CUBE_OBJ.lines().filter(|l| *l != "f 5 6 7" && *l != "f 5 7 8").map(|l| format!("{l}\n")).collect();
+    std::fs::write(dir.path().join("open.obj"), open).unwrap();
+    fails_saying(dir.path(), &["soak", "open.obj", "--rays", "100"], "4 of its 17 edges are boundary edges");
+}
+
+/// The subnormal ray from inside the cube (literal bits), through `trace` as
+/// users run it: all threads, one thread, occlusion, and the GPU; every path hits the
+/// bottom face at t = 1 (it missed on each before the exact exit rule).
+#[test]
+fn trace_answers_a_subnormal_direction_on_every_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The cube [-1, 1]^3 (twelve triangles) at depth 2, a triangle a leaf.
+    let cube = CUBE_OBJ.replace("v 0", "v -1").replace(" 0", " -1");
+    std::fs::write(d.join("cube.obj"), cube).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct", "--max-depth", "2", "--leaf-size", "1"]);
+    let ray: [u32; 8] = [0xbf600000, 0xbf000000, 0, 0, 0x80000001, 0x80000001, 0xbf800000, 0x7f800000];
+    std::fs::write(d.join("ray.bin"), ray.iter().flat_map(|w| w.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
+    let t_of = |name: &str| f32::from_le_bytes(std::fs::read(d.join(name)).unwrap()[..4].try_into().unwrap());
+    for (flags, out) in [(&[][..], "a.bin"), (&["--threads", "1"][..], "b.bin"), (&["--occluded"][..], "c.bin")] {
+        let args = [&["trace", "cube.oct", "--rays", "ray.bin", "--out", out][..], flags].concat();
+        let said = ok(d, &args);
+        assert!(said.starts_with("1 rays, 1 "), "{flags:?}: {said}");
+        assert_eq!(t_of(out), 1.0, "{flags:?}");
+    }
+    let args = ["trace", "cube.oct", "--rays", "ray.bin", "--out", "g.bin", "--gpu"];
+    if on_gpu(d, &args, "trace_answers_a_subnormal_direction_on_every_path").is_some() {
+        assert_eq!(std::fs::read(d.join("g.bin")).unwrap(), std::fs::read(d.join("a.bin")).unwrap());
+    }
+}
+
 #[test]
 fn compressed_bakes_open_and_inspect_shows_both_sizes() {
     let dir = tempfile::tempdir().unwrap();

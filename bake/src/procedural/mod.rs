@@ -109,12 +109,15 @@ pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
     out
 }
 
-/// A closed axis-aligned box, each face split into `n x n` quads.
+/// A closed axis-aligned box, each face split into `n x n` quads, every triangle
+/// wound counter-clockwise seen from outside (its normal points out).
 pub fn cube(lo: [f32; 3], hi: [f32; 3], n: u32) -> Mesh {
     let n = n.max(1);
     let mut tris = Vec::new();
     for axis in 0..3 {
         let (u, v) = octrace_format::layout::other_axes(axis);
+        // `u x v` is +x, -y, +z: turned over where that is not the face's outside.
+        let turn = |side: f32| (side == lo[axis]) != (axis == 1);
         for side in [lo[axis], hi[axis]] {
             for i in 0..n {
                 for j in 0..n {
@@ -125,8 +128,14 @@ pub fn cube(lo: [f32; 3], hi: [f32; 3], n: u32) -> Mesh {
                         p[v] = lo[v] + (hi[v] - lo[v]) * (j + dj) as f32 / n as f32;
                         p
                     };
-                    tris.push([at(0, 0), at(1, 0), at(1, 1)]);
-                    tris.push([at(0, 0), at(1, 1), at(0, 1)]);
+                    let (a, b, c, d) = (at(0, 0), at(1, 0), at(1, 1), at(0, 1));
+                    if turn(side) {
+                        tris.push([a, c, b]);
+                        tris.push([a, d, c]);
+                    } else {
+                        tris.push([a, b, c]);
+                        tris.push([a, c, d]);
+                    }
                 }
             }
         }
