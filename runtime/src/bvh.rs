@@ -141,6 +141,11 @@ impl Bvh {
         if self.nodes.is_empty() || !ray.is_traceable() {
             return None;
         }
+        // A direction of 1e30 or 1e-40, scaled to unit size (the same hits).
+        let (scaled, factor) = ray.unit_scaled();
+        if factor != 1.0 {
+            return self.walk::<ANY>(&scaled).map(|(t, id, u, v)| ((t as f64 * factor) as f32, id, u, v));
+        }
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
         let inv = d.map(|x| 1.0 / x);
@@ -152,7 +157,7 @@ impl Bvh {
         while top > 0 {
             top -= 1;
             let node = &self.nodes[stack[top] as usize];
-            if !hits_box(node, o, inv, tmin, t_best) {
+            if !hits_box(node, o, d, inv, tmin, t_best) {
                 continue;
             }
             if node.count > 0 {
@@ -339,21 +344,26 @@ pub(crate) fn area(lo: [f32; 3], hi: [f32; 3]) -> f64 {
 }
 
 /// Whether the ray meets the node's box within `[tmin, tmax]` (slabs). An axis the ray
-/// does not move along (an infinite inverse) is the whole line or nothing: its slab
+/// does not move along (a zero component) is the whole line or nothing: its slab
 /// distances would be `0 * inf = NaN` for a ray lying in one of the box's planes, and
 /// `min` / `max` would then pick the infinity of the other plane and miss the box
-/// (rays in the octree's cell planes leaked through the BVH builds that way).
+/// (rays in the octree's cell planes leaked through the BVH builds that way). A
+/// component too small for its inverse (below `2^-128`) moves all the same: its slab
+/// distances are divided instead (a subnormal component treated as zero leaked).
 #[inline(always)]
-fn hits_box(n: &Node, o: [f32; 3], inv: [f32; 3], tmin: f32, tmax: f32) -> bool {
+fn hits_box(n: &Node, o: [f32; 3], d: [f32; 3], inv: [f32; 3], tmin: f32, tmax: f32) -> bool {
     let (mut t0, mut t1) = (tmin, tmax);
     for a in 0..3 {
-        if inv[a].is_infinite() {
+        let (ta, tb) = if !inv[a].is_infinite() {
+            ((n.lo[a] - o[a]) * inv[a], (n.hi[a] - o[a]) * inv[a])
+        } else if d[a] != 0.0 {
+            ((n.lo[a] - o[a]) / d[a], (n.hi[a] - o[a]) / d[a])
+        } else {
             if o[a] < n.lo[a] || o[a] > n.hi[a] {
                 return false;
             }
             continue;
-        }
-        let (ta, tb) = ((n.lo[a] - o[a]) * inv[a], (n.hi[a] - o[a]) * inv[a]);
+        };
         t0 = t0.max(ta.min(tb));
         t1 = t1.min(ta.max(tb));
     }

@@ -125,6 +125,11 @@ impl KdTree {
         if self.nodes.is_empty() || !ray.is_traceable() {
             return None;
         }
+        // A direction of 1e30 or 1e-40, scaled to unit size (the same hits).
+        let (scaled, factor) = ray.unit_scaled();
+        if factor != 1.0 {
+            return self.walk::<ANY>(&scaled).map(|(t, id, u, v)| ((t as f64 * factor) as f32, id, u, v));
+        }
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
         let inv = d.map(|x| 1.0 / x);

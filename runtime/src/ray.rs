@@ -47,6 +47,28 @@ impl Ray {
         Ray { origin, tmin, dir, tmax }
     }
 
+    /// The same ray with its direction scaled by a power of two so that its largest
+    /// component lies in `[1, 2)`, and the factor its distances are to be multiplied
+    /// by: the same line and the same hits (distances scaled exactly, barring a
+    /// component that rounds as a subnormal). For the seeds' baselines, whose slab
+    /// distances (`offset * (1 / d)`) lose their meaning for directions of 1e30 or
+    /// 1e-40; the octree walk takes its own exact rule instead
+    /// (`cpu::tables::exit_rule`). A direction already within `[2^-64, 2^64]` is
+    /// returned as it is, factor 1.
+    pub fn unit_scaled(&self) -> (Ray, f64) {
+        let largest = self.dir.abs().max_element();
+        if !(largest.is_finite() && largest > 0.0) || (2f32.powi(-64)..=2f32.powi(64)).contains(&largest) {
+            return (*self, 1.0);
+        }
+        let e = crate::cpu::tables::exponent(largest);
+        // 2^-e and 2^e as f64 (exact; either may be past f32's range).
+        let (down, up) = (2f64.powi(-e), 2f64.powi(e));
+        let dir = self.dir.as_dvec3() * down;
+        let t = |x: f32| (x as f64 * up) as f32;
+        let ray = Ray { origin: self.origin, tmin: t(self.tmin), dir: dir.as_vec3(), tmax: t(self.tmax) };
+        (ray, down)
+    }
+
     /// Whether the ray can hit anything: finite origin and direction, a non-zero
     /// direction, and `tmin <= tmax` with neither NaN. Any other ray is a defined miss.
     pub fn is_traceable(&self) -> bool {

@@ -33,7 +33,7 @@
 
 use octrace_format::layout::{NodeRef, MAX_LEVEL};
 
-use crate::cpu::tables::{exit_code, octant, EXIT_FACE};
+use crate::cpu::tables::{exact_exit, exact_side, exit_code, exit_rule, octant, ExitRule, RuleScale, EXIT_FACE};
 use crate::cpu::watertight::Shear;
 use crate::cpu::{box_slack, clip, exit_along_moving_axes, point_at, BOX_T_SLACK};
 use crate::ray::Ray;
@@ -94,6 +94,8 @@ struct Walk {
     inv: [f32; 3],
     high: [u32; 3],
     exits: &'static [u8; 8],
+    /// The exit rule (`tables::exit_rule`), as the constrained walk's.
+    rule: ExitRule,
     shear: Shear,
     tmin: f32,
     tmax: f32,
@@ -289,6 +291,7 @@ impl UnconstrainedOctree {
             inv: d.map(|x| 1.0 / x),
             high: d.map(|x| !x.is_sign_negative() as u32),
             exits: &EXIT_FACE[octant(d)],
+            rule: exit_rule(o, d, RuleScale::of(self.root_lo, self.root_hi, self.sizes[0])),
             shear: Shear::new(o, d),
             tmin: ray.tmin,
             tmax: t_stop,
@@ -340,13 +343,18 @@ impl UnconstrainedOctree {
         // The exit face, as the constrained walk finds it.
         let (lo, size) = (self.root_lo, self.sizes[leaf.level as usize]);
         let off = [0, 1, 2].map(|k| (lo[k] + (leaf.cell[k] + w.high[k]) as f32 * size) - w.o[k]);
-        let mut face = w.exits[exit_code(off, w.d)] as usize;
-        if w.d.contains(&0.0) {
-            face = exit_along_moving_axes(off, w.d, w.inv);
-        }
+        let exact = w.rule == ExitRule::Exact;
+        let (face, t_exit) = match w.rule {
+            ExitRule::Table => (w.exits[exit_code(off, w.d)] as usize, None),
+            ExitRule::Flat => (exit_along_moving_axes(off, w.d, w.inv), None),
+            ExitRule::Exact => {
+                let (face, t) = exact_exit(off, w.d);
+                (face, Some(t))
+            }
+        };
         let axis = face >> 1;
         let (off_a, d_a) = (off[axis], w.d[axis]);
-        let t_exit = off_a * w.inv[axis];
+        let t_exit = t_exit.unwrap_or(off_a * w.inv[axis]);
         if w.best.is_some_and(|(t, ..)| t <= t_exit) || t_exit >= w.tmax {
             return true;
         }
@@ -368,8 +376,13 @@ impl UnconstrainedOctree {
             for k in 0..3 {
                 if k != axis {
                     let mid = lo[k] + (2 * cell[k] + 1) as f32 * half;
-                    let p = off_a * w.d[k] - (mid - w.o[k]) * d_a;
-                    child |= (((p > 0.0) ^ negative_a) as usize) << k;
+                    let side = if exact {
+                        exact_side(off_a, d_a, mid - w.o[k], w.d[k], negative_a)
+                    } else {
+                        let p = off_a * w.d[k] - (mid - w.o[k]) * d_a;
+                        ((p > 0.0) ^ negative_a) as u32
+                    };
+                    child |= (side as usize) << k;
                 }
             }
             cell = [0, 1, 2].map(|k| 2 * cell[k] + ((child >> k) & 1) as u32);

@@ -7,7 +7,6 @@ use rayon::prelude::*;
 use super::order::memory_order;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::simd;
-use super::tables::ExitRule;
 use super::tracer::{with_tests, NoTally, Tracer};
 use crate::ray::{Hit, Ray};
 
@@ -188,8 +187,8 @@ impl Tracer<'_> {
     }
 
     /// The next ray from `rays[*next..]` that needs a walk, and its walk; rays that
-    /// cannot hit are answered at once, and so are rays under the exact exit rule
-    /// (walked to their end on the scalar step, which alone follows it).
+    /// cannot hit are answered at once, and so are those only the scalar step walks
+    /// (the exact exit rule, re-originated rays: walked to their end here).
     #[inline(always)]
     fn start_next<const ANY: bool>(
         &self,
@@ -201,7 +200,7 @@ impl Tracer<'_> {
             let i = *next;
             *next += 1;
             match self.begin(&rays[i]) {
-                Some(w) if w.rule() == ExitRule::Exact => done(i, self.walk_scalar::<ANY>(w, &mut NoTally)),
+                Some(w) if w.scalar_only() => done(i, self.walk_scalar::<ANY>(w, &mut NoTally)),
                 Some(w) => return Some((i, to_walk(self, &w))),
                 None => done(i, None),
             }

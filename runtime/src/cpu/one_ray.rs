@@ -1,6 +1,5 @@
 //! The one-ray calls: one walk, on the SIMD step where the build has one.
 
-use super::tables::ExitRule;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 use super::tracer::with_tests;
 use super::tracer::{NoTally, Tally, Tracer, WalkStats};
@@ -17,9 +16,7 @@ impl Tracer<'_> {
     /// [`Tracer::intersect`] on the portable scalar step, whatever SIMD the build
     /// has: the reference the SIMD steps are tested against.
     pub fn intersect_scalar(&self, ray: &Ray) -> Option<Hit> {
-        let mut w = self.begin(ray)?;
-        while !self.step::<false>(&mut w, &mut NoTally) {}
-        self.answer(w.best)
+        self.walk_scalar::<false>(self.begin(ray)?, &mut NoTally)
     }
 
     /// [`Tracer::occluded`] on the portable scalar step.
@@ -88,16 +85,17 @@ impl Tracer<'_> {
     fn walk<const ANY: bool>(&self, ray: &Ray, stats: &mut impl Tally) -> Option<Hit> {
         let w = self.begin(ray)?;
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        if w.rule() != ExitRule::Exact {
+        if !w.scalar_only() {
             return with_tests!(self; ANY; super::simd::sse2::walk; self, &w, stats);
         }
         self.walk_scalar::<ANY>(w, stats)
     }
 
-    /// Walks `w` to its end on the scalar step.
+    /// Walks `w` to its end on the scalar step (the only walk that takes the exact
+    /// exit rule and re-originated rays: `RayWalk::scalar_only`).
     #[inline(never)]
     pub(super) fn walk_scalar<const ANY: bool>(&self, mut w: RayWalk, stats: &mut impl Tally) -> Option<Hit> {
         while !self.step::<ANY>(&mut w, stats) {}
-        self.answer(w.best)
+        w.unshift(self.answer(w.best))
     }
 }

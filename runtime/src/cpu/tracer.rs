@@ -55,6 +55,11 @@ pub struct TreeFrame {
     pub(super) cube_level: Option<u32>,
     /// What decides each ray's exit rule (`tables::exit_rule`).
     pub(super) rule_scale: RuleScale,
+    /// The box an origin must lie in to be walked from where it is: the root cube
+    /// enlarged by [`FAR_ROOTS`] root edges on every side. A ray from farther out is
+    /// re-originated where it enters the cube (`walk::Tracer::begin_far`).
+    pub(super) near_lo: [f32; 3],
+    pub(super) near_hi: [f32; 3],
     /// Whether the processor has x86-64-v3 (asked once, not per tracer).
     pub(super) v3: bool,
     /// Whether what walks read (leaf records, triangle references, triangles) is
@@ -92,6 +97,8 @@ impl TreeFrame {
                 level <= max_depth && view.cube_map.len() == 6 * res * res
             }),
             rule_scale: RuleScale::of(root_lo, root_hi, b.root_size),
+            near_lo: root_lo.map(|c| (c as f64 - FAR_ROOTS * b.root_size as f64) as f32),
+            near_hi: root_hi.map(|c| (c as f64 + FAR_ROOTS * b.root_size as f64) as f32),
             v3: wider_simd_available(),
             outgrows_cache: 2 * walked_bytes(view) > super::hw::last_level_cache(),
         }
@@ -442,6 +449,12 @@ fn wider_simd_available() -> bool {
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
     false
 }
+
+/// How many root edges outside the root cube an origin may lie and still be walked
+/// from where it is; a ray from farther out is re-originated where it enters the cube
+/// (`walk::Tracer::begin_far`). Cameras of the standard sets stand about 2.3 root
+/// edges from the centre, and keep their bits.
+pub const FAR_ROOTS: f64 = 4.0;
 
 /// Relative slack on the distance where a ray leaves the mesh box: f32 distances far
 /// from the origin carry a relative error of a few ulps (2^-21); this is 32 times that.

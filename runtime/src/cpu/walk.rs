@@ -60,6 +60,9 @@ pub(crate) struct RayWalk {
     pub(crate) best: Option<Hit>,
     t_best: f32,
     steps: u32,
+    /// For a ray re-originated near the scene ([`Tracer::begin_far`]): the distance
+    /// its origin was moved (`f64`), and the ray's own `tmin` and `tmax`.
+    shifted: Option<(f64, f32, f32)>,
 }
 
 /// A step's triangle test, for [`Tracer::visit_leaf`]: a trait rather than a closure
@@ -162,6 +165,20 @@ impl RayWalk {
     pub(crate) fn rule(&self) -> ExitRule {
         self.rule
     }
+    /// Whether only the scalar step may walk this ray: under the exact exit rule, or
+    /// re-originated (its answer's distance shifted back by `walk_scalar`).
+    pub(crate) fn scalar_only(&self) -> bool {
+        self.rule == ExitRule::Exact || self.shifted.is_some()
+    }
+    /// A finished walk's hit, its distance measured from the ray's own origin.
+    pub(crate) fn unshift(&self, hit: Option<Hit>) -> Option<Hit> {
+        match (self.shifted, hit) {
+            (Some((shift, tmin, tmax)), Some(h)) => {
+                Some(Hit { t: ((shift + h.t as f64) as f32).clamp(tmin, tmax), ..h })
+            }
+            _ => hit,
+        }
+    }
 }
 
 impl Tracer<'_> {
@@ -172,6 +189,61 @@ impl Tracer<'_> {
         if !ray.is_traceable() {
             return None;
         }
+        let o = ray.origin.to_array();
+        if (0..3).any(|k| !(self.frame.near_lo[k] <= o[k] && o[k] <= self.frame.near_hi[k])) {
+            return self.begin_far(ray);
+        }
+        self.begin_near(ray)
+    }
+
+    /// [`Tracer::begin`] for an origin far outside the root cube ([`TreeFrame`]'s near
+    /// box): re-originated where the ray enters the cube, in `f64` (rounded once to
+    /// `f32`), so that the walk and the triangle tests work with coordinates of the
+    /// scene's size rather than the origin's: from 1e7 away, `f32` rounds a unit
+    /// scene's vertices relative to the origin by a whole unit, and 8 % of the rays at
+    /// a unit sphere missed it (98 % from 1e8). The walk's distances are then from the
+    /// new origin; [`Tracer::walk_scalar`], which alone walks such rays, adds the shift
+    /// back (one rounding, the distance clamped into `[tmin, tmax]`).
+    #[cold]
+    #[inline(never)]
+    fn begin_far(&self, ray: &Ray) -> Option<RayWalk> {
+        let (o, d) = (ray.origin.to_array(), ray.dir.to_array());
+        // The entry into the root cube in f64: an f32 distance of 1e9 is off by 64,
+        // which would move the origin past a unit scene.
+        let (mut t_enter, mut t_leave) = (f64::NEG_INFINITY, f64::INFINITY);
+        for k in 0..3 {
+            let (lo, hi) = (self.frame.root_lo[k] as f64, self.frame.root_hi[k] as f64);
+            let (ok, dk) = (o[k] as f64, d[k] as f64);
+            if dk == 0.0 {
+                if ok < lo || ok > hi {
+                    return None;
+                }
+                continue;
+            }
+            let (ta, tb) = ((lo - ok) / dk, (hi - ok) / dk);
+            t_enter = t_enter.max(ta.min(tb));
+            t_leave = t_leave.min(ta.max(tb));
+        }
+        let entry = t_enter.max(ray.tmin as f64);
+        if entry > t_leave.min(ray.tmax as f64) || entry.is_nan() || entry >= f32::MAX as f64 {
+            return None;
+        }
+        // The shift as two f32 (so that the kernels, which keep it so, add the same
+        // bits): their sum is exact in f64, within 2^-48 of the entry.
+        let hi = entry as f32;
+        let shift = hi as f64 + (entry - hi as f64) as f32 as f64;
+        let moved = [0, 1, 2].map(|k| (o[k] as f64 + shift * d[k] as f64) as f32);
+        let bound = |t: f32| (t as f64 - shift) as f32;
+        let near = Ray::segment(moved.into(), ray.dir, bound(ray.tmin), bound(ray.tmax));
+        let mut w = self.begin_near(&near)?;
+        w.shifted = Some((shift, ray.tmin, ray.tmax));
+        Some(w)
+    }
+
+    /// [`Tracer::begin`] for an origin near the scene (or moved there by
+    /// [`Tracer::begin_far`]).
+    #[inline(always)]
+    fn begin_near(&self, ray: &Ray) -> Option<RayWalk> {
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
         let (t_enter, t_leave, entry_axis) = clip(o, d, self.frame.root_lo, self.frame.root_hi)?;
@@ -214,6 +286,7 @@ impl Tracer<'_> {
             best: None,
             t_best: ray.tmax,
             steps: 0,
+            shifted: None,
         })
     }
 
@@ -355,8 +428,7 @@ impl Tracer<'_> {
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
         let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d } };
         let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
-        let Some((box_index, ncount)) = self.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test)
-        else {
+        let Some((_, ncount)) = self.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test) else {
             return true;
         };
         // 2. The exit corner from the cell (the same bits as the stored box: an
@@ -366,13 +438,9 @@ impl Tracer<'_> {
         let size = self.frame.sizes[level as usize & 31];
         let corner = |k: usize| (lo[k] + (cell[k] + w.high[k]) as f32 * size) - w.o[k];
         // (Closures called three times: `[0, 1, 2].map` is not inlined in this loop.)
+        // (In a valid file this is the leaf's stored box; a hostile one on the trusted
+        // path may disagree, and the walk goes on with the cell it computed.)
         let off = [corner(0), corner(1), corner(2)];
-        debug_assert!(
-            v.boxes
-                .get(box_index as usize * 6..box_index as usize * 6 + 6)
-                .is_none_or(|b| (0..3).all(|k| b[k + 3 * w.high[k] as usize] - w.o[k] == off[k])),
-            "walked cell {level}/{cell:?} is not leaf {box_index}'s box"
-        );
         // (A ray with a zero direction component leaves by the slab rule, and one the
         // f32 products cannot serve by exact decisions: `tables::exit_rule`.)
         let mut face = w.exits[exit_code(off, w.d)] as usize;

@@ -809,6 +809,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let p = f64(oi) * f64(dj) - f64(oj) * f64(di);\n    \
               return select(p > 0.0lf, p < 0.0lf, is_negative(di) == is_negative(dj));\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return f32(f64(off) / f64(d));\n}\n";
+        g += FAR_F64;
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let p = f64(off_a) * f64(dk) - f64(m) * f64(d_a);\n    \
               return select(0u, 1u, (p > 0.0lf) != negative_a);\n}\n";
@@ -825,6 +826,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         // products, but the adapter's division).
         g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    return oi / di < oj / dj;\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return off / d;\n}\n";
+        g += FAR_F32;
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let x = (off_a / d_a) * dk - m;\n    \
               let p_positive = select(x > 0.0, x < 0.0, is_negative(d_a));\n    \
@@ -832,6 +834,70 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
 }
+
+/// Moving a far origin to the root (`cpu::walk`'s `begin_far`), in `f64`: the entry
+/// into the root cube, `max(tmin)`, split into two `f32` whose sum is exact; the moved
+/// origin; distances shifted back and bounds shifted forward, each rounded once.
+/// `far_shift` answers `(hi, lo, 1)`, or `z = 0` for a ray that misses the root.
+const FAR_F64: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> vec3<f32> {
+    var t_enter = -1.0e300lf;
+    var t_leave = 1.0e300lf;
+    for (var k = 0u; k < 3u; k++) {
+        let lo = f64(component(params.root_lo.xyz, k));
+        let hi = f64(component(params.root_hi.xyz, k));
+        let ok = f64(component(o, k));
+        let dk = f64(component(d, k));
+        if dk == 0.0lf {
+            if ok < lo || ok > hi {
+                return vec3<f32>(0.0);
+            }
+            continue;
+        }
+        let ta = (lo - ok) / dk;
+        let tb = (hi - ok) / dk;
+        t_enter = max(t_enter, min(ta, tb));
+        t_leave = min(t_leave, max(ta, tb));
+    }
+    let entry = max(t_enter, f64(tmin));
+    if entry > min(t_leave, f64(tmax)) || !(entry < 3.4028234663852886e38lf) {
+        return vec3<f32>(0.0);
+    }
+    let hi = f32(entry);
+    return vec3<f32>(hi, f32(entry - f64(hi)), 1.0);
+}
+fn moved_origin(o: vec3<f32>, d: vec3<f32>, s: vec2<f32>) -> vec3<f32> {
+    let shift = f64(s.x) + f64(s.y);
+    return vec3<f32>(f32(f64(o.x) + shift * f64(d.x)), f32(f64(o.y) + shift * f64(d.y)), f32(f64(o.z) + shift * f64(d.z)));
+}
+fn shifted(t: f32, s: vec2<f32>) -> f32 {
+    return f32(f64(s.x) + f64(s.y) + f64(t));
+}
+fn unshifted(t: f32, s: vec2<f32>) -> f32 {
+    return f32(f64(t) - (f64(s.x) + f64(s.y)));
+}
+";
+
+/// [`FAR_F64`] without `f64`: the entry from the kernel's `f32` clip, pulled back by
+/// eight ulps so that the moved origin stays before the root, and the origin moved by a
+/// fused multiply-add (on the ray's line within a rounding of the moved point).
+const FAR_F32: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> vec3<f32> {
+    let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
+    let entry = max(root.x, tmin);
+    if root.w == 0.0 || entry > min(root.y, tmax) || !is_finite(entry) {
+        return vec3<f32>(0.0);
+    }
+    return vec3<f32>(entry * (1.0 - 9.5367431640625e-7), 0.0, 1.0);
+}
+fn moved_origin(o: vec3<f32>, d: vec3<f32>, s: vec2<f32>) -> vec3<f32> {
+    return fma(vec3<f32>(s.x), d, o);
+}
+fn shifted(t: f32, s: vec2<f32>) -> f32 {
+    return s.x + t;
+}
+fn unshifted(t: f32, s: vec2<f32>) -> f32 {
+    return t - s.x;
+}
+";
 
 /// Bindings a kernel has besides the scene's chunks: (storage, all buffers). Tracing:
 /// rays and hits, and the parameters.

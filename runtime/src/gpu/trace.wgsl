@@ -39,6 +39,9 @@ struct Params {
 
 // Relative slack on the distance where a ray leaves the mesh box (BOX_T_SLACK).
 const BOX_T_SLACK: f32 = 1.52587890625e-5;
+// Root edges an origin may lie outside the root and be walked from where it is
+// (tracer.rs, FAR_ROOTS).
+const FAR_ROOTS: f32 = 4.0;
 
 // 32 bytes a hit; `triangle` is 0xFFFFFFFF on a miss.
 struct HitOut {
@@ -200,6 +203,9 @@ struct Walk {
     row: u32,
     // RULE_TABLE, RULE_FLAT or RULE_EXACT.
     rule: u32,
+    // For an origin far outside the root (walk.rs, begin_far): the distance it was
+    // moved along the ray, as the sum of two f32; zero otherwise.
+    shift: vec2<f32>,
     tmin: f32,
     tmax: f32,
     address: u32,
@@ -462,17 +468,36 @@ fn clip(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec4<f32> {
 }
 
 // Starts a walk: clips to the root, finds the first leaf. `done` when it cannot hit.
-fn begin(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> Walk {
+fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     var wk: Walk;
     wk.done = true;
-    wk.best.t = tmax;
+    wk.best.t = tmax0;
     wk.best.triangle = MISS;
     wk.best.flags = 0u;
     wk.steps = 0u;
     wk.tests = 0u;
-    let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
-    if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin) || is_nan(tmax) || !(tmin <= tmax) {
+    wk.shift = vec2<f32>(0.0);
+    let finite = is_finite(o0.x) && is_finite(o0.y) && is_finite(o0.z) && is_finite(d.x) && is_finite(d.y) && is_finite(d.z);
+    if !finite || all(d == vec3<f32>(0.0)) || is_nan(tmin0) || is_nan(tmax0) || !(tmin0 <= tmax0) {
         return wk;
+    }
+    // An origin far outside the root (more than FAR_ROOTS root edges, tracer.rs) is
+    // moved to where the ray enters the root (walk.rs, begin_far; generated
+    // `far_shift`, in f64 where the adapter has it).
+    var o = o0;
+    var tmin = tmin0;
+    var tmax = tmax0;
+    let reach = FAR_ROOTS * params.root_lo.w;
+    if any(o0 < params.root_lo.xyz - reach) || any(o0 > params.root_hi.xyz + reach) {
+        let far = far_shift(o0, d, tmin0, tmax0);
+        if far.z == 0.0 {
+            return wk;
+        }
+        wk.shift = far.xy;
+        o = moved_origin(o0, d, far.xy);
+        tmin = unshifted(tmin0, far.xy);
+        tmax = unshifted(tmax0, far.xy);
+        wk.best.t = tmax;
     }
     // Clip to the root cube, then to the mesh box: beyond it there is nothing to hit.
     let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
@@ -582,6 +607,10 @@ fn trace(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> HitOut 
         step(&wk, any);
     }
     var out = wk.best;
+    // A moved origin's distances back from the ray's own (walk.rs, RayWalk::unshift).
+    if wk.shift.x != 0.0 || wk.shift.y != 0.0 {
+        out.t = select(tmax, clamp(shifted(out.t, wk.shift), tmin, tmax), out.triangle != MISS);
+    }
     out.steps = wk.steps;
     out.flags = (out.flags & 1u) | (min(wk.tests, 0x7FFFFFFFu) << 1u);
     return out;

@@ -351,6 +351,27 @@ fn tiny_directions_ties_and_t_zero_answer_as_on_the_cpu() {
     assert!(cube.intersect(&beyond).is_none());
 }
 
+/// Cameras far from a unit sphere (10 to 1e9 away) on the GPU: the kernel moves far
+/// origins to the root as the CPU does (in f64 where the adapter has it): the same hits,
+/// bit for bit there; and, either way, no more than the CPU's grazing misses.
+#[test]
+fn far_cameras_see_as_on_the_cpu() {
+    use crate::hard_cases::tiny_directions::{far_rays, unit_sphere};
+    let Some(gpu) = gpu("far_cameras_see_as_on_the_cpu") else { return };
+    let (_, scene) = unit_sphere();
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    for exp in 1..=9 {
+        let rays = far_rays(10f32.powi(exp), 1500, exp as u64);
+        let cpu = scene.intersect_all(&rays);
+        let got = tracer.intersect(&rays).unwrap();
+        if tracer.uses_f64() {
+            same_hits(&format!("1e{exp}"), &rays, &cpu, &got);
+        }
+        let (c, g) = (cpu.iter().flatten().count(), got.iter().flatten().count());
+        assert!(g + rays.len() / 100 >= c, "1e{exp}: {g} GPU hits against {c}");
+    }
+}
+
 /// The zig-zag polygon of slivers on the GPU: every distance within the CPU's bound of
 /// the exact plane distance (the same bits where the adapter has f64).
 #[test]

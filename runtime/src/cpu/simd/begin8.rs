@@ -4,7 +4,8 @@
 //! begin's operations in its order, so each ray starts in the same leaf with the same
 //! interval. What the eight-lane form leaves to the scalar begin: rays with a zero
 //! direction component or that are not traceable (its slab rules and refusals), rays
-//! under the exact exit rule (`tables::exit_rule`), rays
+//! under the exact exit rule (`tables::exit_rule`), rays from origins far outside the
+//! root (re-originated), rays
 //! entering the root through the cube map (none on the standard sets), and every ray
 //! of a tracer without a locate grid.
 //!
@@ -143,10 +144,16 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
         // Rays for the vector clips: traceable (`Ray::is_traceable`: finite, an
         // ordered interval) with no zero direction component.
         let (zero, sign) = (_mm256_setzero_ps(), _mm256_set1_ps(-0.0));
+        // Origins far outside the root are re-originated by the scalar begin.
         let mut eligible = _mm256_cmp_ps::<_CMP_LE_OQ>(tmin, tmax);
+        let (near_lo, near_hi) = (t.frame.near_lo, t.frame.near_hi);
         for k in 0..3 {
             let moving = _mm256_cmp_ps::<_CMP_NEQ_OQ>(d[k], zero);
-            eligible = _mm256_and_ps(eligible, _mm256_and_ps(finite(o[k]), _mm256_and_ps(finite(d[k]), moving)));
+            let near = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_set1_ps(near_lo[k]), o[k]),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(o[k], _mm256_set1_ps(near_hi[k])),
+            );
+            eligible = _mm256_and_ps(eligible, _mm256_and_ps(near, _mm256_and_ps(finite(d[k]), moving)));
         }
         let eligible = _mm256_movemask_ps(eligible) as u32 & table_rule(&o, &d, t.frame.rule_scale);
         if eligible == 0 {

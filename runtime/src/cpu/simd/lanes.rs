@@ -23,7 +23,7 @@ use super::avx2::{self, at_most, mask_of};
 use super::begin8::{begin8, Begun};
 use super::sse2::SseTest;
 use crate::cpu::hw::prefetch;
-use crate::cpu::tables::{octant, ExitRule, EXIT_ROWS};
+use crate::cpu::tables::{octant, EXIT_ROWS};
 use crate::cpu::tracer::{NoTally, Tracer};
 use crate::cpu::walk::{exit_along_moving_axes, LeafVisit, RayWalk};
 use crate::cpu::watertight::Shear;
@@ -199,8 +199,9 @@ unsafe fn refill<const ANY: bool>(
             Some(Start::begun(&rays[i], b, l))
         } else {
             match t.begin(&rays[i]) {
-                // The exact exit rule is the scalar step's alone: walked to its end here.
-                Some(w) if w.rule() == ExitRule::Exact => {
+                // The exact exit rule and re-originated rays are the scalar step's
+                // alone: walked to their end here.
+                Some(w) if w.scalar_only() => {
                     done(i, t.walk_scalar::<ANY>(w, &mut NoTally));
                     continue;
                 }
