@@ -25,7 +25,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 4.0, 0.0 MB
+cube.oct: octrace scene, format 5.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
@@ -244,8 +244,12 @@ fn verify_checks_a_file_against_the_oracle() {
     for set in sets {
         assert_eq!(set["mismatches"].as_array().unwrap().len(), 0, "{set}");
         assert_eq!(set["beyond_distance_bound"].as_array().unwrap().len(), 0, "{set}");
-        assert!(set["max_relative_t_error"].as_f64().unwrap() <= json["distance_bound_relative"].as_f64().unwrap());
     }
+    // Random rays hit at distances of the scene's size: within the relative bound. (Grid
+    // rays moved off their planes graze faces at distances near zero, where the bound's
+    // absolute part is what holds: checked above.)
+    let random_error = sets[0]["max_relative_t_error"].as_f64().unwrap();
+    assert!(random_error <= json["distance_bound_relative"].as_f64().unwrap(), "{random_error}");
     // A corrupt file fails the invariants.
     let mut bytes = std::fs::read(dir.path().join("cube.oct")).unwrap();
     let at = bytes.len() / 2;

@@ -321,6 +321,14 @@ impl SceneView<'_> {
         let lo: [f32; 3] = std::array::from_fn(|a| outward(cell[a] as f64 - margin, false));
         let hi: [f32; 3] = std::array::from_fn(|a| outward(cell[a + 3] as f64 + margin, true));
         let refs = &self.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
+        // Descending input order (the walks' tie rule rests on it), which also rules
+        // out a triangle listed twice.
+        if let Some(w) = refs.windows(2).find(|w| self.triangle_ids[w[0] as usize] <= self.triangle_ids[w[1] as usize])
+        {
+            let (first, then) = (self.triangle_ids[w[0] as usize], self.triangle_ids[w[1] as usize]);
+            let why = if first == then { "twice" } else { "out of descending input order" };
+            return Err(Error::corrupt(format!("leaf {b} lists input triangles {first} and {then} {why}")));
+        }
         for &t in refs {
             let v = &self.triangles[t as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
             let mut apart = false;

@@ -272,11 +272,10 @@ impl Reference {
         // The barycentrics survive the projection along the ray; each times the
         // projected triangle's altitude onto the edge opposite its vertex (twice its
         // area, |n.d|, over the edge's projected length) is a signed distance.
+        // (The edge's length across the ray is `|e x d|`: `|e|^2 - (e.d)^2` cancels to
+        // zero for a ray along the edge, which made a grazing ray's tie a mismatch.)
         let area2 = (tri[1] - tri[0]).cross(tri[2] - tri[0]).dot(d).abs();
-        let altitude = |p: DVec3, q: DVec3| {
-            let e = q - p;
-            area2 / (e.length_squared() - e.dot(d) * e.dot(d)).max(0.0).sqrt()
-        };
+        let altitude = |p: DVec3, q: DVec3| area2 / (q - p).cross(d).length();
         let distances =
             [(1.0 - u - v) * altitude(tri[1], tri[2]), u * altitude(tri[2], tri[0]), v * altitude(tri[0], tri[1])];
         let nearest = distances.iter().copied().fold(f64::INFINITY, f64::min);

@@ -186,7 +186,10 @@ pub(crate) fn arrays(
         for _ in 0..total_links(ncount) {
             octree.push(address[records.next().expect("links") as usize]);
         }
-        for &t in tris {
+        // A leaf lists its triangles in descending input order (`tris` is ascending):
+        // the walks keep the last of equal hits, so a tie goes to the lowest input id
+        // (the format requires it: FORMAT.md).
+        for &t in tris.iter().rev() {
             if new_index[t as usize] == u32::MAX {
                 new_index[t as usize] = tri_order.len() as u32;
                 tri_order.push(t);

@@ -93,13 +93,12 @@ pub(crate) trait LeafTest {
 pub(crate) enum Batch {
     /// No triangle hit within `[tmin, tmax]`.
     Miss,
-    /// The hit that testing the triangles one after another would keep (the nearest,
-    /// where no other in the batch is at its distance; for an any-hit query the
-    /// first): index in the batch, `t`, `u`, `v`.
+    /// The hit that testing the triangles one after another would keep (the nearest;
+    /// of equal ones the last, since a test accepts `t <= t_best`; for an any-hit
+    /// query the first): index in the batch, `t`, `u`, `v`.
     Hit(usize, f32, f32, f32),
     /// Test these one by one (an edge function rounded to zero, which the scalar test
-    /// decides in f64; two hits at the same distance, which `keep` decides by input
-    /// id; an index out of range; no batch form).
+    /// decides in f64; an index out of range; no batch form).
     OneByOne,
 }
 
@@ -384,31 +383,19 @@ impl Tracer<'_> {
     }
 
     /// Makes stored triangle `tri`'s hit `(t, u, v)` the walk's best (its `triangle`
-    /// is set by [`Tracer::answer`]). The tests accept `t <= t_best`, so a hit at the
-    /// best's own distance comes here too: of two at the same distance the lower input
-    /// id is kept, whichever leaf or batch tested it first (the nearest hit is the least
-    /// `(t, input id)`, on every path and on the GPU, as the oracle's ties go).
+    /// is set by [`Tracer::answer`]). The tests accept `t <= t_best`, so of hits at the
+    /// same distance the last tested is kept: a leaf lists its triangles in descending
+    /// input order (the format requires it), and the leaf that holds a hit's point
+    /// lists every triangle through it, so the walk answers the lowest input id among
+    /// them, on every path and on the GPU, as the oracle's ties go.
     #[inline(always)]
     fn keep(&self, walk: &mut LeafVisit<'_>, tri: u32, box_index: u32, (t, u, v): (f32, f32, f32)) {
-        if walk.best.is_some_and(|b| b.t == t && !self.input_id_below(tri, b.prim)) {
-            return;
-        }
         *walk.t_best = t;
         // The input id is looked up when the walk ends (`answer`): a later hit may
         // replace this one, and an any-hit query needs none. Ask for it now.
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         super::hw::prefetch(self.view.triangle_ids, tri);
         *walk.best = Some(Hit { t, triangle: u32::MAX, u, v, leaf: box_index, prim: tri });
-    }
-
-    /// Whether stored triangle `a`'s input id is below `b`'s (the tie rule of
-    /// [`Tracer::keep`]; a stored triangle without an id, in a hostile file on the
-    /// trusted path, counts as the highest). Rare: exact ties only.
-    #[cold]
-    #[inline(never)]
-    fn input_id_below(&self, a: u32, b: u32) -> bool {
-        let id = |p: u32| self.view.triangle_ids.get(p as usize).copied().unwrap_or(u32::MAX);
-        id(a) < id(b)
     }
 
     /// A finished walk's answer, its triangle named by its input id.

@@ -302,15 +302,11 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     for (var j = 0u; j < count && tick(); j++) {
         let tri = word(params.o_refs + offset + j);
         let h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
-        if h.w == 0.0 {
-            continue;
-        }
-        let id = word(params.o_ids + tri);
-        // Of two hits at the same distance the lower input id (walk.rs, `keep`).
-        if (*wk).best.triangle == MISS || h.x != (*wk).best.t || id < (*wk).best.triangle {
+        // Of equal hits the last tested, which is the lowest input id (walk.rs, `keep`).
+        if h.w != 0.0 {
             (*wk).t_best = h.x;
             (*wk).best.t = h.x;
-            (*wk).best.triangle = id;
+            (*wk).best.triangle = word(params.o_ids + tri);
             (*wk).best.u = h.y;
             (*wk).best.v = h.z;
             (*wk).best.leaf = box_index;

@@ -137,10 +137,10 @@ pub(crate) unsafe fn prefetch_triangles(triangles: &[f32], refs: &[u32]) {
 }
 
 /// Tests the triangles `refs` (1 to [`LANES`]) of `triangles` against the sheared
-/// ray. For the nearest hit (`ANY` false), the answer is the nearest hit, or
-/// [`Batch::OneByOne`] where two in the batch are at the same distance (the walk's
-/// `keep` decides ties by input id, which this does not read); for any hit, the
-/// first hit in order.
+/// ray. For the nearest hit (`ANY` false), the answer is the last of the nearest
+/// hits in `refs` order (a one-by-one test accepts `t <= t_best`, so a later tie
+/// wins: the lowest input id, leaves listing triangles in descending input order);
+/// for any hit, the first hit in order.
 ///
 /// No `target_feature` attribute, so that it is inlined (`inline(always)`) into the
 /// x86-64-v3 step, which has AVX2.
@@ -234,8 +234,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         // The distances of the triangles the edge functions accept (one or two a batch
         // at most, mostly none), in f64 as the one-by-one test computes them; the
         // answer is the one testing one after the other keeps: for an any-hit query
-        // the first in range, else the nearest; two at the same distance are left to
-        // the one-by-one test, whose `keep` decides them by input id.
+        // the first in range, else the nearest, of equal ones the last.
         let (o, d) = (wide(shear.origin()), wide(shear.direction()));
         let mut best: Option<(usize, f32)> = None;
         let mut left = inside;
@@ -246,9 +245,6 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
             let tmax = best.map_or(tmax, |b| b.1);
             let t = plane_distance(o, d, p[lane]);
             if t >= tmin && t <= tmax {
-                if !ANY && best.is_some_and(|b| b.1 == t) {
-                    return Batch::OneByOne;
-                }
                 best = Some((lane, t));
                 if ANY {
                     break;
@@ -400,26 +396,22 @@ mod tests {
                         }
                     };
                     batches += 1;
-                    // Batches whose least distance is shared by two references (a
-                    // triangle listed twice, or copies): the ties the rule is about.
-                    let hit_at = |r: u32, t: f32| {
-                        shear.intersect(&tris[r as usize * 9..][..9], 0.0, tmax).is_some_and(|h| h.0 == t)
-                    };
-                    ties += expect.is_some_and(|e| refs.iter().filter(|&&r| hit_at(r, e.1)).count() > 1) as usize;
                     match got {
                         Batch::Miss => assert_eq!(expect, None, "ray {ray}, refs {refs:?}"),
                         Batch::Hit(i, t, u, v) => {
+                            assert_eq!(Some((i, t, u, v)), expect, "ray {ray}, refs {refs:?}, any {any}");
                             hits += 1;
-                            let tied = refs.iter().enumerate().any(|(j, &r)| j != i && hit_at(r, t));
-                            // A nearest-hit batch leaves every tie to `keep` (input ids).
-                            assert!(any || !tied, "ray {ray}, refs {refs:?}: a tie answered in the batch");
-                            if any {
-                                assert_eq!(Some((i, t, u, v)), expect, "ray {ray}, refs {refs:?}, any {any}");
-                            } else {
-                                // The one hit at the least distance (`expect` keeps the
-                                // last copy of it where a triangle is listed twice).
-                                assert_eq!(Some((refs[i], t, u, v)), expect.map(|e| (refs[e.0], e.1, e.2, e.3)));
-                            }
+                            ties += refs
+                                .iter()
+                                .enumerate()
+                                .filter(|&(j, _)| {
+                                    j != i
+                                        && shear
+                                            .intersect(&tris[refs[j] as usize * 9..][..9], 0.0, tmax)
+                                            .is_some_and(|h| h.0 == t)
+                                })
+                                .count()
+                                .min(1);
                         }
                         Batch::OneByOne => fallbacks += 1,
                     }

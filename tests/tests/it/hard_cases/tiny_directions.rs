@@ -246,3 +246,19 @@ fn a_camera_1e9_away_still_sees_a_unit_sphere() {
         assert!(missed <= rays.len() / 100, "1e{exp}: {missed} grazing misses");
     }
 }
+/// Found by `verify`'s twisted grid rays: a ray 5.7e-42 below the unit cube's bottom
+/// face, nearly parallel to it and to its edge along x, 7e-43 outside that edge. The
+/// f32 test rounds the sheared geometry (the ray lies in the face's plane there) and
+/// hits the face at t = 8.8e-24; the f64 oracle enters through the y = 0 face at
+/// t = 0.0012: a tie within rounding, which the oracle called a mismatch because the
+/// edge's length across the ray, `|e|^2 - (e.d)^2`, cancelled to zero (now `|e x d|`).
+#[test]
+fn regression_a_ray_grazing_a_face_along_its_edge_is_a_tie() {
+    let mesh = procedural::cube([0.0; 3], [1.0; 3], 1);
+    let oracle = Reference::in_input_order(mesh.triangles.clone());
+    let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
+    let ray = ray_of([0x3eaa2d7a, 0x80000200, 0x80001000], [0x3eaa2b7a, 0x00065825, 0x21413f44]);
+    let got = scene.intersect(&ray).map(|h| (h.t, h.triangle, h.u, h.v));
+    assert!(got.is_some() && oracle.intersect(&ray).is_some(), "{got:?}");
+    assert_ne!(oracle.compare(&ray, got), octrace_runtime::reference::Agreement::Different, "{ray:?}: {got:?}");
+}
