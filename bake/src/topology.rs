@@ -103,6 +103,7 @@ mod tests {
         for solid in procedural::closed_solids() {
             let c = EdgeCensus::of(&solid.mesh.triangles);
             assert!(c.is_manifold() && c.is_oriented(), "{}: {c:?}", solid.name);
+            assert!(signed_volume(&solid.mesh.triangles) > 0.0, "{}: wound inward", solid.name);
             // One triangle removed: its three edges become the rim of a hole.
             let mut holed = solid.mesh.triangles.clone();
             holed.remove(holed.len() / 2);

@@ -11,7 +11,8 @@ fn mesh(triangles: Vec<[[f32; 3]; 3]>) -> Mesh {
     Mesh::from_triangles(triangles)
 }
 
-/// A closed UV sphere with `stacks x slices` quads (poles as fans).
+/// A closed UV sphere with `stacks x slices` quads (poles as fans), its triangles wound
+/// counter-clockwise seen from outside (normals out).
 pub fn sphere(center: [f32; 3], radius: f32, stacks: u32, slices: u32) -> Mesh {
     let (stacks, slices) = (stacks.max(2), slices.max(3));
     let point = |i: u32, j: u32| {
@@ -34,11 +35,12 @@ pub fn sphere(center: [f32; 3], radius: f32, stacks: u32, slices: u32) -> Mesh {
     for i in 0..stacks {
         for j in 0..slices {
             let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
+            // Counter-clockwise seen from outside: the normals point out.
             if i > 0 {
-                tris.push([a, b, d]);
+                tris.push([a, d, b]);
             }
             if i + 1 < stacks {
-                tris.push([d, b, c]);
+                tris.push([d, c, b]);
             }
         }
     }
@@ -57,7 +59,8 @@ pub fn blob(stacks: u32, slices: u32) -> Mesh {
     m
 }
 
-/// A closed torus around the y axis.
+/// A closed torus around the y axis, its triangles wound counter-clockwise seen from
+/// outside (normals out).
 pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -> Mesh {
     let point = |i: u32, j: u32| {
         let u = std::f64::consts::TAU * (i % rings) as f64 / rings as f64;
@@ -73,8 +76,9 @@ pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -
     for i in 0..rings {
         for j in 0..sides {
             let (a, b, c, d) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
+            // Counter-clockwise seen from outside: the normals point out.
+            tris.push([a, c, b]);
+            tris.push([a, d, c]);
         }
     }
     mesh(tris)
@@ -272,7 +276,7 @@ pub fn effects_scene() -> Mesh {
     add(&mut out, quad([-5.0, 0.0, -3.0], [-5.0, 0.0, 5.0], [5.0, 0.0, 5.0], [5.0, 0.0, -3.0]), 0, None);
     add(&mut out, quad([-2.6, 0.0, -1.8], [1.4, 0.0, -2.4], [1.4, 2.6, -2.4], [-2.6, 2.6, -1.8]), 1, None);
     let glass = sphere([-0.9, 0.7, 0.4], 0.7, 24, 48);
-    add(&mut out, outward(glass.triangles), 2, Some(([-0.9, 0.7, 0.4], 0.7)));
+    add(&mut out, glass.triangles, 2, Some(([-0.9, 0.7, 0.4], 0.7)));
     let clay = torus([1.0, 0.3, -0.3], 0.55, 0.25, 48, 24);
     add(&mut out, clay.triangles, 3, None);
     add(&mut out, quad([1.2, 0.0, 1.6], [2.4, 0.0, 0.9], [2.4, 1.5, 0.9], [1.2, 1.5, 1.6]), 4, None);
@@ -288,11 +292,6 @@ fn add(mesh: &mut Mesh, triangles: Vec<[[f32; 3]; 3]>, material: u32, sphere: Op
         mesh.push(t, normals, None);
         mesh.material_ids.push(material);
     }
-}
-
-/// The triangles of [`sphere`] wound counter-clockwise seen from outside.
-fn outward(triangles: Vec<[[f32; 3]; 3]>) -> Vec<[[f32; 3]; 3]> {
-    triangles.into_iter().map(|[a, b, c]| [a, c, b]).collect()
 }
 
 fn normalized(v: [f32; 3]) -> [f32; 3] {

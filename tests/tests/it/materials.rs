@@ -255,7 +255,12 @@ fn a_sphere_with_the_index_of_air_is_invisible() {
 /// leaves sees the background, so a pixel on the glass sees the background times its
 /// reflectance plus its transmittance. Fresnel from the index, counted once, sums to 1
 /// (less what the depth limit cuts); the second mirror term glass used to get on top
-/// of its Fresnel reflection pushed it above 1.
+/// of its Fresnel reflection pushed it above 1. The sphere is faceted and wound
+/// outward, so light enters it as glass and leaves it as air: near its rim a facet can
+/// tilt the way out past the critical angle, and rays trapped by total internal
+/// reflection run into the depth limit (as they would in cut glass). So: no pixel above
+/// the background anywhere, and at most 3 % lost where no facet traps (rays passing
+/// the centre within half the radius).
 #[test]
 fn glass_reflects_and_transmits_no_more_than_it_receives() {
     let background = Vec3::new(0.08, 0.08, 0.1);
@@ -268,12 +273,19 @@ fn glass_reflects_and_transmits_no_more_than_it_receives() {
         let cam = camera([0.0, 0.0, 3.0], [0.0; 3], 40);
         let (image, counts) = render_effects(&scene, &cam, &options, &|_| {});
         assert!(counts.get(RayKind::Reflection) > 0 && counts.get(RayKind::Refraction) > 0);
-        for p in &image.pixels {
+        let rays = cam.rays();
+        let (mut inner, mut inner_sum) = (0, 0.0);
+        for (p, r) in image.pixels.iter().zip(&rays) {
             let ratio = *p / background;
             assert!(ratio.max_element() <= 1.0 + 1e-5, "ior {ior}: a pixel sees {ratio} of the background");
-            assert!(ratio.min_element() >= 0.97, "ior {ior}: a pixel sees only {ratio} of the background");
+            // Rays passing the centre within half the radius: no facet traps them.
+            if r.origin.cross(r.dir.normalize()).length() < 0.5 {
+                assert!(ratio.min_element() >= 0.97, "ior {ior}: {r:?} sees only {ratio} of the background");
+                (inner, inner_sum) = (inner + 1, inner_sum + ratio.min_element());
+            }
         }
-        let on_glass = cam.rays().iter().filter(|r| scene.intersect(r).is_some()).count();
+        assert!(inner > 100 && inner_sum / inner as f32 >= 0.98, "ior {ior}: {inner} central pixels");
+        let on_glass = rays.iter().filter(|r| scene.intersect(r).is_some()).count();
         assert!(on_glass > 400, "ior {ior}: {on_glass} pixels on the glass");
     }
 }
