@@ -12,6 +12,7 @@
 //! (`tracer`, `walk`, `locate`), the walk below `simd/`, `simd/` below the calls.
 
 mod batch;
+mod crossings;
 mod hw;
 mod locate;
 mod one_ray;
@@ -23,6 +24,7 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
+pub use crossings::{Crossing, CrossingCount};
 pub use locate::LocateGrid;
 pub(crate) use tracer::{box_slack, BOX_T_SLACK};
 pub use tracer::{mesh_box, root_corners, ExitTest, MemoryOrder, Tracer, TreeFrame, TriangleTest, WalkStats};

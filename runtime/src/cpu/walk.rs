@@ -26,7 +26,7 @@
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
 use super::tables::{exact_exit, exact_side, exit_code, exit_rule, octant, ExitRule, EXIT_FACE};
-use super::tracer::{ExitTest, Tally, Tracer, BOX_T_SLACK};
+use super::tracer::{ExitTest, Tally, Tracer, TriangleTest, BOX_T_SLACK};
 use super::triangle::TriRay;
 use super::watertight::Shear;
 use crate::ray::{Hit, Ray};
@@ -102,16 +102,21 @@ pub(crate) enum Batch {
     OneByOne,
 }
 
-/// The scalar step's test: the tracer's.
+/// The scalar step's test: the tracer's (the watertight test in `f64` for a ray under
+/// the exact exit rule: `Shear::intersect_f64`).
 struct ScalarTest<'t, 'a> {
     tracer: &'t Tracer<'a>,
     shear: Shear,
     tri: TriRay,
+    exact: bool,
 }
 
 impl LeafTest for ScalarTest<'_, '_> {
     #[inline(always)]
     fn hit(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        if self.exact && self.tracer.triangle_test() == TriangleTest::Watertight {
+            return self.shear.intersect_f64(t, tmin, tmax);
+        }
         self.tracer.hit_triangle(&self.shear, &self.tri, t, tmin, tmax)
     }
 }
@@ -171,11 +176,14 @@ impl RayWalk {
     }
     /// A finished walk's hit, its distance measured from the ray's own origin.
     pub(crate) fn unshift(&self, hit: Option<Hit>) -> Option<Hit> {
-        match (self.shifted, hit) {
-            (Some((shift, tmin, tmax)), Some(h)) => {
-                Some(Hit { t: ((shift + h.t as f64) as f32).clamp(tmin, tmax), ..h })
-            }
-            _ => hit,
+        hit.map(|h| Hit { t: self.unshift_distance(h.t), ..h })
+    }
+    /// A distance of this walk measured from the ray's own origin: shifted back by the
+    /// distance a far origin was moved (rounded once, clamped into the ray's interval).
+    pub(crate) fn unshift_distance(&self, t: f32) -> f32 {
+        match self.shifted {
+            Some((shift, tmin, tmax)) => ((shift + t as f64) as f32).clamp(tmin, tmax),
+            None => t,
         }
     }
 }
@@ -409,18 +417,31 @@ impl Tracer<'_> {
     /// is over (its answer is then in `w.best`).
     #[inline(always)]
     pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut impl Tally) -> bool {
-        let v = &self.view;
-        let lo = self.frame.root_lo;
-        let a = w.address as usize;
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-        let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d } };
+        let exact = w.rule == ExitRule::Exact;
+        let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d }, exact };
         let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
         let Some((_, ncount)) = self.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test) else {
             return true;
         };
-        // 2. The exit corner from the cell (the same bits as the stored box: an
-        //    integer times a power of two is exact, and one rounding follows), then
-        //    the exit face from the signs of three Plücker products.
+        // 2. Where the ray leaves the leaf.
+        let exit = self.exit_of(w);
+        // 3. A candidate inside this leaf is the nearest: nothing after the exit can
+        //    be nearer. Past tmax, nothing more can count.
+        if w.best.is_some_and(|h| h.t <= exit.t) || exit.t >= w.tmax {
+            return true;
+        }
+        // 4-5. The neighbour.
+        !self.follow(w, &exit, ncount)
+    }
+
+    /// Where the walk leaves its current leaf: the exit corner from the cell (the same
+    /// bits as the stored box: an integer times a power of two is exact, and one
+    /// rounding follows), then the exit face from the signs of three Plücker products
+    /// (or the slab rule, or exact decisions: `tables::exit_rule`), and the distance.
+    #[inline(always)]
+    pub(crate) fn exit_of(&self, w: &RayWalk) -> Exit {
+        let lo = self.frame.root_lo;
         let (cell, level) = (w.cell, w.level);
         let size = self.frame.sizes[level as usize & 31];
         let corner = |k: usize| (lo[k] + (cell[k] + w.high[k]) as f32 * size) - w.o[k];
@@ -449,18 +470,28 @@ impl Tracer<'_> {
             }
         };
         let (off_a, d_a) = (pick(off), pick(w.d));
-        // 3. A candidate inside this leaf is the nearest: nothing after the exit can
-        //    be nearer. Past tmax, nothing more can count.
-        let t_exit = t_exact.unwrap_or_else(|| off_a * pick(w.inv));
-        if w.best.is_some_and(|h| h.t <= t_exit) || t_exit >= w.tmax {
-            return true;
-        }
-        // 4. The neighbour across the face: none at the root's boundary, else one, or
-        //    one of four picked by the sides of the face's median lines (the Plücker
-        //    products with the lines through the face's centre).
+        let t = t_exact.unwrap_or_else(|| off_a * pick(w.inv));
+        Exit { face, t, off_a, d_a }
+    }
+
+    /// Moves the walk across `exit`'s face of its leaf (record word `ncount`) to the
+    /// neighbour there; false where there is none (the root's boundary, or a link past
+    /// the array in a hostile file on the trusted path).
+    #[inline(always)]
+    pub(crate) fn follow(&self, w: &mut RayWalk, exit: &Exit, ncount: u32) -> bool {
+        let v = &self.view;
+        let lo = self.frame.root_lo;
+        let a = w.address as usize;
+        let (cell, level) = (w.cell, w.level);
+        let size = self.frame.sizes[level as usize & 31];
+        let Exit { face, off_a, d_a, .. } = *exit;
+        let axis = face >> 1;
+        // The neighbour across the face: none at the root's boundary, else one, or one
+        // of four picked by the sides of the face's median lines (the Plücker products
+        // with the lines through the face's centre).
         let n = (ncount >> (4 * face)) & 0xF;
         if n == 0 {
-            return true;
+            return false;
         }
         let half = 0.5 * size;
         let negative_a = face & 1 == 0;
@@ -480,12 +511,12 @@ impl Tracer<'_> {
         let quadrant = (side_bits & ((1 << axis) - 1)) | ((side_bits >> (axis + 1)) << axis);
         let link = a + LEAF_HEADER_WORDS + (links_before(ncount, face) + (n >> 2) * quadrant) as usize;
         // A link past the array (a hostile file on the trusted path) ends the walk.
-        let Some(&next) = v.octree.get(link) else { return true };
+        let Some(&next) = v.octree.get(link) else { return false };
         w.address = next;
-        // 5. The neighbour's cell: across the face at this level, then one level finer
-        //    (four neighbours: the quadrant's child on our side), the same, or one
-        //    coarser (the flag in nCount), without a branch:
-        //    cell' = ((across << 1) | child bits) >> (1 - d).
+        // The neighbour's cell: across the face at this level, then one level finer
+        // (four neighbours: the quadrant's child on our side), the same, or one coarser
+        // (the flag in nCount), without a branch: cell' = ((across << 1) | child bits)
+        // >> (1 - d).
         let coarser = (ncount >> (COARSER_SHIFT as usize + face)) & 1;
         let finer = n >> 2;
         // 0 to 2 in a valid file; `& 31` keeps a hostile file's counts (on the trusted
@@ -500,8 +531,18 @@ impl Tracer<'_> {
         };
         w.cell = [next(0), next(1), next(2)];
         w.level = level.wrapping_add(finer).wrapping_sub(coarser);
-        false
+        true
     }
+}
+
+/// Where a walk leaves its leaf ([`Tracer::exit_of`]): the face, the distance, and the
+/// exit axis's corner offset and direction component (for the median-line sides).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Exit {
+    pub face: usize,
+    pub t: f32,
+    off_a: f32,
+    d_a: f32,
 }
 
 impl Tracer<'_> {

@@ -65,9 +65,85 @@ impl Shear {
     }
 
     /// The hit `(t, u, v)` of the triangle `v0 v1 v2` (nine floats) within
-    /// `[tmin, tmax]`; `u` and `v` weigh `v1` and `v2`.
+    /// `[tmin, tmax]`; `u` and `v` weigh `v1` and `v2`. Edges and vertices belong to
+    /// the triangle (closed): a ray through an edge two triangles share hits both.
     #[inline(always)]
     pub fn intersect(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test::<false>(t, tmin, tmax)
+    }
+
+    /// [`Shear::intersect`] with each edge and vertex owned by one triangle: a ray
+    /// through an edge or a vertex that triangles share crosses exactly one of them, so
+    /// every crossing of a closed surface is counted once (the queries that list or
+    /// count every crossing: `Tracer::crossings`).
+    ///
+    /// # The rule
+    /// A ray through an edge makes that edge's function exactly zero (after the `f64`
+    /// check, exact for the sheared `f32` vertices both triangles share). The point
+    /// counts for the triangle when its edge, as the triangle runs it, points "up or
+    /// right" once turned by the sign of the triangle's projected area: with
+    /// `e = sign(det) (end - start)` in the sheared plane, when `e.y > 0`, or
+    /// `e.y == 0` and `e.x > 0` (rasterisers' top-left rule). Two triangles on either
+    /// side of a shared edge run it in opposite senses relative to their areas, so
+    /// exactly one owns it, whichever way they are wound; two folded onto the same side
+    /// (a silhouette) both own it or neither, an even count for a ray that only grazes.
+    /// At a vertex two functions are zero and both edges must be owned, which gives
+    /// the vertex to exactly one triangle of a fan around it.
+    #[inline(always)]
+    pub fn intersect_owned(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test::<true>(t, tmin, tmax)
+    }
+
+    /// [`Shear::intersect`] in `f64` throughout (vertices relative to the origin, the
+    /// shear, the edge functions): the test of the rays under the walk's exact exit
+    /// rule (`tables::exit_rule`), whose components are so small against each other
+    /// that `f32` shear factors lose their bits (a subnormal `d[kx] / d[kz]`): a ray
+    /// lying in a face's plane within that rounding then met every triangle of the
+    /// plane its line crosses, at `t = 0`. In `f64` those products are exact or
+    /// nearly, and the test is watertight for the same reason the `f32` one is (two
+    /// triangles sharing an edge compute its function from the same sheared vertices).
+    #[inline(never)]
+    pub fn intersect_f64(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test_f64::<false>(t, tmin, tmax)
+    }
+
+    /// [`Shear::intersect_owned`] in `f64` throughout ([`Shear::intersect_f64`]).
+    #[inline(never)]
+    pub fn intersect_owned_f64(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test_f64::<true>(t, tmin, tmax)
+    }
+
+    fn test_f64<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.k;
+        let d = self.d.map(f64::from);
+        let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
+        let o = self.o.map(f64::from);
+        let rel = |i: usize| [0, 1, 2].map(|k| t[3 * i + k] as f64 - o[k]);
+        let (a, b, c) = (rel(0), rel(1), rel(2));
+        let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+        let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+        let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+        let (u, v, w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        if OWNED && (u == 0.0 || v == 0.0 || w == 0.0) {
+            let owned = |e: f64, from: (f64, f64), to: (f64, f64)| e != 0.0 || owns64(det > 0.0, from, to);
+            let (a, b, c) = ((ax, ay), (bx, by), (cx, cy));
+            if !(owned(u, b, c) && owned(v, c, a) && owned(w, a, b)) {
+                return None;
+            }
+        }
+        let dist = plane_distance(self.o, self.d, t);
+        (dist >= tmin && dist <= tmax).then_some((dist, (v / det) as f32, (w / det) as f32))
+    }
+
+    #[inline(always)]
+    fn test<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
         let [sx, sy, _] = self.s;
         let o = self.o;
@@ -96,12 +172,36 @@ impl Shear {
         if det == 0.0 {
             return None; // the ray lies in the triangle's plane
         }
+        if OWNED && (u == 0.0 || v == 0.0 || w == 0.0) {
+            // U, V, W are the functions of edges B->C, C->A, A->B.
+            let owned = |e: f32, from: (f32, f32), to: (f32, f32)| e != 0.0 || owns(det, from, to);
+            let (a, b, c) = ((ax, ay), (bx, by), (cx, cy));
+            if !(owned(u, b, c) && owned(v, c, a) && owned(w, a, b)) {
+                return None;
+            }
+        }
         let dist = plane_distance(o, self.d, t);
         // Barycentrics by division: |v| and |w| are at most |det| (the three agree in
         // sign), so the quotients stay in [0, 1] even where det is subnormal (a
         // reciprocal there overflows).
         (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
     }
+}
+
+/// Whether a triangle whose projected area has the sign of `det` owns its edge from
+/// `from` to `to` (sheared coordinates) where the ray crosses it: the rule of
+/// [`Shear::intersect_owned`]. The differences are exact in sign in `f64`.
+#[cold]
+#[inline(never)]
+fn owns(det: f32, from: (f32, f32), to: (f32, f32)) -> bool {
+    owns64(det > 0.0, (from.0 as f64, from.1 as f64), (to.0 as f64, to.1 as f64))
+}
+
+/// [`owns`] on `f64` coordinates (the signs of their differences are what counts).
+fn owns64(positive: bool, from: (f64, f64), to: (f64, f64)) -> bool {
+    let s = if positive { 1.0 } else { -1.0 };
+    let (ex, ey) = (s * (to.0 - from.0), s * (to.1 - from.1));
+    ey > 0.0 || (ey == 0.0 && ex > 0.0)
 }
 
 /// Where the ray `o + t d` meets the plane of triangle `t` (nine floats), in `f64`,
@@ -172,6 +272,128 @@ mod tests {
                 let s = Shear::new(o, d);
                 let hits = [&t1, &t2].iter().filter(|t| s.intersect(&t[..], 0.0, f32::INFINITY).is_some()).count();
                 assert!(hits >= 1, "a ray through ({p}, {p}, 0) along {d:?} slipped between");
+            }
+        }
+    }
+
+    /// Owned hits of a ray over a triangle list: how many triangles claim it.
+    fn owners(tris: &[[f32; 9]], o: [f32; 3], d: [f32; 3]) -> usize {
+        let s = Shear::new(o, d);
+        tris.iter().filter(|t| s.intersect_owned(&t[..], f32::NEG_INFINITY, f32::INFINITY).is_some()).count()
+    }
+
+    /// A grid of `n x n` unit squares in the plane z = 0, two triangles each, every
+    /// other one wound the other way when `mixed` (ownership must not care).
+    fn grid(n: usize, mixed: bool) -> Vec<[f32; 9]> {
+        let mut tris = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let (x0, y0, x1, y1) = (x as f32, y as f32, x as f32 + 1.0, y as f32 + 1.0);
+                let mut a = [x0, y0, 0.0, x1, y0, 0.0, x1, y1, 0.0];
+                let mut b = [x0, y0, 0.0, x1, y1, 0.0, x0, y1, 0.0];
+                if mixed && (x + y) % 2 == 1 {
+                    a = [a[0], a[1], a[2], a[6], a[7], a[8], a[3], a[4], a[5]];
+                    b = [b[0], b[1], b[2], b[6], b[7], b[8], b[3], b[4], b[5]];
+                }
+                tris.extend([a, b]);
+            }
+        }
+        tris
+    }
+
+    /// Every vertex, edge midpoint and random point strictly inside a grid of squares
+    /// is owned by exactly one triangle, for rays from above and below, straight and
+    /// tilted, whichever way the triangles are wound; outside the grid by none.
+    #[test]
+    fn every_point_of_a_grid_is_owned_once() {
+        let mut seed = 0x0DD5_u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let dirs = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.25, -0.5, 1.0], [-0.375, 0.125, -1.0], [1.0, 0.5, 0.25]];
+        for mixed in [false, true] {
+            let tris = grid(4, mixed);
+            for d in dirs {
+                // Rays through p at t = 1.
+                let through = |p: [f32; 3]| [p[0] - d[0], p[1] - d[1], p[2] - d[2]];
+                for i in 0..=8 {
+                    for j in 0..=8 {
+                        let p = [i as f32 * 0.5, j as f32 * 0.5, 0.0];
+                        let inside = (1..8).contains(&i) && (1..8).contains(&j);
+                        let on_rim = !inside && (0..=8).contains(&i) && (0..=8).contains(&j);
+                        let n = owners(&tris, through(p), d);
+                        if inside {
+                            assert_eq!(n, 1, "mixed {mixed}, d {d:?}, point {p:?}: {n} owners");
+                        } else {
+                            assert!(on_rim && n <= 2, "rim point {p:?}: {n}");
+                        }
+                    }
+                }
+                for _ in 0..2000 {
+                    let p = [0.01 + 3.98 * next(), 0.01 + 3.98 * next(), 0.0];
+                    assert_eq!(owners(&tris, through(p), d), 1, "mixed {mixed}, d {d:?}, point {p:?}");
+                }
+                assert_eq!(owners(&tris, through([4.5, 1.0, 0.0]), d), 0);
+            }
+        }
+    }
+
+    /// A fan of 12 triangles around a centre vertex (and the centre on a shared edge of
+    /// a second fan turned over): a ray through the centre, straight or tilted, is owned
+    /// once; a closed cube's every vertex and edge midpoint, once entering and once
+    /// leaving.
+    #[test]
+    fn fans_and_closed_cubes_are_crossed_once_at_vertices_and_edges() {
+        let n = 12;
+        let rim = |k: usize| {
+            let a = std::f64::consts::TAU * (k % n) as f64 / n as f64;
+            [(2.0 * a.cos()) as f32, (2.0 * a.sin()) as f32, 0.0]
+        };
+        let fan: Vec<[f32; 9]> = (0..n)
+            .map(|k| {
+                let (p, q) = (rim(k), rim(k + 1));
+                [0.0, 0.0, 0.0, p[0], p[1], p[2], q[0], q[1], q[2]]
+            })
+            .collect();
+        for d in [[0.0, 0.0, 1.0], [0.3, 0.1, 1.0], [-0.2, 0.7, -1.0], [0.0, 0.5, 1.0]] {
+            assert_eq!(owners(&fan, [-d[0], -d[1], -d[2]], d), 1, "fan centre, d {d:?}");
+            for k in 0..n {
+                let p = rim(k).map(|c| c * 0.5);
+                assert_eq!(owners(&fan, [p[0] - d[0], p[1] - d[1], p[2] - d[2]], d), 1, "spoke {k}, d {d:?}");
+            }
+        }
+        // A closed cube (12 triangles, outward): lines through each vertex, edge midpoint
+        // and face centre, in generic directions into the cube: two crossings each.
+        let cube: Vec<[f32; 9]> = [
+            [[0., 0., 0.], [0., 1., 0.], [1., 1., 0.]],
+            [[0., 0., 0.], [1., 1., 0.], [1., 0., 0.]],
+            [[0., 0., 1.], [1., 0., 1.], [1., 1., 1.]],
+            [[0., 0., 1.], [1., 1., 1.], [0., 1., 1.]],
+            [[0., 0., 0.], [1., 0., 0.], [1., 0., 1.]],
+            [[0., 0., 0.], [1., 0., 1.], [0., 0., 1.]],
+            [[0., 1., 0.], [0., 1., 1.], [1., 1., 1.]],
+            [[0., 1., 0.], [1., 1., 1.], [1., 1., 0.]],
+            [[0., 0., 0.], [0., 0., 1.], [0., 1., 1.]],
+            [[0., 0., 0.], [0., 1., 1.], [0., 1., 0.]],
+            [[1., 0., 0.], [1., 1., 0.], [1., 1., 1.]],
+            [[1., 0., 0.], [1., 1., 1.], [1., 0., 1.]],
+        ]
+        .map(|t: [[f32; 3]; 3]| [t[0][0], t[0][1], t[0][2], t[1][0], t[1][1], t[1][2], t[2][0], t[2][1], t[2][2]])
+        .to_vec();
+        let centre = [0.5f32; 3];
+        for x in 0..=2 {
+            for y in 0..=2 {
+                for z in 0..=2 {
+                    let p = [x as f32 * 0.5, y as f32 * 0.5, z as f32 * 0.5];
+                    if p == centre {
+                        continue;
+                    }
+                    // The line from the far side through the centre and p.
+                    let d = [centre[0] - p[0], centre[1] - p[1], centre[2] - p[2]];
+                    let o = [p[0] - 2.0 * d[0], p[1] - 2.0 * d[1], p[2] - 2.0 * d[2]];
+                    assert_eq!(owners(&cube, o, d), 2, "through {p:?}");
+                }
             }
         }
     }

@@ -810,6 +810,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               return select(p > 0.0lf, p < 0.0lf, is_negative(di) == is_negative(dj));\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return f32(f64(off) / f64(d));\n}\n";
         g += FAR_F64;
+        g += HIT_F64;
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let p = f64(off_a) * f64(dk) - f64(m) * f64(d_a);\n    \
               return select(0u, 1u, (p > 0.0lf) != negative_a);\n}\n";
@@ -827,6 +828,9 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    return oi / di < oj / dj;\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return off / d;\n}\n";
         g += FAR_F32;
+        // Without f64 the exact rule's rays take the f32 test.
+        g += "fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {\n    \
+              return hit_triangle(wk, at, tmin, tmax);\n}\n";
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let x = (off_a / d_a) * dk - m;\n    \
               let p_positive = select(x > 0.0, x < 0.0, is_negative(d_a));\n    \
@@ -874,6 +878,45 @@ fn shifted(t: f32, s: vec2<f32>) -> f32 {
 }
 fn unshifted(t: f32, s: vec2<f32>) -> f32 {
     return f32(f64(t) - (f64(s.x) + f64(s.y)));
+}
+";
+
+/// `cpu::watertight::Shear::intersect_f64`: the watertight test in `f64` throughout,
+/// for the rays under the exact exit rule (the same operations in the same order).
+const HIT_F64: &str = "fn c64(v: vec3<f64>, i: u32) -> f64 {
+    return select(select(v.z, v.y, i == 1u), v.x, i == 0u);
+}
+fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {
+    let k = (*wk).k;
+    let d = vec3<f64>(f64((*wk).d.x), f64((*wk).d.y), f64((*wk).d.z));
+    let sx = c64(d, k.x) / c64(d, k.z);
+    let sy = c64(d, k.y) / c64(d, k.z);
+    let o = vec3<f64>(f64((*wk).o.x), f64((*wk).o.y), f64((*wk).o.z));
+    let a = vec3<f64>(f64(wordf(at)), f64(wordf(at + 1u)), f64(wordf(at + 2u))) - o;
+    let b = vec3<f64>(f64(wordf(at + 3u)), f64(wordf(at + 4u)), f64(wordf(at + 5u))) - o;
+    let c = vec3<f64>(f64(wordf(at + 6u)), f64(wordf(at + 7u)), f64(wordf(at + 8u))) - o;
+    let ax = c64(a, k.x) - sx * c64(a, k.z);
+    let ay = c64(a, k.y) - sy * c64(a, k.z);
+    let bx = c64(b, k.x) - sx * c64(b, k.z);
+    let by = c64(b, k.y) - sy * c64(b, k.z);
+    let cx = c64(c, k.x) - sx * c64(c, k.z);
+    let cy = c64(c, k.y) - sy * c64(c, k.z);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    if (u < 0.0lf || v < 0.0lf || w < 0.0lf) && (u > 0.0lf || v > 0.0lf || w > 0.0lf) {
+        return vec4<f32>(0.0);
+    }
+    let det = u + v + w;
+    if det == 0.0lf {
+        return vec4<f32>(0.0);
+    }
+    let plane = plane_distance((*wk).o, (*wk).d, at);
+    let dist = plane.x;
+    if plane.y != 0.0 && dist >= tmin && dist <= tmax {
+        return vec4<f32>(dist, f32(v / det), f32(w / det), 1.0);
+    }
+    return vec4<f32>(0.0);
 }
 ";
 

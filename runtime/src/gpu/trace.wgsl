@@ -301,7 +301,13 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
     for (var j = 0u; j < count && tick(); j++) {
         let tri = word(params.o_refs + offset + j);
-        let h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+        var h: vec4<f32>;
+        if (*wk).rule == RULE_EXACT {
+            // In f64 throughout (generated: cpu::watertight::Shear::intersect_f64).
+            h = hit_triangle_exact(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+        } else {
+            h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+        }
         // Of equal hits the last tested, which is the lowest input id (walk.rs, `keep`).
         if h.w != 0.0 {
             (*wk).t_best = h.x;

@@ -1,6 +1,7 @@
 //! octrace's integration tests, one module per area.
 
 mod bunny;
+mod crossings;
 mod effects;
 mod format;
 mod gltf_lenient;

@@ -1,0 +1,241 @@
+//! Every crossing along a ray, in increasing distance, each once: the walk's order
+//! (it meets leaves in the order the ray does, with no stack and no sort but within a
+//! leaf) with the watertight test's edge ownership (`Shear::intersect_owned`: a ray
+//! through an edge or a vertex that triangles share crosses exactly one of them).
+//!
+//! # Each crossing once
+//! A triangle spanning several leaves is listed in each and found again in each. The
+//! leaves the walk visits tile the ray: leaf `k` holds the piece `(t_{k-1}, t_k]`
+//! between the previous leaf's exit and its own (the first from `tmin`, the last to
+//! `tmax`), and a leaf reports only the crossings in its piece, so each distance falls
+//! in exactly one leaf, and that leaf lists every triangle through the ray's point
+//! there (the bake lists a triangle in every leaf its enlarged box meets). The pieces'
+//! ends never go backwards (an exit that rounds before the previous one gives an empty
+//! piece). Crossings in a piece are sorted by distance, equal distances by input id.
+
+use std::ops::ControlFlow;
+
+use octrace_format::layout::{LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+
+use super::tables::ExitRule;
+use super::tracer::Tracer;
+use crate::ray::Ray;
+
+/// One crossing of a ray with a triangle ([`Tracer::crossings`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crossing {
+    /// Distance along the ray, in units of its direction (as [`crate::Hit::t`]).
+    pub t: f32,
+    /// The triangle's index in the input mesh.
+    pub triangle: u32,
+    /// Barycentric coordinate of the second vertex.
+    pub u: f32,
+    /// Barycentric coordinate of the third vertex.
+    pub v: f32,
+    /// Whether the ray arrives on the triangle's front, the side its normal
+    /// `(v1 - v0) x (v2 - v0)` points to (counter-clockwise seen from there): for a
+    /// closed mesh wound outward, whether it enters the solid there.
+    pub enters: bool,
+}
+
+/// How many times a ray crosses a mesh ([`Tracer::count_crossings`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CrossingCount {
+    /// Every crossing.
+    pub total: u32,
+    /// Crossings arriving on a triangle's front ([`Crossing::enters`]).
+    pub entries: u32,
+}
+
+impl CrossingCount {
+    /// Crossings arriving on a triangle's back.
+    pub fn exits(&self) -> u32 {
+        self.total - self.entries
+    }
+
+    /// Entries minus exits: for a ray from a point to infinity through a closed mesh
+    /// wound outward, -1 for each solid the point is inside, 0 outside.
+    pub fn winding(&self) -> i64 {
+        self.entries as i64 - self.exits() as i64
+    }
+}
+
+/// A walk's reusable buffer for the crossings of one leaf.
+#[derive(Debug, Default)]
+pub(crate) struct LeafCrossings(Vec<(Crossing, u32)>);
+
+impl Tracer<'_> {
+    /// Calls `visit` with every crossing of `ray` in `[tmin, tmax]`, in increasing
+    /// distance (equal distances in increasing input id), each once: a ray through an
+    /// edge or vertex that triangles share crosses one of them (the watertight test's
+    /// edge ownership, `cpu::watertight::Shear::intersect_owned`); two triangles at the
+    /// same place (coplanar copies) are both listed. `visit` may stop the walk by
+    /// returning `ControlFlow::Break`.
+    ///
+    /// The nearest-hit queries keep their closed edges: a ray exactly through the edge
+    /// of an open mesh's rim hits it there, and may cross nothing here.
+    ///
+    /// # Example
+    /// ```
+    /// use std::ops::ControlFlow;
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{Ray, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let ray = Ray::new([-3.0, 0.1, 0.2].into(), [1.0, 0.0, 0.0].into());
+    /// let mut ts = Vec::new();
+    /// scene.tracer().crossings(&ray, |c| {
+    ///     ts.push((c.t, c.enters));
+    ///     ControlFlow::Continue(())
+    /// });
+    /// assert_eq!(ts.len(), 2); // in, then out
+    /// assert!(ts[0].0 < ts[1].0 && ts[0].1 && !ts[1].1);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn crossings(&self, ray: &Ray, visit: impl FnMut(Crossing) -> ControlFlow<()>) {
+        self.crossings_with(ray, &mut LeafCrossings::default(), visit);
+    }
+
+    /// Every crossing of `ray`, in order ([`Tracer::crossings`]).
+    pub fn all_crossings(&self, ray: &Ray) -> Vec<Crossing> {
+        let mut out = Vec::new();
+        self.crossings(ray, |c| {
+            out.push(c);
+            ControlFlow::Continue(())
+        });
+        out
+    }
+
+    /// The first `k` crossings of `ray`, in order ([`Tracer::crossings`], stopped there).
+    pub fn first_crossings(&self, ray: &Ray, k: usize) -> Vec<Crossing> {
+        let mut out = Vec::with_capacity(k.min(64));
+        if k > 0 {
+            self.crossings(ray, |c| {
+                out.push(c);
+                if out.len() == k {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            });
+        }
+        out
+    }
+
+    /// How many times `ray` crosses the mesh in `[tmin, tmax]`, and how many of those
+    /// arrive on a triangle's front ([`Tracer::crossings`]' crossings, counted).
+    pub fn count_crossings(&self, ray: &Ray) -> CrossingCount {
+        let mut count = CrossingCount::default();
+        self.crossings(ray, |c| {
+            count.total += 1;
+            count.entries += c.enters as u32;
+            ControlFlow::Continue(())
+        });
+        count
+    }
+
+    /// [`Tracer::all_crossings`] by brute force: every stored triangle tested with the
+    /// same test and edge rule, from the same (possibly moved) origin, sorted by
+    /// distance and input id. The reference the walk is tested against: the same list,
+    /// bit for bit.
+    pub fn crossings_by_brute_force(&self, ray: &Ray) -> Vec<Crossing> {
+        let Some(w) = self.begin(ray) else { return Vec::new() };
+        let v = self.view();
+        let (shear, d, exact) = (w.shear(), w.d(), w.rule() == ExitRule::Exact);
+        let mut out: Vec<Crossing> = v
+            .triangles
+            .chunks_exact(TRIANGLE_FLOATS)
+            .zip(v.triangle_ids)
+            .filter_map(|(tri, &triangle)| {
+                let (tmin, tmax) = (w.tmin(), w.t_best());
+                let hit = if exact {
+                    shear.intersect_owned_f64(tri, tmin, tmax)
+                } else {
+                    shear.intersect_owned(tri, tmin, tmax)
+                };
+                let (t, u, vv) = hit?;
+                Some(Crossing { t, triangle, u, v: vv, enters: arrives_on_front(d, tri) })
+            })
+            .collect();
+        // In the walk's order (its distances, then input ids), then measured from the
+        // ray's own origin.
+        out.sort_unstable_by(|x, y| x.t.total_cmp(&y.t).then(x.triangle.cmp(&y.triangle)));
+        out.iter_mut().for_each(|c| c.t = w.unshift_distance(c.t));
+        out
+    }
+
+    /// [`Tracer::crossings`] with a caller's buffer (batches reuse one a thread).
+    pub(crate) fn crossings_with(
+        &self,
+        ray: &Ray,
+        buffer: &mut LeafCrossings,
+        mut visit: impl FnMut(Crossing) -> ControlFlow<()>,
+    ) {
+        let Some(mut w) = self.begin(ray) else { return };
+        // The ray's own interval in the walk's units (a far origin is moved: the walk's
+        // distances are from there, `RayWalk::unshift`).
+        // Where the walk stops: the ray's tmax, or where it leaves the mesh box.
+        let (tmin, tmax, stop) = (w.tmin(), w.t_best(), w.tmax());
+        let (shear, d) = (w.shear(), w.d());
+        // A ray under the exact exit rule is tested in f64 (`Shear::intersect_f64`).
+        let exact = w.rule() == ExitRule::Exact;
+        let v = self.view();
+        // The end of the previous leaf's piece; `None` in the first leaf, whose piece
+        // starts at tmin, closed.
+        let mut lo: Option<f32> = None;
+        for _ in 0..self.max_steps() {
+            let a = w.address() as usize;
+            // A hostile file's link past the array (on the trusted path) ends the walk.
+            let Some(rec) = v.octree.get(a..a + LEAF_HEADER_WORDS) else { return };
+            let (count, offset, ncount) = (rec[0], rec[1], rec[3]);
+            let exit = self.exit_of(&w);
+            let n = (ncount >> (4 * exit.face)) & 0xF;
+            let last = exit.t >= stop || n == 0;
+            let hi = if last { tmax } else { exit.t.max(lo.unwrap_or(tmin)) };
+            // The leaf's crossings in its piece.
+            let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+            buffer.0.clear();
+            for &prim in refs {
+                let Some(tri) =
+                    v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+                else {
+                    continue;
+                };
+                let hit =
+                    if exact { shear.intersect_owned_f64(tri, tmin, hi) } else { shear.intersect_owned(tri, tmin, hi) };
+                let Some((t, u, vv)) = hit else { continue };
+                if lo.is_some_and(|lo| t <= lo) {
+                    continue;
+                }
+                let Some(&triangle) = v.triangle_ids.get(prim as usize) else { continue };
+                let enters = arrives_on_front(d, tri);
+                buffer.0.push((Crossing { t, triangle, u, v: vv, enters }, prim));
+            }
+            if buffer.0.len() > 1 {
+                buffer.0.sort_unstable_by(|x, y| x.0.t.total_cmp(&y.0.t).then(x.0.triangle.cmp(&y.0.triangle)));
+            }
+            for &(c, _) in &buffer.0 {
+                let c = Crossing { t: w.unshift_distance(c.t), ..c };
+                if visit(c).is_break() {
+                    return;
+                }
+            }
+            lo = Some(hi);
+            if last || !self.follow(&mut w, &exit, ncount) {
+                return;
+            }
+        }
+    }
+}
+
+/// Whether a ray of direction `d` arrives on the front of triangle `tri` (nine
+/// floats): `d . n < 0` with `n = (v1 - v0) x (v2 - v0)`, in `f64` (the products of
+/// `f32` differences are exact there; the sum rounds once).
+#[inline(always)]
+fn arrives_on_front(d: [f32; 3], tri: &[f32]) -> bool {
+    let v = |i: usize| [tri[3 * i] as f64, tri[3 * i + 1] as f64, tri[3 * i + 2] as f64];
+    let (a, b, c) = (v(0), v(1), v(2));
+    let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    d[0] as f64 * n[0] + d[1] as f64 * n[1] + d[2] as f64 * n[2] < 0.0
+}
