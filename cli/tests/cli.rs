@@ -35,6 +35,7 @@ cube map           4 x 4 texels a face, level 2
 bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
 bake               max depth 3, leaf size 2, margin 9.536743e-7 of the root edge; time not recorded (reproducible file)
 bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0.0, 0.0], edge 1
+surface            closed (18 edges, each in two triangles; all consistently oriented)
 scene data         1 mesh part, 0 materials, 0 lights, 0 cameras, 0 textures; per triangle: none
 effects            none (primary rays only)
 ";
@@ -43,6 +44,8 @@ effects            none (primary rays only)
     assert_eq!(json["leaves"], 246);
     assert_eq!(json["degenerate_triangles"], 1);
     assert_eq!(json["bake"]["time_s"], serde_json::Value::Null);
+    assert_eq!(json["surface"]["closed"], true);
+    assert_eq!(json["surface"]["edges"], 18);
     let sections = json["sections"].as_array().unwrap();
     let names: Vec<&str> = sections.iter().map(|s| s["name"].as_str().unwrap()).collect();
     assert_eq!(names, octrace_format::SECTION_NAMES);
@@ -78,6 +81,7 @@ fn inspect_lists_each_effect_with_its_reason_and_render_turns_them_off() {
         tail,
         [
             "scene data         3 mesh parts, 3 materials, 0 lights, 0 cameras, 0 textures; per triangle: material ids",
+            "                   part 0, object 'unnamed_object', triangles 0..12: closed (18 edges, each in two triangles; all consistently oriented)",
             "effects            shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangle",
             "                   soft-shadows: area light: material 'lamp' emits (4.00, 4.00, 3.00) on 1 triangle",
             "                   reflection: material 'chrome', illum 3, Ks (0.90, 0.90, 0.90) (and 1 more)",

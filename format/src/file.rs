@@ -389,6 +389,16 @@ pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> Sc
             input_triangles: a.stats.input_triangles.to_native(),
             degenerate_triangles: a.stats.degenerate_triangles.to_native(),
             leaves_before_balance: a.stats.leaves_before_balance.to_native(),
+            edges: {
+                let e = &a.stats.edges;
+                crate::topology::EdgeCensus {
+                    edges: e.edges.to_native(),
+                    boundary: e.boundary.to_native(),
+                    non_manifold: e.non_manifold.to_native(),
+                    flipped: e.flipped.to_native(),
+                    degenerate: e.degenerate.to_native(),
+                }
+            },
         },
         // The archive is little-endian and so is the target (checked at compile time),
         // so rend's little-endian wrappers are the native values: a plain cast.

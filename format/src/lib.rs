@@ -34,6 +34,7 @@ mod scene;
 mod shading;
 pub mod stats;
 mod texture;
+pub mod topology;
 pub mod validate;
 mod view;
 mod write;
@@ -97,7 +98,12 @@ pub mod testing {
         BakedScene {
             params: BakeParams { max_depth: 0, leaf_size: 8, margin: 0.0, cube_level: 0 },
             bounds: Bounds { mesh_lo: [0.0; 3], mesh_hi: [1.0, 1.0, 0.0], root_lo, root_size: 1.0 },
-            stats: BakeStats { input_triangles: 1, degenerate_triangles: 0, leaves_before_balance: 1 },
+            stats: BakeStats {
+                input_triangles: 1,
+                degenerate_triangles: 0,
+                leaves_before_balance: 1,
+                ..Default::default()
+            },
             octree: vec![1, 0, 0, pack_counts([0; 6], [false; 6])],
             tri_refs: vec![0],
             triangles: vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0],

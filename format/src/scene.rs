@@ -41,6 +41,8 @@ pub struct BakeStats {
     pub degenerate_triangles: u64,
     /// Leaves before the 2:1 balance (the paper's "non contraint", Table 1).
     pub leaves_before_balance: u64,
+    /// Whether the stored triangles make a closed, consistently oriented surface.
+    pub edges: crate::topology::EdgeCensus,
 }
 
 /// A baked scene in memory: the contents of a `.oct` file's archive.

@@ -260,6 +260,9 @@ pub struct MeshPart {
     pub first: u32,
     /// Its triangles.
     pub count: u32,
+    /// Whether it is closed and consistently oriented, counted over its triangles that
+    /// are not degenerate (the bake fills it in).
+    pub edges: crate::topology::EdgeCensus,
 }
 
 /// An effect a renderer may have to simulate.
@@ -341,7 +344,7 @@ impl Shading {
     /// # Example
     /// ```
     /// use octrace_format::{MeshPart, Shading};
-    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count };
+    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, edges: Default::default() };
     /// let shading = Shading { parts: vec![part("object 'lid'", 0, 10), part("object 'pot'", 10, 90)], ..Default::default() };
     /// let (pot, i) = shading.part_of(12).unwrap();
     /// assert_eq!((pot.name.as_str(), i), ("object 'pot'", 2));

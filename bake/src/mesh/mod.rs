@@ -110,7 +110,12 @@ impl Mesh {
         let first = self.parts.last().map_or(0, |p| p.first as usize + p.count as usize);
         let count = self.triangles.len().saturating_sub(first);
         if count > 0 {
-            self.parts.push(octrace_format::MeshPart { name: name(), first: first as u32, count: count as u32 });
+            self.parts.push(octrace_format::MeshPart {
+                name: name(),
+                first: first as u32,
+                count: count as u32,
+                edges: Default::default(),
+            });
         }
     }
 

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use build::{Builder, Growth, Limits, Node};
 use flatten::FlatTree;
+use octrace_format::topology::EdgeCensus;
 
 /// The stages of a bake, reported in order to a progress callback.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,7 +49,7 @@ impl BakeStage {
 /// of `f32` values are exact in `f64`, so this is exact collinearity up to the single
 /// rounding of each difference.
 pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
-    crate::mesh::edge_cross(t) == [0.0; 3]
+    octrace_format::topology::is_degenerate(t)
 }
 
 /// The smallest root edge the tracer serves: `2^-60` (8.7e-19). The watertight test
@@ -272,12 +273,18 @@ fn bake_within(
         c.map(|[r, g, b, a]| [r as u32 | (g as u32) << 16, b as u32 | (a as u32) << 16]).concat()
     })
     .concat();
+    // Closed and consistently oriented, or not: each part, and the whole scene.
+    let mut parts = mesh.parts.clone();
+    for p in &mut parts {
+        let range = p.first as usize..(p.first as usize + p.count as usize).min(mesh.triangles.len());
+        p.edges = EdgeCensus::of(&mesh.triangles[range]);
+    }
     let shading = octrace_format::Shading {
         materials: mesh.materials.clone(),
         lights: mesh.lights.clone(),
         cameras: mesh.cameras.clone(),
         textures: mesh.textures.clone(),
-        parts: mesh.parts.clone(),
+        parts,
         effects: crate::effects::decide(mesh, &triangle_ids),
     };
     Ok(BakedScene {
@@ -292,6 +299,7 @@ fn bake_within(
             input_triangles: mesh.triangles.len() as u64,
             degenerate_triangles: (mesh.triangles.len() - kept) as u64,
             leaves_before_balance,
+            edges: EdgeCensus::of(&mesh.triangles),
         },
         octree: arrays.octree,
         tri_refs: arrays.tri_refs,

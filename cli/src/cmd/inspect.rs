@@ -155,9 +155,29 @@ impl<'a> Report<'a> {
                 "bounds             mesh {:?} .. {:?}; root cube at {:?}, edge {}",
                 v.bounds.mesh_lo, v.bounds.mesh_hi, v.bounds.root_lo, v.bounds.root_size
             ),
+            format!("surface            {}", surface(&v.stats.edges)),
             self.scene_data(),
         ];
         let mut text = lines.join("\n");
+        // Parts whose own surface says more than the whole's (a closed part in an open
+        // scene, or the other way round), when there are several.
+        let parts = &v.shading.parts;
+        if parts.len() > 1 {
+            let differing = parts.iter().enumerate().filter(|(_, p)| p.edges.is_closed() != v.stats.edges.is_closed());
+            for (shown, (i, p)) in differing.enumerate() {
+                if shown == 8 {
+                    text.push_str(&format!("\n{:<18} ... (`--json` lists every part)", ""));
+                    break;
+                }
+                let (first, end) = (p.first, p.first as u64 + p.count as u64);
+                text.push_str(&format!(
+                    "\n{:<18} part {i}, {}, triangles {first}..{end}: {}",
+                    "",
+                    p.name,
+                    surface(&p.edges)
+                ));
+            }
+        }
         let effects = &v.shading.effects;
         if effects.is_empty() {
             text.push_str("\neffects            none (primary rays only)");
@@ -235,6 +255,7 @@ impl<'a> Report<'a> {
             "triangles_per_leaf": { "mean": s.triangles_per_leaf_mean, "max": s.triangles_per_leaf_max },
             "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
             "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
+            "surface": surface_json(&v.stats.edges),
             "bytes": {
                 "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
                 "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
@@ -250,6 +271,7 @@ impl<'a> Report<'a> {
                 })).collect::<Vec<_>>(),
                 "parts": v.shading.parts.iter().map(|p| json!({
                     "name": p.name, "first_triangle": p.first, "triangles": p.count,
+                    "surface": surface_json(&p.edges),
                 })).collect::<Vec<_>>(),
                 "textures": v.shading.textures.iter().map(|t| json!({
                     "name": t.name, "width": t.width, "height": t.height,
@@ -293,4 +315,38 @@ impl<'a> Report<'a> {
             })).collect::<Vec<_>>(),
         })
     }
+}
+
+/// A surface's topology in words: `closed (104,288 edges, each in two triangles, all
+/// consistently oriented)`, or `open: 223 boundary edges, 2 non-manifold, 5 flipped
+/// (of 104,288 edges)`.
+pub(crate) fn surface(e: &octrace_format::topology::EdgeCensus) -> String {
+    if e.is_closed() {
+        let shape = if e.is_manifold() { "each in two triangles" } else { "each in an even number of triangles" };
+        let turn = if e.is_oriented() {
+            "all consistently oriented".to_string()
+        } else {
+            format!("{} flipped", thousands(e.flipped))
+        };
+        let more =
+            if e.is_manifold() { String::new() } else { format!(", {} non-manifold", thousands(e.non_manifold)) };
+        format!("closed ({} edges, {shape}{more}; {turn})", thousands(e.edges))
+    } else {
+        format!(
+            "open: {} boundary edges, {} non-manifold, {} flipped (of {} edges)",
+            thousands(e.boundary),
+            thousands(e.non_manifold),
+            thousands(e.flipped),
+            thousands(e.edges)
+        )
+    }
+}
+
+/// [`surface`] for machines.
+fn surface_json(e: &octrace_format::topology::EdgeCensus) -> serde_json::Value {
+    json!({
+        "closed": e.is_closed(), "manifold": e.is_manifold(), "oriented": e.is_oriented(),
+        "edges": e.edges, "boundary_edges": e.boundary, "non_manifold_edges": e.non_manifold,
+        "flipped_edges": e.flipped,
+    })
 }

@@ -462,3 +462,27 @@ fn geometry_and_shading_that_break_the_rules_are_rejected() {
         assert!(matches!(err, Error::Corrupt(ref m) if m.contains(says)), "{what}: {err}");
     }
 }
+
+/// The fuzzer's committed seeds for `open_scene` open in both of its modes (the first
+/// byte: odd, a whole file; even, an archive behind a correct header): seeds the
+/// current format refuses would leave the fuzzer mutating rejected bytes.
+#[test]
+fn the_fuzz_seeds_open_in_the_current_format() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/open_scene");
+    let mut opened = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let data = std::fs::read(&path).unwrap();
+        let (&mode, rest) = data.split_first().unwrap();
+        let scene = if mode & 1 == 1 {
+            octrace_runtime::Scene::from_bytes(rest)
+        } else {
+            let mut file = octrace_format::testing::header_for_archive(rest).encode().to_vec();
+            file.extend_from_slice(rest);
+            octrace_runtime::Scene::from_bytes(&file)
+        };
+        assert!(scene.is_ok(), "{}: {:?}", path.display(), scene.err());
+        opened += 1;
+    }
+    assert_eq!(opened, 6);
+}
