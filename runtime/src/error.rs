@@ -7,6 +7,19 @@ pub enum Error {
     /// The file could not be opened or is not a valid scene.
     #[error(transparent)]
     Format(#[from] octrace_format::Error),
+    /// The scene is not closed (some edge of its triangles is used by an odd number of
+    /// them), so inside and outside are not defined: a query that needs them is
+    /// refused.
+    #[error(
+        "the scene is not closed: {boundary_edges} of its {edges} edges are boundary edges (used by an odd number \
+         of triangles), so it has no inside; a parity vote (`contains_by_vote`) gives an approximate answer"
+    )]
+    NotClosed {
+        /// Edges used by an odd number of triangles.
+        boundary_edges: u64,
+        /// Distinct edges.
+        edges: u64,
+    },
     /// An image could not be written.
     #[error("{path}: cannot write image: {message}")]
     Image {

@@ -4,8 +4,8 @@ use std::path::Path;
 
 use octrace_format::{BakedScene, SceneFile, SceneView};
 
-use crate::cpu::{LocateGrid, Tracer};
-use crate::error::Result;
+use crate::cpu::{BatchCrossings, Crossing, CrossingCount, LocateGrid, Solid, Tracer};
+use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 
 enum Source {
@@ -46,6 +46,9 @@ struct Inner {
     grid: std::sync::OnceLock<LocateGrid>,
     /// The tracers' frame, computed once.
     frame: std::sync::OnceLock<crate::cpu::TreeFrame>,
+    /// The leaves' inside and outside labels, made on the first query that needs
+    /// them (or why not: the scene is open).
+    solid: std::sync::OnceLock<std::result::Result<crate::cpu::Solid, (u64, u64)>>,
 }
 
 impl std::fmt::Debug for Scene {
@@ -129,7 +132,12 @@ impl Scene {
     }
 
     fn with(source: Source) -> Scene {
-        let inner = Inner { source, grid: std::sync::OnceLock::new(), frame: std::sync::OnceLock::new() };
+        let inner = Inner {
+            source,
+            grid: std::sync::OnceLock::new(),
+            frame: std::sync::OnceLock::new(),
+            solid: std::sync::OnceLock::new(),
+        };
         Scene { shared: std::sync::OnceLock::new(), inner: Box::new(inner) }
     }
 
@@ -205,5 +213,86 @@ impl Scene {
         let mut out = vec![false; rays.len()];
         self.tracer().par_occluded_batch(rays, &mut out);
         out
+    }
+
+    /// Every crossing of `ray` with the scene, in order along it, each once
+    /// ([`Tracer::crossings`]: edges that triangles share crossed once).
+    pub fn crossings(&self, ray: &Ray) -> Vec<Crossing> {
+        self.shared_tracer().all_crossings(ray)
+    }
+
+    /// Every crossing of many rays, on all cores, in one flat list with each ray's
+    /// offsets (at most `limit` a ray, the first ones).
+    pub fn crossings_all(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
+        self.tracer().par_crossings_batch(rays, limit)
+    }
+
+    /// How many times each ray crosses the scene, on all cores.
+    pub fn count_crossings_all(&self, rays: &[Ray]) -> Vec<CrossingCount> {
+        let mut out = vec![CrossingCount::default(); rays.len()];
+        self.tracer().par_count_crossings_batch(rays, &mut out);
+        out
+    }
+
+    /// The leaves' inside and outside labels ([`Solid::of`]), made on the first call
+    /// (a crossing count a group of empty leaves, all cores: milliseconds for the
+    /// bunny's size).
+    ///
+    /// # Errors
+    /// [`Error::NotClosed`] when the scene is not closed.
+    pub fn solid(&self) -> Result<&Solid> {
+        let made = self.inner.solid.get_or_init(|| {
+            Solid::of(&self.tracer()).map_err(|e| match e {
+                Error::NotClosed { boundary_edges, edges } => (boundary_edges, edges),
+                _ => (0, 0),
+            })
+        });
+        made.as_ref().map_err(|&(boundary_edges, edges)| Error::NotClosed { boundary_edges, edges })
+    }
+
+    /// Whether `p` lies inside the scene, a closed mesh: point location alone for a
+    /// point in an empty leaf ([`Tracer::contains`], which says how a point on the
+    /// surface is answered).
+    ///
+    /// # Errors
+    /// [`Error::NotClosed`] when the scene is not closed (see [`Scene::solid`]).
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::Scene;
+    /// let ball = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// assert!(ball.contains([0.2, 0.1, 0.3])?);
+    /// assert_eq!(ball.contains_all(&[[0.0; 3], [2.0, 0.0, 0.0]])?, [true, false]);
+    /// let plane = Scene::from_baked(bake(&procedural::grid(4, 1.0), &BuildParams::auto())?)?;
+    /// assert!(plane.contains([0.5, 0.5, 0.1]).is_err()); // open: no inside
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn contains(&self, p: [f32; 3]) -> Result<bool> {
+        let solid = self.solid()?;
+        Ok(self.shared_tracer().contains(solid, p))
+    }
+
+    /// [`Scene::contains`] for many points, on all cores.
+    ///
+    /// # Errors
+    /// As [`Scene::contains`].
+    pub fn contains_all(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
+        let solid = self.solid()?;
+        let mut out = vec![false; points.len()];
+        self.tracer().par_contains_batch(solid, points, &mut out);
+        Ok(out)
+    }
+
+    /// The length of each ray inside the scene, a closed mesh ([`Tracer::length_inside`]),
+    /// on all cores.
+    ///
+    /// # Errors
+    /// As [`Scene::contains`].
+    pub fn length_inside_all(&self, rays: &[Ray]) -> Result<Vec<f32>> {
+        let solid = self.solid()?;
+        let mut out = vec![0.0; rays.len()];
+        self.tracer().par_length_inside(solid, rays, &mut out);
+        Ok(out)
     }
 }

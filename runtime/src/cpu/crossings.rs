@@ -19,6 +19,7 @@ use octrace_format::layout::{LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
 use super::tables::ExitRule;
 use super::tracer::Tracer;
+use super::walk::RayWalk;
 use crate::ray::Ray;
 
 /// One crossing of a ray with a triangle ([`Tracer::crossings`]).
@@ -168,9 +169,35 @@ impl Tracer<'_> {
         &self,
         ray: &Ray,
         buffer: &mut LeafCrossings,
-        mut visit: impl FnMut(Crossing) -> ControlFlow<()>,
+        visit: impl FnMut(Crossing) -> ControlFlow<()>,
     ) {
-        let Some(mut w) = self.begin(ray) else { return };
+        if let Some(w) = self.begin(ray) {
+            self.crossings_from(w, buffer, visit);
+        }
+    }
+
+    /// The crossing walk from a begun walk `w` (the scalar form, which every ray can
+    /// take: the lanes hand it the rays only it walks).
+    pub(crate) fn crossings_from(
+        &self,
+        w: RayWalk,
+        buffer: &mut LeafCrossings,
+        visit: impl FnMut(Crossing) -> ControlFlow<()>,
+    ) {
+        let mut visit = visit;
+        self.crossings_entering(w, buffer, |c, _| visit(c), |_| ControlFlow::Continue(()));
+    }
+
+    /// [`Tracer::crossings_from`], with `enter(address)` asked as the walk enters each
+    /// leaf (its record's address), before the leaf's crossings: `Break` ends the walk
+    /// there. `visit` is handed each crossing's stored vertices beside it.
+    pub(crate) fn crossings_entering(
+        &self,
+        mut w: RayWalk,
+        buffer: &mut LeafCrossings,
+        mut visit: impl FnMut(Crossing, &[f32]) -> ControlFlow<()>,
+        mut enter: impl FnMut(u32) -> ControlFlow<()>,
+    ) {
         // The ray's own interval in the walk's units (a far origin is moved: the walk's
         // distances are from there, `RayWalk::unshift`).
         // Where the walk stops: the ray's tmax, or where it leaves the mesh box.
@@ -183,6 +210,9 @@ impl Tracer<'_> {
         // starts at tmin, closed.
         let mut lo: Option<f32> = None;
         for _ in 0..self.max_steps() {
+            if enter(w.address()).is_break() {
+                return;
+            }
             let a = w.address() as usize;
             // A hostile file's link past the array (on the trusted path) ends the walk.
             let Some(rec) = v.octree.get(a..a + LEAF_HEADER_WORDS) else { return };
@@ -213,9 +243,10 @@ impl Tracer<'_> {
             if buffer.0.len() > 1 {
                 buffer.0.sort_unstable_by(|x, y| x.0.t.total_cmp(&y.0.t).then(x.0.triangle.cmp(&y.0.triangle)));
             }
-            for &(c, _) in &buffer.0 {
+            for &(c, prim) in &buffer.0 {
                 let c = Crossing { t: w.unshift_distance(c.t), ..c };
-                if visit(c).is_break() {
+                let tri = &v.triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+                if visit(c, tri).is_break() {
                     return;
                 }
             }
@@ -231,11 +262,220 @@ impl Tracer<'_> {
 /// floats): `d . n < 0` with `n = (v1 - v0) x (v2 - v0)`, in `f64` (the products of
 /// `f32` differences are exact there; the sum rounds once).
 #[inline(always)]
-fn arrives_on_front(d: [f32; 3], tri: &[f32]) -> bool {
+pub(crate) fn arrives_on_front(d: [f32; 3], tri: &[f32]) -> bool {
     let v = |i: usize| [tri[3 * i] as f64, tri[3 * i + 1] as f64, tri[3 * i + 2] as f64];
     let (a, b, c) = (v(0), v(1), v(2));
     let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
     let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
     d[0] as f64 * n[0] + d[1] as f64 * n[1] + d[2] as f64 * n[2] < 0.0
+}
+
+/// The crossings of a batch of rays, in one flat list: ray `i`'s are
+/// `crossings[splits[i]..splits[i + 1]]` (`splits` has one more entry than there are
+/// rays, as Open3D's `ray_splits`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BatchCrossings {
+    /// Where each ray's crossings start in `crossings`, and the end.
+    pub splits: Vec<usize>,
+    /// Every ray's crossings, in ray order, each ray's in order along it.
+    pub crossings: Vec<Crossing>,
+}
+
+impl BatchCrossings {
+    /// Ray `i`'s crossings.
+    pub fn of(&self, i: usize) -> &[Crossing] {
+        &self.crossings[self.splits[i]..self.splits[i + 1]]
+    }
+}
+
+/// Rays per rayon task in the parallel crossing calls.
+const CHUNK: usize = 1024;
+
+impl Tracer<'_> {
+    /// Every crossing of each ray of a batch (at most `limit` a ray, the first ones),
+    /// on this thread: eight walks at a time in AVX2 lanes where the processor has
+    /// them, each ray's answer that of [`Tracer::crossings`], bit for bit. Memory
+    /// follows the crossings found.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{Ray, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let rays = [
+    ///     Ray::new([-3.0, 0.1, 0.2].into(), [1.0, 0.0, 0.0].into()), // through: 2
+    ///     Ray::new([0.0; 3].into(), [0.0, 1.0, 0.0].into()),        // from inside: 1
+    ///     Ray::new([3.0, 3.0, 3.0].into(), [1.0, 0.0, 0.0].into()), // misses: 0
+    /// ];
+    /// let all = scene.tracer().crossings_batch(&rays, usize::MAX);
+    /// assert_eq!(all.splits, [0, 2, 3, 3]);
+    /// assert!(all.of(0)[0].enters && !all.of(1)[0].enters);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn crossings_batch(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
+        let mut sink = Flat::new(rays.len());
+        self.crossings_into_sink(rays, limit, &mut sink);
+        sink.finish()
+    }
+
+    /// [`Tracer::crossings_batch`] on all threads of the current rayon pool.
+    pub fn par_crossings_batch(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
+        use rayon::prelude::*;
+        let parts: Vec<BatchCrossings> = rays.par_chunks(CHUNK).map(|c| self.crossings_batch(c, limit)).collect();
+        let mut out = BatchCrossings {
+            splits: Vec::with_capacity(rays.len() + 1),
+            crossings: Vec::with_capacity(parts.iter().map(|p| p.crossings.len()).sum()),
+        };
+        out.splits.push(0);
+        for p in parts {
+            let base = out.crossings.len();
+            out.splits.extend(p.splits[1..].iter().map(|s| s + base));
+            out.crossings.extend(p.crossings);
+        }
+        out
+    }
+
+    /// The crossing count of each ray of a batch ([`Tracer::count_crossings`]), on this
+    /// thread.
+    pub fn count_crossings_batch(&self, rays: &[Ray], out: &mut [CrossingCount]) {
+        assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        let mut sink = Counts(out);
+        self.crossings_into_sink(rays, usize::MAX, &mut sink);
+    }
+
+    /// [`Tracer::count_crossings_batch`] on all threads of the current rayon pool.
+    pub fn par_count_crossings_batch(&self, rays: &[Ray], out: &mut [CrossingCount]) {
+        use rayon::prelude::*;
+        assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        rays.par_chunks(CHUNK).zip(out.par_chunks_mut(CHUNK)).for_each(|(r, o)| self.count_crossings_batch(r, o));
+    }
+
+    /// The first `capacity` crossings of each ray of a batch into `out` (ray `i`'s at
+    /// `out[i * capacity..]`), their number into `lens[i]`, and whether the ray has
+    /// more (`truncated[i]`: the list was cut, never silently), on all threads.
+    ///
+    /// # Panics
+    /// If `out` is not `rays.len() * capacity` long, or `lens` or `truncated` not
+    /// `rays.len()`.
+    pub fn par_crossings_into(
+        &self,
+        rays: &[Ray],
+        capacity: usize,
+        out: &mut [Crossing],
+        lens: &mut [u32],
+        truncated: &mut [bool],
+    ) {
+        use rayon::prelude::*;
+        assert_eq!(out.len(), rays.len() * capacity, "capacity slots a ray");
+        assert!(lens.len() == rays.len() && truncated.len() == rays.len(), "one length and flag a ray");
+        let chunks = out.par_chunks_mut((CHUNK * capacity).max(1));
+        let work = rays.par_chunks(CHUNK).zip(lens.par_chunks_mut(CHUNK)).zip(truncated.par_chunks_mut(CHUNK));
+        if capacity == 0 {
+            work.for_each(|((r, l), tr)| {
+                let mut counts = vec![CrossingCount::default(); r.len()];
+                self.count_crossings_batch(r, &mut counts);
+                l.fill(0);
+                tr.iter_mut().zip(&counts).for_each(|(t, c)| *t = c.total > 0);
+            });
+            return;
+        }
+        work.zip(chunks).for_each(|(((r, l), tr), o)| {
+            let mut sink = Capped { capacity, out: o, lens: l, truncated: tr };
+            // One more than fits: a ray that has it was cut.
+            self.crossings_into_sink(r, capacity + 1, &mut sink);
+        });
+    }
+
+    /// Every ray's first `limit` crossings into `sink`: in the lanes where the
+    /// processor has them, else ray by ray.
+    fn crossings_into_sink(&self, rays: &[Ray], limit: usize, sink: &mut impl CrossingSink) {
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        if self.uses_x86_64_v3() && self.uses_lanes() && super::simd::lanes::fits(self) {
+            // SAFETY: the processor has the features (`uses_x86_64_v3` is never true
+            // where it does not), and the arrays fit the gathers.
+            return unsafe { super::simd::lanes_crossings::trace(self, rays, limit, sink) };
+        }
+        let (mut buffer, mut list) = (LeafCrossings::default(), Vec::new());
+        for (i, r) in rays.iter().enumerate() {
+            list.clear();
+            if limit > 0 {
+                self.crossings_with(r, &mut buffer, |c| {
+                    list.push(c);
+                    if list.len() >= limit {
+                        ControlFlow::Break(())
+                    } else {
+                        ControlFlow::Continue(())
+                    }
+                });
+            }
+            sink.ray(i, &list);
+        }
+    }
+}
+
+/// Where a batch's crossings go, ray by ray (in ray order).
+pub(crate) trait CrossingSink {
+    /// Ray `index`'s crossings, in order.
+    fn ray(&mut self, index: usize, crossings: &[Crossing]);
+}
+
+/// Lists in one flat array, in ray order (rays finish out of order in the lanes: each
+/// list is kept where it arrived, and placed once all have).
+#[derive(Default)]
+struct Flat {
+    /// Each ray's count and where its list arrived in `arrived`.
+    placed: Vec<(usize, usize)>,
+    arrived: Vec<Crossing>,
+}
+
+impl CrossingSink for Flat {
+    fn ray(&mut self, index: usize, crossings: &[Crossing]) {
+        self.placed[index] = (crossings.len(), self.arrived.len());
+        self.arrived.extend_from_slice(crossings);
+    }
+}
+
+impl Flat {
+    fn new(rays: usize) -> Flat {
+        Flat { placed: vec![(0, 0); rays], arrived: Vec::new() }
+    }
+
+    fn finish(self) -> BatchCrossings {
+        let mut splits = Vec::with_capacity(self.placed.len() + 1);
+        let mut crossings = Vec::with_capacity(self.arrived.len());
+        splits.push(0);
+        for &(n, at) in &self.placed {
+            crossings.extend_from_slice(&self.arrived[at..at + n]);
+            splits.push(crossings.len());
+        }
+        BatchCrossings { splits, crossings }
+    }
+}
+
+/// Counts alone.
+struct Counts<'a>(&'a mut [CrossingCount]);
+
+impl CrossingSink for Counts<'_> {
+    fn ray(&mut self, index: usize, crossings: &[Crossing]) {
+        let entries = crossings.iter().filter(|c| c.enters).count() as u32;
+        self.0[index] = CrossingCount { total: crossings.len() as u32, entries };
+    }
+}
+
+/// The first `capacity` of each ray into fixed slots.
+struct Capped<'a> {
+    capacity: usize,
+    out: &'a mut [Crossing],
+    lens: &'a mut [u32],
+    truncated: &'a mut [bool],
+}
+
+impl CrossingSink for Capped<'_> {
+    fn ray(&mut self, index: usize, crossings: &[Crossing]) {
+        let n = crossings.len().min(self.capacity);
+        self.out[index * self.capacity..][..n].copy_from_slice(&crossings[..n]);
+        self.lens[index] = n as u32;
+        self.truncated[index] = crossings.len() > self.capacity;
+    }
 }

@@ -14,6 +14,7 @@
 mod batch;
 mod crossings;
 mod hw;
+mod inside;
 mod locate;
 mod one_ray;
 mod order;
@@ -24,7 +25,8 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
-pub use crossings::{Crossing, CrossingCount};
+pub use crossings::{BatchCrossings, Crossing, CrossingCount};
+pub use inside::{Solid, COUNT_DIRECTION};
 pub use locate::LocateGrid;
 pub(crate) use tracer::{box_slack, BOX_T_SLACK};
 pub use tracer::{mesh_box, root_corners, ExitTest, MemoryOrder, Tracer, TreeFrame, TriangleTest, WalkStats};

@@ -164,3 +164,47 @@ fn coplanar_copies_are_all_listed_in_input_order() {
     assert!(c.iter().all(|x| x.t == 1.5));
     assert_eq!(mesh.triangles.len(), 149);
 }
+
+/// The batch calls (eight walks a vector where the processor has AVX2, on one thread
+/// and all, with and without the lanes) give each ray the one-ray call's list, bit for
+/// bit: all of them, the first k, counts, and fixed slots with truncation flagged.
+#[test]
+fn batches_answer_each_ray_as_the_one_ray_walk() {
+    let mut mesh = procedural::sphere([0.0; 3], 1.0, 24, 32);
+    mesh.triangles.extend(procedural::soup(5, 2000, 2.5, 0.3).triangles);
+    let scene = scene_of(&mesh, &BuildParams::auto());
+    let mut rays = random_rays(&mesh, 3000, 11);
+    rays.push(Ray::new(Vec3::splat(f32::NAN), Vec3::X));
+    rays.push(Ray::new(Vec3::ZERO, Vec3::ZERO));
+    for lanes in [true, false] {
+        let tracer = scene.tracer().with_lanes(lanes);
+        let one: Vec<Vec<Crossing>> = rays.iter().map(|r| tracer.all_crossings(r)).collect();
+        let all = tracer.crossings_batch(&rays, usize::MAX);
+        let par = tracer.par_crossings_batch(&rays, usize::MAX);
+        assert_eq!(all, par, "lanes {lanes}: one thread and all");
+        assert_eq!(all.splits.len(), rays.len() + 1);
+        for (i, list) in one.iter().enumerate() {
+            assert_eq!(all.of(i), &list[..], "lanes {lanes}: ray {i} {:?}", rays[i]);
+        }
+        let first = tracer.crossings_batch(&rays, 2);
+        for (i, list) in one.iter().enumerate() {
+            assert_eq!(first.of(i), &list[..list.len().min(2)], "lanes {lanes}: first 2, ray {i}");
+        }
+        let mut counts = vec![Default::default(); rays.len()];
+        tracer.par_count_crossings_batch(&rays, &mut counts);
+        for (i, list) in one.iter().enumerate() {
+            assert_eq!(counts[i], tracer.count_crossings(&rays[i]), "lanes {lanes}: count, ray {i}");
+            assert_eq!(counts[i].total as usize, list.len());
+        }
+        let cap = 3;
+        let mut slots = vec![Crossing { t: 0.0, triangle: 0, u: 0.0, v: 0.0, enters: false }; rays.len() * cap];
+        let (mut lens, mut cut) = (vec![0u32; rays.len()], vec![false; rays.len()]);
+        tracer.par_crossings_into(&rays, cap, &mut slots, &mut lens, &mut cut);
+        for (i, list) in one.iter().enumerate() {
+            assert_eq!(lens[i] as usize, list.len().min(cap), "ray {i}");
+            assert_eq!(cut[i], list.len() > cap, "ray {i}");
+            assert_eq!(&slots[i * cap..][..lens[i] as usize], &list[..lens[i] as usize], "ray {i}");
+        }
+        assert!(cut.iter().any(|&c| c), "some ray crosses more than {cap} times");
+    }
+}

@@ -8,6 +8,7 @@ mod gltf_lenient;
 mod gpu;
 mod hard_cases;
 mod hostile;
+mod inside;
 mod materials;
 mod mesh;
 mod raysets;

@@ -155,9 +155,62 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
     tmin: f32,
     tmax: f32,
 ) -> Batch {
+    // SAFETY: the caller's.
+    let (inside, det, v, w, p) = match unsafe { accepted8(shear, triangles, refs) } {
+        Accepted::OneByOne => return Batch::OneByOne,
+        Accepted::Miss => return Batch::Miss,
+        Accepted::Inside { inside, det, v, w, p } => (inside, det, v, w, p),
+    };
+    // SAFETY: AVX2 is the caller's; each pointer has nine floats to read.
+    unsafe {
+        // The distances of the triangles the edge functions accept (one or two a batch
+        // at most, mostly none), in f64 as the one-by-one test computes them; the
+        // answer is the one testing one after the other keeps: for an any-hit query
+        // the first in range, else the nearest, of equal ones the last.
+        let (o, d) = (wide(shear.origin()), wide(shear.direction()));
+        let mut best: Option<(usize, f32)> = None;
+        let mut left = inside;
+        let lane_of = |x: __m256, lane: usize| -> f32 { std::mem::transmute::<__m256, [f32; LANES]>(x)[lane] };
+        while left != 0 {
+            let lane = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let tmax = best.map_or(tmax, |b| b.1);
+            let t = plane_distance(o, d, p[lane]);
+            if t >= tmin && t <= tmax {
+                best = Some((lane, t));
+                if ANY {
+                    break;
+                }
+            }
+        }
+        let Some((lane, t)) = best else { return Batch::Miss };
+        let det = lane_of(det, lane);
+        Batch::Hit(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det)
+    }
+}
+
+/// What the edge functions of a batch of eight say ([`accepted8`]).
+enum Accepted {
+    /// Test these one by one (an index out of range, an edge function of exactly zero).
+    OneByOne,
+    /// No triangle holds the ray.
+    Miss,
+    /// The lanes whose triangle holds the ray (`inside`), their `det` and the edge
+    /// functions `v` and `w` (barycentrics `v / det`, `w / det`), and each lane's
+    /// triangle.
+    Inside { inside: u32, det: __m256, v: __m256, w: __m256, p: [*const f32; LANES] },
+}
+
+/// The edge functions of the triangles `refs` (1 to [`LANES`]) against the sheared ray,
+/// as the scalar test computes them: what [`hit8`] and [`crossings8`] start from.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[inline(always)]
+unsafe fn accepted8(shear: &Shear, triangles: &[f32], refs: &[u32]) -> Accepted {
     debug_assert!((1..=LANES).contains(&refs.len()));
     let stored = triangles.len() / TRIANGLE_FLOATS;
-    let Some(limit) = stored.checked_sub(1) else { return Batch::OneByOne };
+    let Some(limit) = stored.checked_sub(1) else { return Accepted::OneByOne };
     // SAFETY: AVX2 is the caller's; the masked load reads `refs` only.
     let full: [u32; LANES] = unsafe {
         // The references, unused lanes (a batch of fewer than eight) repeating the
@@ -176,7 +229,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         };
         let limit = _mm256_set1_epi32(limit.min(u32::MAX as usize) as i32);
         if _mm256_movemask_epi8(at_most(tri, limit)) != -1 {
-            return Batch::OneByOne;
+            return Accepted::OneByOne;
         }
         std::mem::transmute::<__m256i, [u32; LANES]>(tri)
     };
@@ -219,42 +272,62 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
         let used = (1u32 << refs.len()) - 1;
         let zero = _mm256_setzero_ps();
         if lanes(any3::<_CMP_EQ_OQ>(u, v, w, zero), used) != 0 {
-            return Batch::OneByOne;
+            return Accepted::OneByOne;
         }
         let mixed = _mm256_and_ps(any3::<_CMP_LT_OQ>(u, v, w, zero), any3::<_CMP_GT_OQ>(u, v, w, zero));
         let inside = used & !lanes(mixed, used);
         if inside == 0 {
-            return Batch::Miss;
+            return Accepted::Miss;
         }
         let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
         let inside = inside & !lanes(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), used);
         if inside == 0 {
-            return Batch::Miss;
+            return Accepted::Miss;
         }
-        // The distances of the triangles the edge functions accept (one or two a batch
-        // at most, mostly none), in f64 as the one-by-one test computes them; the
-        // answer is the one testing one after the other keeps: for an any-hit query
-        // the first in range, else the nearest, of equal ones the last.
+        Accepted::Inside { inside, det, v, w, p }
+    }
+}
+
+/// Every triangle of `refs` (1 to [`LANES`]) that the ray crosses within
+/// `[tmin, tmax]`, with the edge ownership of `Shear::intersect_owned`: `found(index
+/// in the batch, t, u, v, enters)` for each, in batch order. False where the batch must
+/// go one by one (an edge function of exactly zero, whose ownership the scalar test
+/// decides; an index out of range): then nothing was reported. `enters` is the sign of
+/// `d . n` from the plane distance's own sum (`crossings::arrives_on_front`'s bits).
+///
+/// # Safety
+/// The processor must have AVX2.
+#[inline(always)]
+pub(crate) unsafe fn crossings8(
+    shear: &Shear,
+    triangles: &[f32],
+    refs: &[u32],
+    tmin: f32,
+    tmax: f32,
+    mut found: impl FnMut(usize, f32, f32, f32, bool),
+) -> bool {
+    // SAFETY: the caller's.
+    let (inside, det, v, w, p) = match unsafe { accepted8(shear, triangles, refs) } {
+        Accepted::OneByOne => return false,
+        Accepted::Miss => return true,
+        Accepted::Inside { inside, det, v, w, p } => (inside, det, v, w, p),
+    };
+    // SAFETY: AVX2 is the caller's; each pointer has nine floats to read.
+    unsafe {
         let (o, d) = (wide(shear.origin()), wide(shear.direction()));
-        let mut best: Option<(usize, f32)> = None;
-        let mut left = inside;
         let lane_of = |x: __m256, lane: usize| -> f32 { std::mem::transmute::<__m256, [f32; LANES]>(x)[lane] };
+        let mut left = inside;
         while left != 0 {
             let lane = left.trailing_zeros() as usize;
             left &= left - 1;
-            let tmax = best.map_or(tmax, |b| b.1);
-            let t = plane_distance(o, d, p[lane]);
+            let (t, enters) = plane_distance_facing(o, d, p[lane]);
             if t >= tmin && t <= tmax {
-                best = Some((lane, t));
-                if ANY {
-                    break;
-                }
+                let det = lane_of(det, lane);
+                found(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det, enters);
             }
         }
-        let Some((lane, t)) = best else { return Batch::Miss };
-        let det = lane_of(det, lane);
-        Batch::Hit(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det)
     }
+    true
 }
 
 /// `(x, y, z, 0)` in `f64` lanes.
@@ -275,6 +348,17 @@ unsafe fn wide(v: [f32; 3]) -> __m256d {
 /// AVX2 must be available (where this is inlined), and `tri` readable for nine floats.
 #[inline(always)]
 unsafe fn plane_distance(o: __m256d, d: __m256d, tri: *const f32) -> f32 {
+    // SAFETY: the caller's.
+    unsafe { plane_distance_facing(o, d, tri).0 }
+}
+
+/// [`plane_distance`] and whether `d . n < 0` (the ray arrives on the triangle's
+/// front), from the same sums.
+///
+/// # Safety
+/// As [`plane_distance`].
+#[inline(always)]
+unsafe fn plane_distance_facing(o: __m256d, d: __m256d, tri: *const f32) -> (f32, bool) {
     // SAFETY: the caller's: nine floats from `tri` (the loads read floats 0-3, 3-6
     // and 5-8).
     unsafe {
@@ -294,12 +378,9 @@ unsafe fn plane_distance(o: __m256d, d: __m256d, tri: *const f32) -> f32 {
         // (p.x + p.y, q.x + q.y, p.z + -0, q.z + -0), then (x + y) + z for both.
         let h = _mm256_hadd_pd(p, q);
         let sums = _mm_add_pd(_mm256_castpd256_pd128(h), _mm256_extractf128_pd::<1>(h));
-        let t = (_mm_cvtsd_f64(sums) / _mm_cvtsd_f64(_mm_unpackhi_pd(sums, sums))) as f32;
-        if t.abs() < f32::INFINITY {
-            t
-        } else {
-            f32::NAN
-        }
+        let den = _mm_cvtsd_f64(_mm_unpackhi_pd(sums, sums));
+        let t = (_mm_cvtsd_f64(sums) / den) as f32;
+        (if t.abs() < f32::INFINITY { t } else { f32::NAN }, den < 0.0)
     }
 }
 

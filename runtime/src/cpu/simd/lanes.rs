@@ -30,22 +30,22 @@ use crate::cpu::watertight::Shear;
 use crate::ray::{Hit, Ray};
 
 /// Walks stepped at once.
-const LANES: usize = 8;
+pub(super) const LANES: usize = 8;
 
 /// Eight floats, one a lane, aligned for a vector load.
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
-struct F8([f32; LANES]);
+pub(super) struct F8(pub(super) [f32; LANES]);
 
 /// Eight words, one a lane, aligned for a vector load.
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
-struct U8([u32; LANES]);
+pub(super) struct U8(pub(super) [u32; LANES]);
 
 /// What the vector step reads of each walk, one lane a walk (as `sse2::SseWalk`
 /// holds it for one).
 #[derive(Debug, Default)]
-struct Vectors {
+pub(super) struct Vectors {
     o: [F8; 3],
     d: [F8; 3],
     inv: [F8; 3],
@@ -53,10 +53,10 @@ struct Vectors {
     high: [F8; 3],
     cell: [U8; 3],
     level: U8,
-    address: U8,
+    pub(super) address: U8,
     tmax: F8,
     /// The nearest hit's distance so far (the ray's `tmax` before any).
-    t_best: F8,
+    pub(super) t_best: F8,
     steps: U8,
     /// The ray octant's row of the exit-face table, four bits a code.
     exits: U8,
@@ -64,46 +64,46 @@ struct Vectors {
 
 /// The rest of a walk: what its triangle tests need, and its answer so far.
 #[derive(Debug)]
-struct Walk {
+pub(super) struct Walk {
     /// The ray's index in the batch.
-    index: usize,
+    pub(super) index: usize,
     /// The ray's shear, scalar: its triangles go eight at a time (`avx2::hit8`, which
     /// reads the scalar form); the vector form's broadcasts cost a walk more to make
     /// and copy than the rare one-by-one tests gain from them.
-    shear: Shear,
-    o: __m128,
-    d: __m128,
-    d_s: [f32; 3],
-    tmin: f32,
-    best: Option<Hit>,
+    pub(super) shear: Shear,
+    pub(super) o: __m128,
+    pub(super) d: __m128,
+    pub(super) d_s: [f32; 3],
+    pub(super) tmin: f32,
+    pub(super) best: Option<Hit>,
 }
 
 /// Groups of lanes stepped in turn: while one steps, the other's loads are on
 /// their way.
-const GROUPS: usize = 2;
+pub(super) const GROUPS: usize = 2;
 
 /// Eight walks: their vectors, the rest of each, and the lanes in use.
 #[derive(Debug, Default)]
-struct Group {
-    v: Vectors,
-    walks: [Option<Walk>; LANES],
-    active: u32,
+pub(super) struct Group {
+    pub(super) v: Vectors,
+    pub(super) walks: [Option<Walk>; LANES],
+    pub(super) active: u32,
 }
 
 /// Leaves whose triangles were asked for lately, by record address (a direct-mapped
 /// filter): coherent rays visit the same leaves one after another, and asking again
 /// for lines already in the cache costs more than it saves.
 #[derive(Debug)]
-struct Recent([u32; RECENT]);
+pub(super) struct Recent(pub(super) [u32; RECENT]);
 
 /// Entries of [`Recent`] (a power of two; 64 caught fewer of the primary rays'
 /// repeats: 3-9 % slower on them).
-const RECENT: usize = 1024;
+pub(super) const RECENT: usize = 1024;
 
 impl Recent {
     /// Records `address`; returns whether it was not there.
     #[inline(always)]
-    fn insert(&mut self, address: u32) -> bool {
+    pub(super) fn insert(&mut self, address: u32) -> bool {
         let slot = &mut self.0[(address.wrapping_mul(0x9E37_79B1) >> (32 - RECENT.trailing_zeros())) as usize];
         std::mem::replace(slot, address) != address
     }
@@ -130,10 +130,15 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
     let mut groups: [Group; GROUPS] = Default::default();
     let mut recent = Recent([u32::MAX; RECENT]);
     let mut feed = Feed::default();
+    // Rays that miss, and those only the scalar step walks (the exact exit rule,
+    // re-originated rays): answered off the lanes.
+    let off = |done: &mut dyn FnMut(usize, Option<Hit>), i: usize, w: Option<RayWalk>| {
+        done(i, w.and_then(|w| t.walk_scalar::<ANY>(w, &mut NoTally)))
+    };
     for g in groups.iter_mut() {
         for lane in 0..LANES {
             // SAFETY: AVX2 is this function's.
-            unsafe { refill::<ANY>(t, rays, &mut feed, &mut done, g, lane) };
+            unsafe { refill(t, rays, &mut feed, &mut |i, w| off(&mut done, i, w), g, lane) };
         }
     }
     while groups.iter().any(|g| g.active != 0) {
@@ -151,7 +156,7 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
                     done(w.index, t.answer(w.best));
                 }
                 // SAFETY: AVX2 is this function's.
-                unsafe { refill::<ANY>(t, rays, &mut feed, &mut done, g, lane) };
+                unsafe { refill(t, rays, &mut feed, &mut |i, w| off(&mut done, i, w), g, lane) };
             }
         }
     }
@@ -161,23 +166,25 @@ pub(crate) unsafe fn trace<const ANY: bool, const TEST: u8>(
 /// block of eight (rays `8k..8k + 8`), begun for the whole block when its first ray
 /// comes up.
 #[derive(Debug, Default)]
-struct Feed {
+pub(super) struct Feed {
     next: usize,
     block: Begun,
 }
 
 /// Starts the next ray of the batch that needs a walk in `lane`; rays that cannot
-/// hit are answered at once. Rays are begun eight at a time ([`begin8`]); those it
-/// leaves take `Tracer::begin`. The lane is left inactive and empty when none is left.
+/// hit go to `off(i, None)`, and those only the scalar step walks (the exact exit
+/// rule, re-originated rays) to `off(i, Some(walk))`. Rays are begun eight at a time
+/// ([`begin8`]); those it leaves take `Tracer::begin`. The lane is left inactive and
+/// empty when none is left.
 ///
 /// # Safety
 /// AVX2 must be available (inlined into `trace`).
 #[inline(always)]
-unsafe fn refill<const ANY: bool>(
+pub(super) unsafe fn refill(
     t: &Tracer<'_>,
     rays: &[Ray],
     feed: &mut Feed,
-    done: &mut impl FnMut(usize, Option<Hit>),
+    off: &mut impl FnMut(usize, Option<RayWalk>),
     g: &mut Group,
     lane: usize,
 ) {
@@ -202,7 +209,7 @@ unsafe fn refill<const ANY: bool>(
                 // The exact exit rule and re-originated rays are the scalar step's
                 // alone: walked to their end here.
                 Some(w) if w.scalar_only() => {
-                    done(i, t.walk_scalar::<ANY>(w, &mut NoTally));
+                    off(i, Some(w));
                     continue;
                 }
                 w => w.map(|w| Start::of(&w)),
@@ -215,7 +222,7 @@ unsafe fn refill<const ANY: bool>(
                 g.active |= 1 << lane;
                 return;
             }
-            None => done(i, None),
+            None => off(i, None),
         }
     }
     g.walks[lane] = None;
@@ -395,31 +402,12 @@ unsafe fn pick(x: __m256, y: __m256, z: __m256, is0: __m256, is1: __m256) -> __m
 #[inline(always)]
 unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, recent: &mut Recent) -> u32 {
     let octree = t.view().octree;
-    let (v, walks, active) = (&mut g.v, &mut g.walks, g.active);
-    // SAFETY: AVX2 is the caller's. Every gather is masked to lanes whose index was
-    // checked against the array's length (which `fits` keeps below 2^31).
+    // SAFETY: AVX2 is the caller's (and `fits`, for the gathers of `records` and
+    // `advance`).
     unsafe {
+        let (count, ncount, ok, mut ended) = records(t, &mut g.v, g.active);
+        let (v, walks) = (&mut g.v, &mut g.walks);
         let zero = _mm256_setzero_si256();
-        let zf = _mm256_setzero_ps();
-        let one = _mm256_set1_epi32(1);
-        let base = octree.as_ptr().cast::<i32>();
-        let len = octree.len() as i32;
-        let act = mask_of(active);
-        // 1. The record: `count` and `nCount` (words 0 and 3), where it lies in the
-        //    array, and the step bound.
-        let address = ldi(&v.address);
-        let steps = _mm256_add_epi32(ldi(&v.steps), one);
-        sti(&mut v.steps, steps);
-        let within = at_most(steps, _mm256_set1_epi32(t.max_steps() as i32));
-        let record_in = if len >= LEAF_HEADER_WORDS as i32 {
-            at_most(address, _mm256_set1_epi32(len - LEAF_HEADER_WORDS as i32))
-        } else {
-            zero
-        };
-        let ok = _mm256_and_si256(_mm256_and_si256(act, within), record_in);
-        let count = _mm256_mask_i32gather_epi32::<4>(zero, base, address, ok);
-        let ncount = _mm256_mask_i32gather_epi32::<4>(zero, base.wrapping_add(3), address, ok);
-        let mut ended = active & !bits(ok);
         // 2. Triangles, walk by walk, where the leaf has some.
         let mut full = bits(ok) & !bits(_mm256_cmpeq_epi32(count, zero));
         if full != 0 {
@@ -467,6 +455,71 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
                 v.t_best.0[lane] = t_best;
             }
         }
+        ended | advance(t, v, g.active, ended, ncount, None)
+    }
+}
+
+/// Step 1 of a step: each walk's record words `count` and `nCount` (gathered where the
+/// record lies in the array and the walk is within its step bound), the lanes read,
+/// and the lanes already over. Counts the step.
+///
+/// # Safety
+/// AVX2 must be available; [`fits`] must hold.
+#[inline(always)]
+pub(super) unsafe fn records(t: &Tracer<'_>, v: &mut Vectors, active: u32) -> (__m256i, __m256i, __m256i, u32) {
+    let octree = t.view().octree;
+    // SAFETY: AVX2 is the caller's. Every gather is masked to lanes whose index was
+    // checked against the array's length (which `fits` keeps below 2^31).
+    unsafe {
+        let zero = _mm256_setzero_si256();
+        let one = _mm256_set1_epi32(1);
+        let base = octree.as_ptr().cast::<i32>();
+        let len = octree.len() as i32;
+        let act = mask_of(active);
+        // The record: `count` and `nCount` (words 0 and 3), where it lies in the
+        // array, and the step bound.
+        let address = ldi(&v.address);
+        let steps = _mm256_add_epi32(ldi(&v.steps), one);
+        sti(&mut v.steps, steps);
+        let within = at_most(steps, _mm256_set1_epi32(t.max_steps() as i32));
+        let record_in = if len >= LEAF_HEADER_WORDS as i32 {
+            at_most(address, _mm256_set1_epi32(len - LEAF_HEADER_WORDS as i32))
+        } else {
+            zero
+        };
+        let ok = _mm256_and_si256(_mm256_and_si256(act, within), record_in);
+        let count = _mm256_mask_i32gather_epi32::<4>(zero, base, address, ok);
+        let ncount = _mm256_mask_i32gather_epi32::<4>(zero, base.wrapping_add(3), address, ok);
+        (count, ncount, ok, active & !bits(ok))
+    }
+}
+
+/// Steps 3 to 6 of a step, on every lane at once: the exit face and distance, the
+/// stop (the best hit inside the leaf, past `tmax`, no neighbour), the neighbour's
+/// record and cell. Returns `ended` with the lanes that stop here; `exits`, where
+/// given, receives each lane's exit distance.
+///
+/// # Safety
+/// AVX2 must be available; [`fits`] must hold.
+#[inline(always)]
+pub(super) unsafe fn advance(
+    t: &Tracer<'_>,
+    v: &mut Vectors,
+    active: u32,
+    mut ended: u32,
+    ncount: __m256i,
+    exits: Option<&mut F8>,
+) -> u32 {
+    let octree = t.view().octree;
+    // SAFETY: AVX2 is the caller's. Every gather is masked to lanes whose index was
+    // checked against the array's length (which `fits` keeps below 2^31).
+    unsafe {
+        let zero = _mm256_setzero_si256();
+        let zf = _mm256_setzero_ps();
+        let one = _mm256_set1_epi32(1);
+        let base = octree.as_ptr().cast::<i32>();
+        let len = octree.len() as i32;
+        let address = ldi(&v.address);
         // 3. Exit corner `lo + (cell + high) * size - o`, and the Plücker exit code.
         let level = ldi(&v.level);
         let size = _mm256_i32gather_ps::<4>(t.cell_sizes().as_ptr(), _mm256_and_si256(level, _mm256_set1_epi32(31)));
@@ -519,6 +572,9 @@ unsafe fn step<const ANY: bool, const TEST: u8>(t: &Tracer<'_>, g: &mut Group, r
         //    `t_best` is the ray's tmax, at least the walk's: the first test adds no
         //    stop the second does not.)
         let t_exit = _mm256_mul_ps(off_a, inv_a);
+        if let Some(exits) = exits {
+            st(exits, t_exit);
+        }
         let stop = _mm256_or_ps(
             _mm256_cmp_ps::<_CMP_LE_OQ>(ld(&v.t_best), t_exit),
             _mm256_cmp_ps::<_CMP_GE_OQ>(t_exit, ld(&v.tmax)),

@@ -22,3 +22,6 @@ pub(crate) mod begin8;
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 pub(crate) mod lanes;
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+pub(crate) mod lanes_crossings;
