@@ -61,6 +61,11 @@ enum Command {
     Trace(cmd::trace::Args),
     /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
     Rays(cmd::rays::Args),
+    /// Whether points lie inside a closed mesh (the formats: `octrace contains --help`).
+    Contains(cmd::contains::Args),
+    /// Write a standard point set (uniform in the box, or near the surface) for
+    /// `contains`.
+    Points(cmd::contains::PointsArgs),
     /// Render a baked scene to PNG.
     Render(cmd::render::Args),
     /// Check a file's invariants and compare the tracer with the f64 oracle.
@@ -83,6 +88,8 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Trace(a) => cmd::trace::run(a),
         Command::Rays(a) => cmd::rays::run(a),
+        Command::Contains(a) => cmd::contains::run(a),
+        Command::Points(a) => cmd::contains::points(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Verify(a) => cmd::verify::run(a),

@@ -904,3 +904,143 @@ fn bench_checksums_are_the_standard_sets_traced() {
         }
     }
 }
+
+/// The closed unit cube with a face split along its diagonal: rays through its faces,
+/// an edge and a vertex cross it twice, entering first; `--all-hits`, `--counts` and
+/// `--length-inside` write the layouts `trace --help` gives, the same to a file and to
+/// standard output.
+#[test]
+fn trace_lists_every_crossing_counts_and_lengths() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    // Through two faces; through the edge x = 0, z = 0 and out through x = 1; through
+    // the vertex (0, 0, 0) and out through (1, 1, 1); a miss; a segment that stops
+    // inside.
+    let s = 1.0 / 3f32.sqrt();
+    let rays: [[f32; 8]; 5] = [
+        [0.25, 0.5, -1.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY],
+        [-1.0, 0.5, -1.0, 0.0, 1.0, 0.0, 1.0, f32::INFINITY],
+        [-1.0, -1.0, -1.0, 0.0, s, s, s, f32::INFINITY],
+        [5.0, 5.0, 5.0, 0.0, 1.0, 0.0, 0.0, f32::INFINITY],
+        [0.25, 0.5, -1.0, 0.0, 0.0, 0.0, 1.0, 1.5],
+    ];
+    let bytes: Vec<u8> = rays.iter().flatten().flat_map(|f| f.to_le_bytes()).collect();
+    std::fs::write(dir.path().join("rays.bin"), bytes).unwrap();
+    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "all.bin", "--all-hits"]);
+    assert!(out.starts_with("5 rays, 7 crossings"), "{out}");
+    let all = std::fs::read(dir.path().join("all.bin")).unwrap();
+    let word = |b: &[u8], i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap());
+    let offsets: Vec<u64> = (0..6).map(|i| u64::from_le_bytes(all[8 * i..8 * i + 8].try_into().unwrap())).collect();
+    assert_eq!(offsets, [0, 2, 4, 6, 6, 7]);
+    let records = &all[48..];
+    assert_eq!(records.len(), 7 * 20);
+    let record = |k: usize| {
+        let r = &records[20 * k..20 * k + 20];
+        (f32::from_bits(word(r, 0)), word(r, 1), word(r, 4))
+    };
+    // Entering first, then leaving, at the faces' distances.
+    assert_eq!((record(0).0, record(0).2, record(1).0, record(1).2), (1.0, 1, 2.0, 0));
+    assert_eq!((record(2).0, record(2).2, record(3).0, record(3).2), (1.0, 1, 2.0, 0));
+    assert_eq!((record(4).2, record(5).2), (1, 0));
+    assert!((record(4).0 - 3f32.sqrt()).abs() < 1e-6 && (record(5).0 - 2.0 * 3f32.sqrt()).abs() < 1e-6);
+    assert_eq!((record(6).0, record(6).2), (1.0, 1));
+    // Standard output carries the same bytes (the summary goes to standard error).
+    let piped = octrace(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "-", "--all-hits"]);
+    assert!(piped.status.success() && piped.stdout == all, "{piped:?}");
+    let capped = ok(
+        dir.path(),
+        &["trace", "cube.oct", "--rays", "rays.bin", "--out", "cap.bin", "--all-hits", "--max-hits", "1"],
+    );
+    assert!(capped.contains("4 crossings (3 rays cut short at --max-hits)"), "{capped}");
+
+    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "counts.bin", "--counts", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!((json["crossings"].as_u64(), json["entries"].as_u64()), (Some(7), Some(4)));
+    let counts = std::fs::read(dir.path().join("counts.bin")).unwrap();
+    let pairs: Vec<(u32, u32)> = (0..5).map(|i| (word(&counts, 2 * i), word(&counts, 2 * i + 1))).collect();
+    assert_eq!(pairs, [(2, 1), (2, 1), (2, 1), (0, 0), (1, 1)]);
+
+    ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "len.bin", "--length-inside"]);
+    let len = std::fs::read(dir.path().join("len.bin")).unwrap();
+    let lengths: Vec<f32> = (0..5).map(|i| f32::from_bits(word(&len, i))).collect();
+    assert_eq!((lengths[0], lengths[1], lengths[3], lengths[4]), (1.0, 1.0, 0.0, 0.5));
+    assert!((lengths[2] - 3f32.sqrt()).abs() < 1e-6, "{lengths:?}");
+    fails_saying(
+        dir.path(),
+        &["trace", "cube.oct", "--rays", "rays.bin", "--out", "x", "--counts", "--gpu"],
+        "CPU only",
+    );
+}
+
+/// `octrace points` and `octrace contains`: the closed cube answers as the exact
+/// oracle does (`--check`), to a file and to standard output; `--reference` writes the
+/// oracle's answers; an open mesh is refused by name unless a vote is asked for; NaN
+/// points, empty files and files of the wrong size are refused naming the problem.
+#[test]
+fn contains_answers_points_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
+    let out = ok(dir.path(), &["points", "cube.oct", "--count", "5000", "-o", "uniform.bin"]);
+    assert!(out.starts_with("wrote 5,000 Uniform points"), "{out}");
+    ok(dir.path(), &["points", "cube.oct", "--set", "near", "--count", "5000", "-o", "near.bin"]);
+    for set in ["uniform.bin", "near.bin"] {
+        let out = ok(dir.path(), &["contains", "cube.oct", "--points", set, "--out", "in.bin", "--check"]);
+        assert!(out.contains("5,000 compared, 0 wrong"), "{out}");
+        let answers = std::fs::read(dir.path().join("in.bin")).unwrap();
+        let points = std::fs::read(dir.path().join(set)).unwrap();
+        let n_inside = (0..5000)
+            .filter(|&i| {
+                let p: Vec<f32> = (0..3)
+                    .map(|k| f32::from_le_bytes(points[12 * i + 4 * k..12 * i + 4 * k + 4].try_into().unwrap()))
+                    .collect();
+                p.iter().all(|&c| c > 0.0 && c < 1.0)
+            })
+            .count();
+        assert_eq!(answers.iter().filter(|&&a| a == 1).count(), n_inside, "{set}");
+        assert!(answers.iter().all(|&a| a <= 1));
+        let piped = octrace(dir.path(), &["contains", "cube.oct", "--points", set, "--out", "-"]);
+        assert!(piped.status.success() && piped.stdout == answers);
+    }
+    ok(dir.path(), &["contains", "cube.oct", "--points", "near.bin", "--out", "ref.bin", "--reference"]);
+    assert_eq!(std::fs::read(dir.path().join("ref.bin")).unwrap(), std::fs::read(dir.path().join("in.bin")).unwrap());
+
+    // Points of the wrong kinds.
+    let point = |p: [f32; 3]| p.iter().flat_map(|c| c.to_le_bytes()).collect::<Vec<u8>>();
+    std::fs::write(dir.path().join("nan.bin"), [point([0.5; 3]), point([0.1, f32::NAN, 0.2])].concat()).unwrap();
+    std::fs::write(dir.path().join("empty.bin"), []).unwrap();
+    std::fs::write(dir.path().join("odd.bin"), [0u8; 13]).unwrap();
+    let contains = |p: &'static str| ["contains", "cube.oct", "--points", p, "--out", "o.bin"];
+    fails_saying(dir.path(), &contains("nan.bin"), "point 1 is not finite");
+    fails_saying(dir.path(), &contains("empty.bin"), "empty file, no points");
+    fails_saying(dir.path(), &contains("odd.bin"), "13 bytes is not a whole number of 12-byte points");
+    fails_saying(dir.path(), &contains("missing.bin"), "missing.bin");
+
+    // An open mesh: the cube without its last two triangles.
+    let open: String = CUBE_OBJ
+        .lines()
+        .filter(|l| !l.starts_with("f 2 3 7") && !l.starts_with("f 2 7 6"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(dir.path().join("open.obj"), open).unwrap();
+    ok(dir.path(), &["bake", "open.obj", "-o", "open.oct"]);
+    fails_saying(
+        dir.path(),
+        &["contains", "open.oct", "--points", "uniform.bin", "--out", "o.bin"],
+        "4 of its 17 edges are boundary edges",
+    );
+    let out = ok(dir.path(), &["contains", "open.oct", "--points", "uniform.bin", "--out", "o.bin", "--vote", "5"]);
+    assert!(out.contains("approximate, majority of 5 rays"), "{out}");
+    fails_saying(
+        dir.path(),
+        &["contains", "open.oct", "--points", "uniform.bin", "--out", "o.bin", "--vote", "4"],
+        "--vote must be odd",
+    );
+    // 60,000 bytes of points read as 1,875 rays: lengths inside need a closed mesh.
+    fails_saying(
+        dir.path(),
+        &["trace", "open.oct", "--rays", "uniform.bin", "--out", "o.bin", "--length-inside"],
+        "the scene is not closed",
+    );
+}

@@ -268,3 +268,51 @@ pub fn shadow(frame: &Frame, hit: impl Fn(usize) -> Option<(f32, [[f32; 3]; 3])>
     }
     out
 }
+
+/// The `points` set: `n` points (1,000,000 for the benchmarks) uniform in the scene's
+/// box, for inside/outside queries: PCG32 seeded as `pcg32_srandom_r(0x853c49e6748fea9b,
+/// 0x5eed0f9011175)` (the incoherent set's state, another stream), and for each point
+/// `x = lo.x + rand() * e.x`, then `y`, then `z`, in `f64`, rounded to `f32` once.
+///
+/// # Example
+/// ```
+/// use octrace_runtime::raysets::{self, Frame};
+/// let frame = Frame::from_bounds([0.0; 3], [1.0, 2.0, 3.0]);
+/// let points = raysets::points(&frame, 1000);
+/// assert!(points.iter().all(|p| (0..3).all(|k| 0.0 <= p[k] && p[k] <= [1.0, 2.0, 3.0][k])));
+/// ```
+pub fn points(frame: &Frame, n: usize) -> Vec<[f32; 3]> {
+    let mut g = Pcg32::new(0x853c49e6748fea9b, 0x5eed0f9011175);
+    (0..n)
+        .map(|_| {
+            let x = frame.lo.x + g.rand() * frame.e.x;
+            let y = frame.lo.y + g.rand() * frame.e.y;
+            let z = frame.lo.z + g.rand() * frame.e.z;
+            [x as f32, y as f32, z as f32]
+        })
+        .collect()
+}
+
+/// The `near` set: `n` points within `distance` of the surface, half on each side:
+/// point `i` picks triangle `next_u32() % len` of `triangles`, a point in it by two
+/// `rand()` folded into the triangle (`a + b > 1` taken as `1 - a`, `1 - b`), and moves
+/// it along the triangle's unit normal by `+distance` for even `i`, `-distance` for odd
+/// (`f64`, one rounding to `f32`; degenerate triangles give the point on them). The
+/// same generator and stream as [`points`], restarted.
+pub fn near_surface(triangles: &[[[f32; 3]; 3]], n: usize, distance: f64) -> Vec<[f32; 3]> {
+    if triangles.is_empty() {
+        return Vec::new();
+    }
+    let mut g = Pcg32::new(0x853c49e6748fea9b, 0x5eed0f9011175);
+    (0..n)
+        .map(|i| {
+            let t = triangles[g.next_u32() as usize % triangles.len()].map(|v| DVec3::from(v.map(f64::from)));
+            let (a, b) = (g.rand(), g.rand());
+            let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
+            let on = t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b;
+            let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+            let side = if i % 2 == 0 { distance } else { -distance };
+            to_f32(on + normal * side).to_array()
+        })
+        .collect()
+}

@@ -17,6 +17,14 @@ pub fn exercise(scene: &Scene, rays: &[Ray]) {
     }
     let _ = scene.intersect_all(rays);
     let _ = scene.occluded_all(rays);
+    let _ = scene.crossings_all(rays, 64);
+    let _ = scene.count_crossings_all(rays);
+    let _ = scene.length_inside_all(rays);
+    let points: Vec<[f32; 3]> = rays.iter().map(|r| r.origin.to_array()).collect();
+    let _ = scene.contains_all(&points);
+    for p in &points {
+        let _ = tracer.contains_by_vote(*p, 3);
+    }
     let b = scene.view().bounds;
     let camera = Camera::standard_sized(&Frame::from_bounds(b.mesh_lo, b.mesh_hi), 6, 4);
     let options = RenderOptions { soft_samples: 2, max_depth: 3, ..RenderOptions::for_scene(scene.shading()) };

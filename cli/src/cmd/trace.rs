@@ -16,6 +16,24 @@ HITS.bin: 8 bytes a ray, in ray order, f32 `t` then u32 triangle id (its index i
 input mesh); a miss is `t = tmax`, id `0xFFFFFFFF`. With --occluded the id is that of
 some occluding triangle, not necessarily the nearest.
 
+With --all-hits, every crossing of each ray in [tmin, tmax], in order along it, each
+once (a ray through an edge or vertex that triangles share crosses one of them):
+first n + 1 u64 offsets for n rays (ray i's crossings are records offsets[i] ..
+offsets[i + 1]; offsets[0] = 0), then the records, 20 bytes each: f32 `t`, u32
+triangle id, f32 `u`, f32 `v` (barycentrics of the second and third vertices), u32
+`enters` (1 where the ray arrives on the triangle's front, the side its normal
+(v1 - v0) x (v2 - v0) points to: for a closed mesh wound outward, where it enters).
+--max-hits K keeps each ray's first K (the summary counts the rays cut short).
+In numpy: offsets = np.frombuffer(b, '<u8', n + 1); hits = np.frombuffer(b, [('t',
+'<f4'), ('triangle', '<u4'), ('u', '<f4'), ('v', '<f4'), ('enters', '<u4')], offset=8 * (n + 1)).
+
+With --counts, 8 bytes a ray: u32 crossings, u32 of them entering (arriving on a
+front); for a ray from a point to infinity through a closed mesh wound outward,
+entries - exits is -1 inside, 0 outside.
+
+With --length-inside, 4 bytes a ray: f32 length of [tmin, tmax] inside the scene, a
+closed mesh (refused when it is not: `octrace inspect` says), in units of t.
+
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
     /// The .oct scene.
@@ -28,8 +46,23 @@ pub(crate) struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Answer occlusion (any hit) instead of the nearest hit.
-    #[arg(long)]
+    #[arg(long, group = "mode")]
     pub occluded: bool,
+    /// Write every crossing of each ray, in order (the layout below).
+    #[arg(long, group = "mode")]
+    pub all_hits: bool,
+    /// With --all-hits, keep at most K crossings a ray (its first K).
+    #[arg(long, value_name = "K", requires = "all_hits")]
+    pub max_hits: Option<u32>,
+    /// Write how many times each ray crosses the scene, and how many of those enter.
+    #[arg(long, group = "mode")]
+    pub counts: bool,
+    /// Write each ray's length inside the scene (a closed mesh).
+    #[arg(long, group = "mode")]
+    pub length_inside: bool,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
     /// Threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -58,6 +91,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         bytes.len()
     );
     let rays: Vec<Ray> = bytemuck::pod_collect_to_vec(&bytes);
+    if args.all_hits || args.counts || args.length_inside {
+        anyhow::ensure!(
+            !args.gpu,
+            "--all-hits, --counts and --length-inside run on the CPU only for now (leave out --gpu)"
+        );
+        return crate::cmd::trace_crossings::run(&args, &scene, &rays, to_stdout);
+    }
     let (hits, seconds, on) = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
@@ -82,14 +122,21 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     }
     crate::output::write_data(&args.out, &[&out])?;
     let n = hits.iter().flatten().count();
-    crate::report!(
-        to_stdout,
-        "{} rays, {} {}, {:.2} Mrays/s ({on})",
-        thousands(rays.len() as u64),
-        thousands(n as u64),
-        if args.occluded { "occluded" } else { "hits" },
-        rays.len() as f64 / seconds.max(1e-9) / 1e6,
-    );
+    let rate = rays.len() as f64 / seconds.max(1e-9) / 1e6;
+    let what = if args.occluded { "occluded" } else { "hits" };
+    if args.json {
+        let j = serde_json::json!({
+            "rays": rays.len(), what: n, "seconds": seconds, "mrays_per_s": rate, "on": on,
+        });
+        crate::report!(to_stdout, "{j}");
+    } else {
+        crate::report!(
+            to_stdout,
+            "{} rays, {} {what}, {rate:.2} Mrays/s ({on})",
+            thousands(rays.len() as u64),
+            thousands(n as u64)
+        );
+    }
     Ok(())
 }
 

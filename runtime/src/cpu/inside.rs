@@ -5,9 +5,16 @@
 //! within the bake's margin of its box), and empty leaves joined by a face link are on
 //! the same side: one crossing count from one of them (parity, edges owned:
 //! `Tracer::crossings`) labels each connected group. A point in an empty leaf is then
-//! answered by point location alone. A point in a leaf with triangles walks on from it
-//! in a fixed direction, counting crossings, until it enters an empty leaf (or leaves
-//! the scene): that leaf's label, flipped by the parity of the count, is the answer.
+//! answered by point location alone. A leaf with triangles gets a reference point of
+//! its own, labelled once: the first of 27 points of its box (its centre, then the
+//! points at a quarter and three quarters of its edges) at least 1/1024 of its edge
+//! from the plane of every triangle it lists; a point in it counts the crossings of
+//! the segment to that point, testing the leaf's triangles alone (the segment stays in
+//! the box, and every triangle that meets the box is listed), in `f64`, edges owned.
+//! A leaf with no such point, and a point whose segment starts on a triangle, walk on
+//! in a fixed direction instead, counting crossings, until they enter an empty leaf
+//! (or leave the scene): that leaf's label, flipped by the parity of the count, is the
+//! answer.
 //!
 //! A point on the surface is answered as the points just beside it along
 //! [`COUNT_DIRECTION`] are (crossings at a distance of zero are not counted): a
@@ -18,13 +25,14 @@
 
 use std::ops::ControlFlow;
 
-use octrace_format::layout::{total_links, LEAF_HEADER_WORDS};
+use octrace_format::layout::{total_links, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 use octrace_format::topology::EdgeCensus;
 
 use robust::{orient3d, Coord3D};
 
-use super::crossings::{Crossing, CrossingCount, LeafCrossings};
+use super::crossings::{arrives_on_front, Crossing, CrossingCount, LeafCrossings};
 use super::tracer::Tracer;
+use super::watertight::Shear;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
 
@@ -32,16 +40,35 @@ use crate::ray::Ray;
 /// along): no coordinate plane holds it, so it lies in no cell plane.
 pub const COUNT_DIRECTION: [f32; 3] = [0.5773, 0.6151, 0.5371];
 
-/// A leaf's side: empty and outside, empty and inside, or holding triangles.
+/// A leaf's side: empty and outside, empty and inside, or holding triangles (and no
+/// reference point: answered by the walk); from `REFERENCED` on, a leaf with triangles
+/// and a reference point: `REFERENCED + 2 * candidate + inside`.
 const OUTSIDE: u8 = 0;
 const INSIDE: u8 = 1;
 const SURFACE: u8 = 2;
+const REFERENCED: u8 = 3;
+
+/// A reference point's least distance from the planes of its leaf's triangles, as a
+/// fraction of the leaf's edge.
+const CLEARANCE: f64 = 1.0 / 1024.0;
+
+/// Candidate `i` of 27 for a leaf's reference point: its box's centre first, then the
+/// points at 1/4, 1/2 and 3/4 of each edge (exact in `f32`: a leaf's box is a cell of
+/// the root cube, whose edge is a power of two).
+fn candidate(bx: &[f32], i: u8) -> [f32; 3] {
+    const AT: [f32; 3] = [0.5, 0.25, 0.75];
+    let f = [i % 3, (i / 3) % 3, i / 9].map(|k| AT[k as usize]);
+    [0, 1, 2].map(|k| bx[k] + (bx[k + 3] - bx[k]) * f[k])
+}
 
 /// The labels of a closed scene's leaves ([`Solid::of`]), for [`Tracer::contains`].
 #[derive(Clone, Debug)]
 pub struct Solid {
     /// By box index: outside, inside, or a leaf with triangles.
     labels: Vec<u8>,
+    /// The labels again on a uniform grid of the root cube (`Cells`), where a cell
+    /// lies wholly in empty leaves of one side: most points are answered by one read.
+    cells: Cells,
     /// Connected groups of empty leaves, and how many of them are inside.
     groups: usize,
     inside_groups: usize,
@@ -66,7 +93,7 @@ impl Solid {
         let mut a = 0usize;
         while records.len() < leaves {
             let Some(rec) = v.octree.get(a..a + LEAF_HEADER_WORDS) else { break };
-            records.push((a as u32, rec[0], rec[3]));
+            records.push((a as u32, rec[0], rec[3], rec[1]));
             a += LEAF_HEADER_WORDS + total_links(rec[3]) as usize;
         }
         let box_of = |address: u32| v.octree.get(address as usize + 2).copied();
@@ -80,7 +107,7 @@ impl Solid {
             }
             x
         };
-        for (b, &(address, count, ncount)) in records.iter().enumerate() {
+        for (b, &(address, count, ncount, _)) in records.iter().enumerate() {
             if count != 0 {
                 continue;
             }
@@ -95,7 +122,7 @@ impl Solid {
         }
         // One count a group, from the centre of its first leaf, to infinity.
         let mut roots = Vec::new();
-        for (b, &(_, count, _)) in records.iter().enumerate() {
+        for (b, &(_, count, _, _)) in records.iter().enumerate() {
             if count == 0 && find(&mut parent, b as u32) == b as u32 {
                 roots.push(b as u32);
             }
@@ -115,10 +142,39 @@ impl Solid {
             side[b as usize] = (c.total % 2 == 1) as u8;
         }
         let inside_groups = side.iter().zip(&records).filter(|(s, r)| r.1 == 0 && **s == INSIDE).count();
-        let labels = (0..records.len())
+        let labels: Vec<u8> = (0..records.len())
             .map(|b| if records[b].1 != 0 { SURFACE } else { side[find(&mut parent, b as u32) as usize] })
             .collect();
-        Ok(Solid { labels, groups: roots.len(), inside_groups })
+        let mut solid = Solid { labels, cells: Cells::default(), groups: roots.len(), inside_groups };
+        // Reference points of the leaves with triangles, labelled by the walk.
+        use rayon::prelude::*;
+        let referenced: Vec<u8> = records
+            .par_iter()
+            .enumerate()
+            .map(|(b, &(_, count, _, offset))| {
+                if count == 0 {
+                    return solid.labels[b];
+                }
+                let Some(bx) = v.boxes.get(b * 6..b * 6 + 6) else { return SURFACE };
+                let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+                let clearance = CLEARANCE * (bx[3] - bx[0]) as f64;
+                let clear = |c: [f32; 3]| {
+                    refs.iter().all(|&prim| {
+                        v.triangles
+                            .get(prim as usize * TRIANGLE_FLOATS..)
+                            .and_then(|t| t.get(..TRIANGLE_FLOATS))
+                            .is_some_and(|t| plane_gap(c, t) >= clearance)
+                    })
+                };
+                match (0..27u8).find(|&i| clear(candidate(bx, i))) {
+                    Some(i) => REFERENCED + 2 * i + tracer.contains_near_surface(&solid, candidate(bx, i)) as u8,
+                    None => SURFACE,
+                }
+            })
+            .collect();
+        solid.labels = referenced;
+        solid.cells = Cells::of(v, &solid.labels);
+        Ok(solid)
     }
 
     /// Connected groups of empty leaves (each labelled by one crossing count).
@@ -129,6 +185,87 @@ impl Solid {
     /// Of those, the groups inside.
     pub fn inside_groups(&self) -> usize {
         self.inside_groups
+    }
+}
+
+/// A uniform grid over the root cube, `2^level` cells a side, each labelled
+/// [`OUTSIDE`] or [`INSIDE`] where it lies wholly in empty leaves of that side, else
+/// [`MIXED`]. The leaves are cells of the same cube, so a leaf either covers whole
+/// grid cells or lies in one.
+#[derive(Clone, Debug, Default)]
+struct Cells {
+    level: u32,
+    lo: [f64; 3],
+    /// Grid cells per unit of length.
+    scale: f64,
+    labels: Vec<u8>,
+}
+
+/// A grid cell not wholly in empty leaves of one side.
+const MIXED: u8 = 255;
+/// A grid cell no leaf has been seen in yet (while building).
+const UNSEEN: u8 = 254;
+
+impl Cells {
+    /// The finest grid of at most 2^21 cells (2 MiB), and no finer than the leaves.
+    fn of(v: &octrace_format::SceneView<'_>, labels: &[u8]) -> Cells {
+        let b = v.bounds;
+        let level = v.params.max_depth.min(7);
+        let side = 1usize << level;
+        let lo = b.root_lo.map(f64::from);
+        let scale = side as f64 / b.root_size as f64;
+        let mut grid = vec![UNSEEN; side * side * side];
+        // Leaves do not overlap, so they write each cell once, or share one: a file
+        // whose boxes write more (a hostile file on the trusted path) gets no grid.
+        let mut budget = grid.len() + labels.len();
+        for (i, &label) in labels.iter().enumerate() {
+            let Some(bx) = v.boxes.get(i * 6..i * 6 + 6) else { break };
+            let label = if label <= INSIDE { label } else { MIXED };
+            // The box in grid units: exact (power-of-two sizes and offsets).
+            let from = [0, 1, 2].map(|k| (((bx[k] as f64 - lo[k]) * scale).floor().max(0.0) as usize).min(side - 1));
+            let to =
+                [0, 1, 2].map(|k| (((bx[k + 3] as f64 - lo[k]) * scale).ceil() as usize).max(from[k] + 1).min(side));
+            let cells = (0..3).map(|k| to[k] - from[k]).product::<usize>();
+            if cells > budget {
+                return Cells::default();
+            }
+            budget -= cells;
+            for z in from[2]..to[2] {
+                for y in from[1]..to[1] {
+                    for x in from[0]..to[0] {
+                        let cell = &mut grid[(z * side + y) * side + x];
+                        *cell = if *cell == UNSEEN || *cell == label { label } else { MIXED };
+                    }
+                }
+            }
+        }
+        for cell in &mut grid {
+            if *cell == UNSEEN {
+                *cell = MIXED;
+            }
+        }
+        Cells { level, lo, scale, labels: grid }
+    }
+
+    /// The label of the grid cell holding `p`: [`MIXED`] where the cell is, and where
+    /// `p` lies within rounding of a cell's face (so the rounding cannot move it into
+    /// the neighbour).
+    #[inline(always)]
+    fn label(&self, p: [f32; 3]) -> u8 {
+        if self.labels.is_empty() {
+            return MIXED;
+        }
+        let side = 1usize << self.level;
+        let mut index = 0usize;
+        for k in [2, 1, 0] {
+            let x = (p[k] as f64 - self.lo[k]) * self.scale;
+            let f = x.floor();
+            if !(x - f > 1e-9 && x - f < 1.0 - 1e-9 && f >= 0.0 && f < side as f64) {
+                return MIXED;
+            }
+            index = index * side + f as usize;
+        }
+        self.labels[index]
     }
 }
 
@@ -155,14 +292,74 @@ impl Tracer<'_> {
         if !(0..3).all(|k| b.mesh_lo[k] <= p[k] && p[k] <= b.mesh_hi[k]) {
             return false; // outside the box of every triangle (or NaN)
         }
+        match solid.cells.label(p) {
+            OUTSIDE => return false,
+            INSIDE => return true,
+            _ => {}
+        }
         let (address, _, _) = self.locate_cell(p);
         let Some(&box_index) = self.view().octree.get(address as usize + 2) else { return false };
         match solid.labels.get(box_index as usize) {
             Some(&OUTSIDE) => false,
             Some(&INSIDE) => true,
-            Some(_) => self.contains_near_surface(solid, p),
+            Some(&SURFACE) => self.contains_near_surface(solid, p),
+            Some(&label) => {
+                let (i, inside) = ((label - REFERENCED) / 2, (label - REFERENCED) % 2 == 1);
+                self.contains_by_reference(solid, p, address, box_index, i, inside)
+            }
             None => false, // a hostile file on the trusted path
         }
+    }
+
+    /// [`Tracer::contains`] for a point in a leaf with a reference point (candidate
+    /// `i` of its box, inside or not): the parity of the crossings of the segment from
+    /// `p` to it, over the leaf's triangles.
+    fn contains_by_reference(&self, solid: &Solid, p: [f32; 3], address: u32, b: u32, i: u8, inside: bool) -> bool {
+        let v = self.view();
+        let (Some(bx), Some(rec)) =
+            (v.boxes.get(b as usize * 6..b as usize * 6 + 6), v.octree.get(address as usize..address as usize + 2))
+        else {
+            return false;
+        };
+        let c = candidate(bx, i);
+        let d = [0, 1, 2].map(|k| c[k] - p[k]);
+        if d == [0.0; 3] {
+            return inside;
+        }
+        let shear = Shear::new(p, d);
+        // In f32 unless a component is so small against the largest that the shear's
+        // factors lose their bits (as for the walk's exact rule: `Shear::intersect_f64`).
+        let big = d.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+        let fine = big >= f32::MIN_POSITIVE * (1u64 << 50) as f32
+            && d.iter().all(|x| *x == 0.0 || x.abs() >= big * (1.0 / (1u64 << 40) as f32));
+        let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
+        let mut odd = false;
+        for &prim in refs {
+            let Some(tri) = v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+            else {
+                continue;
+            };
+            if in_plane(p, tri) {
+                // Perhaps on the surface (and the segment need not cross there): answered
+                // by the documented rule, along COUNT_DIRECTION.
+                return self.contains_near_surface(solid, p);
+            }
+            // The segment ends at the reference point, clear of every plane: a crossing
+            // lies before t = 1 by far. Near t = 0 its side is decided exactly.
+            let hit = if fine {
+                shear.intersect_owned(tri, f32::NEG_INFINITY, 1.0)
+            } else {
+                shear.intersect_owned_f64(tri, f32::NEG_INFINITY, 1.0)
+            };
+            let Some((t, _, _)) = hit else { continue };
+            if t.abs() >= 1.0 / 1024.0 {
+                odd ^= t > 0.0;
+                continue;
+            }
+            // Not in the plane (above): the orientation is not zero.
+            odd ^= (orientation(p, tri) < 0.0) == arrives_on_front(d, tri);
+        }
+        inside ^ odd
     }
 
     /// [`Tracer::contains`] for a point in a leaf with triangles: the parity of the
@@ -182,7 +379,7 @@ impl Tracer<'_> {
         let empty = |address: u32| {
             let label = v.octree.get(address as usize + 2).and_then(|&b| solid.labels.get(b as usize));
             match label {
-                Some(&l) if l != SURFACE => {
+                Some(&l) if l <= INSIDE => {
                     reached = l;
                     ControlFlow::Break(())
                 }
@@ -216,31 +413,22 @@ impl Tracer<'_> {
     pub fn length_inside(&self, solid: &Solid, ray: &Ray) -> f32 {
         let _ = solid;
         let to_infinity = Ray { tmax: f32::INFINITY, ..*ray };
-        let crossings = self.all_crossings(&to_infinity);
-        let mut inside = crossings.len() % 2 == 1;
-        let (mut t, mut length) = (ray.tmin as f64, 0.0f64);
-        for c in &crossings {
-            let at = (c.t as f64).min(ray.tmax as f64);
-            if inside {
-                length += at - t;
-            }
-            t = at;
-            inside = !inside;
-            if c.t >= ray.tmax {
-                break;
-            }
-        }
-        if inside && t < ray.tmax as f64 {
-            length += ray.tmax as f64 - t;
-        }
-        length as f32
+        length_from(ray, &self.all_crossings(&to_infinity))
     }
 
-    /// [`Tracer::length_inside`] of each ray, on all threads of the current rayon pool.
+    /// [`Tracer::length_inside`] of each ray, on all threads of the current rayon pool
+    /// (the crossings found eight rays at a time, `Tracer::crossings_batch`).
     pub fn par_length_inside(&self, solid: &Solid, rays: &[Ray], out: &mut [f32]) {
         use rayon::prelude::*;
+        let _ = solid;
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        rays.par_iter().zip(out.par_iter_mut()).for_each(|(r, o)| *o = self.length_inside(solid, r));
+        rays.par_chunks(1024).zip(out.par_chunks_mut(1024)).for_each(|(rays, out)| {
+            let to_infinity: Vec<Ray> = rays.iter().map(|r| Ray { tmax: f32::INFINITY, ..*r }).collect();
+            let all = self.crossings_batch(&to_infinity, usize::MAX);
+            for (i, (r, o)) in rays.iter().zip(out).enumerate() {
+                *o = length_from(r, all.of(i));
+            }
+        });
     }
 
     /// Inside or outside by a parity vote over `k` rays (the majority of `k` crossing
@@ -269,6 +457,28 @@ fn vote_direction(i: usize) -> [f32; 3] {
     [(r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32]
 }
 
+/// The length of `ray`'s `[tmin, tmax]` inside, from its crossings from `tmin` to
+/// infinity (a point is inside where the crossings after it are odd).
+fn length_from(ray: &Ray, crossings: &[Crossing]) -> f32 {
+    let mut inside = crossings.len() % 2 == 1;
+    let (mut t, mut length) = (ray.tmin as f64, 0.0f64);
+    for c in crossings {
+        let at = (c.t as f64).min(ray.tmax as f64);
+        if inside {
+            length += at - t;
+        }
+        t = at;
+        inside = !inside;
+        if c.t >= ray.tmax {
+            break;
+        }
+    }
+    if inside && t < ray.tmax as f64 {
+        length += ray.tmax as f64 - t;
+    }
+    length as f32
+}
+
 /// Whether crossing `c` of the ray from `p` along [`COUNT_DIRECTION`] lies at a
 /// distance above zero, exactly: its rounded distance may be a few units of `f64`
 /// rounding off zero where `p` is a vertex of the triangle, or on one of its edges or
@@ -276,9 +486,44 @@ fn vote_direction(i: usize) -> [f32; 3] {
 /// the triangle's plane (Shewchuk's adaptive predicate, exact for `f32` coordinates)
 /// times the side the ray arrives from; a point in the plane is at distance zero.
 fn ahead(p: [f32; 3], c: &Crossing, tri: &[f32]) -> bool {
-    let point = |x: &[f32]| Coord3D { x: x[0], y: x[1], z: x[2] };
-    // (v0 - p) . ((v1 - p) x (v2 - p)) = (v0 - p) . n: the distance's numerator.
-    let orientation = orient3d(point(&tri[0..3]), point(&tri[3..6]), point(&tri[6..9]), point(&p));
+    let orientation = orientation(p, tri);
     // Arriving on the front, d . n < 0: ahead where (v0 - p) . n < 0 too.
     orientation != 0.0 && (orientation < 0.0) == c.enters
+}
+
+/// `(v0 - p) . ((v1 - p) x (v2 - p)) = (v0 - p) . n` for triangle `tri` (nine floats),
+/// whose sign is exact (Shewchuk's `orient3d`): zero when `p` lies in its plane.
+fn orientation(p: [f32; 3], tri: &[f32]) -> f64 {
+    let point = |x: &[f32]| Coord3D { x: x[0], y: x[1], z: x[2] };
+    orient3d(point(&tri[0..3]), point(&tri[3..6]), point(&tri[6..9]), point(&p))
+}
+
+/// Whether `p` lies exactly in the plane of `tri` (nine floats): the `f64` triple
+/// product first, and where it is within its rounding of zero, [`orientation`].
+#[inline(always)]
+fn in_plane(p: [f32; 3], tri: &[f32]) -> bool {
+    let v = |i: usize| [0, 1, 2].map(|k| tri[3 * i + k] as f64);
+    let (a, b, c) = (v(0), v(1), v(2));
+    let ap = [a[0] - p[0] as f64, a[1] - p[1] as f64, a[2] - p[2] as f64];
+    let (e1, e2) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let g = ap[0] * n[0] + ap[1] * n[1] + ap[2] * n[2];
+    let size = |x: [f64; 3]| x[0].abs().max(x[1].abs()).max(x[2].abs());
+    // Each operand is exact or within 2^-53 of its value; a few roundings on the way.
+    let bound = 1e-13 * size(ap) * size(e1) * size(e2);
+    g.abs() <= bound && orientation(p, tri) == 0.0
+}
+
+/// The distance from `c` to the plane of `tri` (nine floats), in `f64`; infinite for
+/// a degenerate triangle (it has no plane, and no crossing).
+fn plane_gap(c: [f32; 3], tri: &[f32]) -> f64 {
+    let v = |i: usize| [0, 1, 2].map(|k| tri[3 * i + k] as f64);
+    let (a, b, cc) = (v(0), v(1), v(2));
+    let (e1, e2) = ([0, 1, 2].map(|k| b[k] - a[k]), [0, 1, 2].map(|k| cc[k] - a[k]));
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if len == 0.0 {
+        return f64::INFINITY;
+    }
+    ((0..3).map(|k| (c[k] as f64 - a[k]) * n[k]).sum::<f64>() / len).abs()
 }

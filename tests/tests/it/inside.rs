@@ -1,23 +1,14 @@
 //! Inside or outside of points (`Scene::contains`): exact for closed meshes against an
-//! f64 parity reference, points on the surface inside, open meshes refused; lengths
-//! inside along rays.
+//! exact reference (`InsideReference`: Shewchuk's predicates along the axes), points on
+//! the surface answered as the points beside them, open meshes refused; lengths inside
+//! along rays.
 
 use glam::Vec3;
 use octrace_bake::hard_rays::GridPlanes;
 use octrace_bake::procedural::{self, ClosedSolid, SplitMix};
 use octrace_bake::{bake, BuildParams, Mesh};
-use octrace_runtime::reference::Reference;
+use octrace_runtime::reference::{InsideReference, Side};
 use octrace_runtime::{Error, Ray, Scene};
-
-/// Inside by the f64 oracle: the parity of its hits along three random directions,
-/// when all three agree (a direction through an edge may count one too many in f64
-/// Möller-Trumbore, which is not watertight); `None` when they do not.
-fn oracle_inside(oracle: &Reference, p: Vec3) -> Option<bool> {
-    let dirs = [Vec3::new(0.31, 0.77, -0.55), Vec3::new(-0.83, 0.12, 0.54), Vec3::new(0.05, -0.62, -0.78)];
-    let votes: Vec<bool> =
-        dirs.iter().map(|&d| oracle.hits(&Ray::new(p, d)).filter(|h| h.t > 0.0).count() % 2 == 1).collect();
-    (votes[0] == votes[1] && votes[1] == votes[2]).then_some(votes[0])
-}
 
 /// Points of three kinds: uniform in the mesh's box (a margin around it), within
 /// `near` of the surface on either side (along the triangle's normal), and snapped to
@@ -56,13 +47,14 @@ fn check_solid(name: &str, mesh: &Mesh, n: usize, near: f32) -> (usize, usize) {
 
 fn check_solid_with(name: &str, mesh: &Mesh, params: &BuildParams, n: usize, near: f32) -> (usize, usize) {
     let scene = Scene::from_baked(bake(mesh, params).unwrap()).unwrap();
-    let oracle = Reference::in_input_order(mesh.triangles.clone());
+    let oracle = InsideReference::new(&mesh.triangles);
     let pts = points(mesh, &scene, n, near, 3);
     let got = scene.contains_all(&pts.iter().map(|p| p.to_array()).collect::<Vec<_>>()).unwrap();
     let (mut compared, mut inside) = (0, 0);
     for (p, &g) in pts.iter().zip(&got) {
         assert_eq!(g, scene.contains(p.to_array()).unwrap(), "{name}: batch and one point, {p}");
-        if let Some(want) = oracle_inside(&oracle, *p) {
+        if let Some(want @ (Side::Inside | Side::Outside)) = oracle.side(p.to_array()) {
+            let want = want == Side::Inside;
             assert_eq!(g, want, "{name}: point {p:?} ({:?})", p.to_array().map(f32::to_bits));
             compared += 1;
             inside += want as usize;
@@ -71,8 +63,9 @@ fn check_solid_with(name: &str, mesh: &Mesh, params: &BuildParams, n: usize, nea
     (compared, inside)
 }
 
-/// The closed solids, at the origin and far from it: every point the oracle is sure of
-/// (three directions agree) gets its answer; most points are compared, inside and out.
+/// The closed solids, at the origin and far from it: every point the exact oracle
+/// finds inside or outside gets its answer (points on the surface have theirs by
+/// definition, tested below); nearly all points are compared, inside and out.
 #[test]
 fn closed_solids_contain_what_the_oracle_says() {
     for (offset, scale) in [(0.0, 1.0), (1e4, 1.0), (-3e6, 100.0)] {
@@ -190,4 +183,46 @@ fn lengths_inside_closed_meshes() {
         let got = ball.length_inside_all(&[ray]).unwrap()[0];
         assert!((got - chord).abs() < 0.01, "impact {b}: {got} against {chord}");
     }
+}
+
+/// The exact oracle itself, against geometry: a fine sphere away from its facets'
+/// error, and a box's faces, edges and corners (on the surface) and its inside and
+/// outside, including points in the planes of its faces.
+#[test]
+fn the_exact_oracle_agrees_with_a_sphere_and_a_box() {
+    let sphere = procedural::sphere([0.25, -0.5, 1.0], 1.0, 48, 64);
+    let oracle = InsideReference::new(&sphere.triangles);
+    let mut rng = SplitMix(11);
+    let (mut checked, mut inside) = (0, 0);
+    for _ in 0..20_000 {
+        let p = Vec3::new(0.25, -0.5, 1.0) + (Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 2.4 - 1.2);
+        let r = p.distance(Vec3::new(0.25, -0.5, 1.0));
+        if (r - 1.0).abs() < 0.01 {
+            continue; // within the facets' distance from the sphere
+        }
+        let want = if r < 1.0 { Side::Inside } else { Side::Outside };
+        assert_eq!(oracle.side(p.to_array()), Some(want), "{p}");
+        checked += 1;
+        inside += (r < 1.0) as usize;
+    }
+    assert!(checked > 18_000 && inside > 4_000, "{checked} {inside}");
+
+    let cube = procedural::cube([0.0, 0.0, 0.0], [1.0, 2.0, 4.0], 4);
+    let oracle = InsideReference::new(&cube.triangles);
+    for (p, want) in [
+        ([0.5, 1.0, 2.0], Side::Inside),
+        ([1.0, 1.0, 2.0], Side::Surface),
+        ([1.0, 2.0, 2.0], Side::Surface),
+        ([0.0, 0.0, 0.0], Side::Surface),
+        ([1.0, 2.0, 4.0], Side::Surface),
+        ([1.5, 1.0, 2.0], Side::Outside),
+        ([1.5, 2.0, 4.0], Side::Outside),
+        ([0.5, 2.0, 4.5], Side::Outside),
+        ([0.5, 0.5, -1e-30], Side::Outside),
+        ([0.5, 0.5, 1e-30], Side::Inside),
+        ([0.25, 0.5, 1.0], Side::Inside), // on the grid lines of the faces' triangles
+    ] {
+        assert_eq!(oracle.side(p), Some(want), "{p:?}");
+    }
+    assert_eq!(oracle.side([f32::NAN, 0.0, 0.0]), None);
 }

@@ -4,8 +4,13 @@
 //! slow on purpose (every triangle, every ray) and as accurate as the input allows:
 //! the `f32` vertices and ray are widened to `f64` exactly, and Möller-Trumbore runs
 //! in `f64`, whose rounding is some 2^29 times finer than the tracer's.
+//! [`InsideReference`] answers inside and outside of points for closed meshes,
+//! exactly.
 
 use glam::DVec3;
+
+mod inside;
+pub use inside::{InsideReference, Side};
 
 use crate::ray::Ray;
 
