@@ -26,16 +26,77 @@ const BUFFER_VERTEX: u32 = 1;
 const FORMAT_UINT3: u32 = 0x5003;
 const FORMAT_FLOAT3: u32 = 0x9003;
 const INVALID_ID: u32 = u32::MAX;
-/// `RTC_SCENE_FLAG_ROBUST`.
+/// `RTC_SCENE_FLAG_ROBUST`, `RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION`.
 const SCENE_FLAG_ROBUST: u32 = 1 << 2;
+const SCENE_FLAG_CONTEXT_FILTER: u32 = 1 << 3;
 
 /// `RTCIntersectContext` with `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and no minimum width
 /// (Debian's build, `rtcore_config.h`).
 #[repr(C)]
 struct IntersectContext {
     flags: u32,
-    filter: *const c_void,
+    filter: Option<unsafe extern "C" fn(*const FilterArguments)>,
     inst_id: [u32; 1],
+}
+
+/// `RTCFilterFunctionNArguments`: the rays and hits are `RTCRayN` / `RTCHitN`, arrays
+/// of `n` lanes a field (`rtcore_ray.h`'s accessors give the offsets used below).
+#[repr(C)]
+struct FilterArguments {
+    valid: *mut i32,
+    geometry_user_ptr: *mut c_void,
+    context: *mut IntersectContext,
+    ray: *mut f32,
+    hit: *mut f32,
+    n: u32,
+}
+
+/// An intersection context with the collector its filter function fills (Embree hands
+/// the filter the context pointer it was given: the pattern of its `next_hit`
+/// tutorial).
+#[repr(C)]
+struct CollectingContext {
+    base: IntersectContext,
+    hits: *mut Vec<EmbreeHit>,
+}
+
+/// A hit Embree's filter sees: distance, triangle (view order), barycentrics, and
+/// whether the ray arrives on the front (`Ng . dir < 0`, Embree's `Ng` being
+/// `(v1 - v0) x (v2 - v0)`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct EmbreeHit {
+    pub t: f32,
+    pub prim: u32,
+    pub u: f32,
+    pub v: f32,
+    pub enters: bool,
+}
+
+/// The filter that keeps every hit: records it and rejects it, so the traversal goes
+/// on to the next (and `tfar` stays where it was).
+///
+/// # Safety
+/// Called by Embree with valid arguments whose context is a [`CollectingContext`].
+unsafe extern "C" fn collect_every_hit(args: *const FilterArguments) {
+    // SAFETY: Embree's arguments; the context is the CollectingContext the caller made
+    // (its first field is the IntersectContext Embree was given).
+    unsafe {
+        let a = &*args;
+        let n = a.n as usize;
+        let hits = &mut *(*(a.context as *mut CollectingContext)).hits;
+        for i in 0..n {
+            if *a.valid.add(i) == 0 {
+                continue;
+            }
+            let ray = |field: usize| *a.ray.add(field * n + i);
+            let hit = |field: usize| *a.hit.add(field * n + i);
+            let ng = [hit(0), hit(1), hit(2)];
+            let dir = [ray(4), ray(5), ray(6)];
+            let facing = ng[0] * dir[0] + ng[1] * dir[1] + ng[2] * dir[2];
+            hits.push(EmbreeHit { t: ray(8), prim: (hit(5)).to_bits(), u: hit(3), v: hit(4), enters: facing < 0.0 });
+            *a.valid.add(i) = 0;
+        }
+    }
 }
 
 /// `RTCRay`.
@@ -141,6 +202,16 @@ impl Embree {
     /// Builds Embree's BVH over the view's stored triangles (primitive ids are the
     /// view's triangle indices), in robust mode if `robust`.
     pub(crate) fn build(view: &octrace_format::SceneView<'_>, robust: bool) -> anyhow::Result<Embree> {
+        Self::build_with(view, if robust { SCENE_FLAG_ROBUST } else { 0 })
+    }
+
+    /// [`Embree::build`] for [`Embree::every_hit`]: the scene takes a filter function
+    /// from the intersection context (`RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION`).
+    pub(crate) fn build_collecting(view: &octrace_format::SceneView<'_>) -> anyhow::Result<Embree> {
+        Self::build_with(view, SCENE_FLAG_CONTEXT_FILTER)
+    }
+
+    fn build_with(view: &octrace_format::SceneView<'_>, flags: u32) -> anyhow::Result<Embree> {
         let n = view.triangle_count();
         anyhow::ensure!(n > 0 && n <= u32::MAX as usize / 3, "Embree: {n} triangles");
         let config: &CStr = c"verbose=0";
@@ -152,8 +223,8 @@ impl Embree {
         // and the buffers Embree allocates hold `n` items of the strides given.
         let scene = unsafe {
             let scene = rtcNewScene(device);
-            if !scene.is_null() && robust {
-                rtcSetSceneFlags(scene, SCENE_FLAG_ROBUST);
+            if !scene.is_null() && flags != 0 {
+                rtcSetSceneFlags(scene, flags);
             }
             let geometry = rtcNewGeometry(device, GEOMETRY_TRIANGLE);
             let vertices = rtcSetNewGeometryBuffer(geometry, BUFFER_VERTEX, 0, FORMAT_FLOAT3, 12, 3 * n) as *mut f32;
@@ -183,6 +254,16 @@ impl Embree {
         Ok(embree)
     }
 
+    /// Whether Embree takes `r`: a ray octrace traces, whose origin and direction
+    /// components are at most `FLT_LARGE` (1.844e18) in magnitude, as Embree's
+    /// `RayK::valid` asks (Debian's build asserts it and aborts on any other). Embree
+    /// answers the others with no hit here (the report counts that against it).
+    fn takes(r: &Ray) -> bool {
+        const FLT_LARGE: f32 = 1.844e18;
+        let within = |v: glam::Vec3| v.abs().max_element() <= FLT_LARGE;
+        r.is_traceable() && within(r.origin) && within(r.dir)
+    }
+
     fn ray(r: &Ray) -> RtcRay {
         RtcRay {
             org: r.origin.to_array(),
@@ -197,13 +278,13 @@ impl Embree {
     }
 
     fn context() -> IntersectContext {
-        IntersectContext { flags: 0, filter: std::ptr::null(), inst_id: [INVALID_ID] }
+        IntersectContext { flags: 0, filter: None, inst_id: [INVALID_ID] }
     }
 
     /// The nearest hit of `r`: distance, stored triangle (view order), barycentrics of
     /// the second and third vertices.
     pub(crate) fn nearest(&self, r: &Ray) -> Option<(f32, u32, f32, f32)> {
-        if !r.is_traceable() {
+        if !Self::takes(r) {
             return None;
         }
         let hit =
@@ -224,7 +305,7 @@ impl Embree {
         // SAFETY: RtcRayHit16 is plain numbers, for which all zeros is a valid value.
         let mut p: RtcRayHit16 = unsafe { std::mem::zeroed() };
         for (k, r) in rays.iter().enumerate() {
-            if !r.is_traceable() {
+            if !Self::takes(r) {
                 continue;
             }
             valid.0[k] = -1;
@@ -243,9 +324,35 @@ impl Embree {
         }
     }
 
+    /// Every hit of `r` in `[tmin, tmax]`, into `hits` (cleared first), sorted by
+    /// distance: one `rtcIntersect1` whose context filter records each hit Embree finds
+    /// and rejects it (Embree's `next_hit` pattern, in one pass), on a scene from
+    /// [`Embree::build_collecting`]. Embree finds hits out of order; a ray through an
+    /// edge two triangles share may find both, or neither. Unsorted where `sort` is
+    /// false (for counts).
+    pub(crate) fn every_hit(&self, r: &Ray, hits: &mut Vec<EmbreeHit>, sort: bool) {
+        hits.clear();
+        if !Self::takes(r) {
+            return;
+        }
+        let hit =
+            RtcHit { ng: [0.0; 3], u: 0.0, v: 0.0, prim_id: INVALID_ID, geom_id: INVALID_ID, inst_id: [INVALID_ID] };
+        let mut rayhit = RtcRayHit { ray: Self::ray(r), hit };
+        let mut context = CollectingContext {
+            base: IntersectContext { filter: Some(collect_every_hit), ..Self::context() },
+            hits: hits as *mut Vec<EmbreeHit>,
+        };
+        // SAFETY: a committed scene built with context filters, a context whose filter
+        // reads the collector beside it (alive for the call), an aligned ray/hit record.
+        unsafe { rtcIntersect1(self.scene, &mut context.base, &mut rayhit) };
+        if sort && hits.len() > 1 {
+            hits.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.prim.cmp(&b.prim)));
+        }
+    }
+
     /// Whether anything blocks `r`.
     pub(crate) fn occluded(&self, r: &Ray) -> bool {
-        if !r.is_traceable() {
+        if !Self::takes(r) {
             return false;
         }
         let mut ray = Self::ray(r);

@@ -903,6 +903,36 @@ fn bench_checksums_are_the_standard_sets_traced() {
             assert_eq!(embree["embree_packets"].is_null(), s["set"] != "primary", "{s}");
         }
     }
+    // The ordered queries, on the incoherent rays and the standard points: the closed
+    // cube's every-hit lists and counts agree with `trace`'s, and (with Embree) Embree's
+    // filter-function lists count the same; no point answers unlike the exact oracle.
+    let q = &json["queries"];
+    let rows = q["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["query"].as_str().unwrap()).collect();
+    assert_eq!(names, ["all hits", "counts", "inside", "length inside"]);
+    ok(d, &["rays", "cube.oct", "--set", "incoherent", "-o", "rays.bin"]);
+    let traced: serde_json::Value = serde_json::from_str(&ok(
+        d,
+        &["trace", "cube.oct", "--rays", "rays.bin", "--out", "c.bin", "--counts", "--json"],
+    ))
+    .unwrap();
+    let crossings = traced["crossings"].as_u64().unwrap();
+    assert!(crossings > 100_000, "{traced}");
+    assert!(
+        rows[0]["checksum"].as_str().unwrap().replace(',', "").starts_with(&format!("{crossings} crossings")),
+        "{q}"
+    );
+    for r in rows {
+        assert!(r["octrace_single"]["median"].as_f64().unwrap() > 0.0, "{r}");
+        let embree = &r["embree_3_single"];
+        if cfg!(feature = "embree") && r["query"] != "length inside" {
+            assert!(embree["mrays"]["median"].as_f64().unwrap() > 0.0, "{r}");
+        } else {
+            assert!(embree.is_null(), "{r}");
+        }
+    }
+    assert_eq!(q["oracle"]["octrace_wrong"].as_u64(), Some(0), "{q}");
+    assert!(q["oracle"]["compared"].as_u64().unwrap() > 900_000, "{q}");
 }
 
 /// The closed unit cube with a face split along its diagonal: rays through its faces,

@@ -132,7 +132,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             Some(k) => {
                 let tracer = scene.tracer();
                 let t = Instant::now();
-                let inside: Vec<bool> = points.par_iter().map(|&p| tracer.contains_by_vote(p, k as usize)).collect();
+                let mut inside = vec![false; points.len()];
+                tracer.par_contains_by_vote(&points, k as usize, &mut inside);
                 Ok((inside, t.elapsed().as_secs_f64()))
             }
         }

@@ -416,19 +416,25 @@ impl Tracer<'_> {
         length_from(ray, &self.all_crossings(&to_infinity))
     }
 
-    /// [`Tracer::length_inside`] of each ray, on all threads of the current rayon pool
-    /// (the crossings found eight rays at a time, `Tracer::crossings_batch`).
-    pub fn par_length_inside(&self, solid: &Solid, rays: &[Ray], out: &mut [f32]) {
-        use rayon::prelude::*;
+    /// [`Tracer::length_inside`] of each ray, on this thread (the crossings found
+    /// eight rays at a time, `Tracer::crossings_batch`).
+    pub fn length_inside_batch(&self, solid: &Solid, rays: &[Ray], out: &mut [f32]) {
         let _ = solid;
         assert_eq!(rays.len(), out.len(), "one result slot a ray");
-        rays.par_chunks(1024).zip(out.par_chunks_mut(1024)).for_each(|(rays, out)| {
+        for (rays, out) in rays.chunks(1024).zip(out.chunks_mut(1024)) {
             let to_infinity: Vec<Ray> = rays.iter().map(|r| Ray { tmax: f32::INFINITY, ..*r }).collect();
             let all = self.crossings_batch(&to_infinity, usize::MAX);
             for (i, (r, o)) in rays.iter().zip(out).enumerate() {
                 *o = length_from(r, all.of(i));
             }
-        });
+        }
+    }
+
+    /// [`Tracer::length_inside_batch`] on all threads of the current rayon pool.
+    pub fn par_length_inside(&self, solid: &Solid, rays: &[Ray], out: &mut [f32]) {
+        use rayon::prelude::*;
+        assert_eq!(rays.len(), out.len(), "one result slot a ray");
+        rays.par_chunks(1024).zip(out.par_chunks_mut(1024)).for_each(|(r, o)| self.length_inside_batch(solid, r, o));
     }
 
     /// Inside or outside by a parity vote over `k` rays (the majority of `k` crossing
@@ -444,6 +450,27 @@ impl Tracer<'_> {
             })
             .sum();
         2 * inside > k
+    }
+}
+
+impl Tracer<'_> {
+    /// [`Tracer::contains_by_vote`] for many points, on all threads of the current rayon
+    /// pool, the counts eight rays at a time (`Tracer::count_crossings_batch`).
+    pub fn par_contains_by_vote(&self, points: &[[f32; 3]], k: usize, out: &mut [bool]) {
+        use rayon::prelude::*;
+        assert_eq!(points.len(), out.len(), "one result slot a point");
+        let k = k.max(1);
+        points.par_chunks(1024).zip(out.par_chunks_mut(1024)).for_each(|(points, out)| {
+            let rays: Vec<Ray> = points
+                .iter()
+                .flat_map(|&p| (0..k).map(move |i| Ray::new(p.into(), vote_direction(i).into())))
+                .collect();
+            let mut counts = vec![CrossingCount::default(); rays.len()];
+            self.count_crossings_batch(&rays, &mut counts);
+            for (o, c) in out.iter_mut().zip(counts.chunks(k)) {
+                *o = 2 * c.iter().filter(|c| c.total % 2 == 1).count() > k;
+            }
+        });
     }
 }
 

@@ -151,6 +151,19 @@ fn open_meshes_are_refused_by_name() {
     let message = scene.solid().unwrap_err().to_string();
     assert!(message.contains("16 of its 56 edges are boundary edges"), "{message}");
     assert!(!scene.tracer().contains_by_vote([1.0, 1.0, 0.5], 5));
+    // The batch vote answers as the one-point vote, point for point (the bunny: open,
+    // and inside mostly where the votes agree).
+    let bunny = octrace_tests::bunny_scene();
+    let b = bunny.view().bounds;
+    let frame = octrace_runtime::raysets::Frame::from_bounds(b.mesh_lo, b.mesh_hi);
+    let pts = octrace_runtime::raysets::points(&frame, 3000);
+    for k in [1, 3] {
+        let mut batch = vec![false; pts.len()];
+        bunny.tracer().par_contains_by_vote(&pts, k, &mut batch);
+        let one: Vec<bool> = pts.iter().map(|&p| bunny.tracer().contains_by_vote(p, k)).collect();
+        assert_eq!(batch, one, "{k} votes");
+        assert!(batch.iter().filter(|&&b| b).count() > 300, "{k} votes");
+    }
     // The bunny this repository carries is open too (223 boundary edges).
     let bunny = octrace_tests::bunny_scene();
     assert!(matches!(bunny.solid(), Err(Error::NotClosed { boundary_edges: 223, .. })));

@@ -51,6 +51,10 @@ pub(crate) struct Args {
     /// ray's answer is the CPU's.
     #[arg(long)]
     pub gpu: bool,
+    /// Skip the ordered queries (every hit, counts, inside/outside of points, lengths
+    /// inside), which run with the incoherent set.
+    #[arg(long)]
+    pub no_queries: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -209,10 +213,10 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         let mut r = measure(name, rays, *occlusion, &tracer, peer.as_ref(), &args)?;
         #[cfg(feature = "embree")]
         if let Some(e) = &embree {
-            let mut figures = embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs);
+            let mut figures = embree_runs::embree_figures(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs);
             if threads > 1 {
                 figures.all_threads = Some(crate::with_threads(args.threads, || {
-                    embree_all_threads(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs)
+                    embree_runs::embree_all_threads(e, &loaded.scene, name, rays, *occlusion, &tracer, args.runs)
                 })?);
             }
             r.embree = Some(figures);
@@ -220,11 +224,23 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         results.push(r);
     }
     let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &sets, &results, args.runs)?) } else { None };
+    let queries = match sets.iter().find(|s| s.0 == "incoherent") {
+        Some((_, rays, _)) if !args.no_queries => {
+            #[cfg(feature = "embree")]
+            let collecting = (!args.no_peer).then(|| crate::embree::Embree::build_collecting(&view)).transpose()?;
+            #[cfg(feature = "embree")]
+            let peer = collecting.as_ref();
+            #[cfg(not(feature = "embree"))]
+            let peer = None;
+            Some(queries::measure(&loaded.scene, rays, args.runs, args.threads, peer)?)
+        }
+        _ => None,
+    };
     #[cfg(feature = "obvhs")]
     let peer_build = peer.as_ref().map(|p| p.build_time);
     #[cfg(not(feature = "obvhs"))]
     let peer_build: Option<Duration> = None;
-    report(&args, &loaded, threads, &results, peer_build, gpu.as_ref())
+    report(&args, &loaded, threads, &results, peer_build, gpu.as_ref(), queries.as_ref())
 }
 
 #[cfg(feature = "obvhs")]
@@ -291,184 +307,16 @@ fn measure(
     })
 }
 
-/// Embree's figures on one set, and octrace's one-ray calls, `runs` times interleaved
-/// with octrace's batch: each run times octrace's batch, Embree one ray a call,
-/// Embree's packets (primary), and octrace one ray a call, back to back.
-#[cfg(feature = "embree")]
-fn embree_figures(
-    e: &crate::embree::Embree,
-    scene: &Scene,
-    name: &str,
-    rays: &[Ray],
-    occlusion: bool,
-    tracer: &Tracer<'_>,
-    runs: usize,
-) -> EmbreeFigures {
-    let timed = |f: &mut dyn FnMut()| mrays_of(rays.len(), f);
-    let packets = camera_packets(name, rays);
-    // Rays octrace's batch sorts (incoherent ones), in its order: Embree timed on them
-    // too, so that the ratio says what the order buys either tracer.
-    let ordered: Option<Vec<Ray>> = tracer.memory_order(rays).map(|o| o.iter().map(|&i| rays[i as usize]).collect());
-    let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut one_ordered = Vec::new();
-    let embree_count = |rays: &[Ray]| embree_one_ray_count(e, rays, occlusion);
-    let mut hits = vec![None; rays.len()];
-    let mut occluded = vec![false; rays.len()];
-    let mut embree_hits = 0;
-    for _ in 0..runs {
-        batch.push(timed(&mut || {
-            if occlusion {
-                tracer.occluded_batch(rays, &mut occluded);
-            } else {
-                tracer.intersect_batch(rays, &mut hits);
-            }
-        }));
-        one.push(timed(&mut || embree_hits = embree_count(rays)));
-        if let Some(ordered) = &ordered {
-            one_ordered.push(timed(&mut || {
-                std::hint::black_box(embree_count(ordered));
-            }));
-        }
-        if let Some(packets) = &packets {
-            packet.push(timed(&mut || {
-                std::hint::black_box(embree_packet_hits(e, rays, packets));
-            }));
-        }
-        ours.push(timed(&mut || {
-            std::hint::black_box(octrace_one_ray_count(scene, rays, occlusion));
-        }));
-    }
-    EmbreeFigures {
-        ratio_batch: median_ratio(&batch, &best_of(&one, &packet)),
-        ratio_one_ray: median_ratio(&ours, &one),
-        embree_one_ray: Spread::of(one),
-        embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
-        embree_memory_order: (!one_ordered.is_empty()).then(|| {
-            let ratio = median_ratio(&batch, &one_ordered);
-            (Spread::of(one_ordered), ratio)
-        }),
-        octrace_one_ray: Spread::of(ours),
-        embree_hits,
-        all_threads: None,
-    }
-}
-
-/// Mrays/s of `f`, which traces `rays` rays.
-#[cfg(feature = "embree")]
+/// Mrays/s of `f`, which traces `rays` rays (or answers as many points).
 fn mrays_of(rays: usize, f: &mut dyn FnMut()) -> f64 {
     let t = Instant::now();
     f();
     rays as f64 / t.elapsed().as_secs_f64().max(1e-9) / 1e6
 }
 
-/// octrace's one-ray calls (`Scene::intersect`, `Scene::occluded`) on `rays`: how many
-/// hit (or, for `occlusion`, are occluded).
-#[cfg(feature = "embree")]
-fn octrace_one_ray_count(scene: &Scene, rays: &[Ray], occlusion: bool) -> usize {
-    if occlusion {
-        rays.iter().filter(|r| scene.occluded(r)).count()
-    } else {
-        rays.iter().filter(|r| scene.intersect(r).is_some()).count()
-    }
-}
-
-/// Embree's one-ray calls on `rays`: how many hit (or, for `occlusion`, are occluded).
-#[cfg(feature = "embree")]
-fn embree_one_ray_count(e: &crate::embree::Embree, rays: &[Ray], occlusion: bool) -> usize {
-    if occlusion {
-        rays.iter().filter(|r| e.occluded(r)).count()
-    } else {
-        rays.iter().filter(|r| e.nearest(r).is_some()).count()
-    }
-}
-
-/// Embree's 16-ray packets of `rays` (indices, [`camera_packets`]): how many hit.
-#[cfg(feature = "embree")]
-fn embree_packet_hits(e: &crate::embree::Embree, rays: &[Ray], packets: &[[usize; 16]]) -> usize {
-    let mut out = [None; 16];
-    packets
-        .iter()
-        .map(|p| {
-            e.nearest16(&p.map(|i| rays[i]), &mut out);
-            out.iter().flatten().count()
-        })
-        .sum()
-}
-
-/// Run by run, Embree's best: the better of one-ray calls and packets where packets ran.
-#[cfg(feature = "embree")]
-fn best_of(one: &[f64], packet: &[f64]) -> Vec<f64> {
-    if packet.is_empty() {
-        one.to_vec()
-    } else {
-        one.iter().zip(packet).map(|(a, b)| a.max(*b)).collect()
-    }
-}
-
 /// The median of the runs' ratios `a / b`.
-#[cfg(feature = "embree")]
 fn median_ratio(a: &[f64], b: &[f64]) -> f64 {
     Spread::of(a.iter().zip(b).map(|(x, y)| x / y).collect()).median
-}
-
-/// The standard camera's 1024 x 1024 rays (row by row) as 4 x 4 pixel packets, for
-/// the primary set.
-#[cfg(feature = "embree")]
-fn camera_packets(name: &str, rays: &[Ray]) -> Option<Vec<[usize; 16]>> {
-    (name == "primary" && rays.len() == 1 << 20).then(|| {
-        let tile = |tx: usize, ty: usize| std::array::from_fn(|k| (4 * ty + k / 4) * 1024 + 4 * tx + k % 4);
-        (0..256).flat_map(|ty| (0..256).map(move |tx| tile(tx, ty))).collect()
-    })
-}
-
-/// [`embree_figures`]'s figures on all threads of the current pool.
-#[cfg(feature = "embree")]
-fn embree_all_threads(
-    e: &crate::embree::Embree,
-    scene: &Scene,
-    name: &str,
-    rays: &[Ray],
-    occlusion: bool,
-    tracer: &Tracer<'_>,
-    runs: usize,
-) -> EmbreeAllThreads {
-    use rayon::prelude::*;
-    let timed = |f: &mut dyn FnMut()| mrays_of(rays.len(), f);
-    let packets = camera_packets(name, rays);
-    let (mut batch, mut one, mut packet, mut ours) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut hits = vec![None; rays.len()];
-    let mut occluded = vec![false; rays.len()];
-    for _ in 0..runs {
-        batch.push(timed(&mut || {
-            if occlusion {
-                tracer.par_occluded_batch(rays, &mut occluded);
-            } else {
-                tracer.par_intersect_batch(rays, &mut hits);
-            }
-        }));
-        one.push(timed(&mut || {
-            std::hint::black_box(rays.par_chunks(1024).map(|c| embree_one_ray_count(e, c, occlusion)).sum::<usize>());
-        }));
-        if let Some(packets) = &packets {
-            packet.push(timed(&mut || {
-                std::hint::black_box(packets.par_chunks(64).map(|c| embree_packet_hits(e, rays, c)).sum::<usize>());
-            }));
-        }
-        ours.push(timed(&mut || {
-            std::hint::black_box(
-                rays.par_chunks(1024).map(|c| octrace_one_ray_count(scene, c, occlusion)).sum::<usize>(),
-            );
-        }));
-    }
-    EmbreeAllThreads {
-        threads: rayon::current_num_threads(),
-        ratio_batch: median_ratio(&batch, &best_of(&one, &packet)),
-        ratio_one_ray: median_ratio(&ours, &one),
-        octrace_batch: Spread::of(batch),
-        octrace_one_ray: Spread::of(ours),
-        embree_one_ray: Spread::of(one),
-        embree_packets: (!packet.is_empty()).then(|| Spread::of(packet)),
-    }
 }
 
 /// Rays that hit and the sum of their distances (`+ 0.0`: an empty sum is -0.0).
@@ -483,6 +331,7 @@ fn report(
     results: &[SetResult],
     peer_build: Option<Duration>,
     gpu: Option<&gpu::GpuReport>,
+    queries: Option<&queries::QueryReport>,
 ) -> anyhow::Result<()> {
     let secs = |d: Duration| d.as_secs_f64();
     if args.json {
@@ -508,6 +357,7 @@ fn report(
                 "open_trusted_s": l.open_trusted.map(secs), "bytes": l.bytes,
                 "obvhs_build_s": peer_build.map(secs), "sets": sets,
                 "gpu": gpu.map(gpu::GpuReport::json),
+                "queries": queries.map(queries::QueryReport::json),
             }))?
         );
         return Ok(());
@@ -618,6 +468,9 @@ fn report(
             );
         }
     }
+    if let Some(q) = queries {
+        crate::out!("{}", q.text());
+    }
     if let Some(g) = gpu {
         crate::out!("{}", g.text());
     }
@@ -633,123 +486,7 @@ fn checksum(set: &str, hits: usize, sum_t: f64) -> String {
     }
 }
 
-mod gpu {
-    //! The GPU figures of `bench --gpu`.
-    use std::time::{Duration, Instant};
-
-    use octrace_runtime::gpu::{GpuContext, GpuTracer};
-    use octrace_runtime::{Hit, Ray, Scene};
-    use serde_json::json;
-
-    use super::Spread;
-    use crate::output::thousands;
-
-    pub(super) struct GpuSet {
-        name: &'static str,
-        rays: usize,
-        kernel: Spread,
-        end_to_end: Spread,
-        hits: usize,
-        sum_t: f64,
-        /// Rays whose answer differs from the CPU's (another triangle at the same
-        /// distance counts as the same answer).
-        differ: usize,
-    }
-
-    pub(super) struct GpuReport {
-        adapter: String,
-        exact_edges: bool,
-        upload: Duration,
-        sets: Vec<GpuSet>,
-    }
-
-    /// Times each set on the GPU and compares its answers with the CPU's (`cpu`, the
-    /// sets' CPU results, in the same order).
-    pub(super) fn measure(
-        scene: &Scene,
-        sets: &[(&'static str, Vec<Ray>, bool)],
-        cpu: &[super::SetResult],
-        runs: usize,
-    ) -> anyhow::Result<GpuReport> {
-        let gpu = GpuContext::new()?;
-        let t = Instant::now();
-        let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
-        let upload = t.elapsed();
-        let mut out = Vec::new();
-        for ((name, rays, occlusion), cpu) in sets.iter().zip(cpu) {
-            let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
-            let (mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new());
-            for _ in 0..runs {
-                let (h, timings) = tracer.trace_timed(rays, *occlusion)?;
-                kernel.push(mrays(timings.kernel));
-                total.push(mrays(timings.upload + timings.kernel + timings.download));
-                hits = h;
-            }
-            let differ = if *occlusion {
-                cpu.occluded.iter().zip(&hits).filter(|(c, g)| **c != g.is_some()).count()
-            } else {
-                cpu.nearest.iter().zip(&hits).filter(|(c, g)| !same(c, g)).count()
-            };
-            let (found, sum_t) = super::hit_sums(&hits);
-            out.push(GpuSet {
-                name,
-                rays: rays.len(),
-                kernel: Spread::of(kernel),
-                end_to_end: Spread::of(total),
-                hits: found,
-                sum_t: if *occlusion { 0.0 } else { sum_t },
-                differ,
-            });
-        }
-        Ok(GpuReport { adapter: gpu.describe(), exact_edges: tracer.uses_f64(), upload, sets: out })
-    }
-
-    /// The same answer: both miss, or hits at the same distance (1e-5 relative).
-    fn same(a: &Option<Hit>, b: &Option<Hit>) -> bool {
-        match (a, b) {
-            (None, None) => true,
-            (Some(a), Some(b)) => a.triangle == b.triangle || (a.t - b.t).abs() <= 1e-5 * a.t.abs(),
-            _ => false,
-        }
-    }
-
-    impl GpuReport {
-        pub(super) fn text(&self) -> String {
-            let fmt = |s: &Spread| format!("{:.1} ({:.1}-{:.1})", s.median, s.min, s.max);
-            let mut lines = vec![
-                format!(
-                    "GPU: {}; scene uploaded in {:.1} ms; {} edge functions",
-                    self.adapter,
-                    self.upload.as_secs_f64() * 1e3,
-                    if self.exact_edges { "f64 (exact)" } else { "f32" }
-                ),
-                format!("{:<11} {:>9} {:>22} {:>22}  checksum", "set", "rays", "kernel Mrays/s", "with transfers"),
-            ];
-            for s in &self.sets {
-                let check = super::checksum(s.name, s.hits, s.sum_t);
-                lines.push(format!(
-                    "{:<11} {:>9} {:>22} {:>22}  {}; {} rays differ from the CPU",
-                    s.name,
-                    thousands(s.rays as u64),
-                    fmt(&s.kernel),
-                    fmt(&s.end_to_end),
-                    check,
-                    s.differ
-                ));
-            }
-            lines.join("\n")
-        }
-
-        pub(super) fn json(&self) -> serde_json::Value {
-            json!({
-                "adapter": self.adapter,
-                "exact_edges": self.exact_edges,
-                "upload_s": self.upload.as_secs_f64(),
-                "sets": self.sets.iter().map(|s| json!({
-                    "set": s.name, "rays": s.rays, "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
-                    "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,
-                })).collect::<Vec<_>>(),
-            })
-        }
-    }
-}
+#[cfg(feature = "embree")]
+mod embree_runs;
+mod gpu;
+mod queries;
