@@ -938,7 +938,7 @@ fn bench_checksums_are_the_standard_sets_traced() {
 /// The closed unit cube with a face split along its diagonal: rays through its faces,
 /// an edge and a vertex cross it twice, entering first; `--all-hits`, `--counts` and
 /// `--length-inside` write the layouts `trace --help` gives, the same to a file and to
-/// standard output.
+/// standard output, and the same with `--gpu`.
 #[test]
 fn trace_lists_every_crossing_counts_and_lengths() {
     let dir = tempfile::tempdir().unwrap();
@@ -996,11 +996,20 @@ fn trace_lists_every_crossing_counts_and_lengths() {
     let lengths: Vec<f32> = (0..5).map(|i| f32::from_bits(word(&len, i))).collect();
     assert_eq!((lengths[0], lengths[1], lengths[3], lengths[4]), (1.0, 1.0, 0.0, 0.5));
     assert!((lengths[2] - 3f32.sqrt()).abs() < 1e-6, "{lengths:?}");
-    fails_saying(
-        dir.path(),
-        &["trace", "cube.oct", "--rays", "rays.bin", "--out", "x", "--counts", "--gpu"],
-        "CPU only",
-    );
+    // On the GPU: the same bytes, --max-hits included.
+    for (mode, cpu_file) in [
+        (&["--all-hits"][..], "all.bin"),
+        (&["--all-hits", "--max-hits", "1"][..], "cap.bin"),
+        (&["--counts"][..], "counts.bin"),
+        (&["--length-inside"][..], "len.bin"),
+    ] {
+        let args = [&["trace", "cube.oct", "--rays", "rays.bin", "--out", "gpu.bin", "--gpu"][..], mode].concat();
+        let Some(out) = on_gpu(dir.path(), &args, "trace_lists_every_crossing_counts_and_lengths") else { return };
+        assert!(out.contains("whole call"), "{out}");
+        let (cpu, gpu) =
+            (std::fs::read(dir.path().join(cpu_file)).unwrap(), std::fs::read(dir.path().join("gpu.bin")).unwrap());
+        assert_eq!(cpu, gpu, "{mode:?}");
+    }
 }
 
 /// `octrace points` and `octrace contains`: the closed cube answers as the exact

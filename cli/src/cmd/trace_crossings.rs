@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use octrace_runtime::cpu::CrossingCount;
+use octrace_runtime::cpu::{BatchCrossings, CrossingCount};
 use octrace_runtime::{Ray, Scene};
 use serde_json::json;
 
@@ -13,13 +13,23 @@ use crate::output::{counted, thousands};
 /// Traces `rays` in the mode `args` asks for and writes its layout (`trace --help`).
 pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> anyhow::Result<()> {
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    let gpu = args.gpu.then(octrace_runtime::gpu::GpuContext::new).transpose()?;
+    let gpu_tracer =
+        gpu.as_ref().map(|g| octrace_runtime::gpu::GpuTracer::new(&g.device, &g.queue, scene)).transpose()?;
     let (mode, seconds, summary) = if args.all_hits {
         let limit = args.max_hits.map_or(usize::MAX, |k| k as usize);
-        let (all, seconds) = crate::with_threads(args.threads, || {
-            let t = Instant::now();
-            let all = scene.crossings_all(rays, limit);
-            (all, t.elapsed().as_secs_f64())
-        })?;
+        let (all, seconds) = match &gpu_tracer {
+            Some(g) => {
+                let t = Instant::now();
+                let all = truncated(g.crossings(rays)?, limit);
+                (all, t.elapsed().as_secs_f64())
+            }
+            None => crate::with_threads(args.threads, || {
+                let t = Instant::now();
+                let all = scene.crossings_all(rays, limit);
+                (all, t.elapsed().as_secs_f64())
+            })?,
+        };
         let mut out = Vec::with_capacity(8 * all.splits.len() + 20 * all.crossings.len());
         for &s in &all.splits {
             out.extend_from_slice(&(s as u64).to_le_bytes());
@@ -52,11 +62,18 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
         );
         ("all-hits", seconds, (text, json!({ "crossings": n, "cut_short": cut })))
     } else if args.counts {
-        let (counts, seconds) = crate::with_threads(args.threads, || {
-            let t = Instant::now();
-            let counts = scene.count_crossings_all(rays);
-            (counts, t.elapsed().as_secs_f64())
-        })?;
+        let (counts, seconds) = match &gpu_tracer {
+            Some(g) => {
+                let t = Instant::now();
+                let counts = g.count_crossings(rays)?;
+                (counts, t.elapsed().as_secs_f64())
+            }
+            None => crate::with_threads(args.threads, || {
+                let t = Instant::now();
+                let counts = scene.count_crossings_all(rays);
+                (counts, t.elapsed().as_secs_f64())
+            })?,
+        };
         let mut out = Vec::with_capacity(8 * counts.len());
         for c in &counts {
             out.extend_from_slice(&c.total.to_le_bytes());
@@ -68,12 +85,19 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
         let text = format!("{}, {} entering", counted(total, "crossing"), thousands(entries));
         ("counts", seconds, (text, json!({ "crossings": total, "entries": entries })))
     } else {
-        scene.solid()?;
-        let (lengths, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
-            let t = Instant::now();
-            let lengths = scene.length_inside_all(rays)?;
-            Ok((lengths, t.elapsed().as_secs_f64()))
-        })??;
+        let solid = scene.solid()?;
+        let (lengths, seconds) = match &gpu_tracer {
+            Some(g) => {
+                let t = Instant::now();
+                let lengths = g.length_inside(solid, rays)?;
+                (lengths, t.elapsed().as_secs_f64())
+            }
+            None => crate::with_threads(args.threads, || -> anyhow::Result<_> {
+                let t = Instant::now();
+                let lengths = scene.length_inside_all(rays)?;
+                Ok((lengths, t.elapsed().as_secs_f64()))
+            })??,
+        };
         crate::output::write_data(&args.out, &[bytemuck::cast_slice(&lengths)])?;
         let inside = lengths.iter().filter(|&&l| l > 0.0).count();
         let total: f64 = lengths.iter().map(|&l| l as f64).sum();
@@ -82,20 +106,34 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
     };
     let rate = rays.len() as f64 / seconds.max(1e-9) / 1e6;
     let (text, fields) = summary;
+    let on = match &gpu {
+        Some(g) => format!("whole call, {}", g.describe()),
+        None => format!("tracing only, {}", counted(threads as u64, "thread")),
+    };
     if args.json {
-        let mut j =
-            json!({ "rays": rays.len(), "mode": mode, "seconds": seconds, "mrays_per_s": rate, "threads": threads });
+        let mut j = json!({
+            "rays": rays.len(), "mode": mode, "seconds": seconds, "mrays_per_s": rate, "threads": threads, "on": on,
+        });
         if let (Some(j), Some(f)) = (j.as_object_mut(), fields.as_object()) {
             j.extend(f.clone());
         }
         crate::report!(to_stdout, "{j}");
     } else {
-        crate::report!(
-            to_stdout,
-            "{} rays, {text}, {rate:.2} Mrays/s ({mode}, tracing only, {})",
-            thousands(rays.len() as u64),
-            counted(threads as u64, "thread")
-        );
+        crate::report!(to_stdout, "{} rays, {text}, {rate:.2} Mrays/s ({mode}, {on})", thousands(rays.len() as u64),);
     }
     Ok(())
+}
+
+/// `all` with each ray's list cut to its first `limit` (the GPU lists them whole).
+fn truncated(all: BatchCrossings, limit: usize) -> BatchCrossings {
+    if limit == usize::MAX {
+        return all;
+    }
+    let mut out = BatchCrossings { splits: vec![0], crossings: Vec::new() };
+    for i in 0..all.splits.len() - 1 {
+        let list = all.of(i);
+        out.crossings.extend_from_slice(&list[..list.len().min(limit)]);
+        out.splits.push(out.crossings.len());
+    }
+    out
 }

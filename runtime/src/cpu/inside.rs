@@ -486,7 +486,7 @@ fn vote_direction(i: usize) -> [f32; 3] {
 
 /// The length of `ray`'s `[tmin, tmax]` inside, from its crossings from `tmin` to
 /// infinity (a point is inside where the crossings after it are odd).
-fn length_from(ray: &Ray, crossings: &[Crossing]) -> f32 {
+pub(crate) fn length_from(ray: &Ray, crossings: &[Crossing]) -> f32 {
     let mut inside = crossings.len() % 2 == 1;
     let (mut t, mut length) = (ray.tmin as f64, 0.0f64);
     for c in crossings {

@@ -14,7 +14,7 @@
 mod batch;
 mod crossings;
 mod hw;
-mod inside;
+pub(crate) mod inside;
 mod locate;
 mod one_ray;
 mod order;

@@ -28,6 +28,7 @@
 //! # Ok(()) }
 //! ```
 
+mod crossings;
 mod render;
 
 use std::time::{Duration, Instant};
@@ -270,6 +271,11 @@ pub struct GpuTracer<'s> {
     queue: wgpu::Queue,
     nearest: wgpu::ComputePipeline,
     any: wgpu::ComputePipeline,
+    /// The module and layout the crossing kernels are made from on first use
+    /// (`crossings`), and those kernels: counts, lists.
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
+    crossing_kernels: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
     layout: wgpu::BindGroupLayout,
     scene_buffers: Vec<wgpu::Buffer>,
     params: Params,
@@ -340,17 +346,8 @@ impl<'s> GpuTracer<'s> {
             immediate_size: 0,
         });
         let pipeline = |any: bool| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(if any { "octrace occluded" } else { "octrace intersect" }),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("ANY_HIT", if any { 1.0 } else { 0.0 })],
-                    ..Default::default()
-                },
-                cache: None,
-            })
+            let label = if any { "octrace occluded" } else { "octrace intersect" };
+            kernel(device, &pipeline_layout, &module, label, &[("ANY_HIT", if any { 1.0 } else { 0.0 })])
         };
         let b = view.bounds;
         let (root_lo, root_hi) = crate::cpu::root_corners(&view);
@@ -387,6 +384,9 @@ impl<'s> GpuTracer<'s> {
             queue: queue.clone(),
             nearest: pipeline(false),
             any: pipeline(true),
+            module,
+            pipeline_layout,
+            crossing_kernels: std::sync::OnceLock::new(),
             layout,
             scene_buffers,
             params,
@@ -477,7 +477,7 @@ impl<'s> GpuTracer<'s> {
     /// Runs the kernel over `rays` in dispatches of at most [`RAYS_PER_DISPATCH`]; the
     /// walks that ran out of loop budget are traced again on the CPU.
     fn run(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
-        let (mut out, timings) = self.run_kernel(rays, any)?;
+        let (mut out, timings) = self.run_kernel(rays, if any { &self.any } else { &self.nearest })?;
         let tracer = self.scene.tracer();
         for (h, r) in out.iter_mut().zip(rays).filter(|(h, _)| h.steps == OVER_BUDGET) {
             *h = if any {
@@ -490,8 +490,9 @@ impl<'s> GpuTracer<'s> {
         Ok((out, timings))
     }
 
-    /// The kernel's answers for `rays`, and the time each part took.
-    fn run_kernel(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
+    /// The answers of `pipeline` (one record a ray) for `rays`, and the time each part
+    /// took.
+    fn run_kernel(&self, rays: &[Ray], pipeline: &wgpu::ComputePipeline) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
         let mut out = Vec::with_capacity(rays.len());
         let mut timings = GpuTimings::default();
         if rays.is_empty() {
@@ -508,7 +509,6 @@ impl<'s> GpuTracer<'s> {
         let params_buffer =
             self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
         let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
-        let pipeline = if any { &self.any } else { &self.nearest };
         for part in rays.chunks(per_dispatch) {
             let t = Instant::now();
             let params = Params { ray_count: part.len() as u32, ..self.params };
@@ -804,6 +804,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
               return u32(f32(clamp(x, 0.0lf, last)));\n}\n";
         g += &plane_distance_source("f64");
+        g += &front_source("f64");
         // tables::exact_exit and exact_side: exact products, the difference's sign exact.
         g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    \
               let p = f64(oi) * f64(dj) - f64(oj) * f64(di);\n    \
@@ -823,20 +824,39 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
         g += &plane_distance_source("f32");
+        g += &front_source("f32");
         // Without f64 the exact rule compares rounded f32 distances (no underflowing
         // products, but the adapter's division).
         g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    return oi / di < oj / dj;\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return off / d;\n}\n";
         g += FAR_F32;
         // Without f64 the exact rule's rays take the f32 test.
-        g += "fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {\n    \
-              return hit_triangle(wk, at, tmin, tmax);\n}\n";
+        g += "fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: bool) -> vec4<f32> {\n    \
+              return hit_triangle(wk, at, tmin, tmax, owned);\n}\n";
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let x = (off_a / d_a) * dk - m;\n    \
               let p_positive = select(x > 0.0, x < 0.0, is_negative(d_a));\n    \
               return select(0u, 1u, p_positive != negative_a);\n}\n";
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
+}
+
+/// The tracing kernel's entry point compiled with override `constants`.
+fn kernel(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    label: &str,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        module,
+        entry_point: Some("main"),
+        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
+        cache: None,
+    })
 }
 
 /// Moving a far origin to the root (`cpu::walk`'s `begin_far`), in `f64`: the entry
@@ -886,7 +906,12 @@ fn unshifted(t: f32, s: vec2<f32>) -> f32 {
 const HIT_F64: &str = "fn c64(v: vec3<f64>, i: u32) -> f64 {
     return select(select(v.z, v.y, i == 1u), v.x, i == 0u);
 }
-fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {
+fn owns64(positive: bool, fx: f64, fy: f64, tx: f64, ty: f64) -> bool {
+    let up = select((ty < fy), (ty > fy), positive);
+    let right = select((tx < fx), (tx > fx), positive);
+    return up || (ty == fy && right);
+}
+fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: bool) -> vec4<f32> {
     let k = (*wk).k;
     let d = vec3<f64>(f64((*wk).d.x), f64((*wk).d.y), f64((*wk).d.z));
     let sx = c64(d, k.x) / c64(d, k.z);
@@ -910,6 +935,13 @@ fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) ->
     let det = u + v + w;
     if det == 0.0lf {
         return vec4<f32>(0.0);
+    }
+    if owned && (u == 0.0lf || v == 0.0lf || w == 0.0lf) {
+        let p = det > 0.0lf;
+        if (u == 0.0lf && !owns64(p, bx, by, cx, cy)) || (v == 0.0lf && !owns64(p, cx, cy, ax, ay))
+            || (w == 0.0lf && !owns64(p, ax, ay, bx, by)) {
+            return vec4<f32>(0.0);
+        }
     }
     let plane = plane_distance((*wk).o, (*wk).d, at);
     let dist = plane.x;
@@ -995,6 +1027,24 @@ fn plane_distance_source(float: &str) -> String {
         return vec2<f32>(0.0);
     }}
     return vec2<f32>(t, 1.0);
+}}
+"
+    )
+}
+
+/// `arrives_on_front(d, at)`: whether a ray of direction `d` arrives on the front of
+/// the triangle at word `at` (`cpu::crossings::arrives_on_front`: `d . n < 0`, the same
+/// operations in the same order), in `float`.
+fn front_source(float: &str) -> String {
+    format!(
+        "fn arrives_on_front(d: vec3<f32>, at: u32) -> bool {{
+    let a = vec3<{float}>({float}(wordf(at)), {float}(wordf(at + 1u)), {float}(wordf(at + 2u)));
+    let b = vec3<{float}>({float}(wordf(at + 3u)), {float}(wordf(at + 4u)), {float}(wordf(at + 5u)));
+    let c = vec3<{float}>({float}(wordf(at + 6u)), {float}(wordf(at + 7u)), {float}(wordf(at + 8u)));
+    let e1 = b - a;
+    let e2 = c - a;
+    let n = vec3<{float}>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    return {float}(d.x) * n.x + {float}(d.y) * n.y + {float}(d.z) * n.z < {float}(0.0);
 }}
 "
     )

@@ -12,6 +12,10 @@
 
 // Any hit (shadow rays) rather than the nearest.
 override ANY_HIT: bool = false;
+// 0: the nearest hit (or with ANY_HIT any hit) a ray; 1: crossing counts (`hits[i]`:
+// `triangle` the crossings, `leaf` those arriving on a front); 2: every crossing, as
+// records of their own (`cross`), at offsets the host puts after the rays.
+override MODE: u32 = 0u;
 
 struct Params {
     ray_count: u32,
@@ -235,8 +239,10 @@ fn with_component(v: vec3<u32>, i: u32, x: u32) -> vec3<u32> {
 }
 
 // Woop, Benthin & Wald's watertight test (runtime/src/cpu/watertight.rs) against the
-// triangle at word `at`; a hit in [tmin, tmax] comes back as (t, u, v, 1).
-fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<f32> {
+// triangle at word `at`; a hit in [tmin, tmax] comes back as (t, u, v, 1). With
+// `owned`, an exact zero edge function counts only on the edge's owner
+// (Shear::intersect_owned: the top-left rule, `owns`).
+fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: bool) -> vec4<f32> {
     let o = (*wk).o;
     let a = vec3<f32>(wordf(at), wordf(at + 1u), wordf(at + 2u)) - o;
     let b = vec3<f32>(wordf(at + 3u), wordf(at + 4u), wordf(at + 5u)) - o;
@@ -272,6 +278,14 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
     if det == 0.0 {
         return vec4<f32>(0.0);
     }
+    if owned && (u == 0.0 || v == 0.0 || w == 0.0) {
+        // U, V, W are the functions of edges B->C, C->A, A->B.
+        let p = det > 0.0;
+        if (u == 0.0 && !owns(p, bx, by, cx, cy)) || (v == 0.0 && !owns(p, cx, cy, ax, ay))
+            || (w == 0.0 && !owns(p, ax, ay, bx, by)) {
+            return vec4<f32>(0.0);
+        }
+    }
     // The distance: where the ray meets the triangle's plane (generated:
     // cpu::watertight::plane_distance, in f64 where the adapter has it).
     let plane = plane_distance(o, (*wk).d, at);
@@ -280,6 +294,15 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32) -> vec4<
         return vec4<f32>(dist, v / det, w / det, 1.0);
     }
     return vec4<f32>(0.0);
+}
+
+// Whether a triangle whose projected area is positive (or not) owns its edge from
+// (fx, fy) to (tx, ty) in sheared coordinates (cpu::watertight::owns64): by
+// comparisons, exact whatever the adapter does with subnormal differences.
+fn owns(positive: bool, fx: f32, fy: f32, tx: f32, ty: f32) -> bool {
+    let up = select((ty < fy), (ty > fy), positive);
+    let right = select((tx < fx), (tx > fx), positive);
+    return up || (ty == fy && right);
 }
 
 // Visits the current leaf: its triangles, then the neighbour to go on to. Sets
@@ -304,9 +327,9 @@ fn step(wk: ptr<function, Walk>, any: bool) {
         var h: vec4<f32>;
         if (*wk).rule == RULE_EXACT {
             // In f64 throughout (generated: cpu::watertight::Shear::intersect_f64).
-            h = hit_triangle_exact(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+            h = hit_triangle_exact(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best, false);
         } else {
-            h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best);
+            h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best, false);
         }
         // Of equal hits the last tested, which is the lowest input id (walk.rs, `keep`).
         if h.w != 0.0 {
@@ -323,7 +346,30 @@ fn step(wk: ptr<function, Walk>, any: bool) {
             }
         }
     }
-    // 2. The exit corner from the cell, then the exit face from three Plücker signs.
+    // 2. The exit face and distance (`leave`); a candidate inside this leaf is the
+    // nearest, and past tmax nothing more counts.
+    let l = leave(wk);
+    if ((*wk).best.triangle != MISS && (*wk).best.t <= l.t) || l.t >= (*wk).tmax {
+        (*wk).done = true;
+        return;
+    }
+    // 3. The neighbour across the face.
+    if !follow(wk, l, ncount) {
+        (*wk).done = true;
+    }
+}
+
+// Where a walk leaves its leaf (walk.rs, exit_of): the face, the distance, and the
+// exit axis's corner offset and direction component.
+struct Leave {
+    face: u32,
+    t: f32,
+    off_a: f32,
+    d_a: f32,
+}
+
+// The exit corner from the cell, then the exit face from three Plücker signs.
+fn leave(wk: ptr<function, Walk>) -> Leave {
     let cell = (*wk).cell;
     let level = (*wk).level;
     let size = ldexp(params.root_lo.w, -i32(level & 31u));
@@ -350,29 +396,38 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     }
     let axis = face >> 1u;
     let off_a = component(off, axis);
-    let d_a = component(d, axis);
-    // 3. A candidate inside this leaf is the nearest; past tmax nothing more counts.
     var t_exit = off_a * component((*wk).inv, axis);
     if exact {
         t_exit = t_exact;
     }
-    if ((*wk).best.triangle != MISS && (*wk).best.t <= t_exit) || t_exit >= (*wk).tmax {
-        (*wk).done = true;
-        return;
-    }
-    // 4. The neighbour across the face: one, or one of four by the median lines.
+    return Leave(face, t_exit, off_a, component(d, axis));
+}
+
+// Moves the walk across face `l.face` of its leaf (record word `ncount`) to the
+// neighbour there (walk.rs, follow): one, or one of four by the median lines; false
+// where there is none.
+fn follow(wk: ptr<function, Walk>, l: Leave, ncount: u32) -> bool {
+    let face = l.face;
     let n = (ncount >> (4u * face)) & 0xFu;
     if n == 0u {
-        (*wk).done = true;
-        return;
+        return false;
     }
+    let cell = (*wk).cell;
+    let level = (*wk).level;
+    let size = ldexp(params.root_lo.w, -i32(level & 31u));
+    let lo = params.root_lo.xyz;
+    let o = (*wk).o;
+    let d = (*wk).d;
+    let axis = face >> 1u;
+    let off_a = l.off_a;
+    let d_a = l.d_a;
     let half = 0.5 * size;
     let negative_a = (face & 1u) == 0u;
     let mid = lo + vec3<f32>(2u * cell + 1u) * half;
     let m = mid - o;
     let p = off_a * d - m * d_a;
     var sides = vec3<u32>(select(vec3<u32>(0u), vec3<u32>(1u), p > vec3<f32>(0.0))) ^ vec3<u32>(select(0u, 1u, negative_a));
-    if exact {
+    if (*wk).rule == RULE_EXACT {
         sides = vec3<u32>(
             exact_side(off_a, d_a, m.x, d.x, negative_a),
             exact_side(off_a, d_a, m.y, d.y, negative_a),
@@ -381,9 +436,10 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     }
     let side_bits = sides.x | (sides.y << 1u) | (sides.z << 2u);
     let quadrant = (side_bits & ((1u << axis) - 1u)) | ((side_bits >> (axis + 1u)) << axis);
+    let address = (*wk).address;
     let link = address + LEAF_HEADER_WORDS + links_before(ncount, face) + (n >> 2u) * quadrant;
     (*wk).address = word(params.o_octree + link);
-    // 5. The neighbour's cell: ((across << 1) | child bit) >> (1 + coarser - finer).
+    // The neighbour's cell: ((across << 1) | child bit) >> (1 + coarser - finer).
     let coarser = (ncount >> (COARSER_SHIFT + face)) & 1u;
     let finer = n >> 2u;
     let shift = 1u + coarser - finer;
@@ -392,6 +448,7 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let next = with_component((cell << vec3<u32>(1u)) | sides, axis, across);
     (*wk).cell = next >> vec3<u32>(shift);
     (*wk).level = level + finer - coarser;
+    return true;
 }
 
 struct Exit {
@@ -618,6 +675,96 @@ fn trace(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> HitOut 
     return out;
 }
 
+// Every crossing of a ray in [tmin, tmax] in order, each once (cpu::crossings,
+// crossings_entering): each leaf tests its triangles with edges owned and keeps the
+// crossings in its piece of the ray, (the previous leaf's exit, its own exit] (the
+// first leaf's from tmin, closed; the last's to tmax). Counts them and those arriving
+// on a front (generated `arrives_on_front`); with MODE 2 writes the first `capacity`
+// to `hits[base..]`, each leaf's sorted by (walk distance, input id), distances moved
+// back for a moved origin. (total, entries, steps).
+fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity: u32) -> vec3<u32> {
+    var wk = begin(o, d, tmin0, tmax0);
+    var total = 0u;
+    var entries = 0u;
+    var lo = 0.0;
+    var first = true;
+    let exact = wk.rule == RULE_EXACT;
+    let moved = wk.shift.x != 0.0 || wk.shift.y != 0.0;
+    loop {
+        if wk.done || !tick() {
+            break;
+        }
+        wk.steps += 1u;
+        if wk.steps > params.max_steps {
+            break;
+        }
+        let rec = params.o_octree + wk.address;
+        let count = word(rec);
+        let offset = word(rec + 1u);
+        let ncount = word(rec + 3u);
+        let l = leave(&wk);
+        let n = (ncount >> (4u * l.face)) & 0xFu;
+        let last = l.t >= wk.tmax || n == 0u;
+        var hi = wk.t_best;
+        if !last {
+            hi = max(l.t, select(lo, wk.tmin, first));
+        }
+        let leaf_start = total;
+        for (var j = 0u; j < count && tick(); j++) {
+            let tri = word(params.o_refs + offset + j);
+            let at = params.o_tris + 9u * tri;
+            var h: vec4<f32>;
+            if exact {
+                h = hit_triangle_exact(&wk, at, wk.tmin, hi, true);
+            } else {
+                h = hit_triangle(&wk, at, wk.tmin, hi, true);
+            }
+            if h.w == 0.0 || (!first && h.x <= lo) {
+                continue;
+            }
+            let front = arrives_on_front(wk.d, at);
+            if MODE == 2u && total < capacity {
+                var c: HitOut;
+                c.t = h.x;
+                if moved {
+                    c.t = clamp(shifted(h.x, wk.shift), tmin0, tmax0);
+                }
+                c.triangle = word(params.o_ids + tri);
+                c.u = h.y;
+                c.v = h.z;
+                c.leaf = select(0u, 1u, front);
+                c.prim = tri;
+                // The walk's distance, the sort key (a moved origin's distances may
+                // round together), as f32::total_cmp orders it.
+                c.steps = order_key(h.x);
+                c.flags = 0u;
+                var k = total;
+                let key = c.steps;
+                loop {
+                    if k == leaf_start || !tick() {
+                        break;
+                    }
+                    let prev = hits[base + k - 1u];
+                    if prev.steps < key || (prev.steps == key && prev.triangle < c.triangle) {
+                        break;
+                    }
+                    hits[base + k] = prev;
+                    k -= 1u;
+                }
+                hits[base + k] = c;
+            }
+            total += 1u;
+            entries += select(0u, 1u, front);
+        }
+        lo = hi;
+        first = false;
+        if last || !follow(&wk, l, ncount) {
+            break;
+        }
+    }
+    return vec3<u32>(total, entries, wk.steps);
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
@@ -626,12 +773,45 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let r0 = rays[2u * i];
     let r1 = rays[2u * i + 1u];
-    var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
-    // A walk that ran out of loop budget: the host traces it again on the CPU.
-    if over_budget {
-        out.steps = OVER_BUDGET;
+    if MODE == 0u {
+        var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
+        // A walk that ran out of loop budget: the host traces it again on the CPU.
+        if over_budget {
+            out.steps = OVER_BUDGET;
+        }
+        hits[i] = out;
+        return;
     }
-    hits[i] = out;
+    if MODE == 1u {
+        let c = cross(r0.xyz, r1.xyz, r0.w, r1.w, 0u, 0u);
+        var out: HitOut;
+        out.triangle = c.x;
+        out.leaf = c.y;
+        out.steps = select(c.z, OVER_BUDGET, over_budget);
+        hits[i] = out;
+        return;
+    }
+    // MODE 2: ray i's records start at offsets[i] (u32s after the rays, four a vec4).
+    let n = params.ray_count;
+    let base = ray_offset(n, i);
+    let capacity = ray_offset(n, i + 1u) - base;
+    cross(r0.xyz, r1.xyz, r0.w, r1.w, base, capacity);
+    if over_budget && capacity > 0u {
+        hits[base].flags = OVER_BUDGET;
+    }
+}
+
+// The bits of `t` as an unsigned key in f32::total_cmp's order.
+fn order_key(t: f32) -> u32 {
+    let b = bitcast<u32>(t);
+    return select(b | 0x80000000u, ~b, (b >> 31u) == 1u);
+}
+
+// Offset `i` of the list kernel's, after the `n` rays (their bits: no float
+// operation touches them).
+fn ray_offset(n: u32, i: u32) -> u32 {
+    let v = bitcast<vec4<u32>>(rays[2u * n + i / 4u]);
+    return v[i % 4u];
 }
 
 // `HitOut::steps` of a walk that ran out of loop budget.

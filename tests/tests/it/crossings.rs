@@ -11,7 +11,7 @@ use octrace_bake::{bake, BuildParams, Mesh};
 use octrace_runtime::cpu::Crossing;
 use octrace_runtime::{Ray, Scene};
 
-fn scene_of(mesh: &Mesh, params: &BuildParams) -> Scene {
+pub(crate) fn scene_of(mesh: &Mesh, params: &BuildParams) -> Scene {
     Scene::from_baked(bake(mesh, params).unwrap()).unwrap()
 }
 
@@ -36,7 +36,7 @@ fn walk_equals_brute_force(name: &str, scene: &Scene, rays: &[Ray]) -> usize {
 
 /// Random rays from a box twice the mesh's, and the same rays bent where f32 gives out
 /// (tiny components, tiny and huge lengths) and from far away.
-fn random_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
+pub(crate) fn random_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
     let (lo, hi) = bounds(mesh);
     let (c, e) = ((lo + hi) * 0.5, (hi - lo).max_element());
     let mut rng = SplitMix(seed);

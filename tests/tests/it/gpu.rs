@@ -535,6 +535,15 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
     same_hits("long walks", &rays, &cpu, &g);
     assert!(stats.iter().all(|s| s.triangle_tests > 65_535), "the walks test more triangles than the cap: {stats:?}");
     assert!(tracer.occluded(&rays).unwrap().iter().all(|&o| o));
+    // The crossing walks too: counted and listed again on the CPU where they run out.
+    let lists = tracer.crossings(&rays).unwrap();
+    let counts = tracer.count_crossings(&rays).unwrap();
+    for (i, r) in rays.iter().enumerate() {
+        let cpu = scene.tracer().all_crossings(r);
+        assert!(cpu.iter().any(|c| c.triangle == 70_000), "ray {i}: {cpu:?}");
+        assert_eq!(lists.of(i), &cpu[..], "ray {i}");
+        assert_eq!(counts[i], scene.tracer().count_crossings(r), "ray {i}");
+    }
 }
 
 /// The textured sample (`tests/data/textured/leaf.gltf`: an alpha-masked leaf texture,

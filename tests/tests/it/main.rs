@@ -6,6 +6,7 @@ mod effects;
 mod format;
 mod gltf_lenient;
 mod gpu;
+mod gpu_crossings;
 mod hard_cases;
 mod hostile;
 mod inside;

@@ -1,0 +1,169 @@
+//! Every crossing along a ray, and crossing counts, in the tracing kernel
+//! (`cross` in trace.wgsl, compiled with `MODE` 1 for counts and 2 for lists): the
+//! CPU's walk (`cpu::crossings`), leaf for leaf, with the same edge ownership, the
+//! same pieces of the ray, the same order within a leaf, so the answers are the
+//! CPU's bit for bit.
+//!
+//! A list takes two passes: the counts, then the records at offsets the counts give
+//! (memory follows the crossings found). Walks that run out of the adapter's loop
+//! budget, and rays with more crossings than one binding holds, are walked again on
+//! the CPU, from the same scene.
+
+use super::{kernel, GpuResult, GpuTracer, HitOut, Ray, OVER_BUDGET, RAYS_PER_DISPATCH};
+use crate::cpu::{BatchCrossings, Crossing, CrossingCount, Solid};
+
+/// Bytes of one record (a ray's crossing, or its count) in the hits binding.
+const RECORD: u64 = std::mem::size_of::<HitOut>() as u64;
+/// Bytes of one ray in the rays binding.
+const RAY: u64 = std::mem::size_of::<Ray>() as u64;
+
+impl GpuTracer<'_> {
+    /// How many times each ray crosses the mesh, and how many of those arrive on a
+    /// front: [`crate::Tracer::count_crossings`], ray for ray, bit for bit.
+    ///
+    /// # Errors
+    /// [`super::GpuError::Device`] if the device is lost or a buffer cannot be read.
+    ///
+    /// # Example
+    /// ```no_run
+    /// use octrace_runtime::gpu::{GpuContext, GpuTracer};
+    /// use octrace_runtime::{Ray, Scene};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// let scene = Scene::open("skull.oct")?;
+    /// let gpu = GpuContext::new()?;
+    /// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+    /// let rays = [Ray::new(glam::Vec3::new(0.0, 0.0, 0.0), glam::Vec3::X)];
+    /// let count = tracer.count_crossings(&rays)?[0];
+    /// println!("{} crossings, winding {}", count.total, count.winding());
+    /// # Ok(()) }
+    /// ```
+    pub fn count_crossings(&self, rays: &[Ray]) -> GpuResult<Vec<CrossingCount>> {
+        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()[0])?;
+        let tracer = self.scene.tracer();
+        Ok(out
+            .iter()
+            .zip(rays)
+            .map(|(h, r)| {
+                if h.steps == OVER_BUDGET {
+                    tracer.count_crossings(r)
+                } else {
+                    CrossingCount { total: h.triangle, entries: h.leaf }
+                }
+            })
+            .collect())
+    }
+
+    /// Every crossing of each ray, in order along it, in one flat list with per-ray
+    /// splits: [`crate::Tracer::crossings_batch`] with no limit, ray for ray, bit for
+    /// bit.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::count_crossings`].
+    pub fn crossings(&self, rays: &[Ray]) -> GpuResult<BatchCrossings> {
+        let counts = self.count_crossings(rays)?;
+        let mut splits = Vec::with_capacity(rays.len() + 1);
+        splits.push(0usize);
+        for c in &counts {
+            splits.push(splits[splits.len() - 1] + c.total as usize);
+        }
+        let mut crossings = vec![Crossing { t: 0.0, triangle: 0, u: 0.0, v: 0.0, enters: false }; splits[rays.len()]];
+        // Dispatches of at most `per_dispatch` rays whose rays and offsets fit one
+        // binding, and whose records fit another; a ray whose records alone do not is
+        // left to the CPU (it is given no room: `capacity` 0).
+        let limits = self.device.limits();
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_records = (max_binding / RECORD).min(u32::MAX as u64) as usize;
+        let per_dispatch =
+            (self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as u64).min((max_binding - 16) / (RAY + 4)) as usize;
+        let fits = |i: usize| (counts[i].total as usize) <= max_records;
+        let tracer = self.scene.tracer();
+        let mut start = 0;
+        while start < rays.len() {
+            let mut end = start;
+            let mut records = 0usize;
+            while end < rays.len() && end - start < per_dispatch {
+                let n = if fits(end) { counts[end].total as usize } else { 0 };
+                if records + n > max_records {
+                    break;
+                }
+                records += n;
+                end += 1;
+            }
+            let part = &rays[start..end];
+            let mut offsets = Vec::with_capacity(part.len() + 1);
+            offsets.push(0u32);
+            for i in start..end {
+                let n = if fits(i) { counts[i].total } else { 0 };
+                offsets.push(offsets[offsets.len() - 1] + n);
+            }
+            let out = if records > 0 { self.list_kernel(part, &offsets)? } else { Vec::new() };
+            for (k, i) in (start..end).enumerate() {
+                let (a, b) = (offsets[k] as usize, offsets[k + 1] as usize);
+                let dest = &mut crossings[splits[i]..splits[i + 1]];
+                if dest.is_empty() {
+                    continue;
+                }
+                if b - a != dest.len() || out[a].flags == OVER_BUDGET {
+                    dest.copy_from_slice(&tracer.all_crossings(&rays[i]));
+                    continue;
+                }
+                for (c, h) in dest.iter_mut().zip(&out[a..b]) {
+                    *c = Crossing { t: h.t, triangle: h.triangle, u: h.u, v: h.v, enters: h.leaf != 0 };
+                }
+            }
+            start = end;
+        }
+        Ok(BatchCrossings { splits, crossings })
+    }
+
+    /// The length of each ray's `[tmin, tmax]` inside the scene, a closed mesh (`solid`,
+    /// from [`crate::Scene::solid`]): [`crate::Tracer::length_inside`], ray for ray, bit
+    /// for bit, from the GPU's crossings to infinity.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::count_crossings`].
+    pub fn length_inside(&self, solid: &Solid, rays: &[Ray]) -> GpuResult<Vec<f32>> {
+        let _ = solid;
+        let to_infinity: Vec<Ray> = rays.iter().map(|r| Ray { tmax: f32::INFINITY, ..*r }).collect();
+        let all = self.crossings(&to_infinity)?;
+        Ok(rays.iter().enumerate().map(|(i, r)| crate::cpu::inside::length_from(r, all.of(i))).collect())
+    }
+
+    /// The list kernel over `rays` (one dispatch), ray `i`'s records at
+    /// `offsets[i]..offsets[i + 1]` of what comes back.
+    fn list_kernel(&self, rays: &[Ray], offsets: &[u32]) -> GpuResult<Vec<HitOut>> {
+        use wgpu::BufferUsages as U;
+        let ray_bytes = rays.len() as u64 * RAY;
+        let offset_bytes = (offsets.len() as u64 * 4).next_multiple_of(16);
+        let records = *offsets.last().unwrap_or(&0) as u64;
+        let ray_buffer = self.buffer("octrace crossing rays", ray_bytes + offset_bytes, U::STORAGE | U::COPY_DST);
+        let hit_buffer = self.buffer("octrace crossings", records.max(1) * RECORD, U::STORAGE | U::COPY_SRC);
+        let params_buffer =
+            self.buffer("octrace params", std::mem::size_of::<super::Params>() as u64, U::UNIFORM | U::COPY_DST);
+        let params = super::Params { ray_count: rays.len() as u32, ..self.params };
+        self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        self.queue.write_buffer(&ray_buffer, 0, bytemuck::cast_slice(rays));
+        let mut padded = offsets.to_vec();
+        padded.resize((offset_bytes / 4) as usize, 0);
+        self.queue.write_buffer(&ray_buffer, ray_bytes, bytemuck::cast_slice(&padded));
+        let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.crossing_kernels()[1]);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups((rays.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
+        }
+        self.queue.submit([encoder.finish()]);
+        self.read_back::<HitOut>(&hit_buffer, records * RECORD)
+    }
+
+    /// The counting and listing kernels, built on first use.
+    fn crossing_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
+        self.crossing_kernels.get_or_init(|| {
+            let make =
+                |label, mode: f64| kernel(&self.device, &self.pipeline_layout, &self.module, label, &[("MODE", mode)]);
+            [make("octrace count crossings", 1.0), make("octrace crossings", 2.0)]
+        })
+    }
+}

@@ -1,0 +1,111 @@
+//! Every crossing and crossing counts on the GPU (`GpuTracer::crossings`,
+//! `GpuTracer::count_crossings`): the CPU's lists and counts, ray for ray, bit for bit
+//! where the adapter has f64 (lavapipe has), on random rays bent where f32 gives out,
+//! rays on the octree's planes aimed at vertices, rays from inside closed solids
+//! through their vertices and edges, and far origins; lengths inside closed solids.
+
+use glam::Vec3;
+use octrace_bake::hard_rays::GridPlanes;
+use octrace_bake::procedural::{self, SplitMix};
+use octrace_bake::BuildParams;
+use octrace_runtime::cpu::{BatchCrossings, Crossing};
+use octrace_runtime::gpu::GpuTracer;
+use octrace_runtime::{Ray, Scene};
+use octrace_tests::gpu;
+
+use crate::crossings::{random_rays, scene_of};
+
+/// A crossing's bits, so that -0.0 and 0.0 differ.
+fn bits(c: &Crossing) -> (u32, u32, u32, u32, bool) {
+    (c.t.to_bits(), c.triangle, c.u.to_bits(), c.v.to_bits(), c.enters)
+}
+
+/// The GPU's lists and counts for `rays` against the CPU's batch and one-ray walks.
+/// Returns the crossings compared.
+fn gpu_equals_cpu(name: &str, gpu: &octrace_runtime::gpu::GpuContext, scene: &Scene, rays: &[Ray]) -> usize {
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
+    let cpu = scene.tracer();
+    let want: BatchCrossings = cpu.par_crossings_batch(rays, usize::MAX);
+    let got = tracer.crossings(rays).unwrap();
+    let counts = tracer.count_crossings(rays).unwrap();
+    assert_eq!(got.splits.len(), rays.len() + 1, "{name}");
+    let mut differ = 0;
+    for (i, r) in rays.iter().enumerate() {
+        let (w, g) = (want.of(i), got.of(i));
+        let same = w.len() == g.len() && w.iter().zip(g).all(|(a, b)| bits(a) == bits(b));
+        if tracer.uses_f64() {
+            assert!(same, "{name}: ray {i} {r:?}\nCPU {w:?}\nGPU {g:?}");
+            assert_eq!(w, &cpu.all_crossings(r)[..], "{name}: ray {i}: one ray and batch");
+        }
+        differ += !same as usize;
+        let c = counts[i];
+        assert_eq!(c.total as usize, g.len(), "{name}: ray {i}: count and list");
+        assert_eq!(c.entries as usize, g.iter().filter(|x| x.enters).count(), "{name}: ray {i}: entries");
+    }
+    // Without f64 the last bits are the adapter's: nearly every list still agrees.
+    assert!(differ * 100 <= rays.len(), "{name}: {differ} of {} rays differ", rays.len());
+    want.crossings.len()
+}
+
+/// Random rays (with subnormal components, 1e-30 and 1e25 lengths, origins 1e6 mesh
+/// sizes away) on meshes open and closed, at several depths.
+#[test]
+fn gpu_crossings_equal_the_cpus_on_random_and_far_rays() {
+    let Some(gpu) = gpu("gpu_crossings_equal_the_cpus_on_random_and_far_rays") else { return };
+    let meshes = [
+        ("soup", procedural::soup(3, 600, 4.0, 0.8)),
+        ("sphere", procedural::sphere([0.1, 0.2, -0.3], 1.5, 20, 28)),
+        ("torus", procedural::torus([0.0; 3], 1.0, 0.35, 30, 14)),
+        ("grid", procedural::grid(12, 3.0)),
+        ("fan", procedural::fan(48, 1.0)),
+    ];
+    for (name, mesh) in &meshes {
+        for params in
+            [BuildParams::auto(), BuildParams { max_depth: Some(6), leaf_size: Some(1), ..BuildParams::auto() }]
+        {
+            let scene = scene_of(mesh, &params);
+            let n = gpu_equals_cpu(name, gpu, &scene, &random_rays(mesh, 1000, 3));
+            assert!(n > 100, "{name}: {n} crossings");
+        }
+    }
+}
+
+/// Rays on the octree's planes (±0 components, every twist of the hard-ray generator)
+/// aimed at vertices; rays from inside the closed solids through every vertex and
+/// edge midpoint, and the same lines from outside.
+#[test]
+fn gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays() {
+    let Some(gpu) = gpu("gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays") else { return };
+    let mesh = crate::hard_cases::test_scene();
+    let vertices: Vec<[f32; 3]> = mesh.triangles.iter().flatten().copied().collect();
+    for depth in [3, 6] {
+        let scene = scene_of(&mesh, &BuildParams { max_depth: Some(depth), leaf_size: Some(2), ..BuildParams::auto() });
+        let grid = GridPlanes::of(&scene.view());
+        let point = |r: &mut SplitMix| [0, 1, 2].map(|_| -2.0 + 4.0 * r.unit());
+        let aim = |r: &mut SplitMix| vertices[(r.next_u64() % vertices.len() as u64) as usize];
+        let hard = octrace_bake::hard_rays::grid_rays(&grid, 3000, depth as u64, point, Some(aim), |_| true);
+        let rays: Vec<Ray> = hard.iter().map(|r| Ray::new(Vec3::from(r.origin), Vec3::from(r.dir))).collect();
+        gpu_equals_cpu(&format!("grid rays, depth {depth}"), gpu, &scene, &rays);
+    }
+    for solid in procedural::closed_solids() {
+        let scene = scene_of(&solid.mesh, &BuildParams::auto());
+        let mut rays = Vec::new();
+        for (o, d) in solid.leak_rays(1000, 4) {
+            let (o, d) = (Vec3::from(o), Vec3::from(d));
+            rays.push(Ray::new(o, d));
+            rays.push(Ray::new(o - d * 50.0, d));
+        }
+        let n = gpu_equals_cpu(solid.name, gpu, &scene, &rays);
+        assert!(n >= rays.len(), "{}: {n} crossings for {} rays", solid.name, rays.len());
+        // Lengths inside, of segments that start and end inside and out.
+        let segments: Vec<Ray> = rays.iter().map(|r| Ray { tmin: 0.25, tmax: 40.0, ..*r }).collect();
+        let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+        let got = tracer.length_inside(scene.solid().unwrap(), &segments).unwrap();
+        let want = scene.length_inside_all(&segments).unwrap();
+        let same = got.iter().zip(&want).filter(|(g, w)| g.to_bits() == w.to_bits()).count();
+        if tracer.uses_f64() {
+            assert_eq!(same, want.len(), "{}: lengths inside", solid.name);
+        }
+        assert!(want.iter().filter(|&&l| l > 0.0).count() * 4 > want.len(), "{}: most segments go inside", solid.name);
+    }
+}
