@@ -132,6 +132,22 @@ pub enum Error {
         /// The format's limit.
         limit: u64,
     },
+    /// The octree being built passed the bake's memory budget
+    /// ([`BuildParams::max_tree_bytes`](crate::BuildParams::max_tree_bytes)); the build
+    /// stopped there. Options that multiply references (a small leaf size, a deep
+    /// tree) or triangles that share cells (many coincident copies, fans) get here.
+    #[error(
+        "the octree being built reached {} bytes, past the bake's memory budget of {} (raise it with \
+         --max-memory or BuildParams::max_tree_bytes, or use a larger --leaf-size or a smaller --max-depth)",
+        thousands(*needed),
+        thousands(*limit)
+    )]
+    TreeBudget {
+        /// Bytes the tree had reached (at least).
+        needed: u64,
+        /// The budget.
+        limit: u64,
+    },
     /// The scene's size or position is beyond what the tracer's `f32` arithmetic
     /// serves: an extent below `2^-60` or a size or coordinate above `2^60`
     /// (`octree::MIN_ROOT_EDGE`, `octree::MAX_COORDINATE`). Rays would leak or miss.
@@ -148,6 +164,22 @@ pub enum Error {
         /// The largest coordinate magnitude.
         largest: f64,
     },
+    /// An input asks for more work or memory than a budget allows, found before the
+    /// work (or, for a tree being built, as soon as it passes): the budget, what was
+    /// asked, and the option that raises it.
+    #[error("{path}: {what}: {needed} is past the budget of {limit} (raise it with {option})")]
+    Budget {
+        /// The input.
+        path: PathBuf,
+        /// What is counted, and where.
+        what: String,
+        /// How many the input asks for (at least).
+        needed: u64,
+        /// The budget.
+        limit: u64,
+        /// The option that raises it: the command-line flag and the library field.
+        option: &'static str,
+    },
     /// A build parameter is beyond its limit ([`BuildParams::check`](crate::BuildParams::check)).
     #[error("invalid build parameters: {message}")]
     Params {
@@ -161,6 +193,19 @@ pub enum Error {
 
 /// The bake crate's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A count with thousands separators: `1,234,567`.
+pub(crate) fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
 
 /// A length for a message: `0`, or four significant digits (`1.000e6`, `2.384e-7`).
 pub(crate) fn number(x: f64) -> String {

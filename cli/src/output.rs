@@ -15,6 +15,49 @@ pub(crate) fn thousands(n: u64) -> String {
 
 /// `n` things, with thousands separators and the plural when `n` is not 1:
 /// `1 triangle`, `1,234 triangles`, `2 leaves`.
+/// The most items a count option (rays, points) may ask for: 2^27 (134 million;
+/// 4 GiB of rays), checked before anything is allocated.
+pub(crate) const MAX_COUNT: usize = 1 << 27;
+
+/// A count option's value, at most [`MAX_COUNT`].
+pub(crate) fn parse_count(text: &str) -> Result<usize, String> {
+    let n: usize = text.trim().replace('_', "").parse().map_err(|_| format!("'{text}' is not a count"))?;
+    if n > MAX_COUNT {
+        return Err(format!("{n} is more than the {MAX_COUNT} (2^27) a run may ask for; split the work"));
+    }
+    Ok(n)
+}
+
+/// A number of timed runs: 1 to 1000.
+pub(crate) fn parse_runs(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(n) if (1..=1000).contains(&n) => Ok(n),
+        _ => Err(format!("'{text}': runs are 1 to 1000")),
+    }
+}
+
+/// A byte count as the command line gives it: digits with an optional suffix K, M, G
+/// or T (powers of 1024; `B` and `iB` accepted after them).
+pub(crate) fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let t = t.strip_suffix("iB").or_else(|| t.strip_suffix('B')).unwrap_or(t);
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let shift = match c.to_ascii_uppercase() {
+                'K' => 10,
+                'M' => 20,
+                'G' => 30,
+                'T' => 40,
+                _ => return Err(format!("'{text}': unknown suffix '{c}' (K, M, G or T)")),
+            };
+            (&t[..i], shift)
+        }
+        _ => (t, 0),
+    };
+    let n: u64 = digits.parse().map_err(|_| format!("'{text}' is not a byte count (digits, then K, M, G or T)"))?;
+    n.checked_mul(1u64 << shift).ok_or_else(|| format!("'{text}' is more than 2^64 bytes"))
+}
+
 pub(crate) fn counted(n: u64, thing: &str) -> String {
     let plural = match thing {
         _ if n == 1 => thing.to_string(),

@@ -21,7 +21,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             leaks += scene.intersect_all(&rays).iter().filter(|h| h.is_none()).count();
             total += rays.len();
         }
-        let baked = bake(&mixed, &BuildParams { max_depth: Some(8), leaf_size: Some(2), margin })?;
+        let baked =
+            bake(&mixed, &BuildParams { max_depth: Some(8), leaf_size: Some(2), margin, ..BuildParams::auto() })?;
         let refs = baked.tri_refs.len() as f64 / baked.triangle_ids.len() as f64;
         let scene = Scene::from_baked(baked)?;
         let view = scene.view();

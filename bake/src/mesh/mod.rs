@@ -6,7 +6,9 @@ mod obj;
 mod obj_plain;
 mod refs;
 
-pub use refs::{LoadOptions, References, DEFAULT_MAX_FILE_BYTES, MAX_MTL_BYTES};
+pub use refs::{
+    LoadOptions, References, DEFAULT_MAX_FILE_BYTES, DEFAULT_MAX_INSTANCES, DEFAULT_MAX_TRIANGLES, MAX_MTL_BYTES,
+};
 
 use std::path::{Path, PathBuf};
 
@@ -267,6 +269,17 @@ impl Mesh {
             MeshFormat::Obj => obj::parse(bytes, name, base, options)?,
             MeshFormat::Gltf => gltf::parse(bytes, name, base, options)?,
         };
+        // glTF's triangles are counted before they are read; an OBJ's are bounded by
+        // its size, and counted here.
+        if mesh.triangles.len() as u64 > options.max_triangles {
+            return Err(Error::Budget {
+                path: name.into(),
+                what: "triangles".into(),
+                needed: mesh.triangles.len() as u64,
+                limit: options.max_triangles,
+                option: "--max-triangles, LoadOptions::max_triangles",
+            });
+        }
         mesh.check_bakeable(name)?;
         Ok(mesh)
     }

@@ -17,8 +17,10 @@ pub enum References {
     Anywhere,
 }
 
-/// How a mesh is loaded: where its references may lead, and how large a file (the mesh
-/// itself, decompressed, or a buffer it names) may be.
+/// How a mesh is loaded: where its references may lead, how large a file (the mesh
+/// itself, decompressed, or a buffer it names) may be, and the budgets a small file
+/// could otherwise multiply: node placements and triangles after instancing, counted
+/// before anything is read into the mesh.
 ///
 /// # Example
 /// ```no_run
@@ -34,7 +36,24 @@ pub struct LoadOptions {
     /// The largest file read, in bytes: the mesh file, its decompressed contents, each
     /// glTF buffer. Checked before anything is read.
     pub max_file_bytes: u64,
+    /// The most node placements a glTF scene may make ([`DEFAULT_MAX_INSTANCES`]): a
+    /// node listed twice as a child, or under two parents, is placed twice, and its
+    /// children with it, so 2 KB of nodes that share children can ask for 2^60.
+    /// Counted over the hierarchy before it is walked.
+    pub max_instances: u64,
+    /// The most triangles the mesh may hold once instanced ([`DEFAULT_MAX_TRIANGLES`]):
+    /// for glTF counted from the accessors and placements before any is read; for OBJ
+    /// as faces are read.
+    pub max_triangles: u64,
 }
+
+/// The default [`LoadOptions::max_instances`]: 2^20 node placements, far beyond real
+/// assets (Khronos' samples place at most a few thousand).
+pub const DEFAULT_MAX_INSTANCES: u64 = 1 << 20;
+
+/// The default [`LoadOptions::max_triangles`]: 2^27 (134 million), 150 times the
+/// dragon; about 5 GB of vertex positions alone.
+pub const DEFAULT_MAX_TRIANGLES: u64 = 1 << 27;
 
 /// The default [`LoadOptions::max_file_bytes`]: 4 GiB, eight times the dragon's
 /// glTF-sized data and far beyond what the format's 2^32 - 1 triangles need in OBJ.
@@ -45,7 +64,12 @@ pub const MAX_MTL_BYTES: u64 = 16 << 20;
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { references: References::Confined, max_file_bytes: DEFAULT_MAX_FILE_BYTES }
+        LoadOptions {
+            references: References::Confined,
+            max_file_bytes: DEFAULT_MAX_FILE_BYTES,
+            max_instances: DEFAULT_MAX_INSTANCES,
+            max_triangles: DEFAULT_MAX_TRIANGLES,
+        }
     }
 }
 

@@ -44,13 +44,27 @@ pub(crate) struct Limits {
     pub refs: u64,
     /// Words of leaf records (`octree`).
     pub words: u64,
+    /// Bytes the tree may hold while it is built ([`tree_bytes`]): the bake's memory
+    /// budget (`BuildParams::max_tree_bytes`).
+    pub bytes: u64,
 }
 
 impl Limits {
-    /// The format's.
+    /// The format's, with no memory budget.
     pub(crate) const FORMAT: Limits =
-        Limits { refs: u32::MAX as u64, words: octrace_format::layout::INTERNAL_BIT as u64 };
+        Limits { refs: u32::MAX as u64, words: octrace_format::layout::INTERNAL_BIT as u64, bytes: u64::MAX };
 }
+
+/// Bytes a tree of `leaves` leaves holding `refs` references takes while it is built:
+/// 4 a reference and [`LEAF_BYTES`] a leaf. The bake's peak is about twice this
+/// (the tree, then the file's arrays made from it) plus the mesh.
+pub(crate) fn tree_bytes(leaves: u64, refs: u64) -> u64 {
+    refs.saturating_mul(4).saturating_add(leaves.saturating_mul(LEAF_BYTES))
+}
+
+/// A leaf's bytes while the tree is built: its node (32), its list's header (24), an
+/// eighth of its parent's children array (32), its record in the file (16).
+pub(crate) const LEAF_BYTES: u64 = 104;
 
 /// What the tree has grown to while it is built, so that a tree passing a limit stops
 /// growing then, not after the whole build.
@@ -77,7 +91,7 @@ impl Growth {
         let refs = self.refs.fetch_add(refs as u64, Ordering::Relaxed).wrapping_add(refs as u64);
         let leaves = self.leaves.fetch_add(leaves as u64, Ordering::Relaxed).wrapping_add(leaves as u64);
         let words = leaves * octrace_format::layout::LEAF_HEADER_WORDS as u64;
-        if refs > self.limits.refs || words > self.limits.words {
+        if refs > self.limits.refs || words > self.limits.words || tree_bytes(leaves, refs) > self.limits.bytes {
             self.passed.store(true, Ordering::Relaxed);
         }
     }
@@ -90,8 +104,12 @@ impl Growth {
     /// The limit passed, as the error to report, once [`Growth::passed`].
     pub(crate) fn error(&self) -> crate::Error {
         let refs = self.refs.load(Ordering::Relaxed);
-        let words = self.leaves.load(Ordering::Relaxed) * octrace_format::layout::LEAF_HEADER_WORDS as u64;
-        if refs > self.limits.refs {
+        let leaves = self.leaves.load(Ordering::Relaxed);
+        let words = leaves * octrace_format::layout::LEAF_HEADER_WORDS as u64;
+        let bytes = tree_bytes(leaves, refs);
+        if bytes > self.limits.bytes && refs <= self.limits.refs && words <= self.limits.words {
+            crate::Error::TreeBudget { needed: bytes, limit: self.limits.bytes }
+        } else if refs > self.limits.refs {
             crate::Error::Limit { what: "triangle references", needed: refs, limit: self.limits.refs }
         } else {
             crate::Error::Limit { what: "words of leaf records", needed: words, limit: self.limits.words }

@@ -47,7 +47,17 @@ pub struct BuildParams {
     pub leaf_size: Option<u32>,
     /// Cell enlargement as a fraction of the root edge; see [`DEFAULT_MARGIN`].
     pub margin: f32,
+    /// The bake's memory budget: the bytes the tree may hold while it is built (4 a
+    /// triangle reference, about 100 a leaf); the build stops with
+    /// [`Error::TreeBudget`](crate::Error::TreeBudget) as soon as it passes.
+    /// [`DEFAULT_MAX_TREE_BYTES`] by default. The bake's peak memory is about twice
+    /// this plus the mesh.
+    pub max_tree_bytes: u64,
 }
+
+/// The default [`BuildParams::max_tree_bytes`]: 2 GiB, 60 times what the dragon's
+/// default bake holds (34 MB: 1.86 million references, 253,436 leaves).
+pub const DEFAULT_MAX_TREE_BYTES: u64 = 2 << 30;
 
 /// Parameters with every automatic choice made.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,7 +105,7 @@ impl BuildParams {
 
     /// Everything automatic, default margin.
     pub fn auto() -> Self {
-        BuildParams { max_depth: None, leaf_size: None, margin: DEFAULT_MARGIN }
+        BuildParams { max_depth: None, leaf_size: None, margin: DEFAULT_MARGIN, max_tree_bytes: DEFAULT_MAX_TREE_BYTES }
     }
 
     /// Fixes the automatic choices for a mesh of `triangles` triangles.

@@ -256,18 +256,18 @@ fn a_tree_past_a_limit_is_refused_as_soon_as_it_passes_it() {
     };
 
     // Exactly at both limits: baked, the same file.
-    let (at, _) = within(Limits { refs, words });
+    let (at, _) = within(Limits { refs, words, bytes: u64::MAX });
     assert_eq!(at.unwrap().to_file_bytes(0).unwrap(), full.to_file_bytes(0).unwrap());
 
     // The triangles alone: refused before the build starts.
-    let (baked, stages) = within(Limits { refs: kept - 1, words });
+    let (baked, stages) = within(Limits { refs: kept - 1, words, bytes: u64::MAX });
     assert_eq!(limit_error(baked), ("triangle references", kept, kept - 1));
     assert_eq!(stages, [BakeStage::Prepare]);
 
     // Past a limit while building: stopped well short of the whole tree, never laid out.
     for (limits, what, whole) in [
-        (Limits { refs: refs / 4, words }, "triangle references", refs),
-        (Limits { refs, words: leaf_words / 4 }, "words of leaf records", leaf_words),
+        (Limits { refs: refs / 4, words, bytes: u64::MAX }, "triangle references", refs),
+        (Limits { refs, words: leaf_words / 4, bytes: u64::MAX }, "words of leaf records", leaf_words),
     ] {
         let (baked, stages) = within(limits);
         let (name, needed, limit) = limit_error(baked);
@@ -279,10 +279,10 @@ fn a_tree_past_a_limit_is_refused_as_soon_as_it_passes_it() {
     }
 
     // Past the words limit only by the links, which the layout counts exactly.
-    let (baked, stages) = within(Limits { refs, words: words - 1 });
+    let (baked, stages) = within(Limits { refs, words: words - 1, bytes: u64::MAX });
     assert_eq!(limit_error(baked), ("words of leaf records", words, words - 1));
     assert_eq!(stages.last(), Some(&BakeStage::Link));
-    let message = within(Limits { refs, words: words - 1 }).0.unwrap_err().to_string();
+    let message = within(Limits { refs, words: words - 1, bytes: u64::MAX }).0.unwrap_err().to_string();
     assert!(message.contains("needs at least") && message.contains("--leaf-size"), "{message}");
 }
 

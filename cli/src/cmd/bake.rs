@@ -42,6 +42,20 @@ pub(crate) struct Args {
     /// FIFOs and files over the size limit are refused either way.
     #[arg(long)]
     pub allow_outside_references: bool,
+    /// The bake's memory budget: the bytes the octree may hold while it is built (4 a
+    /// triangle reference, about 100 a leaf; the bake's peak is about twice this plus
+    /// the mesh). Suffixes K, M, G, T (powers of 1024). A bake that passes it stops
+    /// there with an error.
+    #[arg(long, value_name = "BYTES", default_value = "2G", value_parser = crate::output::parse_bytes)]
+    pub max_memory: u64,
+    /// The most node placements a glTF scene may make (a node listed twice, or under
+    /// two parents, is placed twice, and its children with it); counted before loading.
+    #[arg(long, value_name = "N", default_value_t = octrace_bake::DEFAULT_MAX_INSTANCES)]
+    pub max_instances: u64,
+    /// The most triangles the mesh may hold once instanced; counted before loading a
+    /// glTF's.
+    #[arg(long, value_name = "N", default_value_t = octrace_bake::DEFAULT_MAX_TRIANGLES)]
+    pub max_triangles: u64,
     /// Record the bake's duration in the file's header. Off by default, so that two
     /// bakes of the same input with the same options give identical files.
     #[arg(long)]
@@ -60,14 +74,25 @@ pub(crate) struct Args {
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     crate::memory::return_large_frees();
-    let params = BuildParams { max_depth: args.max_depth, leaf_size: Some(args.leaf_size), margin: args.margin };
+    let params = BuildParams {
+        max_depth: args.max_depth,
+        leaf_size: Some(args.leaf_size),
+        margin: args.margin,
+        max_tree_bytes: args.max_memory,
+    };
     params.check().context("--max-depth, --leaf-size or --margin")?;
     let progress = Progress::new();
     progress.stage("loading");
     let started = Instant::now();
     crate::output::refuse_overwriting(&args.output, "-o", &[&args.input])?;
     let references = if args.allow_outside_references { References::Anywhere } else { References::Confined };
-    let mesh = Mesh::load_with(&args.input, &LoadOptions { references, ..LoadOptions::default() })?;
+    let options = LoadOptions {
+        references,
+        max_instances: args.max_instances,
+        max_triangles: args.max_triangles,
+        ..LoadOptions::default()
+    };
+    let mesh = Mesh::load_with(&args.input, &options)?;
     let sources: Vec<&Path> = mesh.sources.iter().map(PathBuf::as_path).collect();
     crate::output::refuse_overwriting(&args.output, "-o", &sources)?;
     for w in &mesh.warnings {

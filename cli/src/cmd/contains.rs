@@ -253,7 +253,7 @@ pub(crate) struct PointsArgs {
     #[arg(long, value_enum, default_value_t = PointSet::Uniform)]
     pub set: PointSet,
     /// How many points.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = 1_000_000, value_parser = crate::output::parse_count)]
     pub count: usize,
     /// For --set near: the distance from the surface, relative to the box's diagonal.
     #[arg(long, default_value_t = 1e-6)]

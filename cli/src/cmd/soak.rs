@@ -38,10 +38,10 @@ pub(crate) struct Args {
     /// to bake first.
     pub scene: Option<PathBuf>,
     /// Random rays per solid and placement (the vertex and edge rays come on top).
-    #[arg(long, default_value_t = 2_000_000)]
+    #[arg(long, default_value_t = 2_000_000, value_parser = crate::output::parse_count)]
     pub rays: usize,
     /// Rays on the octree's planes per solid and placement.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = 1_000_000, value_parser = crate::output::parse_count)]
     pub grid_rays: usize,
     /// Only the solids at the origin (not moved far from it).
     #[arg(long)]

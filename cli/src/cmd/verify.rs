@@ -26,10 +26,10 @@ pub(crate) struct Args {
     /// The .oct scene.
     pub scene: PathBuf,
     /// Random rays to compare (the oracle tests every triangle for each).
-    #[arg(long, default_value_t = 10_000)]
+    #[arg(long, default_value_t = 10_000, value_parser = crate::output::parse_count)]
     pub rays: usize,
     /// Rays on the octree's planes to compare (default: half of --rays).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::output::parse_count)]
     pub grid_rays: Option<usize>,
     /// Seed of the ray generators.
     #[arg(long, default_value_t = 1)]

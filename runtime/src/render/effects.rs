@@ -237,6 +237,10 @@ const HEADLIGHT: (f32, f32) = (0.1, 0.85);
 /// Shadow rays towards area lights stop this far short of the light (a fraction of
 /// the distance), so they do not find the emitter itself.
 const AREA_SHADOW_END: f32 = 1.0 - 1e-3;
+/// Shadow rays traced together at most (plus one shading point's): what bounds a
+/// tile's memory in a scene of many lights.
+const SHADOW_CHUNK: usize = 4096;
+
 /// Alpha layers a shadow ray may pass through before it counts as blocked.
 const MAX_SHADOW_LAYERS: u32 = 16;
 
@@ -389,6 +393,12 @@ impl<'a> Context<'a> {
                 match hit {
                     None => sum.add(task.weight * BACKGROUND),
                     Some(hit) => self.shade(task, &hit, sum, &mut next, &mut shadows),
+                }
+                // Shadow rays in chunks, whatever the number of lights: a tile's memory
+                // is its pixels' and one chunk's (the sums are exact and commute, so
+                // the image does not depend on where a chunk ends).
+                if shadows.len() >= SHADOW_CHUNK {
+                    self.trace_shadows(tracer, std::mem::take(&mut shadows), &mut out, first, &mut counts);
                 }
             }
             self.trace_shadows(tracer, shadows, &mut out, first, &mut counts);

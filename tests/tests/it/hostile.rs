@@ -20,7 +20,12 @@ fn staged(dir: &Path, fixture: &str) -> PathBuf {
     to
 }
 
-const ANYWHERE: LoadOptions = LoadOptions { references: References::Anywhere, max_file_bytes: 1 << 30 };
+const ANYWHERE: LoadOptions = LoadOptions {
+    references: References::Anywhere,
+    max_file_bytes: 1 << 30,
+    max_instances: octrace_bake::DEFAULT_MAX_INSTANCES,
+    max_triangles: octrace_bake::DEFAULT_MAX_TRIANGLES,
+};
 
 /// Loads on a thread and fails the test if it takes more than ten seconds: a FIFO or a
 /// device must be refused, not waited on.

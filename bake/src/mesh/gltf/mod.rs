@@ -80,6 +80,32 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         return Err(Error::EmptyScene { path: path.into() });
     };
+    // The work the scene asks for, before any of it: its placements of nodes, and the
+    // triangles they make.
+    let placed = placements(&document, &scene, options.max_instances).map_err(|e| match e {
+        Placements::Cycle(node) => Error::Parse {
+            path: path.into(),
+            element: format!("node {node}"),
+            message: "the node hierarchy has a cycle through this node".into(),
+        },
+        Placements::Over { node, total } => Error::Budget {
+            path: path.into(),
+            what: format!("node placements (shared children counted each time; passed at node {node})"),
+            needed: total,
+            limit: options.max_instances,
+            option: "--max-instances, LoadOptions::max_instances",
+        },
+    })?;
+    let triangles = instanced_triangles(&document, &placed);
+    if triangles > options.max_triangles {
+        return Err(Error::Budget {
+            path: path.into(),
+            what: "triangles once instanced (each mesh's triangles times its placements)".into(),
+            needed: triangles,
+            limit: options.max_triangles,
+            option: "--max-triangles, LoadOptions::max_triangles",
+        });
+    }
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.len()).sum::<usize>();
     let mut mesh = Mesh { sources, warnings, ..Mesh::default() };
     let mut materials = material::Materials { path, base, options, buffers: &buffers, loaded: Default::default() };
@@ -100,6 +126,104 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
         }
     }
     Ok(loader.mesh)
+}
+
+/// Why a scene's placements were not counted.
+enum Placements {
+    /// The hierarchy has a cycle through this node.
+    Cycle(usize),
+    /// The placements passed the budget at this node, having reached `total`.
+    Over { node: usize, total: u64 },
+}
+
+/// How many times the scene places each node (a child listed twice, or under two
+/// parents, is placed once for each listing, its children with it), counted over the
+/// hierarchy's edges before it is walked: a small file whose nodes share children may
+/// ask for 2^60 placements.
+fn placements(
+    document: &gltf::Document,
+    scene: &gltf::Scene<'_>,
+    limit: u64,
+) -> std::result::Result<Vec<u64>, Placements> {
+    let n = document.nodes().len();
+    let children: Vec<Vec<usize>> = document.nodes().map(|node| node.children().map(|c| c.index()).collect()).collect();
+    // Depth first from the scene's roots: the nodes reached in post-order, a cycle
+    // refused as it is met (a child already on the path).
+    let (new, open, done) = (0u8, 1u8, 2u8);
+    let mut state = vec![new; n];
+    let mut order = Vec::with_capacity(n);
+    for root in scene.nodes().map(|r| r.index()) {
+        if state[root] != new {
+            continue;
+        }
+        state[root] = open;
+        let mut path = vec![(root, 0usize)];
+        while let Some(&(node, next)) = path.last() {
+            match children[node].get(next) {
+                Some(&child) => {
+                    if let Some(top) = path.last_mut() {
+                        top.1 += 1;
+                    }
+                    if state[child] == open {
+                        return Err(Placements::Cycle(child));
+                    }
+                    if state[child] == new {
+                        state[child] = open;
+                        path.push((child, 0));
+                    }
+                }
+                None => {
+                    state[node] = done;
+                    order.push(node);
+                    path.pop();
+                }
+            }
+        }
+    }
+    // Parents before children (the reverse post-order): each node's count is whole
+    // when it is reached.
+    let mut count = vec![0u64; n];
+    for root in scene.nodes() {
+        count[root.index()] += 1;
+    }
+    let mut total = 0u64;
+    for &node in order.iter().rev() {
+        let c = count[node];
+        total = total.saturating_add(c);
+        if total > limit {
+            return Err(Placements::Over { node, total });
+        }
+        for &child in &children[node] {
+            count[child] = count[child].saturating_add(c);
+        }
+    }
+    Ok(count)
+}
+
+/// The triangles the placed meshes make, from their accessors' counts (a list's
+/// indices or positions over 3; a strip's or fan's less 2; other modes none).
+fn instanced_triangles(document: &gltf::Document, placed: &[u64]) -> u64 {
+    use gltf::mesh::Mode;
+    let per_mesh: Vec<u64> = document
+        .meshes()
+        .map(|m| {
+            m.primitives()
+                .map(|p| {
+                    let vertices =
+                        p.indices().or_else(|| p.get(&gltf::Semantic::Positions)).map_or(0, |a| a.count() as u64);
+                    match p.mode() {
+                        Mode::Triangles => vertices / 3,
+                        Mode::TriangleStrip | Mode::TriangleFan => vertices.saturating_sub(2),
+                        _ => 0,
+                    }
+                })
+                .fold(0u64, u64::saturating_add)
+        })
+        .collect();
+    document
+        .nodes()
+        .filter_map(|node| Some(placed[node.index()].saturating_mul(per_mesh[node.mesh()?.index()])))
+        .fold(0, u64::saturating_add)
 }
 
 /// Every buffer's bytes: the GLB blob, a `data:` URI, or a file the URI names, read

@@ -37,7 +37,7 @@ pub(crate) struct Args {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Timed runs per figure (at least 5).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::output::parse_runs)]
     pub runs: usize,
     /// Skip the peers (obvhs; Embree too in a build with the `embree` feature).
     #[arg(long)]

@@ -78,8 +78,12 @@ impl Knob {
 
     /// The bake parameters: `base` (a mesh's automatic ones) with this knob turned.
     pub(super) fn params(self, base: &ResolvedParams) -> BuildParams {
-        let mut p =
-            BuildParams { max_depth: Some(base.max_depth), leaf_size: Some(base.leaf_size), margin: base.margin };
+        let mut p = BuildParams {
+            max_depth: Some(base.max_depth),
+            leaf_size: Some(base.leaf_size),
+            margin: base.margin,
+            ..BuildParams::auto()
+        };
         match self {
             Knob::Margin(m) => p.margin = m,
             Knob::Depth(d) => p.max_depth = Some(base.max_depth.saturating_add_signed(d).max(1)),

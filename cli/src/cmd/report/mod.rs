@@ -64,17 +64,17 @@ pub(crate) struct Args {
     #[arg(short, long, default_value = "report")]
     pub output: PathBuf,
     /// Timed runs per figure (the median is reported, with the spread).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::output::parse_runs)]
     pub runs: usize,
     /// Rays of each set compared with the f64 oracle (spread evenly over the set).
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = crate::output::parse_count)]
     pub sample: usize,
     /// Rays of each hard kind compared with the f64 oracle.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = crate::output::parse_count)]
     pub hard_rays: usize,
     /// Random rays (and as many on the octree's planes) per closed solid for the leak
     /// counts (rays at every vertex and edge midpoint come on top).
-    #[arg(long, default_value_t = 100_000)]
+    #[arg(long, default_value_t = 100_000, value_parser = crate::output::parse_count)]
     pub leak_rays: usize,
     /// Width of the renders that price the renderer's knobs (0: none).
     #[arg(long, default_value_t = 320)]

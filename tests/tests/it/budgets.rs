@@ -1,0 +1,106 @@
+//! Bounded work for every input (issue 33): the budgets decided before the work, each
+//! refused with an error naming it and the option that raises it.
+
+use std::path::Path;
+
+use octrace_bake::{bake, procedural, BuildParams, Error, LoadOptions, Mesh, MeshFormat};
+
+/// An embedded glTF of one triangle (mesh 0) with `nodes` (JSON objects) and a scene
+/// listing `roots`.
+fn gltf_with_nodes(nodes: &[String], roots: &[usize]) -> String {
+    let positions: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let buf: Vec<u8> = positions.iter().flatten().flat_map(|c| c.to_le_bytes()).collect();
+    let b64 = octrace_tests::base64(&buf);
+    let roots: Vec<String> = roots.iter().map(usize::to_string).collect();
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[{roots}]}}],"nodes":[{nodes}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#,
+        roots = roots.join(","),
+        nodes = nodes.join(","),
+    )
+}
+
+/// Node i lists node i + 1 twice, `levels` deep, with the mesh on the last node:
+/// 2^(levels - 1) placements of it from a file of a few hundred bytes.
+fn doubling_chain(levels: usize) -> String {
+    let mut nodes: Vec<String> = (0..levels - 1).map(|i| format!(r#"{{"children":[{0},{0}]}}"#, i + 1)).collect();
+    nodes.push(r#"{"mesh":0}"#.into());
+    gltf_with_nodes(&nodes, &[0])
+}
+
+fn load(text: &str, options: &LoadOptions) -> Result<Mesh, Error> {
+    Mesh::from_bytes_with(text.as_bytes(), MeshFormat::Gltf, Path::new("scene.gltf"), None, options)
+}
+
+/// A 60-level chain of shared children (2^59 placements; the audit's bake never
+/// finished) is refused before the walk, naming the budget and its option; a chain of
+/// 11 levels (1,024 placements) loads 1,024 triangles; a cycle is named.
+#[test]
+fn shared_children_are_counted_before_the_walk() {
+    let text = doubling_chain(60);
+    assert!(text.len() < 2048, "{} bytes", text.len());
+    let err = load(&text, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(err, Error::Budget { .. }), "{err}");
+    let message = err.to_string();
+    assert!(message.contains("node placements") && message.contains("--max-instances"), "{message}");
+    assert!(message.contains(&octrace_bake::DEFAULT_MAX_INSTANCES.to_string()), "{message}");
+
+    let mesh = load(&doubling_chain(11), &LoadOptions::default()).unwrap();
+    assert_eq!(mesh.triangles.len(), 1024);
+    let small = LoadOptions { max_instances: 1000, ..LoadOptions::default() };
+    assert!(matches!(load(&doubling_chain(11), &small), Err(Error::Budget { .. })));
+
+    let cycle = gltf_with_nodes(
+        &[r#"{"children":[1]}"#.into(), r#"{"children":[2],"mesh":0}"#.into(), r#"{"children":[1]}"#.into()],
+        &[0],
+    );
+    let err = load(&cycle, &LoadOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("node 1: the node hierarchy has a cycle"), "{err}");
+}
+
+/// A scene listing one node many times: its triangles once instanced are counted
+/// from the accessors before any is read.
+#[test]
+fn instanced_triangles_are_counted_before_loading() {
+    let roots = vec![0; 5000];
+    let text = gltf_with_nodes(&[r#"{"mesh":0}"#.into()], &roots);
+    assert_eq!(load(&text, &LoadOptions::default()).unwrap().triangles.len(), 5000);
+    let small = LoadOptions { max_triangles: 4999, ..LoadOptions::default() };
+    let err = load(&text, &small).unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("triangles once instanced") && message.contains("--max-triangles"), "{message}");
+    assert!(message.contains("5000 is past the budget of 4999"), "{message}");
+    // An OBJ's triangles are counted as read.
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 3 2\n";
+    let err = Mesh::from_bytes_with(
+        obj.as_bytes(),
+        MeshFormat::Obj,
+        Path::new("m.obj"),
+        None,
+        &LoadOptions { max_triangles: 1, ..LoadOptions::default() },
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("triangles: 2 is past the budget of 1"), "{err}");
+}
+
+/// Coincident copies of one triangle share every cell it meets, at every depth: the
+/// tree's references grow as copies times cells. The build stops as soon as the tree
+/// passes the memory budget, and the same mesh bakes within a larger one.
+#[test]
+fn the_bake_stops_at_its_memory_budget() {
+    let one = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.25]];
+    let mesh = Mesh::from_triangles(vec![one; 3000]);
+    let tight = BuildParams { max_tree_bytes: 256 << 10, ..BuildParams::auto() };
+    let Err(err) = bake(&mesh, &tight) else { panic!("the bake passed its budget") };
+    assert!(matches!(err, Error::TreeBudget { limit, needed } if limit == 256 << 10 && needed > limit), "{err}");
+    assert!(err.to_string().contains("--max-memory"), "{err}");
+    let baked = bake(&mesh, &BuildParams::auto()).unwrap();
+    assert_eq!(baked.triangle_ids.len(), 3000);
+    // Options that multiply references: a leaf of one triangle at depth 12.
+    let sphere = procedural::sphere([0.0; 3], 1.0, 64, 96);
+    let deep = BuildParams { max_depth: Some(12), leaf_size: Some(1), max_tree_bytes: 32 << 20, ..BuildParams::auto() };
+    assert!(matches!(bake(&sphere, &deep).err(), Some(Error::TreeBudget { .. })));
+}
