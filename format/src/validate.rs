@@ -121,8 +121,25 @@ impl SceneView<'_> {
             )));
         }
         let tri_count = self.triangle_count() as u64;
-        if let Some(bad) = self.tri_refs.iter().find(|&&r| r as u64 >= tri_count) {
-            return Err(Error::corrupt(format!("triangle reference {bad} out of range")));
+        // Every reference in range, and every stored triangle referenced: a triangle
+        // no leaf lists is one no walk can hit (the leaves' lists tile the references,
+        // `check_records`).
+        let mut listed = vec![0u64; (tri_count as usize).div_ceil(64)];
+        for &r in self.tri_refs {
+            if r as u64 >= tri_count {
+                return Err(Error::corrupt(format!("triangle reference {r} out of range")));
+            }
+            listed[r as usize / 64] |= 1 << (r % 64);
+        }
+        let unlisted = listed.iter().enumerate().find_map(|(i, &w)| {
+            let full = if (i + 1) * 64 <= tri_count as usize { u64::MAX } else { (1u64 << (tri_count % 64)) - 1 };
+            (w != full).then(|| i * 64 + (!w & full).trailing_zeros() as usize)
+        });
+        if let Some(t) = unlisted {
+            return Err(Error::corrupt(format!(
+                "stored triangle {t} (input triangle {}) is listed by no leaf: no ray could hit it",
+                self.triangle_ids.get(t).copied().unwrap_or(u32::MAX)
+            )));
         }
         let stats = &self.stats;
         if tri_count.checked_add(stats.degenerate_triangles) != Some(stats.input_triangles) {
@@ -281,14 +298,22 @@ impl SceneView<'_> {
     fn check_records(&self, index: &TreeIndex) -> Result<()> {
         // Records tile the octree array in box order, so an address is a record start
         // exactly when it is some leaf's address.
-        let mut next = 0u64;
+        // And the leaves' lists of triangles tile the references in the same order.
+        let (mut next, mut next_ref) = (0u64, 0u64);
         for (b, &address) in index.leaf_addresses.iter().enumerate() {
             if address as u64 != next {
                 return Err(Error::corrupt(format!("record {b} starts at {address}, expected {next}")));
             }
             let rec = self.leaf(address).expect("indexed leaves fit");
             next += (LEAF_HEADER_WORDS + rec.links.len()) as u64;
+            if rec.tri_offset as u64 != next_ref {
+                return Err(Error::corrupt(format!(
+                    "leaf {b}'s triangles start at reference {}, expected {next_ref} (the leaves list theirs back to back)",
+                    rec.tri_offset
+                )));
+            }
             let end = rec.tri_offset as u64 + rec.tri_count as u64;
+            next_ref = end;
             if end > self.tri_refs.len() as u64 {
                 return Err(Error::corrupt(format!("leaf {b}'s triangles end at {end}, past the references")));
             }
@@ -298,6 +323,12 @@ impl SceneView<'_> {
         }
         if next != self.octree.len() as u64 {
             return Err(Error::corrupt("octree array has words after the last record"));
+        }
+        if next_ref != self.tri_refs.len() as u64 {
+            return Err(Error::corrupt(format!(
+                "{} triangle references after the last leaf's: no walk reads them",
+                self.tri_refs.len() as u64 - next_ref
+            )));
         }
         Ok(())
     }

@@ -215,6 +215,53 @@ fn out_of_range_counts_and_offsets_are_rejected() {
     }
 }
 
+/// Files the audit found accepted and then answered wrongly (issue 33): a leaf that
+/// lists fewer triangles than before (one stored triangle listed by no leaf), the
+/// references all zeroed (one triangle listed many times, the others nowhere), lists
+/// that overlap or leave references behind. Each is refused by name.
+#[test]
+fn references_that_lose_triangles_are_rejected() {
+    type Change = Box<dyn FnOnce(&mut BakedScene)>;
+    let cases: [(&str, Change, &str); 4] = [
+        (
+            "a shorter list",
+            Box::new(|s: &mut BakedScene| {
+                let last = s.view().leaves().filter(|r| r.tri_count > 1).last().unwrap().address as usize;
+                s.octree[last] -= 1;
+            }),
+            "",
+        ),
+        ("zeroed references", Box::new(|s: &mut BakedScene| s.tri_refs.fill(0)), "is listed by no leaf"),
+        (
+            "overlapping lists",
+            Box::new(|s: &mut BakedScene| {
+                let second = s.view().leaves().filter(|r| r.tri_count > 0).nth(1).unwrap().address as usize;
+                s.octree[second + 1] -= 1;
+            }),
+            "back to back",
+        ),
+        (
+            "a reference left over",
+            Box::new(|s: &mut BakedScene| {
+                let t = s.tri_refs[0];
+                s.tri_refs.push(t);
+            }),
+            "after the last leaf's",
+        ),
+    ];
+    for (what, change, says) in cases {
+        let err = corrupt(change);
+        assert!(matches!(err, Error::Corrupt(ref m) if m.contains(says)), "{what}: {err}");
+    }
+    // The audit's file: the textured leaf scene with its references zeroed.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textured/leaf.gltf");
+    let mesh = octrace_bake::Mesh::load(&path).unwrap();
+    let mut s = octrace_bake::bake(&mesh, &Default::default()).unwrap();
+    s.tri_refs.fill(0);
+    let Err(err) = open(&s.to_file_bytes(0).unwrap()) else { panic!("the zeroed references opened") };
+    assert!(matches!(err, Error::Corrupt(_)), "{err}");
+}
+
 #[test]
 fn a_cube_map_texel_that_does_not_hold_its_cell_is_rejected() {
     let err = corrupt(|s| {
