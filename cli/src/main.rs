@@ -102,7 +102,7 @@ fn main() -> ExitCode {
         // A closed pipe (`octrace inspect x.oct | head`) is not a failure.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("octrace: error: {}", message(&e));
+            eprintln!("octrace: error: {}", output::printable(&message(&e)));
             ExitCode::FAILURE
         }
     }

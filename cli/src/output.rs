@@ -15,6 +15,30 @@ pub(crate) fn thousands(n: u64) -> String {
 
 /// `n` things, with thousands separators and the plural when `n` is not 1:
 /// `1 triangle`, `1,234 triangles`, `2 leaves`.
+/// `text` safe to print on a terminal: control characters other than line feeds and
+/// tabs (escape sequences that clear the screen or set the window title, C1 controls,
+/// DEL) and the bidirectional overrides are written as `\u001b`-style escapes. Strings
+/// from meshes (material, part, light names, URIs, extension names) reach messages;
+/// JSON output keeps them exact (its escapes are JSON's, and a `\u` escape of a
+/// character inside a JSON string is that character).
+pub(crate) fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    let unsafe_char = |c: char| {
+        (c.is_control() && c != '\n' && c != '\t') || matches!(c, '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
+    };
+    if !text.chars().any(unsafe_char) {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len() + 16);
+    for c in text.chars() {
+        if unsafe_char(c) {
+            out.push_str(&format!("\\u{:04x}", c as u32));
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 /// The most items a count option (rays, points) may ask for: 2^27 (134 million;
 /// 4 GiB of rays), checked before anything is allocated.
 pub(crate) const MAX_COUNT: usize = 1 << 27;
@@ -77,7 +101,7 @@ pub(crate) fn mb(bytes: u64) -> String {
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        writeln!(std::io::stdout().lock(), $($arg)*)?;
+        writeln!(std::io::stdout().lock(), "{}", $crate::output::printable(&format!($($arg)*)))?;
     }};
 }
 
@@ -87,7 +111,7 @@ macro_rules! out {
 macro_rules! report {
     ($data_on_stdout:expr, $($arg:tt)*) => {{
         if $data_on_stdout {
-            eprintln!($($arg)*);
+            eprintln!("{}", $crate::output::printable(&format!($($arg)*)));
         } else {
             $crate::out!($($arg)*);
         }

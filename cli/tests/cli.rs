@@ -1194,3 +1194,53 @@ fn many_lights_render_in_bounded_memory() {
     assert!(peak < 100 << 20, "peak {} MB", peak >> 20);
     assert!(d.join("lights.png").exists());
 }
+
+/// Strings from meshes reach the terminal escaped (issue 33): a material named with
+/// an escape sequence that would clear the screen, a title-setting sequence in an
+/// `mtllib` name, a C1 control: `inspect` and `bake`'s warnings print `\u001b`, never
+/// the byte; `inspect --json` keeps the exact name.
+#[test]
+fn strings_from_meshes_are_escaped_on_the_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let name = "red\u{1b}[2J\u{9b}31m\u{202e}";
+    let b64 = "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA";
+    let gltf = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0,"name":"n\u001b]0;title\u0007"}}],
+        "materials":[{{"name":"red\u001b[2J\u009b31m\u202e","emissiveFactor":[1,0,0]}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"material":0}}]}}],
+        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#
+    );
+    std::fs::write(d.join("named.gltf"), gltf).unwrap();
+    ok(d, &["bake", "named.gltf", "-o", "named.oct"]);
+    let text = ok(d, &["inspect", "named.oct"]);
+    assert!(!text.contains('\u{1b}') && !text.contains('\u{9b}') && !text.contains('\u{7}'), "{text:?}");
+    assert!(text.contains("red\\u001b[2J\\u009b31m\\u202e"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "named.oct", "--json"])).unwrap();
+    assert_eq!(json["scene_data"]["materials"][0]["name"].as_str(), Some(name));
+    // A material library whose name sets the window title: the warning names it escaped.
+    std::fs::write(d.join("m.obj"), "mtllib \u{1b}]0;pwned\u{7}.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let out = octrace(d, &["bake", "m.obj", "-o", "m.oct"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("\\u001b]0;pwned\\u0007.mtl"), "{err}");
+    assert!(!err.contains('\u{1b}') && !err.contains('\u{7}'), "{err:?}");
+}
+
+/// `bake -o -` writes the scene to standard output as `render`, `trace` and `rays` do
+/// (never a file named "-"), the same bytes as to a file; an output name ending in
+/// '/' says it names a folder.
+#[test]
+fn bake_writes_to_standard_output_and_says_what_a_folder_name_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let piped = octrace(d, &["bake", "cube.obj", "-o", "-"]);
+    assert!(piped.status.success(), "{}", String::from_utf8_lossy(&piped.stderr));
+    assert_eq!(piped.stdout, std::fs::read(d.join("cube.oct")).unwrap());
+    assert!(String::from_utf8_lossy(&piped.stderr).contains("-> -"));
+    assert!(!d.join("-").exists());
+    fails_saying(d, &["bake", "cube.obj", "-o", "missing/"], "the name ends in '/', a folder's");
+}

@@ -128,6 +128,9 @@ pub(crate) fn write_failure(path: &std::path::Path, e: &std::io::Error) -> Strin
         Some(d) if !d.as_os_str().is_empty() => d.display().to_string(),
         _ => ".".into(),
     };
+    if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
+        return "the name ends in '/', a folder's: give the file's name (folder/scene.oct)".into();
+    }
     match e.kind() {
         ErrorKind::StorageFull => "no space left on the device".into(),
         ErrorKind::QuotaExceeded => "disk quota exceeded".into(),

@@ -301,6 +301,7 @@ fn destination(path: &Path) -> Result<Destination> {
         };
         let kind = meta.file_type();
         if kind.is_symlink() {
+            refuse_planted_link(path, &p, &meta)?;
             let link = std::fs::read_link(&p).map_err(|e| Error::write(path, e))?;
             // A relative link is relative to the link's folder; `join` keeps an absolute one.
             p = p.parent().map_or_else(|| link.clone(), |dir| dir.join(&link));
@@ -313,6 +314,42 @@ fn destination(path: &Path) -> Result<Destination> {
         }
     }
     Err(fail("too many levels of symbolic links"))
+}
+
+/// Refuses to follow the symbolic link `link` (met writing `path`) where someone else
+/// could have planted it: in a sticky, world-writable folder (`/tmp`), a link owned by
+/// neither this process's user nor the folder's owner. The kernel's
+/// `fs.protected_symlinks` rule, applied by the writer itself: it resolves links to
+/// replace their target atomically, so the kernel's check at open never runs.
+#[cfg(unix)]
+fn refuse_planted_link(path: &Path, link: &Path, meta: &std::fs::Metadata) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let folder = match link.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let Ok(dir) = std::fs::metadata(folder) else { return Ok(()) };
+    let shared = dir.mode() & 0o1002 == 0o1002;
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let me = unsafe { libc::geteuid() };
+    if shared && meta.uid() != me && meta.uid() != dir.uid() {
+        return Err(Error::write(
+            path,
+            std::io::Error::other(format!(
+                "{} is a symbolic link owned by another user (uid {}) in the shared folder {}: not followed \
+                 (a link someone else may have planted; the kernel's protected_symlinks rule)",
+                link.display(),
+                meta.uid(),
+                folder.display()
+            )),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(not(unix))]
+fn refuse_planted_link(_: &Path, _: &Path, _: &std::fs::Metadata) -> Result<()> {
+    Ok(())
 }
 
 /// Writes `parts` into an existing FIFO, device or socket (not atomic: there is no file
@@ -351,6 +388,35 @@ mod tests {
         std::os::unix::fs::symlink(&a, &b).unwrap();
         let err = write_atomically(&a, &[b"x"]).unwrap_err().to_string();
         assert!(err.contains("symbolic links"), "{err}");
+    }
+
+    /// A link planted in a shared sticky folder by another user is not followed (the
+    /// target is untouched); the user's own link there is. Needs to give a link away
+    /// (root, as in CI); elsewhere the refusal is not reachable and the test says so.
+    #[test]
+    fn links_planted_in_shared_sticky_folders_are_not_followed() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let shared = dir.path().join("shared");
+        std::fs::create_dir(&shared).unwrap();
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777)).unwrap();
+        let victim = dir.path().join("victim");
+        std::fs::write(&victim, b"precious").unwrap();
+        let mine = shared.join("mine");
+        std::os::unix::fs::symlink(&victim, &mine).unwrap();
+        let planted = shared.join("render.png");
+        std::os::unix::fs::symlink(&victim, &planted).unwrap();
+        let c = std::ffi::CString::new(planted.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: a valid NUL-terminated path; lchown changes only the link's owner.
+        if unsafe { libc::lchown(c.as_ptr(), 54_321, 54_321) } != 0 {
+            eprintln!("SKIPPED links_planted_in_shared_sticky_folders_are_not_followed: cannot give a link away");
+            return;
+        }
+        let err = write_atomically(&planted, &[b"overwritten"]).unwrap_err().to_string();
+        assert!(err.contains("owned by another user (uid 54321)") && err.contains("not followed"), "{err}");
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        write_atomically(&mine, &[b"mine"]).unwrap();
+        assert_eq!(std::fs::read(&victim).unwrap(), b"mine");
     }
 
     #[test]

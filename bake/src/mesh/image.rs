@@ -85,14 +85,29 @@ fn png(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
 fn jpeg(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     use zune_core::{bytestream::ZCursor, colorspace::ColorSpace, options::DecoderOptions};
     let side = MAX_TEXTURE_SIDE as usize;
-    let options =
-        DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGBA).set_max_width(side).set_max_height(side);
+    let options = DecoderOptions::default()
+        .jpeg_set_out_colorspace(ColorSpace::RGBA)
+        .set_max_width(side)
+        .set_max_height(side)
+        // A truncated or corrupt stream is an error, not filler texels (as PNG).
+        .set_strict_mode(true);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
-    decoder.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;
+    decoder.decode_headers().map_err(|e| format!("JPEG: {e}"))?;
     let info = decoder.info().ok_or("JPEG: no image header")?;
     let (width, height) = (info.width as usize, info.height as usize);
     check_size(width, height, limit)?;
-    let data = decoder.decode().map_err(|e| format!("JPEG: {e:?}"))?;
+    // Every 8 x 8 block of luma costs a bit at least (its DC code, in any JPEG mode): a
+    // header that claims more blocks than the file has bits is a lie the decoder would
+    // fill with grey.
+    let blocks = width.div_ceil(8) * height.div_ceil(8);
+    if blocks > 8 * bytes.len() {
+        return Err(format!(
+            "JPEG: the header says {width} x {height} pixels ({blocks} blocks), more than its {} bytes can hold \
+             (a bit a block at least)",
+            bytes.len()
+        ));
+    }
+    let data = decoder.decode().map_err(|e| format!("JPEG: {e}"))?;
     if data.len() != width * height * 4 {
         return Err(format!("JPEG: {} bytes decoded for {width} x {height} pixels", data.len()));
     }

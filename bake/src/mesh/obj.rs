@@ -10,11 +10,28 @@ use super::{check_finite, Mesh};
 use crate::error::{Error, Result};
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+    // Text that is not UTF-8 (a Latin-1 comment or name) is read with U+FFFD in place
+    // of each bad byte, and a warning names the first one's line.
+    let (bytes, note) = match std::str::from_utf8(bytes) {
+        Ok(_) => (std::borrow::Cow::Borrowed(bytes), None),
+        Err(e) => {
+            let at = e.valid_up_to();
+            let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+            let note = format!(
+                "{}: line {line}: byte 0x{:02X} is not UTF-8 (Latin-1?): read as U+FFFD, here and wherever else",
+                path.display(),
+                bytes[at]
+            );
+            (std::borrow::Cow::Owned(String::from_utf8_lossy(bytes).into_owned().into_bytes()), Some(note))
+        }
+    };
     // Positions and triangles only: parsed in parallel, the same mesh tobj makes.
-    match super::obj_plain::parse(bytes) {
-        Some(mesh) => Ok(mesh),
-        None => parse_with_tobj(bytes, path, base, options),
-    }
+    let mut mesh = match super::obj_plain::parse(&bytes) {
+        Some(mesh) => mesh,
+        None => parse_with_tobj(&bytes, path, base, options)?,
+    };
+    mesh.warnings.extend(note);
+    Ok(mesh)
 }
 
 /// Any OBJ file, through tobj.
@@ -121,6 +138,13 @@ fn check_face_indices(bytes: &[u8], path: &Path) -> Result<()> {
             Some("v") => counts[0] += 1,
             Some("vt") => counts[1] += 1,
             Some("vn") => counts[2] += 1,
+            Some(what @ ("usemtl" | "mtllib")) if words.next().is_none() => {
+                return Err(Error::Parse {
+                    path: path.into(),
+                    element: format!("line {}", n + 1),
+                    message: format!("{what} without a name"),
+                });
+            }
             Some("f" | "l" | "p") => {
                 for corner in words {
                     for (kind, index) in corner.split('/').enumerate().take(3) {

@@ -111,6 +111,11 @@ fn base_folder(base: &Path) -> std::io::Result<PathBuf> {
 /// Decodes `%XX` escapes; `None` when the result is not UTF-8. Malformed escapes are
 /// kept as they are, as URI decoders do.
 pub(crate) fn percent_decode(uri: &str) -> Option<String> {
+    String::from_utf8(percent_decode_bytes(uri)?).ok()
+}
+
+/// The bytes `%XX` escapes in `uri` stand for (anything else as it is).
+pub(crate) fn percent_decode_bytes(uri: &str) -> Option<Vec<u8>> {
     let b = uri.as_bytes();
     let mut out = Vec::with_capacity(b.len());
     let mut i = 0;
@@ -127,7 +132,7 @@ pub(crate) fn percent_decode(uri: &str) -> Option<String> {
             }
         }
     }
-    String::from_utf8(out).ok()
+    Some(out)
 }
 
 #[cfg(test)]

@@ -14,7 +14,8 @@ use crate::output::{counted, mb, thousands};
 pub(crate) struct Args {
     /// Mesh to bake: .obj, .gltf or .glb, optionally compressed as .zst.
     pub input: PathBuf,
-    /// The .oct file to write. (A bake killed outright leaves its temporary
+    /// The .oct file to write; `-` writes it to standard output (the summary then goes
+    /// to standard error). (A bake killed outright leaves its temporary
     /// .octrace-XXXX.tmp beside it, which may be deleted.)
     #[arg(short, long)]
     pub output: PathBuf,
@@ -107,14 +108,28 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     drop(mesh);
     progress.stage("writing");
     let time_us = if args.record_time { bake_time.as_micros() as u64 } else { 0 };
-    let (bytes, on_disk) = if args.compress {
+    let to_stdout = crate::output::is_stdout(&args.output);
+    let (bytes, on_disk) = if to_stdout {
+        // `-o -`: the file's bytes to standard output, as `render`, `trace` and `rays`.
+        let image = scene.to_file_bytes(time_us)?;
+        let n = image.len() as u64;
+        if args.compress {
+            let compressed = zstd::bulk::compress(&image, args.level).context("compressing the scene")?;
+            crate::output::write_data(&args.output, &[&compressed])?;
+            (n, format!(" (zstd: {})", mb(compressed.len() as u64)))
+        } else {
+            crate::output::write_data(&args.output, &[&image])?;
+            (n, String::new())
+        }
+    } else if args.compress {
         let (raw, compressed) = scene.write_compressed(&args.output, time_us, args.level)?;
         (raw, format!(" (zstd: {} on disk)", mb(compressed)))
     } else {
         (scene.write(&args.output, time_us)?, String::new())
     };
     progress.finish();
-    crate::out!(
+    crate::report!(
+        to_stdout,
         "baked {}: {} ({} degenerate) -> {}, depth {}{}, {}{} in {:.2} s (bake {:.2} s) -> {}",
         crate::show(&args.input),
         counted(scene.stats.input_triangles, "triangle"),
@@ -181,6 +196,7 @@ impl Progress {
     }
 
     pub(crate) fn warn(&self, msg: &str) {
+        let msg = crate::output::printable(msg);
         match &self.bar {
             Some(b) => b.println(format!("warning: {msg}")),
             None => eprintln!("warning: {msg}"),

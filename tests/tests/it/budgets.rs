@@ -104,3 +104,56 @@ fn the_bake_stops_at_its_memory_budget() {
     let deep = BuildParams { max_depth: Some(12), leaf_size: Some(1), max_tree_bytes: 32 << 20, ..BuildParams::auto() };
     assert!(matches!(bake(&sphere, &deep).err(), Some(Error::TreeBudget { .. })));
 }
+
+/// Messages that say where and what (issue 33): an OBJ with a Latin-1 byte loads with
+/// a warning naming its line; `usemtl` without a name is an error naming its line; a
+/// GLB header cut short says so without Rust's debug forms; data: URIs are decoded as
+/// RFC 2397 says (percent-encoded or base64) or refused by what is wrong;
+/// `file://localhost/...` is an absolute path (refused from a confined mesh), and a
+/// file: URI on another host is refused.
+#[test]
+fn messages_say_where_and_what() {
+    let obj =
+        |text: &[u8]| Mesh::from_bytes_with(text, MeshFormat::Obj, Path::new("m.obj"), None, &LoadOptions::default());
+    let mesh = obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n# caf\xe9\nf 1 2 3\n").unwrap();
+    assert_eq!(mesh.triangles.len(), 1);
+    assert!(mesh.warnings.iter().any(|w| w.contains("line 4: byte 0xE9 is not UTF-8")), "{:?}", mesh.warnings);
+    let err = obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl\nf 1 2 3\n").unwrap_err();
+    assert!(err.to_string().contains("m.obj: line 4: usemtl without a name"), "{err}");
+
+    let glb =
+        |bytes: &[u8]| Mesh::from_bytes(bytes, MeshFormat::Gltf, Path::new("s.glb"), None).unwrap_err().to_string();
+    let short = glb(b"glTF\x02\x00\x00\x00\x0b");
+    assert!(short.contains("GLB header: is cut short: the file has 9 bytes") && !short.contains("Some("), "{short}");
+    let lying = glb(b"glTF\x02\x00\x00\x00\xff\x00\x00\x00");
+    assert!(lying.contains("declares 255 bytes; the file has 12"), "{lying}");
+
+    // One triangle as a data: URI: base64, percent-encoded, broken.
+    let floats: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.].iter().flat_map(|f| f.to_le_bytes()).collect();
+    let percent: String = floats.iter().map(|b| format!("%{b:02X}")).collect();
+    let with_uri = |uri: &str| {
+        gltf_with_nodes(&[r#"{"mesh":0}"#.into()], &[0])
+            .replace("data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA", uri)
+    };
+    assert_eq!(load(&with_uri(&format!("data:,{percent}")), &LoadOptions::default()).unwrap().triangles.len(), 1);
+    let err = load(&with_uri("data:application/octet-stream;base64,AAAA*AAA"), &LoadOptions::default()).unwrap_err();
+    assert!(
+        err.to_string().contains("buffer 0: a base64 data: URI with a character base64 does not have at position 4"),
+        "{err}"
+    );
+    let err = load(&with_uri("data:no-comma"), &LoadOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("without the ',' that starts its data"), "{err}");
+
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("localhost"), b"not read").unwrap();
+    let file = dir.path().join("s.gltf");
+    for (uri, why) in [
+        ("file://localhost/etc/hostname", "an absolute path"),
+        ("file:///etc/hostname", "an absolute path"),
+        ("file://example.com/etc/hostname", "a file: URI on another host ('example.com')"),
+    ] {
+        std::fs::write(&file, with_uri(uri)).unwrap();
+        let err = Mesh::load(&file).unwrap_err();
+        assert!(matches!(err, Error::Reference { .. }) && err.to_string().contains(why), "{uri}: {err}");
+    }
+}

@@ -124,6 +124,25 @@ fn jpeg_textures_decode_to_their_colours() {
     }
 }
 
+/// Broken JPEGs are refused as broken PNGs are (issue 33): cut to a third, or a
+/// 4 x 2 image whose header says 2000 x 2000: a warning names the image, no filler
+/// texels.
+#[test]
+fn broken_jpegs_are_left_out_with_a_warning() {
+    let jpeg = std::fs::read(data("textured/colours.jpg")).unwrap();
+    let cut = jpeg[..jpeg.len() / 3].to_vec();
+    let mut lying = jpeg.clone();
+    let sof = lying.windows(2).position(|w| w[0] == 0xFF && (w[1] == 0xC0 || w[1] == 0xC2)).expect("a frame header");
+    lying[sof + 5..sof + 9].copy_from_slice(&[0x07, 0xD0, 0x07, 0xD0]);
+    for (name, bytes) in [("cut.jpg", &cut), ("lying.jpg", &lying)] {
+        let mesh = load_edited(textured(name), &[(name, bytes)]).unwrap();
+        let note = mesh.warnings.iter().find(|w| w.contains(&format!("image 0 '{name}'")));
+        let note = note.unwrap_or_else(|| panic!("{name}: {:?}", mesh.warnings));
+        assert!(note.contains("JPEG"), "{note}");
+        assert!(mesh.textures.is_empty() && mesh.texels.is_empty(), "{name}: {} texels", mesh.texels.len());
+    }
+}
+
 #[test]
 fn textures_that_cannot_be_read_are_left_out_with_a_warning_naming_the_image() {
     for (uri, why) in [

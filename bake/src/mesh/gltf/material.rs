@@ -182,11 +182,7 @@ impl Materials<'_> {
                     .map(<[u8]>::to_vec)
                     .ok_or_else(|| format!("buffer view {} runs past buffer {}", view.index(), view.buffer().index()))
             }
-            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => {
-                gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), None)
-                    .map(|d| d.0)
-                    .map_err(|e| e.to_string())
-            }
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => super::data_uri(uri),
             gltf::image::Source::Uri { uri, .. } => {
                 let target = super::uri_path(uri)?;
                 let file = refs::resolve(self.base, Path::new(&target), self.options.references)?;

@@ -49,7 +49,10 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
             return Err(Error::Parse {
                 path: path.into(),
                 element: "GLB header".into(),
-                message: format!("declares {declared:?} bytes; the file has {} and the header alone 12", bytes.len()),
+                message: match declared {
+                    Some(n) => format!("declares {n} bytes; the file has {} and the header alone 12", bytes.len()),
+                    None => format!("is cut short: the file has {} bytes, the header alone 12", bytes.len()),
+                },
             });
         }
     }
@@ -246,11 +249,13 @@ fn load_buffers<'a>(
                 element: element(),
                 message: "refers to the GLB binary chunk, which the file lacks (or an earlier buffer took)".into(),
             })?,
-            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => Cow::Owned(
-                gltf::buffer::Data::from_source(buffer.source(), None)
-                    .map_err(|e| Error::Parse { path: path.into(), element: element(), message: e.to_string() })?
-                    .0,
-            ),
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                Cow::Owned(data_uri(uri).map_err(|message| Error::Parse {
+                    path: path.into(),
+                    element: element(),
+                    message,
+                })?)
+            }
             gltf::buffer::Source::Uri(uri) => {
                 let refused = |reason: String| Error::Reference {
                     path: path.into(),
@@ -281,10 +286,68 @@ fn load_buffers<'a>(
     Ok(out)
 }
 
+/// The bytes of a `data:` URI (RFC 2397): `data:[type][;base64],DATA`, base64 or
+/// percent-encoded.
+pub(super) fn data_uri(uri: &str) -> std::result::Result<Vec<u8>, String> {
+    let rest = &uri["data:".len().min(uri.len())..];
+    let Some((head, data)) = rest.split_once(',') else {
+        return Err("a data: URI without the ',' that starts its data".into());
+    };
+    if head.ends_with(";base64") {
+        return base64_decode(data).map_err(|at| {
+            format!("a base64 data: URI with a character base64 does not have at position {at} of its data")
+        });
+    }
+    refs::percent_decode_bytes(data).ok_or_else(|| "a data: URI with a broken %-escape".into())
+}
+
+/// Standard base64 (padding optional), or the position of the first character that is
+/// not.
+fn base64_decode(text: &str) -> std::result::Result<Vec<u8>, usize> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'+' => Some(62),
+        b'/' => Some(63),
+        _ => None,
+    };
+    let bytes = text.trim_end_matches('=').as_bytes();
+    let mut out = Vec::with_capacity(bytes.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0);
+    for (i, &c) in bytes.iter().enumerate() {
+        acc = (acc << 6) | value(c).ok_or(i)? as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    Ok(out)
+}
+
 /// The path a buffer URI names: `file:` URIs and relative references, percent-decoded;
 /// other schemes are refused.
 pub(super) fn uri_path(uri: &str) -> std::result::Result<String, String> {
-    let rest = match uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
+    // file://HOST/PATH names PATH on HOST: an absolute path on this machine for an
+    // empty host or localhost, refused for any other.
+    let local = |rest: &str| -> std::result::Result<String, String> {
+        let (host, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+        if host.is_empty() || host.eq_ignore_ascii_case("localhost") {
+            Ok(path.to_string())
+        } else {
+            Err(format!("a file: URI on another host ('{host}')"))
+        }
+    };
+    let owned;
+    let rest = match uri.strip_prefix("file://") {
+        Some(rest) => {
+            owned = local(rest)?;
+            Some(owned.as_str())
+        }
+        None => uri.strip_prefix("file:"),
+    };
+    let rest = match rest {
         Some(rest) => rest,
         None if uri.contains(':') => return Err("not a relative path, a file: URI or a data: URI".into()),
         None => uri,
