@@ -1244,3 +1244,31 @@ fn bake_writes_to_standard_output_and_says_what_a_folder_name_is() {
     assert!(!d.join("-").exists());
     fails_saying(d, &["bake", "cube.obj", "-o", "missing/"], "the name ends in '/', a folder's");
 }
+
+/// `inspect` reports leaves that stay overfull at the depth limit: a fan of 2,000
+/// slivers around one vertex leaves the centre's leaves holding most of them.
+#[test]
+fn inspect_reports_overfull_leaves() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let n = 2000;
+    let mut obj = String::from("v 0 0 0\n");
+    for i in 0..=n {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        obj += &format!("v {} {} 0\n", a.cos(), a.sin());
+    }
+    for i in 0..n {
+        obj += &format!("f 1 {} {}\n", i + 2, i + 3);
+    }
+    std::fs::write(d.join("fan.obj"), obj).unwrap();
+    ok(d, &["bake", "fan.obj", "-o", "fan.oct"]);
+    let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "fan.oct", "--json"])).unwrap();
+    let overfull = &json["overfull_leaves"];
+    assert!(overfull["leaves"].as_u64().unwrap() >= 1, "{overfull}");
+    assert!(overfull["references"].as_u64().unwrap() > 1000, "{overfull}");
+    assert!(ok(d, &["inspect", "fan.oct"]).contains("at the depth limit with more than 8 x the leaf size"));
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "cube.oct", "--json"])).unwrap();
+    assert_eq!(json["overfull_leaves"]["leaves"].as_u64(), Some(0));
+}

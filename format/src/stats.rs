@@ -29,6 +29,10 @@ impl ArrayBytes {
     }
 }
 
+/// A leaf at the depth limit is overfull past this many times the leaf size
+/// ([`SceneStatistics::overfull_leaves`]).
+pub const OVERFULL_FACTOR: u64 = 8;
+
 /// Statistics of a scene, computed from its arrays.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneStatistics {
@@ -46,6 +50,12 @@ pub struct SceneStatistics {
     pub triangles_per_leaf_mean: f64,
     /// Most triangles in one leaf.
     pub triangles_per_leaf_max: u64,
+    /// Leaves at the depth limit holding more than [`OVERFULL_FACTOR`] times the leaf
+    /// size: where triangles share cells at every depth (fans around one vertex,
+    /// coincident copies) and a ray through the leaf tests them all.
+    pub overfull_leaves: u64,
+    /// Triangle references in those leaves.
+    pub overfull_references: u64,
     /// Mean neighbour links per leaf (the paper observed 7).
     pub neighbours_per_leaf_mean: f64,
     /// Internal nodes of the point-location tree.
@@ -67,9 +77,15 @@ impl SceneStatistics {
             depth_histogram[key.level as usize] += 1;
         }
         let (mut refs, mut max, mut empty, mut links) = (0u64, 0u64, 0u64, 0u64);
-        for &address in &index.leaf_addresses {
+        let (mut overfull, mut overfull_refs) = (0u64, 0u64);
+        let crowded = OVERFULL_FACTOR * view.params.leaf_size.max(1) as u64;
+        for (&address, key) in index.leaf_addresses.iter().zip(&index.leaf_keys) {
             let a = address as usize;
             let count = view.octree[a] as u64;
+            if key.level >= view.params.max_depth && count > crowded {
+                overfull += 1;
+                overfull_refs += count;
+            }
             refs += count;
             max = max.max(count);
             empty += (count == 0) as u64;
@@ -85,6 +101,8 @@ impl SceneStatistics {
             triangle_references: refs,
             triangles_per_leaf_mean: refs as f64 / (leaves - empty).max(1) as f64,
             triangles_per_leaf_max: max,
+            overfull_leaves: overfull,
+            overfull_references: overfull_refs,
             neighbours_per_leaf_mean: links as f64 / leaves.max(1) as f64,
             internal_nodes: (view.nodes.len() / 8) as u64,
             bytes: ArrayBytes {

@@ -127,6 +127,20 @@ impl<'a> Report<'a> {
                 s.triangles_per_leaf_max,
                 thousands(s.triangle_references)
             ),
+            format!(
+                "overfull leaves    {}{}",
+                thousands(s.overfull_leaves),
+                if s.overfull_leaves > 0 {
+                    format!(
+                        " at the depth limit with more than {} x the leaf size ({} references: triangles sharing \
+                         cells at every depth, fans or copies; a ray through one tests them all)",
+                        octrace_format::stats::OVERFULL_FACTOR,
+                        thousands(s.overfull_references)
+                    )
+                } else {
+                    String::new()
+                }
+            ),
             format!("neighbours / leaf  mean {:.2}", s.neighbours_per_leaf_mean),
             format!("cube map           {res} x {res} texels a face, level {}", v.params.cube_level),
             format!(
@@ -253,6 +267,7 @@ impl<'a> Report<'a> {
             "depth_histogram": s.depth_histogram,
             "triangle_references": s.triangle_references,
             "triangles_per_leaf": { "mean": s.triangles_per_leaf_mean, "max": s.triangles_per_leaf_max },
+            "overfull_leaves": { "leaves": s.overfull_leaves, "references": s.overfull_references },
             "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
             "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
             "surface": surface_json(&v.stats.edges),
