@@ -16,6 +16,19 @@ const READ_SIZES: std::ops::RangeInclusive<u64> = (16 << 20)..=(2 << 30);
 /// is faster to trace ([`READ_SIZES`]) or the file is zstd-compressed (it cannot be
 /// mapped).
 pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
+    // A mesh given where a baked scene is wanted: say what to do.
+    if let Some((format, _)) = octrace_bake::MeshFormat::from_path(path) {
+        anyhow::bail!(
+            "{} is a mesh ({}), not a baked scene: bake it first (octrace bake {} -o scene.oct), then \
+             use scene.oct",
+            path.display(),
+            match format {
+                octrace_bake::MeshFormat::Obj => "OBJ",
+                octrace_bake::MeshFormat::Gltf => "glTF",
+            },
+            path.display()
+        );
+    }
     let read = std::fs::metadata(path).is_ok_and(|m| reads_into_memory(m.len()));
     if read || octrace_format::is_compressed_file(path)? {
         return Scene::open(path).with_context(|| format!("cannot open scene {}", path.display()));

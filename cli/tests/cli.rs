@@ -1243,6 +1243,8 @@ fn bake_writes_to_standard_output_and_says_what_a_folder_name_is() {
     assert!(String::from_utf8_lossy(&piped.stderr).contains("-> -"));
     assert!(!d.join("-").exists());
     fails_saying(d, &["bake", "cube.obj", "-o", "missing/"], "the name ends in '/', a folder's");
+    // A mesh where a scene is wanted: what to do.
+    fails_saying(d, &["inspect", "cube.obj"], "cube.obj is a mesh (OBJ), not a baked scene: bake it first");
 }
 
 /// `inspect` reports leaves that stay overfull at the depth limit: a fan of 2,000

@@ -1,7 +1,9 @@
 //! glTF files that bend the spec load as viewers load them, with a warning naming the
 //! element; what octrace cannot honour is refused by name; errors say where.
 
-use octrace_bake::{Error, Mesh};
+use std::path::Path;
+
+use octrace_bake::{Error, Mesh, MeshFormat};
 use octrace_format::{Filter, TEXEL_WORDS};
 use octrace_tests::data;
 
@@ -222,4 +224,60 @@ fn images_without_a_source_or_a_mime_type_are_an_error_or_repaired() {
         mesh.warnings
     );
     assert_eq!((mesh.textures.len(), mesh.textures[0].width), (1, 64));
+}
+
+/// What a static bake leaves out, and files it cannot read, said aloud (issue 34):
+/// animations, skins and morph targets are a warning with their counts; glTF 1.0 is
+/// refused by name; a GLB chunk of unknown type is skipped with a warning naming its
+/// byte offset (glTF asks readers to ignore them), and a chunk that runs past the end
+/// is an error naming its offset.
+#[test]
+fn what_a_static_bake_leaves_out_and_what_it_cannot_read_are_said() {
+    let path = Path::new("s.gltf");
+    if let Some(animated) = octrace_tests::shared_file("gltf/AnimatedTriangle.gltf", "said_aloud") {
+        let mesh = octrace_bake::Mesh::load(animated).unwrap();
+        assert!(
+            mesh.warnings.iter().any(|w| w.contains("1 animation, 0 skins and 0 meshes with morph targets")),
+            "{:?}",
+            mesh.warnings
+        );
+    }
+    let v1 = r#"{"asset":{"version":"1.0"},"accessors":{"a":{}}}"#;
+    let err = Mesh::from_bytes(v1.as_bytes(), MeshFormat::Gltf, path, None).unwrap_err();
+    assert!(err.to_string().contains("asset.version: glTF version '1.0': octrace reads glTF 2.0 only"), "{err}");
+
+    // A GLB: the extensions sample's JSON (its buffers embedded) and an unknown chunk.
+    let json = std::fs::read(data("extensions.gltf")).unwrap();
+    let padded = |mut b: Vec<u8>, pad: u8| {
+        while !b.len().is_multiple_of(4) {
+            b.push(pad);
+        }
+        b
+    };
+    let json = padded(json, b' ');
+    let glb = |chunks: &[(u32, &[u8])]| {
+        let mut body = Vec::new();
+        for (kind, data) in chunks {
+            body.extend((data.len() as u32).to_le_bytes());
+            body.extend(kind.to_le_bytes());
+            body.extend_from_slice(data);
+        }
+        let mut out = b"glTF".to_vec();
+        out.extend(2u32.to_le_bytes());
+        out.extend((12 + body.len() as u32).to_le_bytes());
+        out.extend(body);
+        out
+    };
+    let extra = glb(&[(0x4E4F_534A, &json), (0x1234_5678, b"abcd")]);
+    let mesh = Mesh::from_bytes(&extra, MeshFormat::Gltf, Path::new("s.glb"), None).unwrap();
+    let at = 12 + 8 + json.len();
+    assert!(
+        mesh.warnings.iter().any(|w| w.contains(&format!("GLB chunk at byte {at} has the unknown type 0x12345678"))),
+        "{:?}",
+        mesh.warnings
+    );
+    let mut cut = glb(&[(0x4E4F_534A, &json)]);
+    cut[12..16].copy_from_slice(&(json.len() as u32 + 8).to_le_bytes());
+    let err = Mesh::from_bytes(&cut, MeshFormat::Gltf, Path::new("s.glb"), None).unwrap_err();
+    assert!(err.to_string().contains("GLB container: the chunk at byte 12 declares"), "{err}");
 }

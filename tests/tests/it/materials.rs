@@ -334,3 +334,56 @@ fn vertex_colours_multiply_the_base_colour() {
         }
     }
 }
+
+/// KHR_texture_transform's rotation as the spec writes it (issue 34), on Khronos'
+/// TextureTransformTest: the arrow drawn in `Arrow.png` runs from near the texture's
+/// origin to its tip at about (0.63, 0.63); mapped back onto the "Rotation" and "All"
+/// quads through the uvs the bake stored, it points at the quad's "Correct" marker
+/// (within 6 degrees), not at the "Error" one (with the transposed matrix the bake
+/// used before: the other way round, 45 degrees off).
+#[test]
+fn texture_rotation_points_the_arrow_at_the_correct_marker() {
+    let test = "texture_rotation_points_the_arrow_at_the_correct_marker";
+    let Some(path) = octrace_tests::shared_file("gltf/TextureTransformTest/TextureTransformTest.gltf", test) else {
+        return;
+    };
+    let mesh = octrace_bake::Mesh::load(&path).unwrap();
+    // (quad node's name, its translation, the markers' translations within it).
+    let quads = [
+        (
+            "'Rotation'",
+            [-1.1f64, -0.55],
+            [-0.07904822439840126, -0.5162674857624154],
+            Some([0.5162674857624154, 0.07904822439840126]),
+        ),
+        ("'All'", [1.1, -0.55], [-0.07, -0.25], None),
+    ];
+    for (quad, at, correct, error) in quads {
+        let part = mesh.parts.iter().find(|p| p.name.starts_with("node") && p.name.contains(quad)).unwrap();
+        // The quad's uv map is affine in position: invert it on its first triangle.
+        let t = part.first as usize;
+        let (p, uv) =
+            (mesh.triangles[t].map(|c| [c[0] as f64, c[1] as f64]), mesh.uvs[t].map(|c| [c[0] as f64, c[1] as f64]));
+        let (du1, du2) = ([uv[1][0] - uv[0][0], uv[1][1] - uv[0][1]], [uv[2][0] - uv[0][0], uv[2][1] - uv[0][1]]);
+        let det = du1[0] * du2[1] - du2[0] * du1[1];
+        let position = |u: f64, v: f64| {
+            let (du, dv) = (u - uv[0][0], v - uv[0][1]);
+            let (a, b) = ((du * du2[1] - du2[0] * dv) / det, (du1[0] * dv - du * du1[1]) / det);
+            [0, 1].map(|k| p[0][k] + a * (p[1][k] - p[0][k]) + b * (p[2][k] - p[0][k]))
+        };
+        let (origin, tip) = (position(0.0, 0.0), position(0.63, 0.63));
+        let angle_to = |m: [f64; 2]| {
+            let (d, e) =
+                ([tip[0] - origin[0], tip[1] - origin[1]], [at[0] + m[0] - origin[0], at[1] + m[1] - origin[1]]);
+            (d[0] * e[1] - d[1] * e[0]).atan2(d[0] * e[0] + d[1] * e[1]).abs().to_degrees()
+        };
+        assert!(
+            angle_to(correct) < 6.0,
+            "{quad}: the arrow is {:.1} degrees off its correct marker",
+            angle_to(correct)
+        );
+        if let Some(error) = error {
+            assert!(angle_to(error) > 30.0, "{quad}: the arrow points at the error marker");
+        }
+    }
+}

@@ -18,6 +18,46 @@ pub(super) const HONOURED_EXTENSIONS: [&str; 6] = [
     "KHR_texture_transform",
 ];
 
+/// A GLB file's chunks: JSON, binary if any, and those of unknown type it skipped
+/// (byte offset, type).
+type GlbChunks<'a> = (&'a [u8], Option<&'a [u8]>, Vec<(usize, u32)>);
+
+/// A GLB file's chunks ([`GlbChunks`]). Errors name the byte offset of what is wrong.
+fn glb_chunks(bytes: &[u8]) -> std::result::Result<GlbChunks<'_>, String> {
+    let word = |at: usize| bytes.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let version = word(4).ok_or("the file ends inside the 12-byte header")?;
+    if version != 2 {
+        return Err(format!("GLB version {version} at byte 4: octrace reads version 2 (glTF 2.0) only"));
+    }
+    // The header's length (checked against the file's before this is called).
+    let end = (word(8).ok_or("the file ends inside the 12-byte header")? as usize).min(bytes.len());
+    let (mut json, mut bin, mut skipped) = (None, None, Vec::new());
+    let mut at = 12;
+    while at < end {
+        let (Some(len), Some(kind)) = (word(at), word(at + 4)) else {
+            return Err(format!("the chunk header at byte {at} runs past the end ({end} bytes)"));
+        };
+        let data = at + 8;
+        let stop = data
+            .checked_add(len as usize)
+            .filter(|&s| s <= end)
+            .ok_or_else(|| format!("the chunk at byte {at} declares {len} bytes, past the end ({end} bytes)"))?;
+        match kind {
+            0x4E4F_534A if json.is_none() && at == 12 => json = Some(&bytes[data..stop]),
+            0x004E_4942 if bin.is_none() && json.is_some() => bin = Some(&bytes[data..stop]),
+            0x4E4F_534A | 0x004E_4942 => {
+                return Err(format!("the chunk at byte {at} is a second JSON or binary chunk, or out of order"))
+            }
+            _ if at == 12 => return Err(format!("the first chunk (byte 12) has type 0x{kind:08X}, not JSON")),
+            _ => skipped.push((at, kind)),
+        }
+        // Chunks are padded to 4 bytes.
+        at = stop.next_multiple_of(4);
+    }
+    let json = json.ok_or("no JSON chunk")?;
+    Ok((json, bin, skipped))
+}
+
 /// The document of a `.gltf` or `.glb` file and the GLB binary chunk, with the
 /// repairs made (each one a line in `warnings`).
 ///
@@ -37,16 +77,31 @@ pub(super) fn document<'a>(
 ) -> Result<(gltf::json::Root, Option<super::Buffer<'a>>)> {
     let parse_error =
         |element: &str, message: String| Error::Parse { path: path.into(), element: element.into(), message };
+    let warn = |warnings: &mut Vec<String>, what: String| warnings.push(format!("{}: {what}", path.display()));
     let (json, blob) = if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| parse_error("GLB container", e.to_string()))?;
+        let (json, bin, skipped) = glb_chunks(bytes).map_err(|e| parse_error("GLB container", e))?;
+        for (at, kind) in skipped {
+            warn(warnings, format!("GLB chunk at byte {at} has the unknown type 0x{kind:08X}: ignored, as glTF asks"));
+        }
         // The binary chunk stays borrowed from the file's bytes: no copy of what can
         // be most of a big file.
-        (glb.json.into_owned(), glb.bin)
+        (json, bin.map(std::borrow::Cow::Borrowed))
     } else {
-        (bytes.to_vec(), None)
+        (bytes, None)
     };
-    let mut value: Value = serde_json::from_slice(&json).map_err(|e| parse_error("document", format!("JSON: {e}")))?;
-    let warn = |warnings: &mut Vec<String>, what: String| warnings.push(format!("{}: {what}", path.display()));
+    let mut value: Value = serde_json::from_slice(json).map_err(|e| parse_error("document", format!("JSON: {e}")))?;
+    // glTF 1.0 (and any other major version) is another schema: say so rather than
+    // fail on its first difference.
+    let version = value.get("asset").and_then(|a| a.get("version")).and_then(Value::as_str).unwrap_or("");
+    if !version.starts_with("2.") {
+        return Err(parse_error(
+            "asset.version",
+            format!(
+                "glTF version '{version}': octrace reads glTF 2.0 only (convert older files, e.g. with \
+                 gltf-pipeline or Blender)"
+            ),
+        ));
+    }
     if let Some(cameras) = value.get_mut("cameras").and_then(Value::as_array_mut) {
         for (i, camera) in cameras.iter_mut().enumerate() {
             let Some(camera) = camera.as_object_mut() else { continue };

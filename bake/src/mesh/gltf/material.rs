@@ -68,9 +68,10 @@ impl Materials<'_> {
                 uv.set = t.tex_coord().unwrap_or(uv.set);
                 let ([ox, oy], r, [sx, sy]) =
                     (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
-                // KHR_texture_transform: translation * rotation * scale.
+                // KHR_texture_transform: translation * rotation * scale, the rotation
+                // matrix as the spec writes it, rows (cos r, sin r), (-sin r, cos r).
                 let (c, s) = (r.cos(), r.sin());
-                uv.transform = Some([[c * sx, -s * sy, ox], [s * sx, c * sy, oy]]);
+                uv.transform = Some([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]]);
             }
             texture = self.texture(&info.texture(), &name, mesh);
         }

@@ -77,8 +77,31 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
         }
     }
     let document = gltf::Document::from_json(json).map_err(|e| parse_error("document", e))?;
+    // What a static bake leaves out, said once with the counts.
+    let (animations, skins) = (document.animations().count(), document.skins().count());
+    let morphed = document.meshes().filter(|m| m.primitives().any(|p| p.morph_targets().next().is_some())).count();
+    if animations + skins + morphed > 0 {
+        let n = |count: usize, one: &str, many: &str| format!("{count} {}", if count == 1 { one } else { many });
+        warnings.push(format!(
+            "{}: {}, {} and {}: baked still, in the rest pose (nodes' stored transforms, joints ignored, each \
+             mesh's base positions without its morph targets)",
+            path.display(),
+            n(animations, "animation", "animations"),
+            n(skins, "skin", "skins"),
+            n(morphed, "mesh with morph targets", "meshes with morph targets"),
+        ));
+    }
     let mut sources = Vec::new();
-    let buffers = load_buffers(&document, blob, path, base, options, &mut sources)?;
+    let buffers = load_buffers(&document, blob, path, base, options, &mut sources).map_err(|e| match e {
+        // A binary chunk the file lacks may be one it mislabelled: say which were skipped.
+        Error::Parse { path, element, message } if message.contains("GLB binary chunk") => {
+            let skipped: Vec<&str> =
+                warnings.iter().filter(|w| w.contains("GLB chunk at byte")).map(String::as_str).collect();
+            let message = if skipped.is_empty() { message } else { format!("{message}; {}", skipped.join("; ")) };
+            Error::Parse { path, element, message }
+        }
+        e => e,
+    })?;
     // The default scene, or scene 0 when the file names none.
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         return Err(Error::EmptyScene { path: path.into() });
