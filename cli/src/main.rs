@@ -59,7 +59,7 @@ enum Command {
     Inspect(cmd::inspect::Args),
     /// Trace a file of rays and write the hits (the formats: `octrace trace --help`).
     Trace(cmd::trace::Args),
-    /// Write a standard ray set (shared/bench/RAYS.md) to a file for `trace`.
+    /// Write a standard ray set (bench/RAYS.md) to a file for `trace`.
     Rays(cmd::rays::Args),
     /// Whether points lie inside a closed mesh (the formats: `octrace contains --help`).
     Contains(cmd::contains::Args),
@@ -72,7 +72,7 @@ enum Command {
     Verify(cmd::verify::Args),
     /// Count rays leaking out of closed meshes (every one should hit).
     Soak(cmd::soak::Args),
-    /// Measure Mrays/s on the standard ray sets (shared/bench/RAYS.md), against obvhs.
+    /// Measure Mrays/s on the standard ray sets (bench/RAYS.md), against obvhs.
     Bench(cmd::bench::Args),
     /// Bake the bunny this build carries, inspect it, render demo.png, measure it.
     Demo(cmd::demo::Args),

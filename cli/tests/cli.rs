@@ -30,6 +30,7 @@ triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
 triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
+overfull leaves    0
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
 bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
@@ -171,7 +172,8 @@ fn trace_writes_one_record_per_ray_in_ray_order() {
     assert_eq!(rec(1), (f32::INFINITY, u32::MAX));
     assert_eq!(rec(2), (0.5, u32::MAX));
     assert_eq!(rec(3), (9.0, u32::MAX));
-    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "--out", "occ.bin", "--occluded"]);
+    // -o, --output and --out name the same output.
+    let out = ok(dir.path(), &["trace", "cube.oct", "--rays", "rays.bin", "-o", "occ.bin", "--occluded"]);
     assert!(out.starts_with("4 rays, 1 occluded"), "{out}");
 }
 

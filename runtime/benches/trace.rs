@@ -1,4 +1,4 @@
-//! Tracing benchmarks on the standard ray sets of `shared/bench/RAYS.md` over the
+//! Tracing benchmarks on the standard ray sets of `bench/RAYS.md` over the
 //! bunny the repository carries: `cargo bench -p octrace-runtime`.
 //! `OCTRACE_BENCH_SMALL=1` traces a 64 x 64 image instead of 1024 x 1024 (for CI).
 use std::sync::OnceLock;

@@ -1,4 +1,4 @@
-//! The standard ray sets of `shared/bench/RAYS.md`, bit for bit.
+//! The standard ray sets of `bench/RAYS.md`, bit for bit.
 //!
 //! All arithmetic is `f64`, evaluated left to right as RAYS.md writes it (Rust never
 //! fuses `*` and `+` on its own), and rounded to `f32` once at the end, so any

@@ -46,7 +46,7 @@ pub(crate) struct Args {
     pub points: PathBuf,
     /// Output answers (one byte each); `-` writes them to standard output (the summary
     /// then goes to standard error). Never one of the inputs.
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", visible_alias = "out")]
     pub out: PathBuf,
     /// Answer an open scene by a majority of K rays' parities (odd K, 1 to 99).
     #[arg(long, value_name = "K")]
@@ -88,7 +88,7 @@ fn read_points(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    crate::output::refuse_overwriting(&args.out, "--out", &[&args.scene, &args.points])?;
+    crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.points])?;
     if let Some(k) = args.vote {
         anyhow::ensure!(k % 2 == 1 && k <= 99, "--vote must be odd, from 1 to 99 (a majority of K rays): {k}");
     }

@@ -123,7 +123,7 @@ fn bunny(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::Re
     tracer.par_intersect_batch(&rays, &mut hits);
     let all = t.elapsed().as_secs_f64();
     crate::out!(
-        "primary rays (1024 x 1024, shared/bench/RAYS.md): {:.2} Mrays/s on one thread, {:.2} Mrays/s on {}; {} hits",
+        "primary rays (1024 x 1024, bench/RAYS.md): {:.2} Mrays/s on one thread, {:.2} Mrays/s on {}; {} hits",
         rays.len() as f64 / best / 1e6,
         rays.len() as f64 / all / 1e6,
         crate::output::counted(rayon::current_num_threads() as u64, "thread"),

@@ -6,7 +6,7 @@ use octrace_runtime::raysets::{self, Frame};
 
 use crate::output::thousands;
 
-/// Write a standard ray set of shared/bench/RAYS.md for a scene, in the 32-byte
+/// Write a standard ray set of bench/RAYS.md for a scene, in the 32-byte
 /// format `octrace trace` reads (f32 `ox oy oz tmin dx dy dz tmax`, little-endian).
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {

@@ -42,7 +42,7 @@ pub(crate) struct Args {
     #[arg(long)]
     pub height: Option<u32>,
     /// Eye position `x,y,z` (default: the scene's first camera, else the standard
-    /// camera of shared/bench/RAYS.md).
+    /// camera of bench/RAYS.md).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<DVec3>,
     /// Point looked at `x,y,z` (default: the scene's centre).

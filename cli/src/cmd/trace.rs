@@ -43,7 +43,7 @@ pub(crate) struct Args {
     pub rays: PathBuf,
     /// Output hits (8 bytes each); `-` writes them to standard output (the summary then
     /// goes to standard error). Never one of the inputs.
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", visible_alias = "out")]
     pub out: PathBuf,
     /// Answer occlusion (any hit) instead of the nearest hit.
     #[arg(long, group = "mode")]
@@ -81,7 +81,7 @@ pub(crate) const MISS: u32 = u32::MAX;
 pub(crate) const MAX_RAYS: u64 = 1 << 32;
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    crate::output::refuse_overwriting(&args.out, "--out", &[&args.scene, &args.rays])?;
+    crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.rays])?;
     let to_stdout = crate::output::is_stdout(&args.out);
     let scene = crate::open::open_scene(&args.scene)?;
     let bytes = octrace_format::read_regular_file(&args.rays, 32 * MAX_RAYS)

@@ -65,7 +65,7 @@ fn check(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>]) {
     assert!(t.ties * 10_000 <= rays.len(), "{name}: {} ties in {} rays", t.ties, rays.len());
 }
 
-/// The three standard sets of `shared/bench/RAYS.md` on the bunny: the same triangle
+/// The three standard sets of `bench/RAYS.md` on the bunny: the same triangle
 /// (or a tie at the same distance) and |Δt| ≤ 1e-5 t for every ray; the same occlusion
 /// for every shadow ray but those whose occluder lies on a triangle's boundary.
 #[test]

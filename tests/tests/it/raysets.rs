@@ -1,4 +1,4 @@
-//! The standard ray sets are generated bit for bit as `shared/bench/RAYS.md` says.
+//! The standard ray sets are generated bit for bit as `bench/RAYS.md` says.
 //!
 //! The expected bits come from an independent generator (Python, the same IEEE `f64`
 //! arithmetic and libm), run over `shared/meshes/bunny.obj`.

@@ -9,7 +9,7 @@ use serde_json::json;
 
 use crate::output::{mb, thousands};
 
-/// Measure tracing speed on the standard ray sets of shared/bench/RAYS.md.
+/// Measure tracing speed on the standard ray sets of bench/RAYS.md.
 ///
 /// The input is a baked .oct or a mesh (baked first, and the bake timed). Each figure
 /// is the median (with min and max) of --runs timed runs of tracing alone, single

@@ -14,7 +14,7 @@ pub(super) fn markdown(report: &Report, args: &Args) -> String {
     let _ = writeln!(
         s,
         "octrace {} on {} ({} threads available; the tracing figures are single-threaded), {} UTC. \
-         Mrays/s: median of {} runs on the standard sets of shared/bench/RAYS.md, with the fastest and \
+         Mrays/s: median of {} runs on the standard sets of bench/RAYS.md, with the fastest and \
          slowest run in brackets: only a difference beyond them is a difference. Errors: each \
          configuration's answers on {} rays of each set against the f64 brute-force oracle \
          (`runtime::reference`); \"wrong\" excludes ties within rounding (two triangles at one \

@@ -39,7 +39,7 @@ use render_knobs::RenderKnobRow;
 /// the exit-face test (Plücker signs or slab distances), the bake margin, the depth
 /// limit, the leaf target. Each configuration is baked (time, bytes, leaves,
 /// references per triangle) and traced on the three standard ray sets
-/// (shared/bench/RAYS.md) on one thread: the median of --runs, and their spread. Its
+/// (bench/RAYS.md) on one thread: the median of --runs, and their spread. Its
 /// answers are compared with the oracle's on --sample rays of each set (wrong hits,
 /// largest |Δt|/t) and on --hard-rays rays of each hard kind: in cell planes, along
 /// cell edges, through cell corners, grazing, aimed at vertices, at slivers, from
