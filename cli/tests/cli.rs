@@ -593,7 +593,12 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
         "--render-width",
         "32",
     ];
-    let out = ok(dir.path(), &[&["report", "cube.obj", "-o", "rep", "--json"][..], &quick].concat());
+    let run = octrace(dir.path(), &[&["report", "cube.obj", "-o", "rep", "--json"][..], &quick].concat());
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    // Not a terminal: a line of progress a step on standard error.
+    let progress = String::from_utf8_lossy(&run.stderr);
+    assert!(progress.lines().filter(|l| l.starts_with("report: step ")).count() > 3, "{progress}");
+    let out = String::from_utf8(run.stdout).unwrap();
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
     let mesh = &json["meshes"][0];
     assert_eq!((mesh["name"].as_str(), mesh["triangles"].as_u64()), (Some("cube.obj"), Some(13)));

@@ -99,7 +99,12 @@ fn bunny(output: &std::path::Path, save: Option<&std::path::Path>) -> anyhow::Re
     let (scene, bake_time) = super::bake::bake_mesh(&mesh, &BuildParams::auto(), &progress)?;
     progress.finish();
     let (path, bytes, _dir) = write_scene(&scene, "bunny.oct", save, bake_time.as_micros() as u64)?;
-    crate::out!("baked the bunny in {:.2} s: {} -> {}", bake_time.as_secs_f64(), thousands(bytes), crate::show(&path));
+    // A temporary file is gone when the demo ends: named only when it is kept.
+    let kept = match save {
+        Some(_) => crate::show(&path),
+        None => "a temporary file (--save-scene keeps it)".to_string(),
+    };
+    crate::out!("baked the bunny in {:.2} s: {} bytes -> {kept}", bake_time.as_secs_f64(), thousands(bytes));
     let scene = crate::open::open_scene(&path)?;
     let file = scene.file().expect("from a file");
     let report = super::inspect::Report::new(&scene.view(), file.header(), bytes)?;

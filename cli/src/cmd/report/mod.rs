@@ -360,27 +360,41 @@ fn today() -> String {
     format!("{y:04}-{m:02}-{d:02}")
 }
 
-/// A progress bar over the report's steps, on a terminal.
-struct Bar(Option<indicatif::ProgressBar>);
+/// A progress bar over the report's steps on a terminal; elsewhere (a log, CI) a line
+/// a step on standard error, so a run of minutes is never silent.
+struct Bar(Option<indicatif::ProgressBar>, u64, std::cell::Cell<u64>, std::time::Instant);
 
 impl Bar {
     fn new(steps: u64) -> Bar {
         use std::io::IsTerminal as _;
-        Bar(std::io::stderr().is_terminal().then(|| {
+        let bar = std::io::stderr().is_terminal().then(|| {
             let bar = indicatif::ProgressBar::new(steps);
             bar.set_style(
                 indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed:>4} {msg}")
                     .expect("valid template"),
             );
             bar
-        }))
+        });
+        Bar(bar, steps, std::cell::Cell::new(0), std::time::Instant::now())
     }
 
     /// Starts the next step.
     fn step(&self, what: &str) {
-        if let Some(b) = &self.0 {
-            b.inc(1);
-            b.set_message(what.to_string());
+        match &self.0 {
+            Some(b) => {
+                b.inc(1);
+                b.set_message(what.to_string());
+            }
+            None => {
+                self.2.set(self.2.get() + 1);
+                eprintln!(
+                    "report: step {}/{} at {:.0} s: {}",
+                    self.2.get(),
+                    self.1,
+                    self.3.elapsed().as_secs_f64(),
+                    crate::output::printable(what)
+                );
+            }
         }
     }
 
