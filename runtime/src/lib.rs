@@ -37,6 +37,7 @@ pub mod reference;
 pub mod render;
 mod scene;
 pub mod spawn;
+pub mod surface;
 #[doc(hidden)]
 pub mod testing;
 pub mod unconstrained;
@@ -52,3 +53,4 @@ pub use cpu::{ExitTest, MemoryOrder, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};
 pub use scene::Scene;
+pub use surface::HitSurface;

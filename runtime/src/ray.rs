@@ -80,7 +80,11 @@ impl Ray {
     }
 }
 
-/// The nearest hit of a ray.
+/// The nearest hit of a ray. [`Scene::surface`](crate::Scene::surface) gives what it
+/// is on: the point, the geometric and shading normals, the texture coordinates, the
+/// mesh part and the material ([`crate::HitSurface`]). Pass [`Hit::triangle`] (the
+/// input's index) wherever a triangle goes back to the scene's shading data;
+/// [`Hit::prim`] indexes the stored arrays ([`octrace_format::SceneView::triangle`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
     /// Distance along the ray, in units of its direction: with the watertight test
