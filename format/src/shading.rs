@@ -437,7 +437,8 @@ impl Shading {
     pub fn validate_texels(&self, words: usize) -> crate::Result<()> {
         for t in &self.textures {
             let sides = 1..=MAX_TEXTURE_SIDE;
-            let end = (t.first as u64 + t.width as u64 * t.height as u64) * TEXEL_WORDS as u64;
+            // Saturating: a hostile size must be refused, not overflow (found by fuzzing).
+            let end = (t.first as u64 + t.width as u64 * t.height as u64).saturating_mul(TEXEL_WORDS as u64);
             if !sides.contains(&t.width) || !sides.contains(&t.height) || end > words as u64 {
                 return Err(crate::Error::corrupt(format!(
                     "texture '{}' ({} x {} from texel {}) is empty, larger than {MAX_TEXTURE_SIDE} a side, \

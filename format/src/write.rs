@@ -58,6 +58,10 @@ impl BakedScene {
     /// megabytes (on a fresh machine, zeroing the pages of such a copy costs more than
     /// writing it).
     ///
+    /// `bake_time_us` is the bake's duration in microseconds, recorded in the header
+    /// for `inspect`; pass 0 (what `octrace bake` writes unless `--record-time`) to keep
+    /// the file reproducible: the same scene then always gives the same bytes.
+    ///
     /// # Errors
     /// [`Error::Write`] naming the path on any failure (the temporary file is removed).
     pub fn write(&self, path: impl AsRef<Path>, bake_time_us: u64) -> Result<u64> {

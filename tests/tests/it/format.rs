@@ -503,6 +503,23 @@ fn geometry_and_shading_that_break_the_rules_are_rejected() {
             Box::new(with(camera.clone(), Light { direction: [0.0; 3], ..light.clone() })),
             "unit",
         ),
+        // Found by fuzzing open_scene: the texel range's end overflowed (a panic with
+        // overflow checks) before the sides were checked.
+        (
+            "a texture of 2^32 - 1 a side",
+            Box::new(|s: &mut BakedScene| {
+                s.shading.textures.push(octrace_format::Texture {
+                    name: "huge".into(),
+                    width: u32::MAX,
+                    height: u32::MAX,
+                    first: u32::MAX,
+                    wrap: [octrace_format::Wrap::Repeat; 2],
+                    filter: octrace_format::Filter::Linear,
+                    min_alpha: 1.0,
+                })
+            }),
+            "larger than 8192 a side",
+        ),
     ];
     for (what, change, says) in cases {
         let err = corrupt(change);
