@@ -61,18 +61,22 @@ fn bounds(mesh: &Mesh) -> (Vec3, Vec3) {
     pts.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)))
 }
 
-/// Soups, procedural meshes and the bunny, at several depths: the walk's list is the
-/// brute force's, ray for ray.
-#[test]
-fn all_crossings_equal_the_brute_force_list() {
-    let meshes = [
+/// A soup, closed solids (a sphere, a torus), an open grid and a fan.
+pub(crate) fn test_meshes() -> [(&'static str, Mesh); 5] {
+    [
         ("soup", procedural::soup(3, 600, 4.0, 0.8)),
         ("sphere", procedural::sphere([0.1, 0.2, -0.3], 1.5, 20, 28)),
         ("torus", procedural::torus([0.0; 3], 1.0, 0.35, 30, 14)),
         ("grid", procedural::grid(12, 3.0)),
         ("fan", procedural::fan(48, 1.0)),
-    ];
-    for (name, mesh) in &meshes {
+    ]
+}
+
+/// Soups, procedural meshes and the bunny, at several depths: the walk's list is the
+/// brute force's, ray for ray.
+#[test]
+fn all_crossings_equal_the_brute_force_list() {
+    for (name, mesh) in &test_meshes() {
         for params in [
             BuildParams::auto(),
             BuildParams { max_depth: Some(6), leaf_size: Some(1), ..BuildParams::auto() },

@@ -13,7 +13,7 @@ use octrace_runtime::gpu::GpuTracer;
 use octrace_runtime::{Ray, Scene};
 use octrace_tests::gpu;
 
-use crate::crossings::{random_rays, scene_of};
+use crate::crossings::{random_rays, scene_of, test_meshes};
 
 /// A crossing's bits, so that -0.0 and 0.0 differ.
 fn bits(c: &Crossing) -> (u32, u32, u32, u32, bool) {
@@ -52,14 +52,7 @@ fn gpu_equals_cpu(name: &str, gpu: &octrace_runtime::gpu::GpuContext, scene: &Sc
 #[test]
 fn gpu_crossings_equal_the_cpus_on_random_and_far_rays() {
     let Some(gpu) = gpu("gpu_crossings_equal_the_cpus_on_random_and_far_rays") else { return };
-    let meshes = [
-        ("soup", procedural::soup(3, 600, 4.0, 0.8)),
-        ("sphere", procedural::sphere([0.1, 0.2, -0.3], 1.5, 20, 28)),
-        ("torus", procedural::torus([0.0; 3], 1.0, 0.35, 30, 14)),
-        ("grid", procedural::grid(12, 3.0)),
-        ("fan", procedural::fan(48, 1.0)),
-    ];
-    for (name, mesh) in &meshes {
+    for (name, mesh) in &test_meshes() {
         for params in
             [BuildParams::auto(), BuildParams { max_depth: Some(6), leaf_size: Some(1), ..BuildParams::auto() }]
         {
