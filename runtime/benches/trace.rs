@@ -48,5 +48,5 @@ fn incoherent_single_thread(bencher: divan::Bencher) {
 #[divan::bench]
 fn primary_all_threads(bencher: divan::Bencher) {
     let (scene, rays, _) = fixture();
-    bencher.counter(divan::counter::ItemsCount::new(rays.len())).bench_local(|| scene.intersect_all(rays));
+    bencher.counter(divan::counter::ItemsCount::new(rays.len())).bench_local(|| scene.intersect_batch(rays));
 }

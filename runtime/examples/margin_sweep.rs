@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let scene = Scene::from_baked(bake(&s.mesh, &params)?)?;
             let rays: Vec<Ray> =
                 s.leak_rays(500_000, 9).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect();
-            leaks += scene.intersect_all(&rays).iter().filter(|h| h.is_none()).count();
+            leaks += scene.intersect_batch(&rays).iter().filter(|h| h.is_none()).count();
             total += rays.len();
         }
         let baked =

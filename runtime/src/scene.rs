@@ -201,15 +201,17 @@ impl Scene {
 
     /// Nearest hits of many rays, on all cores: each core walks sixteen rays at a time
     /// (eight a vector where the processor has AVX2), so that their loads overlap:
-    /// faster than [`Scene::intersect`] ray by ray, with the same answers.
-    pub fn intersect_all(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
+    /// faster than [`Scene::intersect`] ray by ray, with the same answers. (The calls
+    /// on many rays or points end in `_batch`; "all" is for every hit along one ray,
+    /// [`Scene::crossings`], as in other tracers.)
+    pub fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
         let mut out = vec![None; rays.len()];
         self.tracer().par_intersect_batch(rays, &mut out);
         out
     }
 
     /// Occlusion of many rays, on all cores.
-    pub fn occluded_all(&self, rays: &[Ray]) -> Vec<bool> {
+    pub fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
         let mut out = vec![false; rays.len()];
         self.tracer().par_occluded_batch(rays, &mut out);
         out
@@ -223,12 +225,12 @@ impl Scene {
 
     /// Every crossing of many rays, on all cores, in one flat list with each ray's
     /// offsets (at most `limit` a ray, the first ones).
-    pub fn crossings_all(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
+    pub fn crossings_batch(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
         self.tracer().par_crossings_batch(rays, limit)
     }
 
     /// How many times each ray crosses the scene, on all cores.
-    pub fn count_crossings_all(&self, rays: &[Ray]) -> Vec<CrossingCount> {
+    pub fn count_crossings_batch(&self, rays: &[Ray]) -> Vec<CrossingCount> {
         let mut out = vec![CrossingCount::default(); rays.len()];
         self.tracer().par_count_crossings_batch(rays, &mut out);
         out
@@ -263,7 +265,7 @@ impl Scene {
     /// use octrace_runtime::Scene;
     /// let ball = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
     /// assert!(ball.contains([0.2, 0.1, 0.3])?);
-    /// assert_eq!(ball.contains_all(&[[0.0; 3], [2.0, 0.0, 0.0]])?, [true, false]);
+    /// assert_eq!(ball.contains_batch(&[[0.0; 3], [2.0, 0.0, 0.0]])?, [true, false]);
     /// let plane = Scene::from_baked(bake(&procedural::grid(4, 1.0), &BuildParams::auto())?)?;
     /// assert!(plane.contains([0.5, 0.5, 0.1]).is_err()); // open: no inside
     /// # Ok::<(), Box<dyn std::error::Error>>(())
@@ -277,7 +279,7 @@ impl Scene {
     ///
     /// # Errors
     /// As [`Scene::contains`].
-    pub fn contains_all(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
+    pub fn contains_batch(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
         let solid = self.solid()?;
         let mut out = vec![false; points.len()];
         self.tracer().par_contains_batch(solid, points, &mut out);
@@ -289,10 +291,56 @@ impl Scene {
     ///
     /// # Errors
     /// As [`Scene::contains`].
-    pub fn length_inside_all(&self, rays: &[Ray]) -> Result<Vec<f32>> {
+    pub fn length_inside_batch(&self, rays: &[Ray]) -> Result<Vec<f32>> {
         let solid = self.solid()?;
         let mut out = vec![0.0; rays.len()];
         self.tracer().par_length_inside(solid, rays, &mut out);
         Ok(out)
+    }
+}
+
+/// The batch calls' former names, kept for one release: "all" now means every hit
+/// along one ray, as in other tracers.
+impl Scene {
+    /// [`Scene::intersect_batch`].
+    #[deprecated(note = "renamed intersect_batch: `all` is for every hit along one ray (Scene::crossings)")]
+    pub fn intersect_all(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
+        self.intersect_batch(rays)
+    }
+
+    /// [`Scene::occluded_batch`].
+    #[deprecated(note = "renamed occluded_batch")]
+    pub fn occluded_all(&self, rays: &[Ray]) -> Vec<bool> {
+        self.occluded_batch(rays)
+    }
+
+    /// [`Scene::crossings_batch`].
+    #[deprecated(note = "renamed crossings_batch")]
+    pub fn crossings_all(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
+        self.crossings_batch(rays, limit)
+    }
+
+    /// [`Scene::count_crossings_batch`].
+    #[deprecated(note = "renamed count_crossings_batch")]
+    pub fn count_crossings_all(&self, rays: &[Ray]) -> Vec<CrossingCount> {
+        self.count_crossings_batch(rays)
+    }
+
+    /// [`Scene::contains_batch`].
+    ///
+    /// # Errors
+    /// As [`Scene::contains`].
+    #[deprecated(note = "renamed contains_batch")]
+    pub fn contains_all(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
+        self.contains_batch(points)
+    }
+
+    /// [`Scene::length_inside_batch`].
+    ///
+    /// # Errors
+    /// As [`Scene::contains`].
+    #[deprecated(note = "renamed length_inside_batch")]
+    pub fn length_inside_all(&self, rays: &[Ray]) -> Result<Vec<f32>> {
+        self.length_inside_batch(rays)
     }
 }

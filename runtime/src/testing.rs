@@ -15,13 +15,13 @@ pub fn exercise(scene: &Scene, rays: &[Ray]) {
         let _ = tracer.intersect(r);
         let _ = tracer.occluded(r);
     }
-    let _ = scene.intersect_all(rays);
-    let _ = scene.occluded_all(rays);
-    let _ = scene.crossings_all(rays, 64);
-    let _ = scene.count_crossings_all(rays);
-    let _ = scene.length_inside_all(rays);
+    let _ = scene.intersect_batch(rays);
+    let _ = scene.occluded_batch(rays);
+    let _ = scene.crossings_batch(rays, 64);
+    let _ = scene.count_crossings_batch(rays);
+    let _ = scene.length_inside_batch(rays);
     let points: Vec<[f32; 3]> = rays.iter().map(|r| r.origin.to_array()).collect();
-    let _ = scene.contains_all(&points);
+    let _ = scene.contains_batch(&points);
     for p in &points {
         let _ = tracer.contains_by_vote(*p, 3);
     }

@@ -126,7 +126,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
                 // The labels are made once, before the clock (a crossing count a group).
                 scene.solid().context("--vote K answers such a scene approximately")?;
                 let t = Instant::now();
-                let inside = scene.contains_all(&points)?;
+                let inside = scene.contains_batch(&points)?;
                 Ok((inside, t.elapsed().as_secs_f64()))
             }
             Some(k) => {

@@ -26,7 +26,7 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
             }
             None => crate::with_threads(args.threads, || {
                 let t = Instant::now();
-                let all = scene.crossings_all(rays, limit);
+                let all = scene.crossings_batch(rays, limit);
                 (all, t.elapsed().as_secs_f64())
             })?,
         };
@@ -45,7 +45,7 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
             Some(k) => {
                 let full: Vec<usize> = (0..rays.len()).filter(|&i| all.of(i).len() == k as usize).collect();
                 let sub: Vec<Ray> = full.iter().map(|&i| rays[i]).collect();
-                let counts = scene.count_crossings_all(&sub);
+                let counts = scene.count_crossings_batch(&sub);
                 counts.iter().filter(|c| c.total > k).count()
             }
             None => 0,
@@ -70,7 +70,7 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
             }
             None => crate::with_threads(args.threads, || {
                 let t = Instant::now();
-                let counts = scene.count_crossings_all(rays);
+                let counts = scene.count_crossings_batch(rays);
                 (counts, t.elapsed().as_secs_f64())
             })?,
         };
@@ -94,7 +94,7 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
             }
             None => crate::with_threads(args.threads, || -> anyhow::Result<_> {
                 let t = Instant::now();
-                let lengths = scene.length_inside_all(rays)?;
+                let lengths = scene.length_inside_batch(rays)?;
                 Ok((lengths, t.elapsed().as_secs_f64()))
             })??,
         };

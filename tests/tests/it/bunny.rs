@@ -43,7 +43,7 @@ fn within(got: usize, want: usize) -> bool {
 /// published hits and sum of distances.
 fn set_agrees(name: &str, rays: &[Ray], step: usize, published_hits: usize, published_sum: f64) {
     sample_agrees(name, rays, step);
-    let (n, sum) = checksum(&bunny_scene().intersect_all(rays));
+    let (n, sum) = checksum(&bunny_scene().intersect_batch(rays));
     assert!(within(n, published_hits), "{name} hits {n}, published {published_hits}");
     assert!((sum - published_sum).abs() < published_sum * 3e-4, "{name} sum of t {sum}, published {published_sum}");
 }
@@ -62,12 +62,12 @@ fn incoherent_agrees_with_the_oracle_and_the_published_checksum() {
 fn shadow_agrees_with_the_oracle_and_the_published_checksum() {
     let f = frame();
     let scene = bunny_scene();
-    let hits = scene.intersect_all(&raysets::primary(&f));
+    let hits = scene.intersect_batch(&raysets::primary(&f));
     let rays = raysets::shadow(&f, |i| hits[i].map(|h| (h.t, scene.view().triangle(h.prim))));
     let oracle = oracle();
     for r in rays.iter().step_by(211) {
         assert_eq!(scene.occluded(r), oracle.occluded(r), "shadow ray {r:?}");
     }
-    let occluded = scene.occluded_all(&rays).iter().filter(|&&o| o).count();
+    let occluded = scene.occluded_batch(&rays).iter().filter(|&&o| o).count();
     assert!(within(occluded, 121_774), "shadow occluded {occluded}, published 121774");
 }

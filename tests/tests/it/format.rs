@@ -405,9 +405,9 @@ fn walks_through_link_cycles_stop_even_on_the_trusted_path() {
         // The batch paths (SIMD walks, eight in vector lanes where the processor has
         // AVX2) stop at the same bound, with the same answers.
         let single: Vec<_> = rays.iter().map(|r| tracer.intersect(r)).collect();
-        assert_eq!(scene.intersect_all(&rays), single, "{name}");
+        assert_eq!(scene.intersect_batch(&rays), single, "{name}");
         let single: Vec<_> = rays.iter().map(|r| tracer.occluded(r)).collect();
-        assert_eq!(scene.occluded_all(&rays), single, "{name}");
+        assert_eq!(scene.occluded_batch(&rays), single, "{name}");
         // Walks that would go on forever are stopped by the bound, not by luck.
         eprintln!("{name}: {stopped} of {} walks stopped at the bound", rays.len());
         if reaches_bound {

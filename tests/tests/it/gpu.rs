@@ -89,28 +89,28 @@ fn standard_sets_match(gpu: &octrace_runtime::gpu::GpuContext, scene: &Scene, tr
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
     let frame = Frame::from_triangles(triangles);
     let primary = raysets::primary(&frame);
-    let cpu_primary = scene.intersect_all(&primary);
+    let cpu_primary = scene.intersect_batch(&primary);
     let incoherent = raysets::incoherent(&frame, 1_000_000);
     let view = scene.view();
     let shadow = raysets::shadow(&frame, |i| cpu_primary[i].map(|h| (h.t, view.triangle(h.prim))));
-    let cpu_occluded = scene.occluded_all(&shadow);
+    let cpu_occluded = scene.occluded_batch(&shadow);
     if tracer.uses_f64() {
         // The kernel's arithmetic is the CPU's: every answer the same, bit for bit.
         same_hits("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
         same_hits(
             "incoherent",
             &incoherent,
-            &scene.intersect_all(&incoherent),
+            &scene.intersect_batch(&incoherent),
             &tracer.intersect(&incoherent).unwrap(),
         );
-        same_hits("shadow", &shadow, &scene.intersect_all(&shadow), &tracer.intersect(&shadow).unwrap());
+        same_hits("shadow", &shadow, &scene.intersect_batch(&shadow), &tracer.intersect(&shadow).unwrap());
         assert!(tracer.occluded(&shadow).unwrap() == cpu_occluded, "shadow: occlusion differs");
         return;
     }
     // Without f64 the edge functions and distances round differently: the same
     // triangle or a tie, within 1e-5 t.
     check("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
-    check("incoherent", &incoherent, &scene.intersect_all(&incoherent), &tracer.intersect(&incoherent).unwrap());
+    check("incoherent", &incoherent, &scene.intersect_batch(&incoherent), &tracer.intersect(&incoherent).unwrap());
     let (occluders, _) = tracer.trace_timed(&shadow, true).unwrap();
     assert_eq!(tracer.occluded(&shadow).unwrap(), occluders.iter().map(Option::is_some).collect::<Vec<_>>());
     let cpu_occluders: Vec<Option<Hit>> = shadow.iter().map(|r| scene.tracer().occluder(r)).collect();
@@ -210,7 +210,7 @@ fn inside_origins_and_untraceable_rays_match_the_cpu() {
         Ray::new(Vec3::new(5.0, 5.0, 5.0), Vec3::X),
         Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, -0.0, 1.0)),
     ]);
-    let cpu = scene.intersect_all(&rays);
+    let cpu = scene.intersect_batch(&rays);
     let got = tracer.intersect(&rays).unwrap();
     if tracer.uses_f64() {
         same_hits("inside", &rays, &cpu, &got);
@@ -279,7 +279,7 @@ fn rays_on_cell_planes_never_leak_on_the_gpu() {
             assert_eq!(leaks, 0, "{}: {leaks} of {} rays leaked through the kernel", solid.label(), rays.len());
             assert!(tracer.occluded(&rays).unwrap().iter().all(|&o| o), "{}: any-hit leaks", solid.label());
             if tracer.uses_f64() {
-                same_hits(&solid.label(), &rays, &scene.intersect_all(&rays), &got);
+                same_hits(&solid.label(), &rays, &scene.intersect_batch(&rays), &got);
             }
         }
     }
@@ -336,7 +336,7 @@ fn tiny_directions_ties_and_t_zero_answer_as_on_the_cpu() {
     for (name, scene, rays) in cases {
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
         let got = tracer.intersect(&rays).unwrap();
-        let cpu = scene.intersect_all(&rays);
+        let cpu = scene.intersect_batch(&rays);
         for (i, (c, g)) in cpu.iter().zip(&got).enumerate() {
             assert_eq!(c.is_some(), g.is_some(), "{name}: ray {i} {:?}: CPU {c:?}, GPU {g:?}", rays[i]);
             assert_eq!(c.map(|h| (h.triangle, h.t)), g.map(|h| (h.triangle, h.t)), "{name}: ray {i}");
@@ -362,7 +362,7 @@ fn far_cameras_see_as_on_the_cpu() {
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
     for exp in 1..=9 {
         let rays = far_rays(10f32.powi(exp), 1500, exp as u64);
-        let cpu = scene.intersect_all(&rays);
+        let cpu = scene.intersect_batch(&rays);
         let got = tracer.intersect(&rays).unwrap();
         if tracer.uses_f64() {
             same_hits(&format!("1e{exp}"), &rays, &cpu, &got);
@@ -401,7 +401,7 @@ fn slivers_keep_the_distance_bound_on_the_gpu() {
     }
     assert!(hits > 10_000, "{hits}");
     if tracer.uses_f64() {
-        same_hits("zigzag", &rays, &scene.intersect_all(&rays), &got);
+        same_hits("zigzag", &rays, &scene.intersect_batch(&rays), &got);
     }
 }
 
@@ -529,7 +529,7 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &params).unwrap()).unwrap();
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
     let rays: Vec<Ray> = (0..16).map(|k| Ray::new(Vec3::new(k as f32 * 1e-3, 0.0, -1.0), Vec3::Z)).collect();
-    let cpu = scene.intersect_all(&rays);
+    let cpu = scene.intersect_batch(&rays);
     assert!(cpu.iter().all(|h| h.is_some_and(|h| h.triangle == 70_000)), "{cpu:?}");
     let (g, stats): (Vec<_>, Vec<_>) = tracer.intersect_with_stats(&rays).unwrap().into_iter().unzip();
     same_hits("long walks", &rays, &cpu, &g);

@@ -94,7 +94,7 @@ fn gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays() {
         let segments: Vec<Ray> = rays.iter().map(|r| Ray { tmin: 0.25, tmax: 40.0, ..*r }).collect();
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
         let got = tracer.length_inside(scene.solid().unwrap(), &segments).unwrap();
-        let want = scene.length_inside_all(&segments).unwrap();
+        let want = scene.length_inside_batch(&segments).unwrap();
         let same = got.iter().zip(&want).filter(|(g, w)| g.to_bits() == w.to_bits()).count();
         if tracer.uses_f64() {
             assert_eq!(same, want.len(), "{}: lengths inside", solid.name);

@@ -49,7 +49,7 @@ fn check_solid_with(name: &str, mesh: &Mesh, params: &BuildParams, n: usize, nea
     let scene = Scene::from_baked(bake(mesh, params).unwrap()).unwrap();
     let oracle = InsideReference::new(&mesh.triangles);
     let pts = points(mesh, &scene, n, near, 3);
-    let got = scene.contains_all(&pts.iter().map(|p| p.to_array()).collect::<Vec<_>>()).unwrap();
+    let got = scene.contains_batch(&pts.iter().map(|p| p.to_array()).collect::<Vec<_>>()).unwrap();
     let (mut compared, mut inside) = (0, 0);
     for (p, &g) in pts.iter().zip(&got) {
         assert_eq!(g, scene.contains(p.to_array()).unwrap(), "{name}: batch and one point, {p}");
@@ -187,7 +187,7 @@ fn lengths_inside_closed_meshes() {
         Ray::segment(Vec3::new(-5.0, 0.1, 1.3), Vec3::X, 0.0, 4.5),
         Ray::new(Vec3::new(-5.0, 3.0, 1.3), Vec3::X),
     ];
-    let lengths = scene.length_inside_all(&rays).unwrap();
+    let lengths = scene.length_inside_batch(&rays).unwrap();
     assert_eq!(lengths, [2.0, 1.0, 2.0, 3.0, 0.5, 0.0]);
     let ball =
         Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 48, 64), &BuildParams::auto()).unwrap()).unwrap();
@@ -196,7 +196,7 @@ fn lengths_inside_closed_meshes() {
         let b = 0.9 * rng.unit();
         let ray = Ray::new(Vec3::new(-3.0, b, 0.0), Vec3::X);
         let chord = 2.0 * (1.0 - b * b).sqrt();
-        let got = ball.length_inside_all(&[ray]).unwrap()[0];
+        let got = ball.length_inside_batch(&[ray]).unwrap()[0];
         assert!((got - chord).abs() < 0.01, "impact {b}: {got} against {chord}");
     }
 }

@@ -112,7 +112,7 @@ fn regression_in_plane_rays_that_leaked() {
         assert!(solid.contains(ray.origin.to_array()), "{}: the origin is inside", solid.label());
         assert!(scene.intersect(&ray).is_some(), "{}: {ray:?} leaks", solid.label());
         assert!(scene.occluded(&ray), "{}: {ray:?} is not occluded", solid.label());
-        assert!(scene.intersect_all(&[ray; 9]).iter().all(Option::is_some), "{}: batch", solid.label());
+        assert!(scene.intersect_batch(&[ray; 9]).iter().all(Option::is_some), "{}: batch", solid.label());
     }
 }
 
@@ -127,7 +127,7 @@ fn regression_the_bunny_ray_in_a_y_plane_with_negative_zero() {
         let hit = scene.intersect(&ray).unwrap_or_else(|| panic!("{ray:?} misses"));
         assert_eq!(hit.triangle, 38327, "{ray:?}");
         assert!((hit.t - 0.27274).abs() < 1e-4, "{hit:?}");
-        assert_eq!(scene.intersect_all(&[ray; 17])[16], Some(hit), "batch");
+        assert_eq!(scene.intersect_batch(&[ray; 17])[16], Some(hit), "batch");
     }
 }
 
@@ -154,7 +154,7 @@ fn regression_a_camera_on_a_cell_plane_sees_no_crack() {
         let rays = camera.rays();
         let middle = &rays[50 * 96..51 * 96];
         assert!(middle.iter().all(|r| r.dir.y == 0.0 && r.origin.y == y), "the middle row lies in the plane");
-        let hits = scene.intersect_all(&rays);
+        let hits = scene.intersect_batch(&rays);
         let missed = hits.iter().filter(|h| h.is_none()).count();
         assert_eq!(missed, 0, "camera at {eye:?}: {missed} pixels see through the wall");
         for r in middle {

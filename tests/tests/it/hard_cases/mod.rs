@@ -190,7 +190,7 @@ fn closed_meshes_do_not_leak() {
         let s = scene(&solid.mesh, None, 8);
         let rays: Vec<Ray> =
             solid.leak_rays(1_000_000, 7).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect();
-        let hits = s.intersect_all(&rays);
+        let hits = s.intersect_batch(&rays);
         let leaks: Vec<&Ray> = rays.iter().zip(&hits).filter(|(_, h)| h.is_none()).map(|(r, _)| r).collect();
         assert!(
             leaks.is_empty(),
@@ -268,7 +268,7 @@ fn extreme_scales_within_the_limits_trace_right() {
         let s = scene(&solid.mesh, None, 16);
         let rays: Vec<Ray> =
             solid.leak_rays(30_000, 4).iter().map(|(o, d)| Ray::new(Vec3::from(*o), Vec3::from(*d))).collect();
-        let leaks = s.intersect_all(&rays).iter().filter(|h| h.is_none()).count();
+        let leaks = s.intersect_batch(&rays).iter().filter(|h| h.is_none()).count();
         assert_eq!(leaks, 0, "scale {scale:e}: {leaks} of {} rays leaked", rays.len());
         let sample: Vec<Ray> = rays.iter().step_by(40).copied().collect();
         all_agree(&format!("scale {scale:e}"), &s, &oracle(&solid.mesh), &sample);
@@ -372,8 +372,8 @@ fn nan_inf_inverted_and_zero_rays_are_defined_misses() {
         assert_eq!(t.intersect(r), None, "{r:?}");
         assert!(!t.occluded(r), "{r:?}");
     }
-    assert!(s.intersect_all(&bad).iter().all(Option::is_none));
-    assert!(s.occluded_all(&bad).iter().all(|o| !o));
+    assert!(s.intersect_batch(&bad).iter().all(Option::is_none));
+    assert!(s.occluded_batch(&bad).iter().all(|o| !o));
     // A huge but finite tmax and a ray that only starts beyond the scene are fine too.
     assert!(t.intersect(&Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, f32::MAX)).is_some());
     assert!(t.intersect(&Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 100.0, inf)).is_none());
