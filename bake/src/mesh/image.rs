@@ -85,17 +85,19 @@ fn png(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
 fn jpeg(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     use zune_core::{bytestream::ZCursor, colorspace::ColorSpace, options::DecoderOptions};
     let side = MAX_TEXTURE_SIDE as usize;
-    let options = DecoderOptions::default()
-        .jpeg_set_out_colorspace(ColorSpace::RGBA)
-        .set_max_width(side)
-        .set_max_height(side)
-        // A truncated or corrupt stream is an error, not filler texels (as PNG).
-        .set_strict_mode(true);
+    let options =
+        DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGBA).set_max_width(side).set_max_height(side);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
     decoder.decode_headers().map_err(|e| format!("JPEG: {e}"))?;
     let info = decoder.info().ok_or("JPEG: no image header")?;
     let (width, height) = (info.width as usize, info.height as usize);
     check_size(width, height, limit)?;
+    // A file cut short: the decoder would fill what is missing with grey. A JPEG ends
+    // with its end-of-image marker after its (last) scan; anything may follow it.
+    let scan = bytes.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    if scan.is_none_or(|at| !bytes[at..].windows(2).any(|w| w == [0xFF, 0xD9])) {
+        return Err(format!("JPEG: cut short ({} bytes, no end-of-image marker after its scan)", bytes.len()));
+    }
     // Every 8 x 8 block of luma costs a bit at least (its DC code, in any JPEG mode): a
     // header that claims more blocks than the file has bits is a lie the decoder would
     // fill with grey.

@@ -133,10 +133,11 @@ fn jpeg_textures_decode_to_their_colours() {
 fn broken_jpegs_are_left_out_with_a_warning() {
     let jpeg = std::fs::read(data("textured/colours.jpg")).unwrap();
     let cut = jpeg[..jpeg.len() / 3].to_vec();
+    let cut_in_scan = jpeg[..jpeg.len() - 60].to_vec();
     let mut lying = jpeg.clone();
     let sof = lying.windows(2).position(|w| w[0] == 0xFF && (w[1] == 0xC0 || w[1] == 0xC2)).expect("a frame header");
     lying[sof + 5..sof + 9].copy_from_slice(&[0x07, 0xD0, 0x07, 0xD0]);
-    for (name, bytes) in [("cut.jpg", &cut), ("lying.jpg", &lying)] {
+    for (name, bytes) in [("cut.jpg", &cut), ("cut-in-scan.jpg", &cut_in_scan), ("lying.jpg", &lying)] {
         let mesh = load_edited(textured(name), &[(name, bytes)]).unwrap();
         let note = mesh.warnings.iter().find(|w| w.contains(&format!("image 0 '{name}'")));
         let note = note.unwrap_or_else(|| panic!("{name}: {:?}", mesh.warnings));
