@@ -38,18 +38,17 @@ impl GpuTracer<'_> {
     /// # Ok(()) }
     /// ```
     pub fn count_crossings(&self, rays: &[Ray]) -> GpuResult<Vec<CrossingCount>> {
-        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()[0])?;
         let tracer = self.scene.tracer();
+        let counts = self.kernel_counts(rays)?;
+        Ok(counts.iter().zip(rays).map(|(c, r)| c.unwrap_or_else(|| tracer.count_crossings(r))).collect())
+    }
+
+    /// The counting kernel's answers; `None` for a walk that ran out of loop budget.
+    fn kernel_counts(&self, rays: &[Ray]) -> GpuResult<Vec<Option<CrossingCount>>> {
+        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()[0])?;
         Ok(out
             .iter()
-            .zip(rays)
-            .map(|(h, r)| {
-                if h.steps == OVER_BUDGET {
-                    tracer.count_crossings(r)
-                } else {
-                    CrossingCount { total: h.triangle, entries: h.leaf }
-                }
-            })
+            .map(|h| (h.steps != OVER_BUDGET).then_some(CrossingCount { total: h.triangle, entries: h.leaf }))
             .collect())
     }
 
@@ -60,29 +59,35 @@ impl GpuTracer<'_> {
     /// # Errors
     /// As [`GpuTracer::count_crossings`].
     pub fn crossings(&self, rays: &[Ray]) -> GpuResult<BatchCrossings> {
-        let counts = self.count_crossings(rays)?;
+        // A walk the counting kernel could not finish is listed on the CPU once, and
+        // its list gives its count.
+        let tracer = self.scene.tracer();
+        let gpu_counts = self.kernel_counts(rays)?;
+        let cpu_lists: Vec<Option<Vec<Crossing>>> =
+            gpu_counts.iter().zip(rays).map(|(c, r)| c.is_none().then(|| tracer.all_crossings(r))).collect();
+        let total =
+            |i: usize| gpu_counts[i].map_or_else(|| cpu_lists[i].as_ref().map_or(0, Vec::len), |c| c.total as usize);
         let mut splits = Vec::with_capacity(rays.len() + 1);
         splits.push(0usize);
-        for c in &counts {
-            splits.push(splits[splits.len() - 1] + c.total as usize);
+        for i in 0..rays.len() {
+            splits.push(splits[i] + total(i));
         }
         let mut crossings = vec![Crossing { t: 0.0, triangle: 0, u: 0.0, v: 0.0, enters: false }; splits[rays.len()]];
         // Dispatches of at most `per_dispatch` rays whose rays and offsets fit one
-        // binding, and whose records fit another; a ray whose records alone do not is
-        // left to the CPU (it is given no room: `capacity` 0).
+        // binding, and whose records fit another; a ray whose records alone do not, or
+        // that the CPU listed already, is given no room (`capacity` 0).
         let limits = self.device.limits();
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let max_records = (max_binding / RECORD).min(u32::MAX as u64) as usize;
         let per_dispatch =
             (self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as u64).min((max_binding - 16) / (RAY + 4)) as usize;
-        let fits = |i: usize| (counts[i].total as usize) <= max_records;
-        let tracer = self.scene.tracer();
+        let on_gpu = |i: usize| cpu_lists[i].is_none() && total(i) <= max_records;
         let mut start = 0;
         while start < rays.len() {
             let mut end = start;
             let mut records = 0usize;
             while end < rays.len() && end - start < per_dispatch {
-                let n = if fits(end) { counts[end].total as usize } else { 0 };
+                let n = if on_gpu(end) { total(end) } else { 0 };
                 if records + n > max_records {
                     break;
                 }
@@ -93,7 +98,7 @@ impl GpuTracer<'_> {
             let mut offsets = Vec::with_capacity(part.len() + 1);
             offsets.push(0u32);
             for i in start..end {
-                let n = if fits(i) { counts[i].total } else { 0 };
+                let n = if on_gpu(i) { total(i) as u32 } else { 0 };
                 offsets.push(offsets[offsets.len() - 1] + n);
             }
             let out = if records > 0 { self.list_kernel(part, &offsets)? } else { Vec::new() };
@@ -101,6 +106,10 @@ impl GpuTracer<'_> {
                 let (a, b) = (offsets[k] as usize, offsets[k + 1] as usize);
                 let dest = &mut crossings[splits[i]..splits[i + 1]];
                 if dest.is_empty() {
+                    continue;
+                }
+                if let Some(list) = &cpu_lists[i] {
+                    dest.copy_from_slice(list);
                     continue;
                 }
                 if b - a != dest.len() || out[a].flags == OVER_BUDGET {

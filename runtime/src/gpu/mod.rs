@@ -803,6 +803,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let last = f64((1u << params.max_depth) - 1u);\n    \
               let x = (f64(p) - f64(lo)) * f64(params.root_hi.w);\n    \
               return u32(f32(clamp(x, 0.0lf, last)));\n}\n";
+        g += &triangle_source("f64");
         g += &plane_distance_source("f64");
         g += &front_source("f64");
         // tables::exact_exit and exact_side: exact products, the difference's sign exact.
@@ -823,6 +824,7 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \
               let last = f32((1u << params.max_depth) - 1u);\n    \
               return u32(clamp((p - lo) * params.root_hi.w, 0.0, last));\n}\n";
+        g += &triangle_source("f32");
         g += &plane_distance_source("f32");
         g += &front_source("f32");
         // Without f64 the exact rule compares rounded f32 distances (no underflowing
@@ -917,9 +919,9 @@ fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, ow
     let sx = c64(d, k.x) / c64(d, k.z);
     let sy = c64(d, k.y) / c64(d, k.z);
     let o = vec3<f64>(f64((*wk).o.x), f64((*wk).o.y), f64((*wk).o.z));
-    let a = vec3<f64>(f64(wordf(at)), f64(wordf(at + 1u)), f64(wordf(at + 2u))) - o;
-    let b = vec3<f64>(f64(wordf(at + 3u)), f64(wordf(at + 4u)), f64(wordf(at + 5u))) - o;
-    let c = vec3<f64>(f64(wordf(at + 6u)), f64(wordf(at + 7u)), f64(wordf(at + 8u))) - o;
+    let a = corner(at) - o;
+    let b = corner(at + 3u) - o;
+    let c = corner(at + 6u) - o;
     let ax = c64(a, k.x) - sx * c64(a, k.z);
     let ay = c64(a, k.y) - sy * c64(a, k.z);
     let bx = c64(b, k.x) - sx * c64(b, k.z);
@@ -1002,6 +1004,25 @@ pub(super) fn check_bindings(
     Ok(())
 }
 
+/// The stored triangle's corners and plane normal in `float` (`f64` where the adapter
+/// has it), shared by the generated functions below: `corner(at)`, the three floats
+/// from word `at`; `plane_normal(at)`, `(v1 - v0) x (v2 - v0)` of the triangle at word
+/// `at`, the same operations in the same order as the CPU's.
+fn triangle_source(float: &str) -> String {
+    format!(
+        "fn corner(at: u32) -> vec3<{float}> {{
+    return vec3<{float}>({float}(wordf(at)), {float}(wordf(at + 1u)), {float}(wordf(at + 2u)));
+}}
+fn plane_normal(at: u32) -> vec3<{float}> {{
+    let a = corner(at);
+    let e1 = corner(at + 3u) - a;
+    let e2 = corner(at + 6u) - a;
+    return vec3<{float}>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+}}
+"
+    )
+}
+
 /// `plane_distance(o, d, at)`: where the ray meets the plane of the triangle at word
 /// `at`, as `cpu::watertight::plane_distance` computes it (the same operations in the
 /// same order), in `float` (`f64` where the adapter has it; else `f32`, whose error
@@ -1010,13 +1031,8 @@ pub(super) fn check_bindings(
 fn plane_distance_source(float: &str) -> String {
     format!(
         "fn plane_distance(o: vec3<f32>, d: vec3<f32>, at: u32) -> vec2<f32> {{
-    let a = vec3<{float}>({float}(wordf(at)), {float}(wordf(at + 1u)), {float}(wordf(at + 2u)));
-    let b = vec3<{float}>({float}(wordf(at + 3u)), {float}(wordf(at + 4u)), {float}(wordf(at + 5u)));
-    let c = vec3<{float}>({float}(wordf(at + 6u)), {float}(wordf(at + 7u)), {float}(wordf(at + 8u)));
-    let e1 = b - a;
-    let e2 = c - a;
-    let n = vec3<{float}>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    let ao = a - vec3<{float}>({float}(o.x), {float}(o.y), {float}(o.z));
+    let n = plane_normal(at);
+    let ao = corner(at) - vec3<{float}>({float}(o.x), {float}(o.y), {float}(o.z));
     let num = ao.x * n.x + ao.y * n.y + ao.z * n.z;
     let den = {float}(d.x) * n.x + {float}(d.y) * n.y + {float}(d.z) * n.z;
     if den == {float}(0.0) {{
@@ -1038,12 +1054,7 @@ fn plane_distance_source(float: &str) -> String {
 fn front_source(float: &str) -> String {
     format!(
         "fn arrives_on_front(d: vec3<f32>, at: u32) -> bool {{
-    let a = vec3<{float}>({float}(wordf(at)), {float}(wordf(at + 1u)), {float}(wordf(at + 2u)));
-    let b = vec3<{float}>({float}(wordf(at + 3u)), {float}(wordf(at + 4u)), {float}(wordf(at + 5u)));
-    let c = vec3<{float}>({float}(wordf(at + 6u)), {float}(wordf(at + 7u)), {float}(wordf(at + 8u)));
-    let e1 = b - a;
-    let e2 = c - a;
-    let n = vec3<{float}>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    let n = plane_normal(at);
     return {float}(d.x) * n.x + {float}(d.y) * n.y + {float}(d.z) * n.z < {float}(0.0);
 }}
 "

@@ -362,7 +362,14 @@ fn today() -> String {
 
 /// A progress bar over the report's steps on a terminal; elsewhere (a log, CI) a line
 /// a step on standard error, so a run of minutes is never silent.
-struct Bar(Option<indicatif::ProgressBar>, u64, std::cell::Cell<u64>, std::time::Instant);
+struct Bar {
+    /// The bar, on a terminal.
+    bar: Option<indicatif::ProgressBar>,
+    /// Steps in all, and those begun (for the lines printed without a bar).
+    steps: u64,
+    begun: std::cell::Cell<u64>,
+    started: std::time::Instant,
+}
 
 impl Bar {
     fn new(steps: u64) -> Bar {
@@ -375,23 +382,23 @@ impl Bar {
             );
             bar
         });
-        Bar(bar, steps, std::cell::Cell::new(0), std::time::Instant::now())
+        Bar { bar, steps, begun: std::cell::Cell::new(0), started: std::time::Instant::now() }
     }
 
     /// Starts the next step.
     fn step(&self, what: &str) {
-        match &self.0 {
+        match &self.bar {
             Some(b) => {
                 b.inc(1);
                 b.set_message(what.to_string());
             }
             None => {
-                self.2.set(self.2.get() + 1);
+                self.begun.set(self.begun.get() + 1);
                 eprintln!(
                     "report: step {}/{} at {:.0} s: {}",
-                    self.2.get(),
-                    self.1,
-                    self.3.elapsed().as_secs_f64(),
+                    self.begun.get(),
+                    self.steps,
+                    self.started.elapsed().as_secs_f64(),
                     crate::output::printable(what)
                 );
             }
@@ -399,13 +406,13 @@ impl Bar {
     }
 
     fn message(&self, what: &str) {
-        if let Some(b) = &self.0 {
+        if let Some(b) = &self.bar {
             b.set_message(what.to_string());
         }
     }
 
     fn finish(&self) {
-        if let Some(b) = &self.0 {
+        if let Some(b) = &self.bar {
             b.finish_and_clear();
         }
     }

@@ -289,7 +289,7 @@ unsafe fn table_rule(o: &[__m256; 3], d: &[__m256; 3], scale: RuleScale) -> u32 
 /// # Safety
 /// AVX2 must be available (where this is inlined).
 #[inline(always)]
-unsafe fn mask8(bits: u32) -> __m256 {
+pub(super) unsafe fn mask8(bits: u32) -> __m256 {
     // SAFETY: the caller's.
     unsafe {
         let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);

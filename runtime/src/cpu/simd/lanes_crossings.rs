@@ -14,6 +14,7 @@ use std::arch::x86_64::*;
 use octrace_format::layout::TRIANGLE_FLOATS;
 
 use super::avx2::{self, crossings8};
+use super::begin8::mask8;
 use super::lanes::{advance, records, refill, Feed, Group, Recent, Walk, F8, GROUPS, LANES, RECENT};
 use crate::cpu::crossings::{arrives_on_front, Crossing, CrossingSink, LeafCrossings};
 use crate::cpu::tracer::Tracer;
@@ -176,20 +177,6 @@ unsafe fn step(t: &Tracer<'_>, g: &mut Group, ls: &mut [Lane; LANES], recent: &m
 #[inline(always)]
 fn lo_of(ls: &[Lane; LANES]) -> [f32; LANES] {
     std::array::from_fn(|i| ls[i].lo)
-}
-
-/// The lanes of `bits` as a mask.
-///
-/// # Safety
-/// AVX2 must be available (where this is inlined).
-#[inline(always)]
-unsafe fn mask8(bits: u32) -> __m256 {
-    // SAFETY: the caller's.
-    unsafe {
-        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bits);
-        _mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bits))
-    }
 }
 
 /// Lane `l`'s crossings in its leaf (`count` references from `offset`) past its piece's
