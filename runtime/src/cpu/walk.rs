@@ -188,6 +188,43 @@ impl RayWalk {
     }
 }
 
+/// The walk's `tmax` for an origin moved `shift` along the ray: the largest distance
+/// `t` from the moved origin whose distance from the ray's own,
+/// `(shift + t) as f32` ([`RayWalk::unshift_distance`]), is at most `tmax`. So the
+/// walk accepts exactly the hits the ray's closed interval does: `tmax - shift`
+/// rounded to nearest can fall below a hit whose distance shifts back to `tmax`
+/// itself, several of the moved distance's ulps apart (a segment ending exactly at
+/// its nearest hit then missed it). A binary search over the `f32` in order (the
+/// shifted-back distance grows with `t`): 32 steps, on the far origins' cold path; the
+/// GPU kernel runs the same search (`moved_tmax` in trace.wgsl).
+pub(crate) fn moved_tmax(tmax: f32, shift: f64) -> f32 {
+    if tmax == f32::INFINITY {
+        return tmax;
+    }
+    let back = |t: f32| (shift + t as f64) as f32;
+    // The f32 in order as u32 (-inf lowest, +inf highest), and back.
+    let key = |x: f32| {
+        let b = x.to_bits();
+        if b >> 31 == 1 {
+            !b
+        } else {
+            b | 0x8000_0000
+        }
+    };
+    let value = |k: u32| f32::from_bits(if k >> 31 == 1 { k & 0x7FFF_FFFF } else { !k });
+    // back(-inf) <= tmax and back(+inf) > tmax (tmax is finite): the answer is between.
+    let (mut lo, mut hi) = (key(f32::NEG_INFINITY), key(f32::INFINITY));
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if back(value(mid)) <= tmax {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    value(lo)
+}
+
 impl Tracer<'_> {
     /// Prepares a ray's walk: clips it to the root cube and finds its first leaf, or
     /// returns `None` for a ray that cannot hit (no memory touched).
@@ -240,8 +277,7 @@ impl Tracer<'_> {
         let hi = entry as f32;
         let shift = hi as f64 + (entry - hi as f64) as f32 as f64;
         let moved = [0, 1, 2].map(|k| (o[k] as f64 + shift * d[k] as f64) as f32);
-        let bound = |t: f32| (t as f64 - shift) as f32;
-        let near = Ray::segment(moved.into(), ray.dir, bound(ray.tmin), bound(ray.tmax));
+        let near = Ray::segment(moved.into(), ray.dir, (ray.tmin as f64 - shift) as f32, moved_tmax(ray.tmax, shift));
         let mut w = self.begin_near(&near)?;
         w.shifted = Some((shift, ray.tmin, ray.tmax));
         Some(w)

@@ -555,7 +555,7 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
         wk.shift = far.xy;
         o = moved_origin(o0, d, far.xy);
         tmin = unshifted(tmin0, far.xy);
-        tmax = unshifted(tmax0, far.xy);
+        tmax = moved_tmax(tmax0, far.xy);
         wk.best.t = tmax;
     }
     // Clip to the root cube, then to the mesh box: beyond it there is nothing to hit.
@@ -802,6 +802,30 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // The bits of `t` as an unsigned key in f32::total_cmp's order.
+// The walk's tmax for a moved origin: the largest distance from it that `shifted`
+// takes back to tmax or below (walk.rs, moved_tmax), by a binary search over the
+// f32 in order.
+fn moved_tmax(tmax: f32, s: vec2<f32>) -> f32 {
+    if !is_finite(tmax) {
+        return tmax;
+    }
+    var lo = order_key(bitcast<f32>(0xFF800000u));
+    var hi = order_key(bitcast<f32>(0x7F800000u));
+    for (var i = 0u; i < 34u && hi - lo > 1u; i++) {
+        let mid = lo + (hi - lo) / 2u;
+        if shifted(from_order_key(mid), s) <= tmax {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return from_order_key(lo);
+}
+
+fn from_order_key(k: u32) -> f32 {
+    return bitcast<f32>(select(~k, k & 0x7FFFFFFFu, (k >> 31u) == 1u));
+}
+
 fn order_key(t: f32) -> u32 {
     let b = bitcast<u32>(t);
     return select(b | 0x80000000u, ~b, (b >> 31u) == 1u);

@@ -71,3 +71,41 @@ fn shadow_agrees_with_the_oracle_and_the_published_checksum() {
     let occluded = scene.occluded_batch(&rays).iter().filter(|&&o| o).count();
     assert!(within(occluded, 121_774), "shadow occluded {occluded}, published 121774");
 }
+
+/// The interval is closed (`Ray`'s docs): a segment that ends exactly at its nearest
+/// hit still hits there, for the nearest-hit and any-hit queries, one ray or a batch,
+/// and one that ends an ulp before it does not.
+#[test]
+fn a_hit_at_exactly_tmax_counts_on_every_path() {
+    let scene = bunny_scene();
+    let tracer = scene.tracer();
+    // Rays from inside the scene's box, and from a camera outside it (whose origins
+    // the walk moves onto the root cube first).
+    let mut rays = raysets::incoherent(&frame(), 20_000);
+    rays.extend(raysets::primary(&frame()).into_iter().step_by(53));
+    // An axis-aligned ray from below the bunny, its origin off the root cube.
+    rays.push(Ray::new(
+        [f32::from_bits(0xbc89f517), f32::from_bits(0x3de1986c), f32::from_bits(0xc000192f)].into(),
+        [0.0, 0.0, 1.0].into(),
+    ));
+    let mut checked = 0;
+    let mut ended = Vec::new();
+    for r in &rays {
+        let Some(h) = scene.intersect(r) else { continue };
+        let at = Ray { tmax: h.t, ..*r };
+        let short = Ray { tmax: f32::from_bits(h.t.to_bits() - 1), ..*r };
+        assert_eq!(scene.intersect(&at), Some(h), "ray {r:?} ending at its hit {h:?}");
+        assert_eq!(tracer.intersect_scalar(&at), Some(h), "scalar: ray {r:?} ending at its hit {h:?}");
+        assert!(scene.occluded(&at), "occluded: ray {r:?} ending at its hit {h:?}");
+        assert!(tracer.occluded_scalar(&at), "occluded, scalar: ray {r:?} ending at its hit {h:?}");
+        assert_eq!(scene.occluded_batch(&[at]), [true], "occluded_batch: ray {r:?} ending at its hit {h:?}");
+        assert_eq!(scene.intersect_batch(&[at]), [Some(h)], "intersect_batch: ray {r:?} ending at its hit {h:?}");
+        let before = scene.intersect(&short);
+        assert!(before.is_none_or(|b| b.t < h.t), "ray {r:?} ending an ulp before its hit {h:?}: {before:?}");
+        ended.push(at);
+        checked += 1;
+    }
+    assert!(checked > 5_000, "only {checked} rays hit");
+    assert!(scene.occluded_batch(&ended).iter().all(|&o| o), "occluded_batch");
+    assert!(scene.intersect_batch(&ended).iter().all(Option::is_some), "intersect_batch");
+}
