@@ -25,6 +25,7 @@ pub mod hard_rays;
 pub mod mesh;
 pub mod octree;
 pub mod procedural;
+pub mod summary;
 pub mod topology;
 
 pub use error::{Error, Result};

@@ -351,10 +351,26 @@ impl Shading {
     /// assert!(shading.part_of(100).is_none());
     /// ```
     pub fn part_of(&self, triangle: u32) -> Option<(&MeshPart, u32)> {
-        let after = self.parts.partition_point(|p| p.first <= triangle);
-        let part = self.parts.get(after.checked_sub(1)?)?;
-        let within = triangle - part.first;
-        (within < part.count).then_some((part, within))
+        let index = self.part_index_of(triangle)?;
+        let part = &self.parts[index as usize];
+        Some((part, triangle - part.first))
+    }
+
+    /// The index in [`Shading::parts`] of the part input triangle `triangle` belongs
+    /// to (a binary search): a hit's part as a number, as Embree's `geomID`.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_format::{MeshPart, Shading};
+    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, edges: Default::default() };
+    /// let shading = Shading { parts: vec![part("object 'lid'", 0, 10), part("object 'pot'", 10, 90)], ..Default::default() };
+    /// assert_eq!(shading.part_index_of(12), Some(1));
+    /// assert_eq!(shading.part_index_of(100), None);
+    /// ```
+    pub fn part_index_of(&self, triangle: u32) -> Option<u32> {
+        let index = self.parts.partition_point(|p| p.first <= triangle).checked_sub(1)?;
+        let part = self.parts.get(index)?;
+        (triangle - part.first < part.count).then_some(index as u32)
     }
 
     /// Whether the scene calls for `effect`.

@@ -68,7 +68,7 @@ impl Scene {
             .map_or(geometric_normal, |n| if n.dot(geometric_normal) < 0.0 { -n } else { n });
         let uv = view.corner_uvs(hit.prim).map(|_| view.uv_at(hit.prim, hit.u, hit.v));
         let shading = self.shading();
-        let part = shading.part_of(hit.triangle).map(|(p, _)| p);
+        let part = shading.part_index_of(hit.triangle);
         HitSurface {
             point,
             point_error,
@@ -76,8 +76,8 @@ impl Scene {
             shading_normal,
             uv,
             triangle: hit.triangle,
-            part: part.and_then(|p| shading.parts.iter().position(|q| std::ptr::eq(p, q))).map(|i| i as u32),
-            part_name: part.map(|p| p.name.clone()),
+            part,
+            part_name: part.map(|p| shading.parts[p as usize].name.clone()),
             material: view
                 .material_ids
                 .get(hit.prim as usize)

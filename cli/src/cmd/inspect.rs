@@ -3,8 +3,7 @@
 use std::path::PathBuf;
 
 use octrace_format::stats::SceneStatistics;
-use octrace_format::{SceneView, Wrap};
-use serde_json::json;
+use octrace_format::SceneView;
 
 use crate::output::{counted, mb, thousands};
 
@@ -34,24 +33,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 pub(crate) struct Report<'a> {
     view: SceneView<'a>,
     stats: SceneStatistics,
-    version: octrace_format::Version,
-    bake_time_us: u64,
-    payload_len: u64,
-    sections: [octrace_format::Section; octrace_format::SECTION_COUNT],
+    header: octrace_format::Header,
     file_bytes: u64,
 }
 
 impl<'a> Report<'a> {
     pub(crate) fn new(view: &SceneView<'a>, header: &octrace_format::Header, file_bytes: u64) -> anyhow::Result<Self> {
-        Ok(Report {
-            stats: SceneStatistics::compute(view)?,
-            view: view.clone(),
-            version: header.version,
-            bake_time_us: header.bake_time_us,
-            payload_len: header.payload_len,
-            sections: header.sections,
-            file_bytes,
-        })
+        Ok(Report { stats: SceneStatistics::compute(view)?, view: view.clone(), header: *header, file_bytes })
     }
 
     fn balance_growth(&self) -> f64 {
@@ -60,7 +48,7 @@ impl<'a> Report<'a> {
 
     /// Bytes of the uncompressed file (header and archive).
     fn archive_file_bytes(&self) -> u64 {
-        octrace_format::HEADER_LEN as u64 + self.payload_len
+        octrace_format::HEADER_LEN as u64 + self.header.payload_len
     }
 
     /// ", zstd: X on disk" when the file on disk is compressed.
@@ -72,18 +60,8 @@ impl<'a> Report<'a> {
         }
     }
 
-    /// Whether the depth is what f32 precision allows at the scene's position and less
-    /// than the automatic choice for its triangles: the bake was limited there.
-    fn depth_limited_by_precision(&self) -> bool {
-        let v = &self.view;
-        let allowed = octrace_bake::octree::precision_depth(v.bounds.root_lo, v.bounds.root_size);
-        let kept = (v.stats.input_triangles - v.stats.degenerate_triangles) as usize;
-        let automatic = octrace_bake::BuildParams { leaf_size: Some(v.params.leaf_size), ..Default::default() };
-        v.params.max_depth == allowed && allowed < automatic.resolve(kept).max_depth
-    }
-
     fn bake_time(&self) -> String {
-        match self.bake_time_us {
+        match self.header.bake_time_us {
             0 => "not recorded (reproducible file)".into(),
             us => format!("{:.3} s", us as f64 / 1e6),
         }
@@ -103,7 +81,7 @@ impl<'a> Report<'a> {
         let lines = [
             format!(
                 "{name}: octrace scene, format {}, {}{}",
-                self.version,
+                self.header.version,
                 mb(self.archive_file_bytes()),
                 self.on_disk()
             ),
@@ -156,7 +134,7 @@ impl<'a> Report<'a> {
             format!(
                 "bake               max depth {}{}, leaf size {}, margin {:e} of the root edge; time {}",
                 v.params.max_depth,
-                if self.depth_limited_by_precision() {
+                if octrace_bake::summary::depth_limited_by_precision(v) {
                     " (the most f32 precision allows at this position: cells of four spacings)"
                 } else {
                     ""
@@ -252,83 +230,7 @@ impl<'a> Report<'a> {
     }
 
     pub(crate) fn json(&self) -> serde_json::Value {
-        let (s, v) = (&self.stats, &self.view);
-        let b = &s.bytes;
-        json!({
-            "format_version": self.version.to_string(),
-            "file_bytes": self.archive_file_bytes(),
-            "bytes_on_disk": self.file_bytes,
-            "triangles": s.triangles,
-            "degenerate_triangles": v.stats.degenerate_triangles,
-            "input_triangles": v.stats.input_triangles,
-            "leaves": s.leaves,
-            "leaves_before_balance": v.stats.leaves_before_balance,
-            "empty_leaves": s.empty_leaves,
-            "depth_histogram": s.depth_histogram,
-            "triangle_references": s.triangle_references,
-            "triangles_per_leaf": { "mean": s.triangles_per_leaf_mean, "max": s.triangles_per_leaf_max },
-            "overfull_leaves": { "leaves": s.overfull_leaves, "references": s.overfull_references },
-            "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
-            "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
-            "surface": surface_json(&v.stats.edges),
-            "bytes": {
-                "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
-                "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
-                "total": b.total(),
-            },
-            "scene_data": {
-                "materials": v.shading.materials.iter().map(|m| json!({
-                    "name": m.name, "base_color": m.base_color, "metallic": m.metallic,
-                    "roughness": m.roughness, "emissive": m.emissive,
-                    "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
-                    "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
-                    "unlit": m.unlit, "base_color_texture": m.base_color_texture,
-                })).collect::<Vec<_>>(),
-                "parts": v.shading.parts.iter().map(|p| json!({
-                    "name": p.name, "first_triangle": p.first, "triangles": p.count,
-                    "surface": surface_json(&p.edges),
-                })).collect::<Vec<_>>(),
-                "textures": v.shading.textures.iter().map(|t| json!({
-                    "name": t.name, "width": t.width, "height": t.height,
-                    "filter": t.filter.name(), "wrap": t.wrap.map(Wrap::name), "min_alpha": t.min_alpha,
-                })).collect::<Vec<_>>(),
-                "lights": v.shading.lights.iter().map(|l| json!({
-                    "name": l.name, "kind": format!("{:?}", l.kind).to_lowercase(), "color": l.color,
-                    "intensity": l.intensity, "position": l.position, "direction": l.direction,
-                    "range": l.range.is_finite().then_some(l.range),
-                })).collect::<Vec<_>>(),
-                "cameras": v.shading.cameras.iter().enumerate().map(|(i, c)| json!({
-                    "index": i, "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
-                    "projection": if c.orthographic.is_some() { "orthographic" } else { "perspective" },
-                    "yfov": c.orthographic.is_none().then_some(c.yfov), "aspect": c.aspect,
-                    "orthographic_height": c.orthographic.map(|h| 2.0 * h),
-                })).collect::<Vec<_>>(),
-                "per_triangle": {
-                    "material_ids": !v.material_ids.is_empty(), "normals": !v.normals.is_empty(),
-                    "uvs": !v.uvs.is_empty(), "colors": !v.colors.is_empty(),
-                },
-            },
-            "effects": v.shading.effects.iter().map(|e| json!({
-                "effect": e.effect.name(), "reason": e.reason,
-            })).collect::<Vec<_>>(),
-            "bake": {
-                "max_depth": v.params.max_depth, "leaf_size": v.params.leaf_size,
-                "depth_limited_by_precision": self.depth_limited_by_precision(),
-                "precision_depth": octrace_bake::octree::precision_depth(v.bounds.root_lo, v.bounds.root_size),
-                "margin": v.params.margin,
-                "time_s": (self.bake_time_us > 0).then(|| self.bake_time_us as f64 / 1e6),
-            },
-            "bounds": {
-                "mesh_lo": v.bounds.mesh_lo, "mesh_hi": v.bounds.mesh_hi,
-                "root_lo": v.bounds.root_lo, "root_size": v.bounds.root_size,
-            },
-            "sections": self.sections.iter().map(|s| json!({
-                "name": s.name,
-                "offset": octrace_format::HEADER_LEN as u64 + s.offset,
-                "bytes": s.len,
-                "xxh3": format!("{:016x}", s.xxh3),
-            })).collect::<Vec<_>>(),
-        })
+        octrace_bake::summary::json(&self.view, &self.stats, &self.header, self.file_bytes)
     }
 }
 
@@ -355,13 +257,4 @@ pub(crate) fn surface(e: &octrace_format::topology::EdgeCensus) -> String {
             thousands(e.edges)
         )
     }
-}
-
-/// [`surface`] for machines.
-fn surface_json(e: &octrace_format::topology::EdgeCensus) -> serde_json::Value {
-    json!({
-        "closed": e.is_closed(), "manifold": e.is_manifold(), "oriented": e.is_oriented(),
-        "edges": e.edges, "boundary_edges": e.boundary, "non_manifold_edges": e.non_manifold,
-        "flipped_edges": e.flipped,
-    })
 }

@@ -118,6 +118,7 @@ impl RayCounts {
         self.0.iter().sum()
     }
 
+    #[cfg(feature = "gpu")]
     pub(crate) fn from_array(counts: [u64; 6]) -> RayCounts {
         RayCounts(counts)
     }

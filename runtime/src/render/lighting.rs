@@ -248,6 +248,7 @@ impl Emitters {
     }
 
     /// Each emitter's triangle, radiance and running area sum, in pick order.
+    #[cfg(feature = "gpu")]
     pub(crate) fn iter(&self) -> impl Iterator<Item = (u32, Vec3, f32)> + '_ {
         self.triangles.iter().zip(&self.cumulative).map(|(&(prim, e), &c)| (prim, e, c))
     }
