@@ -1,0 +1,109 @@
+"""Type stubs of octrace's Python module (the docstrings are in the module itself:
+``help(octrace.Scene)``)."""
+
+from os import PathLike
+from typing import Any, Optional, Sequence, Union, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+INVALID_ID: int
+"""The id of "no triangle" and "no part" in the returned arrays (0xFFFFFFFF)."""
+
+_Path = Union[str, PathLike]
+_Rays = Union[npt.NDArray[np.float32], Sequence[Sequence[float]]]
+_Points = Union[npt.NDArray[np.float32], Sequence[Sequence[float]]]
+
+class FormatError(ValueError):
+    """A file that is not a valid octrace scene."""
+
+class BakeError(ValueError):
+    """A mesh that cannot be baked; the message names the file and where."""
+
+class NotClosedError(ValueError):
+    """A query that needs an inside, on a scene that is not closed."""
+
+def bake(
+    mesh: _Path,
+    output: _Path,
+    *,
+    max_depth: Optional[int] = None,
+    leaf_size: int = 16,
+    margin: float = ...,
+    threads: int = 0,
+    allow_outside_references: bool = False,
+    max_memory: int = 2 << 30,
+    max_instances: int = ...,
+    max_triangles: int = ...,
+    compress: bool = False,
+    level: int = 3,
+    record_time: bool = False,
+) -> dict[str, Any]: ...
+def bake_arrays(
+    vertices: npt.ArrayLike,
+    triangles: npt.ArrayLike,
+    output: _Path,
+    *,
+    max_depth: Optional[int] = None,
+    leaf_size: int = 16,
+    margin: float = ...,
+    threads: int = 0,
+    max_memory: int = 2 << 30,
+    compress: bool = False,
+    level: int = 3,
+) -> dict[str, Any]: ...
+
+class Scene:
+    def __init__(self, path: _Path, *, mmap: bool = False, trusted: bool = False) -> None: ...
+    @staticmethod
+    def from_arrays(
+        vertices: npt.ArrayLike,
+        triangles: npt.ArrayLike,
+        *,
+        max_depth: Optional[int] = None,
+        leaf_size: int = 16,
+        margin: float = ...,
+        threads: int = 0,
+        max_memory: int = 2 << 30,
+    ) -> "Scene": ...
+    @property
+    def triangle_count(self) -> int: ...
+    @property
+    def parts(self) -> list[str]: ...
+    @property
+    def bounds(self) -> tuple[list[float], list[float]]: ...
+    @property
+    def is_closed(self) -> bool: ...
+    def inspect(self) -> dict[str, Any]: ...
+    def cast_rays(self, rays: _Rays, nthreads: int = 0) -> dict[str, np.ndarray]: ...
+    def test_occlusions(
+        self, rays: _Rays, tnear: float = 0.0, tfar: float = ..., nthreads: int = 0
+    ) -> npt.NDArray[np.bool_]: ...
+    def count_intersections(self, rays: _Rays, nthreads: int = 0) -> npt.NDArray[np.int32]: ...
+    def list_intersections(
+        self, rays: _Rays, nthreads: int = 0, *, max_hits: Optional[int] = None
+    ) -> dict[str, np.ndarray]: ...
+    def compute_occupancy(
+        self, query_points: _Points, nthreads: int = 0, nsamples: int = 1
+    ) -> npt.NDArray[np.float32]: ...
+    def contains(self, query_points: _Points, nthreads: int = 0) -> npt.NDArray[np.bool_]: ...
+    def length_inside(self, rays: _Rays, tmax: float = ..., nthreads: int = 0) -> npt.NDArray[np.float32]: ...
+    @overload
+    @staticmethod
+    def create_rays_pinhole(
+        fov_deg: float,
+        center: npt.ArrayLike,
+        eye: npt.ArrayLike,
+        up: npt.ArrayLike,
+        width_px: int,
+        height_px: int,
+    ) -> npt.NDArray[np.float32]: ...
+    @overload
+    @staticmethod
+    def create_rays_pinhole(
+        intrinsic_matrix: npt.ArrayLike,
+        extrinsic_matrix: npt.ArrayLike,
+        width_px: int,
+        height_px: int,
+    ) -> npt.NDArray[np.float32]: ...
