@@ -386,7 +386,7 @@ fn builder<'a>(
 
 /// The octree as subdivision leaves it: no 2:1 constraint, no face links. The paper's
 /// "unconstrained" tree (its Table 1), which it left to future work to traverse;
-/// `octrace_runtime::unconstrained` walks it, so that `octrace report` can measure
+/// `octrace_runtime::baselines::unconstrained` walks it, so that `octrace report` can measure
 /// what the constraint costs and buys. Not a file format: built in memory.
 #[derive(Clone, Debug)]
 pub struct Unbalanced {

@@ -9,7 +9,7 @@ use octrace_bake::hard_rays::{grid_rays, GridPlanes, HardKind, Twist};
 use octrace_bake::procedural::{self, ClosedSolid, SplitMix};
 use octrace_bake::topology::EdgeCensus;
 use octrace_bake::{bake, BuildParams};
-use octrace_runtime::bvh::{Bvh, BvhBuild};
+use octrace_runtime::baselines::bvh::{Bvh, BvhBuild};
 use octrace_runtime::{Ray, Scene, TriangleTest};
 use serde_json::json;
 

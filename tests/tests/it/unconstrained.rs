@@ -4,8 +4,8 @@
 use glam::Vec3;
 use octrace_bake::octree::{build_unbalanced, Unbalanced};
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
+use octrace_runtime::baselines::unconstrained::{UnconstrainedOctree, UnconstrainedStats};
 use octrace_runtime::reference::{Agreement, Reference};
-use octrace_runtime::unconstrained::{UnconstrainedOctree, UnconstrainedStats};
 use octrace_runtime::Ray;
 
 fn tree(mesh: &Mesh, params: &BuildParams) -> (Unbalanced, UnconstrainedOctree) {

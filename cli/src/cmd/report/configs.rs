@@ -8,9 +8,9 @@ use std::time::Instant;
 
 use octrace_bake::octree::{build_unbalanced, ResolvedParams};
 use octrace_bake::{bake, BuildParams, Mesh};
-use octrace_runtime::bvh::{Bvh, BvhBuild};
-use octrace_runtime::kdtree::KdTree;
-use octrace_runtime::unconstrained::UnconstrainedOctree;
+use octrace_runtime::baselines::bvh::{Bvh, BvhBuild};
+use octrace_runtime::baselines::kdtree::KdTree;
+use octrace_runtime::baselines::unconstrained::UnconstrainedOctree;
 use octrace_runtime::{ExitTest, Hit, Ray, Scene, Tracer, TriangleTest};
 
 use super::measure::{answers_by, tracer_answers, Answer, Traced};

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use octrace_bake::octree::build_unbalanced;
 use octrace_bake::{BuildParams, Mesh, MeshFormat};
-use octrace_runtime::unconstrained::UnconstrainedOctree;
+use octrace_runtime::baselines::unconstrained::UnconstrainedOctree;
 use serde::Serialize;
 
 use crate::output::thousands;

@@ -7,7 +7,7 @@
 //! # Example
 //! ```
 //! use glam::Vec3;
-//! use octrace_runtime::bvh::{Bvh, BvhBuild};
+//! use octrace_runtime::baselines::bvh::{Bvh, BvhBuild};
 //! use octrace_runtime::Ray;
 //! let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
 //! let ids: Vec<u32> = (0..mesh.triangles.len() as u32).collect();

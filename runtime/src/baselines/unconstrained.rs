@@ -21,7 +21,7 @@
 //! # Example
 //! ```
 //! use glam::Vec3;
-//! use octrace_runtime::unconstrained::UnconstrainedOctree;
+//! use octrace_runtime::baselines::unconstrained::UnconstrainedOctree;
 //! use octrace_runtime::Ray;
 //! let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
 //! let t = octrace_bake::octree::build_unbalanced(&mesh, &octrace_bake::BuildParams::auto())?;

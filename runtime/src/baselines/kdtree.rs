@@ -14,7 +14,7 @@
 //! # Example
 //! ```
 //! use glam::Vec3;
-//! use octrace_runtime::kdtree::KdTree;
+//! use octrace_runtime::baselines::kdtree::KdTree;
 //! use octrace_runtime::Ray;
 //! let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
 //! let ids: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
@@ -23,7 +23,7 @@
 //! assert!((t - 4.0).abs() < 0.01);
 //! ```
 
-use crate::bvh::{area, tri_bounds};
+use crate::baselines::bvh::{area, tri_bounds};
 use crate::cpu::watertight::Shear;
 use crate::ray::Ray;
 
@@ -96,7 +96,7 @@ impl KdTree {
 
     /// The tree's SAH cost: each node's surface area over the root's, times one
     /// traversal step for an inner node or its triangle count for a leaf (as
-    /// [`Bvh::sah_cost`](crate::bvh::Bvh::sah_cost)).
+    /// [`Bvh::sah_cost`](crate::baselines::bvh::Bvh::sah_cost)).
     pub fn sah_cost(&self) -> f64 {
         self.sah_cost
     }
@@ -314,7 +314,7 @@ mod tests {
     /// to the side whose triangles they pass beside: 0.05 % of the aimed rays).
     #[test]
     fn rays_on_cell_planes_never_leak() {
-        let leaks = crate::bvh::tests::solid_leaks(|tris, ids| {
+        let leaks = crate::baselines::bvh::tests::solid_leaks(|tris, ids| {
             let tree = KdTree::build(tris, ids);
             Box::new(move |r| tree.intersect(r).is_some() && tree.occluded(r))
         });
