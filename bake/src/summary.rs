@@ -3,7 +3,7 @@
 
 use octrace_format::stats::SceneStatistics;
 use octrace_format::topology::EdgeCensus;
-use octrace_format::{Header, SceneView, Wrap, HEADER_LEN};
+use octrace_format::{Header, PartSource, SceneView, Wrap, HEADER_LEN};
 use serde_json::json;
 
 /// The scene's summary: the header, the tree's statistics (`stats`, from
@@ -55,10 +55,14 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
                 "unlit": m.unlit, "base_color_texture": m.base_color_texture,
             })).collect::<Vec<_>>(),
-            "parts": v.shading.parts.iter().map(|p| json!({
-                "name": p.name, "first_triangle": p.first, "triangles": p.count,
-                "surface": surface_json(&p.edges),
-            })).collect::<Vec<_>>(),
+            "parts": v.shading.parts.iter().map(|p| {
+                let mut part = json!({
+                    "name": p.name, "first_triangle": p.first, "triangles": p.count,
+                    "surface": surface_json(&p.edges),
+                });
+                part.as_object_mut().expect("an object").extend(source_json(&p.source));
+                part
+            }).collect::<Vec<_>>(),
             "textures": v.shading.textures.iter().map(|t| json!({
                 "name": t.name, "width": t.width, "height": t.height,
                 "filter": t.filter.name(), "wrap": t.wrap.map(Wrap::name), "min_alpha": t.min_alpha,
@@ -109,6 +113,16 @@ pub fn depth_limited_by_precision(v: &SceneView<'_>) -> bool {
     let kept = (v.stats.input_triangles - v.stats.degenerate_triangles) as usize;
     let automatic = crate::BuildParams { leaf_size: Some(v.params.leaf_size), ..Default::default() };
     v.params.max_depth == allowed && allowed < automatic.resolve(kept).max_depth
+}
+
+/// A part's source as fields: `node`, `mesh`, `primitive` (glTF) or `object` (OBJ).
+pub fn source_json(source: &PartSource) -> serde_json::Map<String, serde_json::Value> {
+    let fields = match *source {
+        PartSource::Gltf { node, mesh, primitive } => vec![("node", node), ("mesh", mesh), ("primitive", primitive)],
+        PartSource::Obj { object } => vec![("object", object)],
+        PartSource::None => vec![],
+    };
+    fields.into_iter().map(|(k, v)| (k.to_string(), v.into())).collect()
 }
 
 /// A surface's topology for machines.

@@ -236,8 +236,8 @@ impl Embree {
             }
             let vertices = std::slice::from_raw_parts_mut(vertices, 9 * n);
             let indices = std::slice::from_raw_parts_mut(indices, 3 * n);
-            for t in 0..n {
-                vertices[9 * t..9 * t + 9].copy_from_slice(&view.triangle(t as u32).concat());
+            for (t, tri) in view.stored_triangles().enumerate().take(n) {
+                vertices[9 * t..9 * t + 9].copy_from_slice(&tri.concat());
                 indices[3 * t..3 * t + 3].copy_from_slice(&[3 * t as u32, 3 * t as u32 + 1, 3 * t as u32 + 2]);
             }
             rtcCommitGeometry(geometry);

@@ -20,9 +20,10 @@ pub(crate) struct Peer {
 
 impl Peer {
     pub(crate) fn build(view: &octrace_format::SceneView<'_>) -> Peer {
-        let tris: Vec<Triangle> = (0..view.triangle_count() as u32)
+        let tris: Vec<Triangle> = view
+            .stored_triangles()
             .map(|t| {
-                let [a, b, c] = view.triangle(t).map(Vec3A::from);
+                let [a, b, c] = t.map(Vec3A::from);
                 Triangle { v0: a, v1: b, v2: c }
             })
             .collect();

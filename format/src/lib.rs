@@ -49,11 +49,11 @@ pub use input::{open_regular_file, read_regular_file};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{
-    AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, MeshPart, Shading, DIELECTRIC_F0,
+    AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, MeshPart, PartSource, Shading, DIELECTRIC_F0,
     VISIBLE_WEIGHT,
 };
 pub use texture::{srgb_to_linear16, Filter, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS};
-pub use view::{LeafRecord, SceneView, COLOR_SCALE, COLOR_WORDS};
+pub use view::{LeafRecord, SceneView, StoredIndex, COLOR_SCALE, COLOR_WORDS};
 pub use write::write_atomically;
 
 #[doc(hidden)]

@@ -260,9 +260,36 @@ pub struct MeshPart {
     pub first: u32,
     /// Its triangles.
     pub count: u32,
+    /// Where it comes from in the file, as numbers (the name says it in words).
+    pub source: PartSource,
     /// Whether it is closed and consistently oriented, counted over its triangles that
     /// are not degenerate (the bake fills it in).
     pub edges: crate::topology::EdgeCensus,
+}
+
+/// Where a mesh part comes from in its file, as numbers: what Embree's `geomID` or
+/// Open3D's `geometry_ids` give an app, for the mesh it loaded itself.
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[rkyv(derive(Debug))]
+pub enum PartSource {
+    /// A glTF mesh primitive placed by a node: the node's, the mesh's and the
+    /// primitive's indices in the file (a mesh placed by two nodes is two parts).
+    Gltf {
+        /// The node's index in the file's `nodes`.
+        node: u32,
+        /// The mesh's index in the file's `meshes`.
+        mesh: u32,
+        /// The primitive's index in the mesh's `primitives`.
+        primitive: u32,
+    },
+    /// An OBJ object or group: its index among the file's objects, in file order.
+    Obj {
+        /// The object's index, from 0.
+        object: u32,
+    },
+    /// A mesh made in code (or a part without a file behind it).
+    #[default]
+    None,
 }
 
 /// An effect a renderer may have to simulate.
@@ -344,7 +371,7 @@ impl Shading {
     /// # Example
     /// ```
     /// use octrace_format::{MeshPart, Shading};
-    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, edges: Default::default() };
+    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, source: Default::default(), edges: Default::default() };
     /// let shading = Shading { parts: vec![part("object 'lid'", 0, 10), part("object 'pot'", 10, 90)], ..Default::default() };
     /// let (pot, i) = shading.part_of(12).unwrap();
     /// assert_eq!((pot.name.as_str(), i), ("object 'pot'", 2));
@@ -362,7 +389,7 @@ impl Shading {
     /// # Example
     /// ```
     /// use octrace_format::{MeshPart, Shading};
-    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, edges: Default::default() };
+    /// let part = |name: &str, first, count| MeshPart { name: name.into(), first, count, source: Default::default(), edges: Default::default() };
     /// let shading = Shading { parts: vec![part("object 'lid'", 0, 10), part("object 'pot'", 10, 90)], ..Default::default() };
     /// assert_eq!(shading.part_index_of(12), Some(1));
     /// assert_eq!(shading.part_index_of(100), None);

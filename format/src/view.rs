@@ -114,20 +114,20 @@ impl<'a> SceneView<'a> {
 
     /// The material of stored triangle `index`: its entry in the scene's materials,
     /// or `None` when the scene has no materials.
-    pub fn material(&self, index: u32) -> Option<&'a crate::Material> {
-        let id = *self.material_ids.get(index as usize)?;
+    pub fn material(&self, index: StoredIndex) -> Option<&'a crate::Material> {
+        let id = *self.material_ids.get(index.0 as usize)?;
         self.shading.materials.get(id as usize)
     }
 
     /// The shading normals of stored triangle `index`'s corners, when the scene has them.
-    pub fn corner_normals(&self, index: u32) -> Option<[[f32; 3]; 3]> {
-        let n = self.normals.get(index as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?;
+    pub fn corner_normals(&self, index: StoredIndex) -> Option<[[f32; 3]; 3]> {
+        let n = self.normals.get(index.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?;
         Some([[n[0], n[1], n[2]], [n[3], n[4], n[5]], [n[6], n[7], n[8]]])
     }
 
     /// The texture coordinates of stored triangle `index`'s corners, when the scene has them.
-    pub fn corner_uvs(&self, index: u32) -> Option<[[f32; 2]; 3]> {
-        let t = self.uvs.get(index as usize * UV_FLOATS..)?.get(..UV_FLOATS)?;
+    pub fn corner_uvs(&self, index: StoredIndex) -> Option<[[f32; 2]; 3]> {
+        let t = self.uvs.get(index.0 as usize * UV_FLOATS..)?.get(..UV_FLOATS)?;
         Some([[t[0], t[1]], [t[2], t[3]], [t[4], t[5]]])
     }
 
@@ -135,7 +135,7 @@ impl<'a> SceneView<'a> {
     /// (`(0, 0)` when the scene has none): each product exact in `f64`, the sum
     /// rounded once to `f32`, so that the GPU kernel, which computes it the same way
     /// where it has `f64`, finds the same texels.
-    pub fn uv_at(&self, index: u32, u: f32, v: f32) -> [f32; 2] {
+    pub fn uv_at(&self, index: StoredIndex, u: f32, v: f32) -> [f32; 2] {
         let Some([t0, t1, t2]) = self.corner_uvs(index) else { return [0.0; 2] };
         [0, 1].map(|c| mix([t0[c], t1[c], t2[c]], u, v))
     }
@@ -143,8 +143,8 @@ impl<'a> SceneView<'a> {
     /// The vertex colour at barycentrics `(u, v)` of stored triangle `index`, when the
     /// scene has vertex colours: the corners' values (16 bits a channel, scaled by
     /// [`COLOR_SCALE`]) mixed as [`SceneView::uv_at`] mixes coordinates.
-    pub fn color_at(&self, index: u32, u: f32, v: f32) -> Option<[f32; 4]> {
-        let at = (index as usize).checked_mul(COLOR_WORDS)?;
+    pub fn color_at(&self, index: StoredIndex, u: f32, v: f32) -> Option<[f32; 4]> {
+        let at = (index.0 as usize).checked_mul(COLOR_WORDS)?;
         let w = self.colors.get(at..at.checked_add(COLOR_WORDS)?)?;
         let corner = |k: usize| {
             let (a, b) = (w[2 * k], w[2 * k + 1]);
@@ -157,7 +157,7 @@ impl<'a> SceneView<'a> {
     /// The base colour (and alpha) of `material` at barycentrics `(u, v)` of stored
     /// triangle `index`: its factor times its texture there times the vertex colour
     /// there, channel by channel, in that order; the factor alone when it has neither.
-    pub fn base_color_at(&self, material: &crate::Material, index: u32, u: f32, v: f32) -> [f32; 4] {
+    pub fn base_color_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 4] {
         let mut color = material.base_color;
         if let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) {
             let texel = texture.sample(self.texels, self.uv_at(index, u, v));
@@ -212,9 +212,23 @@ impl<'a> SceneView<'a> {
         self.boxes[b..b + 6].try_into().expect("six floats")
     }
 
+    /// The input mesh's index of stored triangle `index` (what a hit's `triangle`
+    /// says), or `None` past the stored triangles.
+    pub fn input_index(&self, index: StoredIndex) -> Option<u32> {
+        self.triangle_ids.get(index.0 as usize).copied()
+    }
+
+    /// Every stored triangle's vertices, in stored order (the `n`-th is
+    /// `triangle(StoredIndex(n))`).
+    pub fn stored_triangles(&self) -> impl ExactSizeIterator<Item = [[f32; 3]; 3]> + '_ {
+        self.triangles
+            .chunks_exact(TRIANGLE_FLOATS)
+            .map(|t| [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]])
+    }
+
     /// The three vertices of stored triangle `index`.
-    pub fn triangle(&self, index: u32) -> [[f32; 3]; 3] {
-        let t = &self.triangles[index as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+    pub fn triangle(&self, index: StoredIndex) -> [[f32; 3]; 3] {
+        let t = &self.triangles[index.0 as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
         [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
     }
 
@@ -223,3 +237,21 @@ impl<'a> SceneView<'a> {
         1usize << self.params.cube_level
     }
 }
+
+/// A triangle's index in a scene's stored arrays: what [`SceneView::triangle`] and the
+/// other calls on stored triangles take, and what a hit's `prim` is. Not the
+/// triangle's index in the input mesh (a hit's `triangle`, what the mesh parts, an
+/// app's own arrays and every answer of the tracer name): the bake stores triangles
+/// in its own order, so the two differ for nearly every triangle, and this type keeps
+/// the compiler from taking one for the other. [`SceneView::input_index`] maps a
+/// stored index to the input's.
+///
+/// # Example
+/// ```
+/// use octrace_format::StoredIndex;
+/// let first = StoredIndex(0);
+/// assert_eq!(first.0, 0);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[repr(transparent)]
+pub struct StoredIndex(pub u32);

@@ -575,11 +575,28 @@ impl Scene {
         self.inner.view().stats.input_triangles
     }
 
-    /// The parts' names, indexed by ``geometry_ids`` (``node 3 'wheel', mesh 1 'tyre',
-    /// primitive 0`` for glTF, ``object 'lid'`` for OBJ); empty for a mesh without parts.
+    /// The mesh's parts, indexed by ``geometry_ids``: dicts of ``name`` (``node 3
+    /// 'wheel', mesh 1 'tyre', primitive 0`` for glTF, ``object 'lid'`` for OBJ),
+    /// ``first_triangle``, ``triangles``, and the part's numbers in its file: ``node``,
+    /// ``mesh``, ``primitive`` (glTF) or ``object`` (OBJ, in file order). Empty for a
+    /// mesh made from arrays.
     #[getter]
-    fn parts(&self) -> Vec<String> {
-        self.inner.shading().parts.iter().map(|p| p.name.clone()).collect()
+    fn parts<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .shading()
+            .parts
+            .iter()
+            .map(|p| {
+                let d = PyDict::new(py);
+                d.set_item("name", &p.name)?;
+                d.set_item("first_triangle", p.first)?;
+                d.set_item("triangles", p.count)?;
+                for (key, value) in octrace_bake::summary::source_json(&p.source) {
+                    d.set_item(key, value.as_u64())?;
+                }
+                Ok(d)
+            })
+            .collect()
     }
 
     /// The mesh's bounding box, ``(lo, hi)``, each ``[x, y, z]``.

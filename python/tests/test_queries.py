@@ -126,7 +126,24 @@ def test_inspect_is_the_command_lines_json(cli, bunny, bunny_oct):
     d = bunny.inspect()
     assert d["triangles"] == bunny.triangle_count == 69451
     assert not bunny.is_closed and d["surface"]["boundary_edges"] > 0
-    assert len(bunny.parts) == 1
+    assert [(p["name"], p["object"], p["first_triangle"], p["triangles"]) for p in bunny.parts] == [
+        (d["scene_data"]["parts"][0]["name"], 0, 0, 69451)]
+    assert d["scene_data"]["parts"][0]["object"] == 0
+
+
+def test_geometry_ids_name_gltf_nodes_meshes_and_primitives(tmp_path):
+    """SimpleMeshes (Khronos sample): one triangle mesh placed by two nodes, the second
+    moved one unit along x."""
+    from conftest import ROOT
+
+    octrace.bake(ROOT / "fuzz" / "seeds" / "load_gltf" / "SimpleMeshes.gltf", tmp_path / "simple.oct")
+    scene = octrace.Scene(tmp_path / "simple.oct")
+    assert [(p["node"], p["mesh"], p["primitive"]) for p in scene.parts] == [(0, 0, 0), (1, 0, 0)]
+    rays = np.array([[0.25, 0.25, 1, 0, 0, -1], [1.25, 0.25, 1, 0, 0, -1], [3, 3, 1, 0, 0, -1]], np.float32)
+    ans = scene.cast_rays(rays)
+    np.testing.assert_array_equal(ans["geometry_ids"], [0, 1, octrace.INVALID_ID])
+    every = scene.list_intersections(rays)
+    np.testing.assert_array_equal(every["geometry_ids"], [0, 1])
 
 
 def test_occlusion_interval(bunny):

@@ -1,6 +1,7 @@
 //! Rays and hits.
 
 use glam::Vec3;
+use octrace_format::StoredIndex;
 
 /// A ray: points `origin + t * dir` for `t` in `[tmin, tmax]`.
 ///
@@ -84,7 +85,19 @@ impl Ray {
 /// is on: the point, the geometric and shading normals, the texture coordinates, the
 /// mesh part and the material ([`crate::HitSurface`]). Pass [`Hit::triangle`] (the
 /// input's index) wherever a triangle goes back to the scene's shading data;
-/// [`Hit::prim`] indexes the stored arrays ([`octrace_format::SceneView::triangle`]).
+/// [`Hit::prim`] indexes the stored arrays ([`octrace_format::SceneView::triangle`]),
+/// a type of its own, so that the one cannot be passed for the other:
+///
+/// ```compile_fail
+/// # fn corners(scene: &octrace_runtime::Scene, hit: &octrace_runtime::Hit) {
+/// scene.view().triangle(hit.triangle); // the input's index is not a stored index
+/// # }
+/// ```
+/// ```
+/// # fn corners(scene: &octrace_runtime::Scene, hit: &octrace_runtime::Hit) -> [[f32; 3]; 3] {
+/// scene.view().triangle(hit.prim)
+/// # }
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
     /// Distance along the ray, in units of its direction: with the watertight test
@@ -100,6 +113,8 @@ pub struct Hit {
     pub v: f32,
     /// The leaf (box index) the hit was found in.
     pub leaf: u32,
-    /// The triangle's index in the scene's triangle array (`SceneView::triangle`).
-    pub prim: u32,
+    /// The triangle's index in the scene's stored arrays (`SceneView::triangle` and
+    /// the other calls on stored triangles take it): a type of its own, so that it
+    /// cannot be passed where the input's index ([`Hit::triangle`]) belongs.
+    pub prim: StoredIndex,
 }

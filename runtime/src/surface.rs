@@ -29,6 +29,9 @@ pub struct HitSurface {
     /// The mesh part the triangle belongs to (its index in `Shading::parts`), where the
     /// file records parts.
     pub part: Option<u32>,
+    /// Where the part comes from in its file, as numbers (glTF node, mesh and
+    /// primitive indices; OBJ object index), where the file records parts.
+    pub part_source: Option<octrace_format::PartSource>,
     /// The part's name (`node 3 'wheel', mesh 1 'tyre', primitive 0` for glTF,
     /// `object 'lid'` for OBJ).
     pub part_name: Option<String>,
@@ -77,10 +80,11 @@ impl Scene {
             uv,
             triangle: hit.triangle,
             part,
+            part_source: part.map(|p| shading.parts[p as usize].source),
             part_name: part.map(|p| shading.parts[p as usize].name.clone()),
             material: view
                 .material_ids
-                .get(hit.prim as usize)
+                .get(hit.prim.0 as usize)
                 .copied()
                 .filter(|&m| (m as usize) < shading.materials.len()),
         }

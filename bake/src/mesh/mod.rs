@@ -107,8 +107,9 @@ impl Mesh {
         }
     }
 
-    /// Ends a part: the triangles pushed since the last part (none: nothing).
-    pub fn end_part(&mut self, name: impl FnOnce() -> String) {
+    /// Ends a part: the triangles pushed since the last part (none: nothing), from
+    /// `source` in the file and named `name()`.
+    pub fn end_part(&mut self, source: octrace_format::PartSource, name: impl FnOnce() -> String) {
         let first = self.parts.last().map_or(0, |p| p.first as usize + p.count as usize);
         let count = self.triangles.len().saturating_sub(first);
         if count > 0 {
@@ -116,6 +117,7 @@ impl Mesh {
                 name: name(),
                 first: first as u32,
                 count: count as u32,
+                source,
                 edges: Default::default(),
             });
         }

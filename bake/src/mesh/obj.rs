@@ -80,7 +80,7 @@ pub(super) fn parse_with_tobj(bytes: &[u8], path: &Path, base: Option<&Path>, op
     let given = attributes_given(bytes);
     let given = |t: usize| if given.len() == total { given[t] } else { (true, true) };
     let mut material_ids = Vec::new();
-    for model in &models {
+    for (object, model) in models.iter().enumerate() {
         let m = &model.mesh;
         let element = |face: usize| format!("object '{}', triangle {face}", model.name);
         for (face, idx) in m.indices.chunks_exact(3).enumerate() {
@@ -107,7 +107,7 @@ pub(super) fn parse_with_tobj(bytes: &[u8], path: &Path, base: Option<&Path>, op
             );
             material_ids.push(m.material_id.filter(|&i| i < mesh.materials.len()));
         }
-        mesh.end_part(|| format!("object '{}'", model.name));
+        mesh.end_part(octrace_format::PartSource::Obj { object: object as u32 }, || format!("object '{}'", model.name));
     }
     // Faces without a (known) material get a default one, when there are materials.
     if !mesh.materials.is_empty() {

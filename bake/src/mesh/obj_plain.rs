@@ -72,7 +72,7 @@ pub(super) fn parse(bytes: &[u8]) -> Option<Mesh> {
             mesh.push(tri, None, None);
         }
     }
-    mesh.end_part(|| "object 'unnamed_object'".to_string());
+    mesh.end_part(octrace_format::PartSource::Obj { object: 0 }, || "object 'unnamed_object'".to_string());
     Some(mesh)
 }
 

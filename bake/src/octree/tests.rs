@@ -132,7 +132,7 @@ fn each_triangle_is_in_exactly_the_leaves_it_overlaps() {
             let got: HashSet<u32> = refs.iter().copied().collect();
             assert_eq!(got.len(), refs.len(), "{name}: a triangle listed twice in one leaf");
             let brute: HashSet<u32> = (0..view.triangle_count() as u32)
-                .filter(|&t| triangle_overlaps_box(&view.triangle(t), &cell))
+                .filter(|&t| triangle_overlaps_box(&view.triangle(octrace_format::StoredIndex(t)), &cell))
                 .collect();
             assert_eq!(got, brute, "{name}: leaf {} references differ from brute force", rec.box_index);
         }
@@ -151,7 +151,7 @@ fn triangle_ids_name_the_input_triangles_and_skip_degenerate_ones() {
     for (stored, &id) in scene.triangle_ids.iter().enumerate() {
         assert_ne!(id, 3);
         assert_ne!(id, 7);
-        let t = view.triangle(stored as u32);
+        let t = view.triangle(octrace_format::StoredIndex(stored as u32));
         assert_eq!(t, mesh.triangles[id as usize], "stored triangle {stored} is not input {id}");
     }
 }

@@ -205,7 +205,7 @@ fn code(side: Option<Side>) -> u8 {
 
 fn stored_triangles(scene: &Scene) -> Vec<[[f32; 3]; 3]> {
     let v = scene.view();
-    (0..v.triangle_count() as u32).map(|t| v.triangle(t)).collect()
+    v.stored_triangles().collect()
 }
 
 /// Prints the summary line (or JSON, with `extra`'s fields).

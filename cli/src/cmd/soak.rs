@@ -141,7 +141,7 @@ fn soak_scene(
     let loaded = super::bench::load(path)?;
     let scene = &loaded.scene;
     let view = scene.view();
-    let triangles: Vec<[[f32; 3]; 3]> = (0..view.triangle_count() as u32).map(|t| view.triangle(t)).collect();
+    let triangles: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
     let census = EdgeCensus::of(&triangles);
     anyhow::ensure!(
         census.is_closed(),

@@ -73,7 +73,10 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         let n = args.grid_rays.unwrap_or(args.rays / 2);
         let point = |r: &mut SplitMix| (c + (Vec3::new(r.unit(), r.unit(), r.unit()) - 0.5) * e * 1.2).to_array();
         let count = view.triangle_count() as u64;
-        let aim = |r: &mut SplitMix| view.triangle((r.next_u64() % count.max(1)) as u32)[(r.next_u64() % 3) as usize];
+        let aim = |r: &mut SplitMix| {
+            view.triangle(octrace_format::StoredIndex((r.next_u64() % count.max(1)) as u32))
+                [(r.next_u64() % 3) as usize]
+        };
         let hard = grid_rays(&GridPlanes::of(&view), n, args.seed, point, (count > 0).then_some(aim), |_| true);
         hard.iter().map(|r| Ray::new(Vec3::from(r.origin), Vec3::from(r.dir))).collect::<Vec<Ray>>()
     };

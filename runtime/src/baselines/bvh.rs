@@ -432,7 +432,7 @@ pub(crate) mod tests {
         for solid in octrace_bake::procedural::closed_solids() {
             let baked = octrace_bake::bake(&solid.mesh, &octrace_bake::BuildParams::auto()).unwrap();
             let view = baked.view();
-            let tris: Vec<[[f32; 3]; 3]> = (0..view.triangle_count() as u32).map(|p| view.triangle(p)).collect();
+            let tris: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
             let hits = structure(&tris, view.triangle_ids);
             let grid = octrace_bake::hard_rays::GridPlanes::of(&view);
             let grid_rays = solid.grid_rays(&grid, 20_000, 3).into_iter().map(|r| (r.origin, r.dir));

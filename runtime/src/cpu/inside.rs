@@ -82,7 +82,7 @@ impl Solid {
     /// [`Error::NotClosed`] for an open scene, with its edge counts.
     pub fn of(tracer: &Tracer<'_>) -> Result<Solid> {
         let v = tracer.view();
-        let triangles: Vec<[[f32; 3]; 3]> = (0..v.triangle_count() as u32).map(|t| v.triangle(t)).collect();
+        let triangles: Vec<[[f32; 3]; 3]> = v.stored_triangles().collect();
         let census = EdgeCensus::of(&triangles);
         if !census.is_closed() {
             return Err(Error::NotClosed { boundary_edges: census.boundary, edges: census.edges });

@@ -24,6 +24,7 @@
 //! valid file ever is.
 
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
+use octrace_format::StoredIndex;
 
 use super::tables::{exact_exit, exact_side, exit_code, exit_rule, octant, ExitRule, EXIT_FACE};
 use super::tracer::{ExitTest, Tally, Tracer, TriangleTest, BOX_T_SLACK};
@@ -439,14 +440,14 @@ impl Tracer<'_> {
         // replace this one, and an any-hit query needs none. Ask for it now.
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         super::hw::prefetch(self.view.triangle_ids, tri);
-        *walk.best = Some(Hit { t, triangle: u32::MAX, u, v, leaf: box_index, prim: tri });
+        *walk.best = Some(Hit { t, triangle: u32::MAX, u, v, leaf: box_index, prim: StoredIndex(tri) });
     }
 
     /// A finished walk's answer, its triangle named by its input id.
     #[inline(always)]
     pub(crate) fn answer(&self, best: Option<Hit>) -> Option<Hit> {
         // A stored triangle without an id (a hostile file on the trusted path): a miss.
-        best.and_then(|h| Some(Hit { triangle: *self.view.triangle_ids.get(h.prim as usize)?, ..h }))
+        best.and_then(|h| Some(Hit { triangle: self.view.input_index(h.prim)?, ..h }))
     }
 
     /// Visits the walk's current leaf and moves to the next; returns whether the walk

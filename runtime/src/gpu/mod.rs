@@ -38,6 +38,7 @@ pub use render::{GpuRenderer, MAX_GPU_DEPTH};
 use crate::ray::{Hit, Ray};
 use crate::Scene;
 use crate::WalkStats;
+use octrace_format::StoredIndex;
 
 /// What can go wrong on the GPU path.
 #[derive(Debug, thiserror::Error)]
@@ -658,7 +659,14 @@ fn read_buffer_into<T: bytemuck::Pod>(
 const TRACE_ARRAYS: usize = 7;
 
 fn to_hit(h: &HitOut) -> Option<Hit> {
-    (h.triangle != u32::MAX).then_some(Hit { t: h.t, triangle: h.triangle, u: h.u, v: h.v, leaf: h.leaf, prim: h.prim })
+    (h.triangle != u32::MAX).then_some(Hit {
+        t: h.t,
+        triangle: h.triangle,
+        u: h.u,
+        v: h.v,
+        leaf: h.leaf,
+        prim: StoredIndex(h.prim),
+    })
 }
 
 /// The kernel's record of a CPU answer (for the walks traced again on the CPU).
@@ -671,7 +679,7 @@ fn from_hit(hit: Option<Hit>, stats: WalkStats) -> HitOut {
             u: h.u,
             v: h.v,
             leaf: h.leaf,
-            prim: h.prim,
+            prim: h.prim.0,
             steps: stats.leaves,
             flags,
         },

@@ -60,7 +60,7 @@ impl Reference {
 
     /// An oracle over the triangles stored in a scene.
     pub fn from_view(view: &octrace_format::SceneView<'_>) -> Reference {
-        let tris = (0..view.triangle_count() as u32).map(|t| view.triangle(t)).collect();
+        let tris = view.stored_triangles().collect();
         Reference::new(tris, view.triangle_ids.to_vec())
     }
 

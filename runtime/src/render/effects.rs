@@ -11,7 +11,7 @@ use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::Vec3;
-use octrace_format::{Effect, Material, SceneView, Shading, VISIBLE_WEIGHT};
+use octrace_format::{Effect, Material, SceneView, Shading, StoredIndex, VISIBLE_WEIGHT};
 use rayon::prelude::*;
 
 use super::lighting::{self, Emitters, PLAIN};
@@ -459,7 +459,7 @@ impl<'a> Context<'a> {
         Vec3::splat(1.0 - coverage) + coverage * transmitted
     }
 
-    fn material(&self, prim: u32) -> &'a Material {
+    fn material(&self, prim: StoredIndex) -> &'a Material {
         self.view.material(prim).unwrap_or(&PLAIN)
     }
 
@@ -557,7 +557,7 @@ impl<'a> Context<'a> {
         for s in 0..samples {
             let (pick, _) = lighting::uniform2(task.pixel, task.depth, 2 * s);
             let (prim, emitted) = self.emitters.pick(pick);
-            let tri = self.view.triangle(prim);
+            let tri = self.view.triangle(StoredIndex(prim));
             let [a, b, c] = tri.map(Vec3::from);
             let y = if soft {
                 let (u, v) = lighting::uniform2(task.pixel, task.depth, 2 * s + 1);

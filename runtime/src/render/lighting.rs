@@ -4,7 +4,7 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use octrace_format::{Light, LightKind, Material, SceneView, VISIBLE_WEIGHT};
+use octrace_format::{Light, LightKind, Material, SceneView, StoredIndex, VISIBLE_WEIGHT};
 
 /// The material of a triangle with none (a mesh without materials): white, diffuse.
 pub(crate) static PLAIN: Material = Material {
@@ -212,8 +212,8 @@ impl Emitters {
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
         for prim in 0..view.triangle_count() as u32 {
-            let Some(m) = view.material(prim).filter(|m| m.is_emissive()) else { continue };
-            let area = area(&view.triangle(prim));
+            let Some(m) = view.material(StoredIndex(prim)).filter(|m| m.is_emissive()) else { continue };
+            let area = area(&view.triangle(StoredIndex(prim)));
             if area > 0.0 {
                 total += area as f64;
                 triangles.push((prim, Vec3::from(m.emissive)));

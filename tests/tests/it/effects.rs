@@ -4,7 +4,7 @@
 
 use glam::{DVec3, Vec3};
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
-use octrace_format::{AlphaMode, Effect, Light, LightKind, Material};
+use octrace_format::{AlphaMode, Effect, Light, LightKind, Material, StoredIndex};
 use octrace_runtime::raysets::Camera;
 use octrace_runtime::render::effects::{render_effects, EffectSet, Radiance, RayCounts, RayKind, RenderOptions};
 use octrace_runtime::{Ray, Scene};
@@ -297,7 +297,7 @@ fn shading_data_survives_the_file() {
     let mesh = procedural::effects_scene();
     for (stored, &input) in view.triangle_ids.iter().enumerate() {
         assert_eq!(view.material_ids[stored], mesh.material_ids[input as usize]);
-        assert_eq!(view.corner_normals(stored as u32), Some(mesh.normals[input as usize]));
+        assert_eq!(view.corner_normals(StoredIndex(stored as u32)), Some(mesh.normals[input as usize]));
     }
 }
 

@@ -4,7 +4,7 @@
 
 use glam::{DVec3, Vec3};
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
-use octrace_format::{AlphaMode, Effect, Filter, Material, Texture, Wrap, TEXEL_WORDS};
+use octrace_format::{AlphaMode, Effect, Filter, Material, StoredIndex, Texture, Wrap, TEXEL_WORDS};
 use octrace_runtime::raysets::Camera;
 use octrace_runtime::render::effects::{render_effects, EffectSet, RayKind, RenderOptions};
 use octrace_runtime::Scene;
@@ -316,18 +316,18 @@ fn vertex_colours_multiply_the_base_colour() {
     assert_eq!(mesh.colors.len(), 12);
     let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
     let view = scene.view();
-    let material = view.material(0).unwrap();
+    let material = view.material(StoredIndex(0)).unwrap();
     let stored = |i: u32| mesh.colors[view.triangle_ids[i as usize] as usize];
     for prim in 0..view.triangle_count() as u32 {
         let corners = stored(prim).map(|c| c.map(|x| x as f32 / 65535.0));
         for (k, (u, v)) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)].into_iter().enumerate() {
-            let got = view.base_color_at(material, prim, u, v);
+            let got = view.base_color_at(material, StoredIndex(prim), u, v);
             let want: [f32; 4] = [0, 1, 2, 3].map(|c| material.base_color[c] * corners[k][c]);
             for c in 0..4 {
                 assert!((got[c] - want[c]).abs() <= 1e-6, "triangle {prim} corner {k}: {got:?} vs {want:?}");
             }
         }
-        let middle = view.color_at(prim, 1.0 / 3.0, 1.0 / 3.0).unwrap();
+        let middle = view.color_at(StoredIndex(prim), 1.0 / 3.0, 1.0 / 3.0).unwrap();
         for c in 0..4 {
             let mean = (corners[0][c] + corners[1][c] + corners[2][c]) / 3.0;
             assert!((middle[c] - mean).abs() <= 1e-6, "triangle {prim}: {middle:?}");
@@ -411,7 +411,7 @@ fn a_hit_surface_agrees_with_the_input_mesh() {
             let ray = octrace_runtime::Ray::new(origin, target - origin);
             let Some(hit) = scene.intersect(&ray) else { continue };
             hits += 1;
-            reordered += (hit.prim != hit.triangle) as usize;
+            reordered += (hit.prim.0 != hit.triangle) as usize;
             let s = scene.surface(&hit);
             let t = hit.triangle as usize;
             let [a, b, c] = mesh.triangles[t].map(Vec3::from);
@@ -430,6 +430,13 @@ fn a_hit_surface_agrees_with_the_input_mesh() {
             let part = mesh.parts.iter().position(|p| (p.first..p.first + p.count).contains(&hit.triangle));
             assert_eq!(s.part.map(|p| p as usize), part, "{file}");
             assert_eq!(s.part_name.as_deref(), part.map(|p| mesh.parts[p].name.as_str()));
+            // The part's numbers say what its name says.
+            let Some(octrace_format::PartSource::Gltf { node, mesh: m, primitive }) = s.part_source else {
+                panic!("{file}: a glTF part without its numbers: {:?}", s.part_source)
+            };
+            let name = s.part_name.as_deref().unwrap_or_default();
+            assert!(name.starts_with(&format!("node {node}")), "{file}: {name} is not node {node}");
+            assert!(name.contains(&format!("mesh {m}")) && name.ends_with(&format!("primitive {primitive}")), "{name}");
             assert_eq!(s.material, mesh.material_ids.get(t).copied(), "{file}");
         }
         assert!(hits > 200, "{file}: {hits} hits");

@@ -496,7 +496,12 @@ impl Loader<'_> {
                 let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
                 self.primitive(&prim, &world, element)?;
                 let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
-                self.mesh.end_part(|| {
+                let source = octrace_format::PartSource::Gltf {
+                    node: node.index() as u32,
+                    mesh: mesh.index() as u32,
+                    primitive: prim.index() as u32,
+                };
+                self.mesh.end_part(source, || {
                     format!(
                         "node {}{}, mesh {}{}, primitive {}",
                         node.index(),

@@ -202,7 +202,7 @@ fn against_the_oracle(
 ) -> anyhow::Result<(usize, usize, Option<usize>)> {
     use rayon::prelude::*;
     let v = scene.view();
-    let triangles: Vec<[[f32; 3]; 3]> = (0..v.triangle_count() as u32).map(|t| v.triangle(t)).collect();
+    let triangles: Vec<[[f32; 3]; 3]> = v.stored_triangles().collect();
     let oracle = InsideReference::new(&triangles);
     let sides: Vec<Option<Side>> =
         crate::with_threads(threads, || points.par_iter().map(|&p| oracle.side(p)).collect())?;

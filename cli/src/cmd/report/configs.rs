@@ -238,7 +238,7 @@ impl Config {
 /// the octree does), timed.
 fn baseline<B: Baseline + 'static>(scene: &Scene, build: impl FnOnce(&[[[f32; 3]; 3]], &[u32]) -> B) -> Built {
     let view = scene.view();
-    let tris: Vec<[[f32; 3]; 3]> = (0..view.triangle_count() as u32).map(|p| view.triangle(p)).collect();
+    let tris: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
     let t = Instant::now();
     let b = build(&tris, view.triangle_ids);
     let seconds = t.elapsed().as_secs_f64();

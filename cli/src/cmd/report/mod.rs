@@ -214,8 +214,8 @@ fn inputs(args: &Args) -> anyhow::Result<Vec<(String, Mesh)>> {
                 let view = scene.view();
                 // Input order, so triangle ids stay those of the file.
                 let mut tris = vec![[[0.0f32; 3]; 3]; view.triangle_ids.iter().max().map_or(0, |&m| m as usize + 1)];
-                for prim in 0..view.triangle_count() as u32 {
-                    tris[view.triangle_ids[prim as usize] as usize] = view.triangle(prim);
+                for (&input, tri) in view.triangle_ids.iter().zip(view.stored_triangles()) {
+                    tris[input as usize] = tri;
                 }
                 Mesh::from_triangles(tris)
             } else {
