@@ -270,7 +270,8 @@ impl Tracer<'_> {
             t_leave = t_leave.min(ta.max(tb));
         }
         let entry = t_enter.max(ray.tmin as f64);
-        if entry > t_leave.min(ray.tmax as f64) || entry.is_nan() || entry >= f32::MAX as f64 {
+        // Not against tmax: see `begin_near`.
+        if entry > t_leave || entry.is_nan() || entry >= f32::MAX as f64 {
             return None;
         }
         // The shift as two f32 (so that the kernels, which keep it so, add the same
@@ -296,9 +297,14 @@ impl Tracer<'_> {
         // a relative slack for the rounding of distances far from the origin).
         let (box_enter, box_leave, _) = clip(o, d, self.frame.box_lo, self.frame.box_hi)?;
         let t_start = t_enter.max(ray.tmin);
-        let t_stop = ray.tmax.min(box_leave + box_leave.abs() * BOX_T_SLACK);
-        if t_start > t_leave.min(ray.tmax) || t_start.max(box_enter) > t_stop {
-            return None; // misses the root cube or the mesh box within [tmin, tmax]
+        let box_stop = box_leave + box_leave.abs() * BOX_T_SLACK;
+        let t_stop = ray.tmax.min(box_stop);
+        // A ray that ends before it enters is walked all the same (its first leaf
+        // only: the walk stops past tmax): a hit on the root's or the box's face can
+        // lie a rounding before the clip's entry, and a segment that ends exactly
+        // there must still hit it, as the same ray without an end does.
+        if t_start > t_leave || t_start.max(box_enter) > box_stop {
+            return None; // misses the root cube or the mesh box
         }
         // A ray so slow that it reaches the cube past f32's range (a tiny direction
         // from far away) has no hit at a representable distance.

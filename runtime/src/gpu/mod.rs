@@ -893,7 +893,7 @@ const FAR_F64: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax:
         t_leave = min(t_leave, max(ta, tb));
     }
     let entry = max(t_enter, f64(tmin));
-    if entry > min(t_leave, f64(tmax)) || !(entry < 3.4028234663852886e38lf) {
+    if entry > t_leave || !(entry < 3.4028234663852886e38lf) {
         return vec3<f32>(0.0);
     }
     let hi = f32(entry);
@@ -968,7 +968,7 @@ fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, ow
 const FAR_F32: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> vec3<f32> {
     let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
     let entry = max(root.x, tmin);
-    if root.w == 0.0 || entry > min(root.y, tmax) || !is_finite(entry) {
+    if root.w == 0.0 || entry > root.y || !is_finite(entry) {
         return vec3<f32>(0.0);
     }
     return vec3<f32>(entry * (1.0 - 9.5367431640625e-7), 0.0, 1.0);

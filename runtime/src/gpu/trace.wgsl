@@ -567,8 +567,10 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     let t0 = root.x;
     let entry_axis = u32(root.z);
     let t_start = max(t0, tmin);
-    let t_stop = min(tmax, mesh.y + abs(mesh.y) * BOX_T_SLACK);
-    if t_start > min(root.y, tmax) || max(t_start, mesh.x) > t_stop {
+    let box_stop = mesh.y + abs(mesh.y) * BOX_T_SLACK;
+    let t_stop = min(tmax, box_stop);
+    // Not against tmax (walk.rs, begin_near, says why).
+    if t_start > root.y || max(t_start, mesh.x) > box_stop {
         return wk;
     }
     // Reached past f32's range (a tiny direction from far away): no representable hit.

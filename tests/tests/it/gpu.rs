@@ -367,6 +367,14 @@ fn far_cameras_see_as_on_the_cpu() {
         if tracer.uses_f64() {
             same_hits(&format!("1e{exp}"), &rays, &cpu, &got);
         }
+        // A segment ending exactly at its nearest hit still hits it (the moved tmax,
+        // walk.rs `moved_tmax`; trace.wgsl the same).
+        let ended: Vec<Ray> = rays.iter().zip(&cpu).filter_map(|(r, h)| h.map(|h| Ray { tmax: h.t, ..*r })).collect();
+        let cpu_ended = scene.intersect_batch(&ended);
+        assert!(cpu_ended.iter().all(Option::is_some), "1e{exp}: a segment ending at its hit missed it");
+        if tracer.uses_f64() {
+            same_hits(&format!("1e{exp}, ending at the hit"), &ended, &cpu_ended, &tracer.intersect(&ended).unwrap());
+        }
         let (c, g) = (cpu.iter().flatten().count(), got.iter().flatten().count());
         assert!(g + rays.len() / 100 >= c, "1e{exp}: {g} GPU hits against {c}");
     }

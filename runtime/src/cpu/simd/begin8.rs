@@ -168,11 +168,13 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
         let (box_enter, box_leave, in_box) = clip8(&o, &d, box_lo, box_hi);
         let t_start = _mm256_max_ps(t_enter, tmin);
         let slack = _mm256_mul_ps(_mm256_andnot_ps(sign, box_leave), _mm256_set1_ps(BOX_T_SLACK));
-        let t_stop = _mm256_min_ps(_mm256_add_ps(box_leave, slack), tmax);
+        let box_stop = _mm256_add_ps(box_leave, slack);
+        let t_stop = _mm256_min_ps(box_stop, tmax);
+        // Not against tmax (`begin_near` says why).
         let hits = _mm256_andnot_ps(
             _mm256_or_ps(
-                _mm256_cmp_ps::<_CMP_GT_OQ>(t_start, _mm256_min_ps(t_leave, tmax)),
-                _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_max_ps(box_enter, t_start), t_stop),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(t_start, t_leave),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_max_ps(box_enter, t_start), box_stop),
             ),
             _mm256_and_ps(in_root, in_box),
         );
