@@ -121,8 +121,7 @@ impl<'a> SceneView<'a> {
 
     /// The shading normals of stored triangle `index`'s corners, when the scene has them.
     pub fn corner_normals(&self, index: StoredIndex) -> Option<[[f32; 3]; 3]> {
-        let n = self.normals.get(index.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?;
-        Some([[n[0], n[1], n[2]], [n[3], n[4], n[5]], [n[6], n[7], n[8]]])
+        Some(corners(self.normals.get(index.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?))
     }
 
     /// The texture coordinates of stored triangle `index`'s corners, when the scene has them.
@@ -221,21 +220,23 @@ impl<'a> SceneView<'a> {
     /// Every stored triangle's vertices, in stored order (the `n`-th is
     /// `triangle(StoredIndex(n))`).
     pub fn stored_triangles(&self) -> impl ExactSizeIterator<Item = [[f32; 3]; 3]> + '_ {
-        self.triangles
-            .chunks_exact(TRIANGLE_FLOATS)
-            .map(|t| [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]])
+        self.triangles.chunks_exact(TRIANGLE_FLOATS).map(corners)
     }
 
     /// The three vertices of stored triangle `index`.
     pub fn triangle(&self, index: StoredIndex) -> [[f32; 3]; 3] {
-        let t = &self.triangles[index.0 as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-        [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
+        corners(&self.triangles[index.0 as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS])
     }
 
     /// Cube-map resolution along a face edge.
     pub fn cube_resolution(&self) -> usize {
         1usize << self.params.cube_level
     }
+}
+
+/// Three points from the nine floats of a triangle's record (vertices or normals).
+fn corners(t: &[f32]) -> [[f32; 3]; 3] {
+    [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
 }
 
 /// A triangle's index in a scene's stored arrays: what [`SceneView::triangle`] and the

@@ -871,9 +871,10 @@ fn kernel(
 
 /// Moving a far origin to the root (`cpu::walk`'s `begin_far`), in `f64`: the entry
 /// into the root cube, `max(tmin)`, split into two `f32` whose sum is exact; the moved
-/// origin; distances shifted back and bounds shifted forward, each rounded once.
+/// origin; distances shifted back and `tmin` forward, each rounded once (`tmax`
+/// forward by `moved_tmax`, trace.wgsl).
 /// `far_shift` answers `(hi, lo, 1)`, or `z = 0` for a ray that misses the root.
-const FAR_F64: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> vec3<f32> {
+const FAR_F64: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32) -> vec3<f32> {
     var t_enter = -1.0e300lf;
     var t_leave = 1.0e300lf;
     for (var k = 0u; k < 3u; k++) {
@@ -965,7 +966,7 @@ fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, ow
 /// [`FAR_F64`] without `f64`: the entry from the kernel's `f32` clip, pulled back by
 /// eight ulps so that the moved origin stays before the root, and the origin moved by a
 /// fused multiply-add (on the ray's line within a rounding of the moved point).
-const FAR_F32: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32, tmax: f32) -> vec3<f32> {
+const FAR_F32: &str = "fn far_shift(o: vec3<f32>, d: vec3<f32>, tmin: f32) -> vec3<f32> {
     let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
     let entry = max(root.x, tmin);
     if root.w == 0.0 || entry > root.y || !is_finite(entry) {

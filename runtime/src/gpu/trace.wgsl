@@ -548,7 +548,7 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     var tmax = tmax0;
     let reach = FAR_ROOTS * params.root_lo.w;
     if any(o0 < params.root_lo.xyz - reach) || any(o0 > params.root_hi.xyz + reach) {
-        let far = far_shift(o0, d, tmin0, tmax0);
+        let far = far_shift(o0, d, tmin0);
         if far.z == 0.0 {
             return wk;
         }
@@ -803,7 +803,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// The bits of `t` as an unsigned key in f32::total_cmp's order.
 // The walk's tmax for a moved origin: the largest distance from it that `shifted`
 // takes back to tmax or below (walk.rs, moved_tmax), by a binary search over the
 // f32 in order.
@@ -824,10 +823,12 @@ fn moved_tmax(tmax: f32, s: vec2<f32>) -> f32 {
     return from_order_key(lo);
 }
 
+// `order_key`'s inverse.
 fn from_order_key(k: u32) -> f32 {
     return bitcast<f32>(select(~k, k & 0x7FFFFFFFu, (k >> 31u) == 1u));
 }
 
+// The bits of `t` as an unsigned key in f32::total_cmp's order.
 fn order_key(t: f32) -> u32 {
     let b = bitcast<u32>(t);
     return select(b | 0x80000000u, ~b, (b >> 31u) == 1u);
