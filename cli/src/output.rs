@@ -151,12 +151,11 @@ pub(crate) fn refuse_overwriting(
     if is_stdout(output) {
         return Ok(());
     }
-    let Ok(out) = std::fs::metadata(output) else { return Ok(()) };
-    if !out.is_file() {
+    if !std::fs::metadata(output).is_ok_and(|m| m.is_file()) {
         return Ok(());
     }
     for input in inputs {
-        if std::fs::metadata(input).is_ok_and(|inp| same_file(&out, &inp, output, input)) {
+        if octrace_format::same_file(output, input) {
             anyhow::bail!(
                 "{option} {} is the file this command reads as {}: writing it would destroy its input \
                  (nothing was written; choose another output)",
@@ -166,17 +165,6 @@ pub(crate) fn refuse_overwriting(
         }
     }
     Ok(())
-}
-
-#[cfg(unix)]
-fn same_file(a: &std::fs::Metadata, b: &std::fs::Metadata, _: &std::path::Path, _: &std::path::Path) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    a.dev() == b.dev() && a.ino() == b.ino()
-}
-
-#[cfg(not(unix))]
-fn same_file(_: &std::fs::Metadata, _: &std::fs::Metadata, a: &std::path::Path, b: &std::path::Path) -> bool {
-    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }
 
 #[cfg(test)]

@@ -84,6 +84,32 @@ fn kind_of(t: &std::fs::FileType) -> &'static str {
     }
 }
 
+/// Whether `a` and `b` name the same existing file: the same device and inode on Unix
+/// (so another path to it, or a hard link, counts), the same canonical path elsewhere.
+/// What a command checks before it writes, so that its output never destroys an input.
+///
+/// # Example
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// let (a, b) = (dir.path().join("a.oct"), dir.path().join("b.oct"));
+/// std::fs::write(&a, b"x")?;
+/// std::fs::hard_link(&a, &b)?;
+/// assert!(octrace_format::same_file(&a, &b));
+/// assert!(!octrace_format::same_file(&a, &dir.path().join("missing")));
+/// # Ok::<(), std::io::Error>(())
+/// ```
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        matches!((std::fs::metadata(a), std::fs::metadata(b)), (Ok(a), Ok(b)) if a.dev() == b.dev() && a.ino() == b.ino())
+    }
+    #[cfg(not(unix))]
+    {
+        matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

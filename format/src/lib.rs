@@ -45,7 +45,7 @@ pub use header::{
     Header, Section, ARCHIVE_ALIGN, FIXED_HEADER_LEN, HEADER_LEN, MAGIC, RKYV_SETTINGS, SECTION_COUNT, SECTION_NAMES,
     VERSION,
 };
-pub use input::{open_regular_file, read_regular_file};
+pub use input::{open_regular_file, read_regular_file, same_file};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{

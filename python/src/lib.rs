@@ -197,28 +197,35 @@ const PIECE: usize = 1 << 18;
 /// over `[tmin, tmax]`, a piece of at most [`PIECE`] at a time (`first`: the index of
 /// the piece's first ray); a NaN anywhere is an error naming the ray, before any work.
 fn each_piece(values: &[f32], tmin: f32, tmax: f32, mut trace: impl FnMut(usize, &[Ray])) -> PyResult<()> {
+    refuse_nan_rays(values)?;
+    let mut rays = Vec::new();
+    for (p, chunk) in values.chunks(6 * PIECE).enumerate() {
+        chunk.par_chunks_exact(6).map(|r| ray_of(r, tmin, tmax)).collect_into_vec(&mut rays);
+        trace(p * PIECE, &rays);
+    }
+    Ok(())
+}
+
+/// The ray `[ox, oy, oz, dx, dy, dz]` over `[tmin, tmax]`.
+fn ray_of(r: &[f32], tmin: f32, tmax: f32) -> Ray {
+    Ray::segment(Vec3::new(r[0], r[1], r[2]), Vec3::new(r[3], r[4], r[5]), tmin, tmax)
+}
+
+/// An error naming the first ray with a NaN, if one has.
+fn refuse_nan_rays(values: &[f32]) -> PyResult<()> {
     // A branch-free pass (it vectorises); the ray is looked for only once one is there.
     if values.par_chunks(1 << 14).any(|c| c.iter().fold(false, |nan, x| nan | x.is_nan())) {
         let i = values.chunks_exact(6).position(|r| r.iter().any(|x| x.is_nan())).expect("a NaN was seen");
         let r = &values[6 * i..6 * i + 6];
         return Err(PyValueError::new_err(format!("rays: ray {i} has a NaN: {r:?}")));
     }
-    let mut rays = Vec::new();
-    for (p, chunk) in values.chunks(6 * PIECE).enumerate() {
-        chunk
-            .par_chunks_exact(6)
-            .map(|r| Ray::segment(Vec3::new(r[0], r[1], r[2]), Vec3::new(r[3], r[4], r[5]), tmin, tmax))
-            .collect_into_vec(&mut rays);
-        trace(p * PIECE, &rays);
-    }
     Ok(())
 }
 
 /// Every ray of `values` at once (for the calls whose answers are not one a ray).
 fn to_rays(values: &[f32], tmin: f32, tmax: f32) -> PyResult<Vec<Ray>> {
-    let mut all = Vec::with_capacity(values.len() / 6);
-    each_piece(values, tmin, tmax, |_, rays| all.extend_from_slice(rays))?;
-    Ok(all)
+    refuse_nan_rays(values)?;
+    Ok(values.par_chunks_exact(6).map(|r| ray_of(r, tmin, tmax)).collect())
 }
 
 /// Points `[x, y, z]`; a NaN is an error naming the point.
@@ -228,6 +235,23 @@ fn to_points(values: &[f32]) -> PyResult<Vec<[f32; 3]>> {
         return Err(PyValueError::new_err(format!("query_points: point {i} has a NaN: {p:?}")));
     }
     Ok(values.par_chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())
+}
+
+/// A hit's `geometry_ids` entry: its part's index, 0 in a mesh without parts.
+fn geometry_id(shading: &octrace_format::Shading, triangle: u32) -> u32 {
+    if shading.parts.is_empty() {
+        0
+    } else {
+        shading.part_index_of(triangle).unwrap_or(INVALID_ID)
+    }
+}
+
+/// The zstd level to write at, or `None` uncompressed; a level outside 1-22 is an error.
+fn compression(compress: bool, level: i32) -> PyResult<Option<i32>> {
+    if compress && !(1..=22).contains(&level) {
+        return Err(PyValueError::new_err(format!("level: {level}, expected 1 to 22")));
+    }
+    Ok(compress.then_some(level))
 }
 
 /// A numpy array of `shape` holding `values`.
@@ -332,11 +356,14 @@ fn bake_summary<'py>(py: Python<'py>, scene: &octrace_format::BakedScene, bytes:
     Ok(d)
 }
 
-/// Refuses an output that is one of the inputs (the mesh or a file it reads).
+/// Refuses an output that is one of the inputs (the mesh or a file it reads), as
+/// `octrace bake` does: the same file by any path or hard link.
 fn refuse_overwriting(output: &Path, inputs: &[&Path]) -> PyResult<()> {
-    let Ok(out) = output.canonicalize() else { return Ok(()) };
+    if !std::fs::metadata(output).is_ok_and(|m| m.is_file()) {
+        return Ok(());
+    }
     for input in inputs {
-        if input.canonicalize().is_ok_and(|i| i == out) {
+        if octrace_format::same_file(output, input) {
             return Err(PyValueError::new_err(format!(
                 "output {} is one of the bake's inputs; choose another name",
                 output.display()
@@ -415,9 +442,7 @@ fn bake<'py>(
     record_time: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, threads)?;
-    if compress && !(1..=22).contains(&level) {
-        return Err(PyValueError::new_err(format!("level: {level}, expected 1 to 22")));
-    }
+    let compress = compression(compress, level)?;
     let load = LoadOptions {
         references: if allow_outside_references { References::Anywhere } else { References::Confined },
         max_instances,
@@ -435,7 +460,7 @@ fn bake<'py>(
         let mut warnings = loaded.warnings.clone();
         drop(loaded);
         warnings.extend(octrace_bake::octree::degenerate_warning(&scene));
-        let bytes = write_scene(&scene, &output, compress.then_some(level), time_us)?;
+        let bytes = write_scene(&scene, &output, compress, time_us)?;
         Ok((scene, bytes, warnings))
     })?;
     let warn = py.import("warnings")?;
@@ -481,13 +506,11 @@ fn bake_arrays<'py>(
     level: i32,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, threads)?;
-    if compress && !(1..=22).contains(&level) {
-        return Err(PyValueError::new_err(format!("level: {level}, expected 1 to 22")));
-    }
+    let compress = compression(compress, level)?;
     let mesh = mesh_of_arrays(vertices, triangles)?;
     let (scene, bytes) = py.detach(|| -> PyResult<_> {
         let scene = options.bake(&mesh)?;
-        let bytes = write_scene(&scene, &output, compress.then_some(level), 0)?;
+        let bytes = write_scene(&scene, &output, compress, 0)?;
         Ok((scene, bytes))
     })?;
     bake_summary(py, &scene, bytes)
@@ -659,7 +682,6 @@ impl Scene {
                 let (mut uvs, mut normals) = (vec![0f32; 2 * n], vec![0f32; 3 * n]);
                 let view = self.inner.view();
                 let shading = self.inner.shading();
-                let has_parts = !shading.parts.is_empty();
                 let mut hits = vec![None; PIECE.min(n)];
                 each_piece(values, 0.0, f32::INFINITY, |first, rays| {
                     let (hits, end) = (&mut hits[..rays.len()], first + rays.len());
@@ -674,8 +696,7 @@ impl Scene {
                         .for_each(|(((((t, g), p), uv), normal), hit)| match hit {
                             Some(h) => {
                                 *t = h.t;
-                                *g =
-                                    if has_parts { shading.part_index_of(h.triangle).unwrap_or(INVALID_ID) } else { 0 };
+                                *g = geometry_id(shading, h.triangle);
                                 *p = h.triangle;
                                 uv.copy_from_slice(&[h.u, h.v]);
                                 let tri = view.triangle(h.prim);
@@ -789,17 +810,13 @@ impl Scene {
             )));
         }
         let shading = self.inner.shading();
-        let has_parts = !shading.parts.is_empty();
         let splits: Vec<u32> = lists.splits.iter().map(|&s| s as u32).collect();
         let mut ray_ids = Vec::with_capacity(k);
         for (i, w) in lists.splits.windows(2).enumerate() {
             ray_ids.extend(std::iter::repeat_n(i as u32, w[1] - w[0]));
         }
         let c = &lists.crossings;
-        let geometry: Vec<u32> = c
-            .iter()
-            .map(|c| if has_parts { shading.part_index_of(c.triangle).unwrap_or(INVALID_ID) } else { 0 })
-            .collect();
+        let geometry: Vec<u32> = c.iter().map(|c| geometry_id(shading, c.triangle)).collect();
         let d = PyDict::new(py);
         d.set_item("ray_splits", PyArray1::from_vec(py, splits))?;
         d.set_item("ray_ids", PyArray1::from_vec(py, ray_ids))?;

@@ -52,6 +52,9 @@ def test_bad_meshes_and_options(tmp_path):
         octrace.bake(BUNNY, tmp_path / "x.oct", leaf_size=0)
     with pytest.raises(ValueError, match="one of the bake's inputs"):
         octrace.bake(bad, bad)
+    (tmp_path / "linked.oct").hardlink_to(bad)  # the same file by another name
+    with pytest.raises(ValueError, match="one of the bake's inputs"):
+        octrace.bake(bad, tmp_path / "linked.oct")
     v, t = cube_arrays()
     with pytest.raises(ValueError, match=r"triangles\[1\]: vertex index 8 out of range"):
         octrace.Scene.from_arrays(v, np.array([[0, 1, 2], [1, 2, 8]]))
