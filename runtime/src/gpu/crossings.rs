@@ -9,7 +9,7 @@
 //! budget, and rays with more crossings than one binding holds, are walked again on
 //! the CPU, from the same scene.
 
-use super::{kernel, GpuResult, GpuTracer, HitOut, Ray, OVER_BUDGET, RAYS_PER_DISPATCH};
+use super::{GpuError, GpuResult, GpuTracer, HitOut, Ray, OVER_BUDGET, RAYS_PER_DISPATCH};
 use crate::cpu::{BatchCrossings, Crossing, CrossingCount, Solid};
 
 /// Bytes of one record (a ray's crossing, or its count) in the hits binding.
@@ -45,7 +45,7 @@ impl GpuTracer<'_> {
 
     /// The counting kernel's answers; `None` for a walk that ran out of loop budget.
     fn kernel_counts(&self, rays: &[Ray]) -> GpuResult<Vec<Option<CrossingCount>>> {
-        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()[0])?;
+        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()?[0])?;
         Ok(out
             .iter()
             .map(|h| (h.steps != OVER_BUDGET).then_some(CrossingCount { total: h.triangle, entries: h.leaf }))
@@ -159,7 +159,7 @@ impl GpuTracer<'_> {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.crossing_kernels()[1]);
+            pass.set_pipeline(&self.crossing_kernels()?[1]);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups((rays.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
         }
@@ -168,11 +168,18 @@ impl GpuTracer<'_> {
     }
 
     /// The counting and listing kernels, built on first use.
-    fn crossing_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
-        self.crossing_kernels.get_or_init(|| {
-            let make =
-                |label, mode: f64| kernel(&self.device, &self.pipeline_layout, &self.module, label, &[("MODE", mode)]);
-            [make("octrace count crossings", 1.0), make("octrace crossings", 2.0)]
-        })
+    fn crossing_kernels(&self) -> GpuResult<&[wgpu::ComputePipeline; 2]> {
+        self.crossing_kernels
+            .get_or_init(|| {
+                let source = self.source();
+                let make = |label, mode: f64| {
+                    self.compiler
+                        .pipeline(&self.device, &self.pipeline_layout, &source, "main", &[("MODE", mode)], label)
+                        .map_err(|e| e.to_string())
+                };
+                Ok([make("octrace count crossings", 1.0)?, make("octrace crossings", 2.0)?])
+            })
+            .as_ref()
+            .map_err(|e: &String| GpuError::Device(e.clone()))
     }
 }

@@ -30,6 +30,7 @@
 
 mod crossings;
 mod render;
+mod spirv;
 
 use std::time::{Duration, Instant};
 
@@ -102,7 +103,10 @@ impl GpuContext {
                 .max_buffers_and_acceleration_structures_per_shader_stage,
             ..wgpu::Limits::defaults()
         };
-        let required_features = adapter.features() & wgpu::Features::SHADER_F64;
+        // 64-bit floats for the exact paths; kernels compiled here (`spirv`); timestamps to
+        // time kernels on the device.
+        let wanted = wgpu::Features::SHADER_F64 | wgpu::Features::PASSTHROUGH_SHADERS | wgpu::Features::TIMESTAMP_QUERY;
+        let required_features = adapter.features() & wanted;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("octrace"),
             required_features,
@@ -190,14 +194,20 @@ pub(super) struct Budget {
 }
 
 impl Budget {
-    /// The budget for an adapter that caps an invocation's loop iterations at `cap`
-    /// (`None`: no cap). Under a cap, each invocation gets a workgroup of its own (the
-    /// cap is counted per SIMD group of lanes, whose loops run in lockstep: alone, an
-    /// invocation's own count is the group's) and half the cap: the driver's count runs
-    /// ahead of the kernel's own (lavapipe cut the render kernel short when the kernel
-    /// had counted 58,000 to 61,300 iterations: loops of its own making, about 10 %).
-    fn for_cap(cap: Option<u32>) -> Budget {
+    /// The budget for an adapter that caps the loop iterations of a group of `lanes`
+    /// invocations run in lockstep at `cap` (`None`: no cap). The driver counts an
+    /// iteration of a loop whenever one lane of the group runs it, over all loops
+    /// together, so the group's count is at most the sum of its lanes' own: a lane gets
+    /// `cap / (2 lanes)`, and workgroups stay full. Half, because the driver's count
+    /// runs ahead of the kernel's own (lavapipe cut the render kernel short when the
+    /// kernel had counted 58,000 to 61,300 iterations alone: loops of its own making,
+    /// about 10 %). A lane that spends its budget stops, and the host finishes its ray
+    /// or pixel on the CPU. Where the group is the whole workgroup (`lanes` =
+    /// [`WORKGROUP`]), each invocation gets a workgroup of its own instead, and half the
+    /// cap.
+    fn for_cap(cap: Option<u32>, lanes: u32) -> Budget {
         match cap {
+            Some(cap) if lanes < WORKGROUP => Budget { workgroup: WORKGROUP, loops: cap / (2 * lanes.max(1)) },
             Some(cap) => Budget { workgroup: 1, loops: cap / 2 },
             None => Budget { workgroup: WORKGROUP, loops: u32::MAX },
         }
@@ -223,12 +233,40 @@ pub fn loop_cap(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Option<
          @compute @workgroup_size(1)\n\
          fn main() {{\n    var n = 0u;\n    for (var i = 0u; i < {PROBE_ITERATIONS}u; i++) {{\n        n += 1u;\n    }}\n    out[0] = n;\n}}\n"
     );
+    let ran = run_probe(device, queue, &source, "octrace loop probe", 1)?[0];
+    Ok((ran < PROBE_ITERATIONS).then_some(ran))
+}
+
+/// How many invocations of a workgroup share the adapter's loop count, under a loop
+/// `cap` ([`loop_cap`]): the lanes of one SIMD group, run in lockstep (lavapipe: 8, the
+/// 256-bit vectors of its LLVM build), or [`WORKGROUP`] if the whole workgroup does.
+/// Lane `l` of a workgroup of [`WORKGROUP`] runs a loop of `m` iterations (more than
+/// half the cap) at the `l`-th step of an outer loop: in a shared count, lane 0 runs
+/// whole and its neighbours are cut short, until the lane that begins the next group
+/// runs whole again.
+pub fn lockstep_lanes(device: &wgpu::Device, queue: &wgpu::Queue, cap: u32) -> GpuResult<u32> {
+    let m = cap / 2 + cap / 8;
+    let source = format!(
+        "@group(0) @binding(0) var<storage, read_write> out: array<u32>;\n\
+         @compute @workgroup_size({WORKGROUP})\n\
+         fn main(@builtin(local_invocation_index) l: u32) {{\n    var n = 0u;\n    \
+         for (var k = 0u; k < {WORKGROUP}u; k++) {{\n        if k == l {{\n            \
+         for (var j = 0u; j < {m}u; j++) {{\n                n += 1u;\n            }}\n        }}\n    }}\n    \
+         out[l] = n;\n}}\n"
+    );
+    let ran = run_probe(device, queue, &source, "octrace lockstep probe", WORKGROUP)?;
+    Ok((1..WORKGROUP).find(|&l| ran[l as usize] == m).unwrap_or(WORKGROUP))
+}
+
+/// Runs a one-workgroup probe kernel writing `words` words to its one binding, and
+/// reads them back.
+fn run_probe(device: &wgpu::Device, queue: &wgpu::Queue, source: &str, label: &str, words: u32) -> GpuResult<Vec<u32>> {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("octrace loop probe"),
+        label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
     let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("octrace loop probe"),
+        label: Some(label),
         layout: None,
         module: &module,
         entry_point: Some("main"),
@@ -236,13 +274,13 @@ pub fn loop_cap(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Option<
         cache: None,
     });
     let out = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("octrace loop probe"),
-        size: 4,
+        label: Some(label),
+        size: 4 * u64::from(words),
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     });
     let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("octrace loop probe"),
+        label: Some(label),
         layout: &pipeline.get_bind_group_layout(0),
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }],
     });
@@ -254,8 +292,7 @@ pub fn loop_cap(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Option<
         pass.dispatch_workgroups(1, 1, 1);
     }
     queue.submit([encoder.finish()]);
-    let ran = read_buffer::<u32>(device, queue, &out, 4)?[0];
-    Ok((ran < PROBE_ITERATIONS).then_some(ran))
+    read_buffer::<u32>(device, queue, &out, 4 * u64::from(words))
 }
 
 /// Traces rays through one scene on the GPU.
@@ -272,16 +309,18 @@ pub struct GpuTracer<'s> {
     queue: wgpu::Queue,
     nearest: wgpu::ComputePipeline,
     any: wgpu::ComputePipeline,
-    /// The module and layout the crossing kernels are made from on first use
-    /// (`crossings`), and those kernels: counts, lists.
-    module: wgpu::ShaderModule,
+    /// How kernels are compiled on this device, the layout the crossing kernels are
+    /// made with on first use (`crossings`), and those kernels: counts, lists.
+    compiler: spirv::Compiler,
     pipeline_layout: wgpu::PipelineLayout,
-    crossing_kernels: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    crossing_kernels: std::sync::OnceLock<Result<[wgpu::ComputePipeline; 2], String>>,
     layout: wgpu::BindGroupLayout,
     scene_buffers: Vec<wgpu::Buffer>,
     params: Params,
     chunk_words: u64,
     f64_edges: bool,
+    stopwatch: Option<Stopwatch>,
+    compile: Duration,
 }
 
 /// Timings of one batch, for benchmarks.
@@ -289,10 +328,63 @@ pub struct GpuTracer<'s> {
 pub struct GpuTimings {
     /// Uploading the rays.
     pub upload: Duration,
-    /// The kernel alone (submitted to finished).
+    /// The kernel, as the host sees it: from submitting its dispatches to their end
+    /// (the submission's and the wait's latency included).
     pub kernel: Duration,
+    /// The kernel on the device: from the first to the last timestamp of each dispatch
+    /// (`None` where the adapter has no timestamp queries).
+    pub kernel_device: Option<Duration>,
     /// Reading the hits back.
     pub download: Duration,
+}
+
+/// Two timestamps around each compute pass, where the device has timestamp queries.
+#[derive(Debug)]
+struct Stopwatch {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    /// Nanoseconds a timestamp tick.
+    period: f64,
+}
+
+impl Stopwatch {
+    fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Option<Stopwatch> {
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("octrace kernel time"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("octrace kernel time"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        Some(Stopwatch { queries, resolve, period: f64::from(queue.get_timestamp_period()) })
+    }
+
+    /// The pass's timestamp writes.
+    fn writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
+    /// Resolves the pass's timestamps (after the pass, in the same encoder).
+    fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2, &self.resolve, 0);
+    }
+
+    /// The time between the pass's two timestamps (once its work is done).
+    fn elapsed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Duration> {
+        let ticks = read_buffer::<u64>(device, queue, &self.resolve, 16)?;
+        Ok(Duration::from_nanos((ticks[1].saturating_sub(ticks[0]) as f64 * self.period) as u64))
+    }
 }
 
 impl<'s> GpuTracer<'s> {
@@ -334,12 +426,14 @@ impl<'s> GpuTracer<'s> {
         let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
         let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
         let cap = loop_cap(device, queue)?;
-        let budget = Budget::for_cap(cap);
+        let lanes = match cap {
+            Some(cap) => lockstep_lanes(device, queue, cap)?,
+            None => 1,
+        };
+        let budget = Budget::for_cap(cap, lanes);
+        let compiler = spirv::Compiler::for_device(device, queue)?;
+        let compiling = Instant::now();
         let source = shader_source(scene_buffers.len(), chunk_words, f64_edges, budget);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("octrace trace"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
         let layout = bind_group_layout(device, chunks as usize);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("octrace trace"),
@@ -348,8 +442,17 @@ impl<'s> GpuTracer<'s> {
         });
         let pipeline = |any: bool| {
             let label = if any { "octrace occluded" } else { "octrace intersect" };
-            kernel(device, &pipeline_layout, &module, label, &[("ANY_HIT", if any { 1.0 } else { 0.0 })])
+            compiler.pipeline(
+                device,
+                &pipeline_layout,
+                &source,
+                "main",
+                &[("ANY_HIT", if any { 1.0 } else { 0.0 })],
+                label,
+            )
         };
+        let (nearest, any) = (pipeline(false)?, pipeline(true)?);
+        let compile = compiling.elapsed();
         let b = view.bounds;
         let (root_lo, root_hi) = crate::cpu::root_corners(&view);
         // As the CPU tracer: a depth beyond the format's (a hostile file on the trusted
@@ -383,9 +486,10 @@ impl<'s> GpuTracer<'s> {
             budget,
             device: device.clone(),
             queue: queue.clone(),
-            nearest: pipeline(false),
-            any: pipeline(true),
-            module,
+            nearest,
+            any,
+            compile,
+            compiler,
             pipeline_layout,
             crossing_kernels: std::sync::OnceLock::new(),
             layout,
@@ -393,6 +497,7 @@ impl<'s> GpuTracer<'s> {
             params,
             chunk_words,
             f64_edges,
+            stopwatch: Stopwatch::new(device, queue),
         })
     }
 
@@ -460,6 +565,38 @@ impl<'s> GpuTracer<'s> {
         Ok((out.iter().map(to_hit).collect(), timings))
     }
 
+    /// How long making the tracing kernels took (WGSL to the driver's pipelines; a
+    /// driver may finish compiling at the first dispatch, which the first batch's
+    /// timings then hold).
+    pub fn compile_time(&self) -> Duration {
+        self.compile
+    }
+
+    /// Whether the kernels were compiled here to SPIR-V with every float operation
+    /// marked `NoContraction` (where the device takes SPIR-V as it is: every Vulkan
+    /// device), so that no driver fuses a multiply into an add the CPU rounds apart.
+    pub fn unfused(&self) -> bool {
+        self.compiler.passthrough
+    }
+
+    /// Whether the kernels keep f32 subnormals, as the CPU does (a driver may flush
+    /// them to zero; NVIDIA's does unless asked not to, which these kernels ask where
+    /// the driver honours it).
+    pub fn keeps_subnormals(&self) -> bool {
+        self.compiler.denormals
+    }
+
+    /// Whether kernels are timed on the device ([`GpuTimings::kernel_device`]).
+    pub fn has_timestamps(&self) -> bool {
+        self.stopwatch.is_some()
+    }
+
+    /// Under a loop cap, the loop iterations each invocation may run before its ray or
+    /// pixel is finished on the CPU (the cap shared by [`lockstep_lanes`], halved).
+    pub fn lane_budget(&self) -> Option<u32> {
+        self.cap.map(|_| self.budget.loops)
+    }
+
     /// The loop cap of the adapter this tracer runs on, if it has one ([`loop_cap`]).
     pub fn loop_cap(&self) -> Option<u32> {
         self.cap
@@ -522,14 +659,24 @@ impl<'s> GpuTracer<'s> {
             let t = Instant::now();
             let mut encoder = self.device.create_command_encoder(&Default::default());
             {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("octrace trace"),
+                    timestamp_writes: self.stopwatch.as_ref().map(Stopwatch::writes),
+                });
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &bind_group, &[]);
                 pass.dispatch_workgroups((part.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
             }
+            if let Some(s) = &self.stopwatch {
+                s.resolve(&mut encoder);
+            }
             self.queue.submit([encoder.finish()]);
             self.wait()?;
             timings.kernel += t.elapsed();
+            if let Some(s) = &self.stopwatch {
+                let device = s.elapsed(&self.device, &self.queue)?;
+                timings.kernel_device = Some(timings.kernel_device.unwrap_or_default() + device);
+            }
 
             let t = Instant::now();
             let bytes = (part.len() * std::mem::size_of::<HitOut>()) as u64;
@@ -819,6 +966,11 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               let p = f64(oi) * f64(dj) - f64(oj) * f64(di);\n    \
               return select(p > 0.0lf, p < 0.0lf, is_negative(di) == is_negative(dj));\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return f32(f64(off) / f64(d));\n}\n";
+        // The f32 quotient and square root correctly rounded, as the CPU's: in f64
+        // (rounding twice is exact for these: 53 >= 2 x 24 + 2 bits), where a driver's
+        // f32 division may be 2.5 ulps off (NVIDIA's is) and its square root worse.
+        g += "fn div(a: f32, b: f32) -> f32 {\n    return f32(f64(a) / f64(b));\n}\n";
+        g += "fn root(x: f32) -> f32 {\n    return f32(sqrt(f64(x)));\n}\n";
         g += FAR_F64;
         g += HIT_F64;
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
@@ -839,6 +991,9 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
         // products, but the adapter's division).
         g += "fn exits_before(oi: f32, di: f32, oj: f32, dj: f32) -> bool {\n    return oi / di < oj / dj;\n}\n";
         g += "fn exact_distance(off: f32, d: f32) -> f32 {\n    return off / d;\n}\n";
+        // Without f64, the adapter's quotient and square root.
+        g += "fn div(a: f32, b: f32) -> f32 {\n    return a / b;\n}\n";
+        g += "fn root(x: f32) -> f32 {\n    return sqrt(x);\n}\n";
         g += FAR_F32;
         // Without f64 the exact rule's rays take the f32 test.
         g += "fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: bool) -> vec4<f32> {\n    \
@@ -849,24 +1004,6 @@ fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budge
               return select(0u, 1u, p_positive != negative_a);\n}\n";
     }
     include_str!("trace.wgsl").replace("//GENERATED//\n", &g)
-}
-
-/// The tracing kernel's entry point compiled with override `constants`.
-fn kernel(
-    device: &wgpu::Device,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
-    label: &str,
-    constants: &[(&str, f64)],
-) -> wgpu::ComputePipeline {
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        module,
-        entry_point: Some("main"),
-        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
-        cache: None,
-    })
 }
 
 /// Moving a far origin to the root (`cpu::walk`'s `begin_far`), in `f64`: the entry
@@ -989,6 +1126,11 @@ fn unshifted(t: f32, s: vec2<f32>) -> f32 {
 /// rays and hits, and the parameters.
 pub(super) const TRACE_EXTRA_BINDINGS: (u64, u64) = (2, 3);
 
+/// Scene bindings a kernel takes at most: each is a case of the `word` accessor's
+/// switch, and a driver's compile time grows with them (NVIDIA's ran past five minutes
+/// on 850). A device binds gigabytes a binding: 64 is far past any scene that fits.
+pub const MAX_SCENE_BINDINGS: u64 = 64;
+
 /// Whether `chunks` scene bindings plus `extra` (storage, all buffers) fit the device's
 /// limits on buffers per shader stage; a scene that needs more is
 /// [`GpuError::TooLarge`], naming the limit, before wgpu is asked (it would panic).
@@ -1001,10 +1143,19 @@ pub(super) fn check_bindings(
 ) -> GpuResult<()> {
     let storage_limit = u64::from(limits.max_storage_buffers_per_shader_stage);
     let buffer_limit = u64::from(limits.max_buffers_and_acceleration_structures_per_shader_stage);
-    if chunks + storage > storage_limit || chunks + buffers > buffer_limit {
+    // The scene's group holds the chunks and the tracing kernel's own three bindings
+    // (on NVIDIA the stage limits are in the millions: this one binds first).
+    let group_limit = u64::from(limits.max_bindings_per_bind_group);
+    let in_group = chunks + TRACE_EXTRA_BINDINGS.1;
+    if chunks + storage > storage_limit
+        || chunks + buffers > buffer_limit
+        || in_group > group_limit
+        || chunks > MAX_SCENE_BINDINGS
+    {
         return Err(GpuError::TooLarge(format!(
             "{} MB of scene words need {chunks} bindings of {} MB, {} in all with the kernel's own; the device \
-             allows {storage_limit} storage buffers and {buffer_limit} buffers a shader stage",
+             allows {storage_limit} storage buffers and {buffer_limit} buffers a shader stage, {group_limit} \
+             bindings a group, and the kernels take at most {MAX_SCENE_BINDINGS} scene bindings",
             scene_bytes / 1_000_000,
             chunk_bytes / 1_000_000,
             chunks + buffers
@@ -1080,11 +1231,16 @@ mod tests {
     #[test]
     fn the_kernel_source_is_valid_wgsl() {
         for (chunks, f64_edges) in [(1, false), (1, true), (3, false), (5, true)] {
-            for budget in [Budget::for_cap(None), Budget::for_cap(Some(65_535))] {
+            for budget in
+                [Budget::for_cap(None, 1), Budget::for_cap(Some(65_535), 8), Budget::for_cap(Some(65_535), 64)]
+            {
                 let trace = shader_source(chunks, 1 << 10, f64_edges, budget);
                 for source in [trace.clone(), render::render_source(&trace, 6)] {
                     validate(&source, f64_edges, chunks);
                 }
+                // And as the device gets them where it takes SPIR-V (`spirv`).
+                spirv::compile(&trace, "main", &[("ANY_HIT", 1.0)], true).unwrap();
+                spirv::compile(&render::render_source(&trace, 6), "render", &[("SHADOWS", 0.0)], false).unwrap();
             }
         }
     }
@@ -1094,7 +1250,7 @@ mod tests {
     #[test]
     fn host_structs_match_the_kernels() {
         use std::mem::{offset_of, size_of};
-        let source = render::render_source(&shader_source(1, 1 << 10, false, Budget::for_cap(None)), 6);
+        let source = render::render_source(&shader_source(1, 1 << 10, false, Budget::for_cap(None, 1)), 6);
         let module = naga::front::wgsl::parse_str(&source).expect("valid");
         let layout = |name: &str| {
             let ty = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name).1;

@@ -144,10 +144,6 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         tracer.queue.write_buffer(&shade, 0, bytemuck::cast_slice(&words));
 
         let source = render_source(&tracer.source(), options.max_depth);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("octrace render"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
         let render_layout = render_layout(device);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("octrace render"),
@@ -155,14 +151,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             immediate_size: 0,
         });
         let constants = overrides(options.effects, headlight);
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("octrace render"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("render"),
-            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
-            cache: None,
-        });
+        let pipeline =
+            tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
         let scene_group = tracer.scene_bind_group();
         Ok(GpuRenderer { tracer, pipeline, scene_group, render_layout, shade, params, options: *options })
     }

@@ -148,15 +148,31 @@ fn max3(v: vec3<f32>) -> f32 {
     return max(max(v.x, v.y), v.z);
 }
 
+// glam's `dot`: the products summed left to right (WGSL's `dot` is the adapter's, which
+// may fuse them).
+fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// glam's `length`: the square root of `dot3`, correctly rounded (generated `root`).
+fn length3(v: vec3<f32>) -> f32 {
+    return root(dot3(v, v));
+}
+
+// A vector over a scalar, each component's quotient correctly rounded (generated `div`).
+fn div3(a: vec3<f32>, b: f32) -> vec3<f32> {
+    return vec3<f32>(div(a.x, b), div(a.y, b), div(a.z, b));
+}
+
 // glam's `normalize`: `v` times the reciprocal of its length (WGSL's `normalize` is
 // the adapter's; lavapipe's differs from this in the last bit of a quarter of vectors).
 fn unit(v: vec3<f32>) -> vec3<f32> {
-    return v * (1.0 / length(v));
+    return v * div(1.0, length3(v));
 }
 
 // glam's `normalize_or_zero`.
 fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
-    let r = 1.0 / length(v);
+    let r = div(1.0, length3(v));
     if is_finite(r) && r > 0.0 {
         return v * r;
     }
@@ -366,14 +382,14 @@ fn spawn_point(prim: u32, hit: HitOut) -> SpawnPoint {
     let err = GAMMA_7 * (abs(b0 * v0) + abs(hit.u * v1) + abs(hit.v * v2));
     sp.normal = face_normal(v0, v1, v2);
     let scale = max(max3(abs(v0)), max(max3(abs(v1)), max3(abs(v2))));
-    sp.offset = max(dot(err, abs(sp.normal)), GAMMA_7 * scale);
+    sp.offset = max(dot3(err, abs(sp.normal)), GAMMA_7 * scale);
     return sp;
 }
 
 // The origin of a ray leaving `sp` towards `d`: offset to the side it leaves by, then
 // one float further out per axis.
 fn spawn_origin(sp: SpawnPoint, d: vec3<f32>) -> vec3<f32> {
-    let n = select(sp.normal, -sp.normal, dot(sp.normal, d) < 0.0);
+    let n = select(sp.normal, -sp.normal, dot3(sp.normal, d) < 0.0);
     let offset = n * sp.offset;
     var o = sp.point + offset;
     if offset.x > 0.0 { o.x = next_up(o.x); } else if offset.x < 0.0 { o.x = next_down(o.x); }
@@ -412,7 +428,7 @@ fn power(x: f32, e: f32) -> f32 {
         m *= 0.5;
         k += 1;
     }
-    let f = (m - 1.0) / (m + 1.0);
+    let f = div(m - 1.0, m + 1.0);
     let s = f * f;
     let l = POWER_LN;
     let ln_m = 2.0 * f * (1.0 + s * (l[0] + s * (l[1] + s * (l[2] + s * l[3]))));
@@ -470,10 +486,10 @@ fn reflectance(m: Material, transmits: bool, n: vec3<f32>, v: vec3<f32>, l: vec3
     let h = normalize_or_zero(v + l);
     var spec = vec3<f32>(0.0);
     if any(m.ks != vec3<f32>(0.0)) {
-        let lobe = power(max(dot(n, h), 0.0), m.exponent);
-        spec = m.ks * (m.exponent + 8.0) / (8.0 * PI) * select(0.0, lobe, lobe >= F32_MIN_POSITIVE);
+        let lobe = power(max(dot3(n, h), 0.0), m.exponent);
+        spec = div3(m.ks * (m.exponent + 8.0), 8.0 * PI) * select(0.0, lobe, lobe >= F32_MIN_POSITIVE);
     }
-    return kd / PI + spec;
+    return div3(kd, PI) + spec;
 }
 
 // What of `value0` reaches a shadow ray's end: all of it when nothing blocks it, none
@@ -524,7 +540,7 @@ fn shading_normal(hit: HitOut, ng: vec3<f32>) -> vec3<f32> {
     if !(is_finite(n.x) && is_finite(n.y) && is_finite(n.z)) || all(n == vec3<f32>(0.0)) {
         return ng;
     }
-    return select(n, -n, dot(n, ng) < 0.0);
+    return select(n, -n, dot3(n, ng) < 0.0);
 }
 
 // What a surface point receives from one light direction (lighting's `light` closure):
@@ -541,8 +557,8 @@ struct Surface {
 
 fn light(s: Surface, to: vec3<f32>, tmax: f32, incident: vec3<f32>, kind: u32) {
     let l = normalize_or_zero(to);
-    let cos = dot(s.n, l);
-    if cos <= 0.0 || dot(s.ng, l) <= 0.0 {
+    let cos = dot3(s.n, l);
+    if cos <= 0.0 || dot3(s.ng, l) <= 0.0 {
         return;
     }
     let value = s.weight * reflectance(s.m, s.transmits, s.n, s.v, l) * incident * cos;
@@ -568,25 +584,25 @@ fn punctual(s: Surface, i: u32, p: vec3<f32>) {
         return;
     }
     let to_light = sv3(at + 8u) - p;
-    let d2 = dot(to_light, to_light);
+    let d2 = dot3(to_light, to_light);
     if d2 == 0.0 || !is_finite(d2) {
         return;
     }
-    let d = sqrt(d2);
+    let d = root(d2);
     let range = sf(at + 1u);
     var window = 1.0;
     if is_finite(range) {
-        let x = d / range;
+        let x = div(d, range);
         let x2 = x * x;
         let w = clamp(1.0 - x2 * x2, 0.0, 1.0);
         window = w * w;
     }
-    var falloff = window / d2;
+    var falloff = div(window, d2);
     if kind == 1u {
-        let cos = dot(direction, -to_light / d);
+        let cos = dot3(direction, div3(-to_light, d));
         let cos_outer = sf(at + 2u);
         let cos_inner = sf(at + 3u);
-        let x = clamp((cos - cos_outer) / max(cos_inner - cos_outer, 1e-4), 0.0, 1.0);
+        let x = clamp(div(cos - cos_outer, max(cos_inner - cos_outer, 1e-4)), 0.0, 1.0);
         falloff *= x * x;
     }
     if !(falloff > 0.0) {
@@ -617,7 +633,7 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
     if SOFT_SHADOWS {
         samples = max(rp.soft_samples, 1u);
     }
-    let scale = rp.emitter_area / f32(samples);
+    let scale = div(rp.emitter_area, f32(samples));
     for (var k = 0u; k < samples && tick(); k++) {
         let e = pick_emitter(uniform2(pixel, depth, 2u * k).x);
         let emitted = sv3(rp.o_emitters + 4u * e);
@@ -628,17 +644,17 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
         var y: vec3<f32>;
         if SOFT_SHADOWS {
             let uv = uniform2(pixel, depth, 2u * k + 1u);
-            let r = sqrt(uv.x);
+            let r = root(uv.x);
             y = a * (1.0 - r) + b * (r * (1.0 - uv.y)) + c * (r * uv.y);
         } else {
-            y = (a + b + c) / 3.0;
+            y = div3(a + b + c, 3.0);
         }
         let to = y - p;
-        let d2 = dot(to, to);
-        let cos_y = abs(dot(face_normal(a, b, c), to)) / sqrt(d2);
+        let d2 = dot3(to, to);
+        let cos_y = div(abs(dot3(face_normal(a, b, c), to)), root(d2));
         if d2 > 0.0 && cos_y > 0.0 {
             let kind = select(SHADOW, SOFT_SHADOW, SOFT_SHADOWS);
-            light(s, to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
+            light(s, to, AREA_SHADOW_END, emitted * div(cos_y * scale, d2), kind);
         }
     }
 }
@@ -659,7 +675,7 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     s.m = surface(hit);
     let dir = unit(task.d);
     var ng = s.sp.normal;
-    let entering = dot(ng, dir) < 0.0;
+    let entering = dot3(ng, dir) < 0.0;
     if !entering {
         ng = -ng;
     }
@@ -692,7 +708,7 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     let p = s.sp.point;
     if HEADLIGHT {
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
-        add_light(s.weight * kd * (HEADLIGHT_AMBIENT + HEADLIGHT_DIRECT * abs(dot(s.n, s.v))));
+        add_light(s.weight * kd * (HEADLIGHT_AMBIENT + HEADLIGHT_DIRECT * abs(dot3(s.n, s.v))));
     } else {
         for (var i = 0u; i < rp.light_count && tick(); i++) {
             punctual(s, i, p);
@@ -709,18 +725,18 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     var reflected = vec3<f32>(0.0);
     if REFRACTION && s.m.transmission > 0.0 {
         let t = s.m.transmission;
-        let eta = select(s.m.ior, 1.0 / s.m.ior, entering);
-        let cos_i = -dot(dir, n);
+        let eta = select(s.m.ior, div(1.0, s.m.ior), entering);
+        let cos_i = -dot3(dir, n);
         let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
         if k < 0.0 {
             reflected += s.weight * t;
         } else {
-            let cos_t = sqrt(k);
-            let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-            let rpar = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+            let cos_t = root(k);
+            let rs = div(eta * cos_i - cos_t, eta * cos_i + cos_t);
+            let rpar = div(cos_i - eta * cos_t, cos_i + eta * cos_t);
             let fresnel = clamp(0.5 * (rs * rs + rpar * rpar), 0.0, 1.0);
             let refracted = eta * dir + (eta * cos_i - cos_t) * n;
-            if dot(refracted, ng) < 0.0 {
+            if dot3(refracted, ng) < 0.0 {
                 let w = s.weight * t * (1.0 - fresnel) * s.m.base;
                 push(sp, spawn_origin(s.sp, refracted), refracted, w, task.depth + 1u, REFRACTION_RAY);
             }
@@ -729,9 +745,9 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     }
     if REFLECTION {
         // A direction on the wrong side of the surface is mirrored about ng instead.
-        var r = dir - 2.0 * dot(dir, n) * n;
-        if !(dot(r, ng) > 0.0) {
-            r = dir - 2.0 * dot(dir, ng) * ng;
+        var r = dir - 2.0 * dot3(dir, n) * n;
+        if !(dot3(r, ng) > 0.0) {
+            r = dir - 2.0 * dot3(dir, ng) * ng;
         }
         let w = reflected + s.weight * s.m.mirror;
         push(sp, spawn_origin(s.sp, r), r, w, task.depth + 1u, REFLECTION_RAY);

@@ -291,7 +291,7 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: b
     let plane = plane_distance(o, (*wk).d, at);
     let dist = plane.x;
     if plane.y != 0.0 && dist >= tmin && dist <= tmax {
-        return vec4<f32>(dist, v / det, w / det, 1.0);
+        return vec4<f32>(dist, div(v, det), div(w, det), 1.0);
     }
     return vec4<f32>(0.0);
 }
@@ -510,8 +510,8 @@ fn clip(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec4<f32> {
             }
             continue;
         }
-        let ta = (la - oa) / da;
-        let tb = (ha - oa) / da;
+        let ta = div(la - oa, da);
+        let tb = div(ha - oa, da);
         let near = min(ta, tb);
         let far = max(ta, tb);
         if near > t0 {
@@ -613,7 +613,7 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
             // edge, a power-of-two fraction of the root's.
             let b = params.o_boxes + 6u * word(params.o_octree + node + 2u);
             let edge = wordf(b + 3u) - wordf(b);
-            let ratio = params.root_lo.w / edge * 1.4142135;
+            let ratio = div(params.root_lo.w, edge) * 1.4142135;
             let exponent = i32((bitcast<u32>(ratio) >> 23u) & 0xFFu) - 127;
             leaf = vec2<u32>(node, u32(clamp(exponent, 0, i32(level))));
         }
@@ -623,7 +623,7 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     }
     wk.o = o;
     wk.d = d;
-    wk.inv = vec3<f32>(1.0) / d;
+    wk.inv = vec3<f32>(div(1.0, d.x), div(1.0, d.y), div(1.0, d.z));
     wk.high = vec3<u32>(select(1u, 0u, is_negative(d.x)), select(1u, 0u, is_negative(d.y)), select(1u, 0u, is_negative(d.z)));
     let octant = select(0u, 1u, is_negative(d.x)) | select(0u, 2u, is_negative(d.y)) | select(0u, 4u, is_negative(d.z));
     wk.row = exit_row(octant);
@@ -650,7 +650,7 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     }
     let dz = component(d, kz);
     wk.k = vec3<u32>(kx, ky, kz);
-    wk.s = vec3<f32>(component(d, kx) / dz, component(d, ky) / dz, 1.0 / dz);
+    wk.s = vec3<f32>(div(component(d, kx), dz), div(component(d, ky), dz), div(1.0, dz));
     wk.t_best = tmax;
     wk.done = false;
     return wk;

@@ -155,13 +155,17 @@ fn a_scene_needing_too_many_bindings_is_a_clear_error() {
     let scene = bunny_scene();
     let limits = gpu.device.limits();
     let storage = u64::from(limits.max_storage_buffers_per_shader_stage);
+    // The scene's bind group holds its chunks and three bindings more (NVIDIA allows
+    // millions of storage buffers a stage, and 1,000 bindings a group).
+    let group = u64::from(limits.max_bindings_per_bind_group);
+    let allowed = storage.min(group - 3).min(octrace_runtime::gpu::MAX_SCENE_BINDINGS);
     let words = scene.view().section_words()[..7].iter().map(|a| a.len() as u64).sum::<u64>();
     // Chunks of a power of two words: the largest size giving more chunks than allowed.
     let chunk = |n: u64| 4 << (words / n).max(1).ilog2();
-    let options = GpuOptions { max_binding_bytes: Some(chunk(storage)) };
+    let options = GpuOptions { max_binding_bytes: Some(chunk(allowed + 1)) };
     match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) {
         Err(GpuError::TooLarge(why)) => assert!(why.contains("storage buffers"), "{why}"),
-        other => panic!("{} words in chunks of {} bytes: {other:?}", words, chunk(storage)),
+        other => panic!("{} words in chunks of {} bytes: {other:?}", words, chunk(allowed + 1)),
     }
     // Every split the tracer takes: the renderer, three storage bindings more, is made
     // exactly when they fit, and refused by name otherwise.
@@ -171,6 +175,7 @@ fn a_scene_needing_too_many_bindings_is_a_clear_error() {
         let options = GpuOptions { max_binding_bytes: Some(1 << shift) };
         let Ok(tracer) = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) else { continue };
         let chunks = tracer.scene_bindings() as u64;
+        assert!(chunks <= allowed, "{chunks} bindings made, {allowed} allowed");
         let fits = chunks + 5 <= storage && chunks + 7 <= buffers;
         match GpuRenderer::new(&tracer, &RenderOptions::for_scene(scene.shading())) {
             Ok(_) => assert!(fits, "{chunks} bindings"),
