@@ -1281,3 +1281,65 @@ fn inspect_reports_overfull_leaves() {
     let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "cube.oct", "--json"])).unwrap();
     assert_eq!(json["overfull_leaves"]["leaves"].as_u64(), Some(0));
 }
+
+/// `scripts/gpu-check.sh`, the device check, fails and names the comparison when one
+/// GPU answer differs from the CPU's: a wrapper of the CLI flips one bit of the GPU's
+/// hits on the bunny's primary set, and the quick check (lavapipe in CI) reports that
+/// set as differing, every other comparison as the same, and exits 1.
+#[test]
+fn the_gpu_check_fails_when_a_gpu_answer_differs() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let wrapper = d.join("octrace-flipping");
+    std::fs::write(
+        &wrapper,
+        "#!/bin/sh\n\"$OCTRACE_REAL\" \"$@\" || exit $?\n\
+         case \" $* \" in *' --gpu '*) ;; *) exit 0 ;; esac\n\
+         case \" $* \" in *' --counts '*|*' --all-hits '*|*' --occluded '*) exit 0 ;; esac\n\
+         case \"$1 $*\" in 'trace '*primary*) ;; *) exit 0 ;; esac\n\
+         out=''; prev=''; for a in \"$@\"; do [ \"$prev\" = -o ] && out=\"$a\"; prev=\"$a\"; done\n\
+         python3 -c 'import sys; f = open(sys.argv[1], \"r+b\"); b = f.read(1); f.seek(0); f.write(bytes([b[0] ^ 1]))' \"$out\"\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&wrapper, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let json = d.join("check.json");
+    let out = Command::new("bash")
+        .arg(root.join("scripts/gpu-check.sh"))
+        .args(["run", "--quick", "--no-tests", "--no-bench", "--bundle"])
+        .arg(d.join("no-bundle"))
+        .arg("--octrace")
+        .arg(&wrapper)
+        .arg("--json")
+        .arg(&json)
+        .env("OCTRACE_REAL", env!("CARGO_BIN_EXE_octrace"))
+        .output()
+        .expect("bash runs");
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    if stdout.contains("no Vulkan adapter") && std::env::var("OCTRACE_REQUIRE_GPU").as_deref() != Ok("1") {
+        eprintln!("SKIPPED the_gpu_check_fails_when_a_gpu_answer_differs: no Vulkan adapter");
+        return;
+    }
+    assert_eq!(out.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert!(stdout.contains("FAILED"), "{stdout}");
+    let line = |name: &str| {
+        stdout.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} line: {stdout}")).to_string()
+    };
+    assert!(line("trace bunny primary nearest ").contains(" differs "), "{stdout}");
+    for name in
+        ["trace bunny shadow occluded", "trace bunny primary counts", "trace bunny primary every hit", "render effects"]
+    {
+        assert!(line(name).contains(" same "), "{name}: {stdout}");
+    }
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["ok"], false);
+    let failed: Vec<&str> = report["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["ok"] == false)
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(failed, ["trace bunny primary nearest"], "{stdout}");
+}

@@ -7,9 +7,19 @@ use std::sync::OnceLock;
 use octrace_bake::{bake, BuildParams, Mesh};
 use octrace_runtime::Scene;
 
-/// The repository's root.
+/// The repository's root: `OCTRACE_REPO` where set (a test binary carried to another
+/// machine, `scripts/gpu-check.sh`), else the checkout it was built from.
 pub fn repo_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ is in the repo").to_path_buf()
+    match std::env::var_os("OCTRACE_REPO") {
+        Some(root) => PathBuf::from(root),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ is in the repo").to_path_buf(),
+    }
+}
+
+/// The folder of shared meshes: `OCTRACE_SHARED` where set, else `../shared` beside
+/// the repository.
+pub fn shared_root() -> PathBuf {
+    std::env::var_os("OCTRACE_SHARED").map_or_else(|| repo_root().join("../shared"), PathBuf::from)
 }
 
 /// The zstd-compressed bunny the repository carries.
@@ -42,7 +52,7 @@ pub fn torus_scene() -> octrace_format::BakedScene {
 
 /// A test data file under `tests/data`.
 pub fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+    repo_root().join("tests/data").join(name)
 }
 
 /// zstd-compresses bytes (for `.zst` inputs made by tests).
@@ -68,14 +78,14 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
-/// A file of `../shared` (beside the repository), for the tests that use the shared
-/// meshes, or `None` with a skip notice when it is missing.
+/// A file of `../shared` (beside the repository, or `OCTRACE_SHARED`), for the tests
+/// that use the shared meshes, or `None` with a skip notice when it is missing.
 ///
 /// # Panics
 /// With `OCTRACE_REQUIRE_SHARED=1` (CI, which always has `../shared`), when the file
 /// is missing: a test CI runs must never pass by skipping.
 pub fn shared_file(relative: &str, test: &str) -> Option<PathBuf> {
-    let path = repo_root().join("../shared").join(relative);
+    let path = shared_root().join(relative);
     if path.exists() {
         return Some(path);
     }

@@ -12,7 +12,8 @@ use crate::output::thousands;
 pub(crate) struct Args {
     /// The .oct scene whose frame the rays are made for.
     pub scene: PathBuf,
-    /// primary (1024 x 1024 camera rays) or incoherent (1,000,000 random rays).
+    /// primary (1024 x 1024 camera rays), incoherent (1,000,000 random rays) or shadow
+    /// (from each primary hit towards the standard light; for `trace --occluded`).
     #[arg(long, value_enum, default_value_t = Set::Primary)]
     pub set: Set,
     /// The file to write; `-` writes the rays to standard output. Never the scene.
@@ -24,6 +25,7 @@ pub(crate) struct Args {
 pub(crate) enum Set {
     Primary,
     Incoherent,
+    Shadow,
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
@@ -34,6 +36,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let rays = match args.set {
         Set::Primary => raysets::primary(&frame),
         Set::Incoherent => raysets::incoherent(&frame, 1_000_000),
+        Set::Shadow => {
+            // As `bench` makes them: the primary set traced here, one ray a hit.
+            let primary = raysets::primary(&frame);
+            let hits = scene.intersect_batch(&primary);
+            let view = scene.view();
+            raysets::shadow(&frame, |i| hits[i].map(|h| (h.t, view.triangle(h.prim))))
+        }
     };
     crate::output::write_data(&args.output, &[bytemuck::cast_slice(&rays)])?;
     crate::report!(

@@ -6,10 +6,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 use octrace_format::{Effect, Shading};
+use octrace_runtime::gpu::GpuRenderer;
 use octrace_runtime::raysets::{Camera, Frame};
-use octrace_runtime::render::effects::{
-    render_effects, render_effects_gpu, EffectSet, RayCounts, RayKind, RenderOptions,
-};
+use octrace_runtime::render::effects::{render_effects, EffectSet, RayCounts, RayKind, RenderOptions};
 use octrace_runtime::render::{render, RenderMode};
 use octrace_runtime::Scene;
 
@@ -175,11 +174,19 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     } else {
         None
     };
+    // The render kernel is made (and compiled by the driver) before the clock starts:
+    // `gpu_setup_seconds` in --json.
+    let setup = Instant::now();
+    let renderer = match (&gpu, args.mode) {
+        (Some((_, tracer)), Mode::Shaded) => Some(GpuRenderer::new(tracer, &options)?),
+        _ => None,
+    };
+    let setup = setup.elapsed().as_secs_f64();
     let t = Instant::now();
     let (image, summary) = match args.mode {
         Mode::Shaded => {
-            let (radiance, counts) = match &gpu {
-                Some((_, tracer)) => render_effects_gpu(tracer, &camera, &options)?,
+            let (radiance, counts) = match &renderer {
+                Some(renderer) => renderer.render(&camera)?,
                 None => {
                     let bar = RowsBar::new(camera.height);
                     let out = render_effects(&scene, &camera, &options, &|rows| bar.set(rows));
@@ -206,6 +213,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             "scene": crate::show(&args.scene), "output": crate::show(&args.output),
             "width": camera.width, "height": camera.height, "mode": format!("{:?}", args.mode).to_lowercase(),
             "seconds": secs, "gpu": args.gpu, "notes": notes,
+            "gpu_setup_seconds": if args.gpu { Some(setup) } else { None },
         });
         match &summary {
             Summary::Effects(counts) => {

@@ -100,7 +100,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
         let (hits, timings) = tracer.trace_timed(&rays, args.occluded)?;
-        (hits, timings.kernel.as_secs_f64(), format!("kernel only, {}", gpu.describe()))
+        // The device's own clock where it has timestamps, else the host's.
+        let (kernel, clock) = match timings.kernel_device {
+            Some(d) => (d, "GPU timestamps"),
+            None => (timings.kernel, "host clock"),
+        };
+        (hits, kernel.as_secs_f64(), format!("kernel only, {clock}, {}", gpu.describe()))
     } else {
         let (hits, seconds) = trace_cpu(&scene, &rays, &args)?;
         (

@@ -11,8 +11,13 @@ use crate::output::thousands;
 pub(super) struct GpuSet {
     name: &'static str,
     rays: usize,
+    /// The kernel on the device (timestamp queries), where the adapter has them.
+    kernel_device: Option<Spread>,
+    /// The kernel as the host sees it (submitted to finished).
     kernel: Spread,
     end_to_end: Spread,
+    /// The set's first, untimed call (the driver may compile at its first dispatch).
+    first_call: Duration,
     hits: usize,
     sum_t: f64,
     /// Rays whose answer differs from the CPU's (another triangle at the same
@@ -23,7 +28,14 @@ pub(super) struct GpuSet {
 pub(super) struct GpuReport {
     adapter: String,
     exact_edges: bool,
-    upload: Duration,
+    unfused: bool,
+    subnormals: bool,
+    /// Uploading the scene and making the kernels.
+    setup: Duration,
+    /// Of which making the kernels.
+    compile: Duration,
+    loop_cap: Option<u32>,
+    lane_budget: Option<u32>,
     sets: Vec<GpuSet>,
 }
 
@@ -38,13 +50,17 @@ pub(super) fn measure(
     let gpu = GpuContext::new()?;
     let t = Instant::now();
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
-    let upload = t.elapsed();
+    let setup = t.elapsed();
     let mut out = Vec::new();
     for ((name, rays, occlusion), cpu) in sets.iter().zip(cpu) {
         let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
-        let (mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new());
+        let t = Instant::now();
+        tracer.trace_timed(rays, *occlusion)?;
+        let first_call = t.elapsed();
+        let (mut device, mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for _ in 0..runs {
             let (h, timings) = tracer.trace_timed(rays, *occlusion)?;
+            device.extend(timings.kernel_device.map(mrays));
             kernel.push(mrays(timings.kernel));
             total.push(mrays(timings.upload + timings.kernel + timings.download));
             hits = h;
@@ -58,14 +74,26 @@ pub(super) fn measure(
         out.push(GpuSet {
             name,
             rays: rays.len(),
+            kernel_device: (!device.is_empty()).then(|| Spread::of(device)),
             kernel: Spread::of(kernel),
             end_to_end: Spread::of(total),
+            first_call,
             hits: found,
             sum_t: if *occlusion { 0.0 } else { sum_t },
             differ,
         });
     }
-    Ok(GpuReport { adapter: gpu.describe(), exact_edges: tracer.uses_f64(), upload, sets: out })
+    Ok(GpuReport {
+        adapter: gpu.describe(),
+        exact_edges: tracer.uses_f64(),
+        unfused: tracer.unfused(),
+        subnormals: tracer.keeps_subnormals(),
+        setup,
+        compile: tracer.compile_time(),
+        loop_cap: tracer.loop_cap(),
+        lane_budget: tracer.lane_budget(),
+        sets: out,
+    })
 }
 
 /// The same answer: both miss, or hits at the same distance (1e-5 relative).
@@ -80,23 +108,40 @@ fn same(a: &Option<Hit>, b: &Option<Hit>) -> bool {
 impl GpuReport {
     pub(super) fn text(&self) -> String {
         let fmt = |s: &Spread| format!("{:.1} ({:.1}-{:.1})", s.median, s.min, s.max);
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
         let mut lines = vec![
             format!(
-                "GPU: {}; scene uploaded in {:.1} ms; {} edge functions",
+                "GPU: {}; scene uploaded and kernels made in {:.1} ms (making them {:.1} ms); {} edge functions; \
+                 {}; subnormals {}; {}",
                 self.adapter,
-                self.upload.as_secs_f64() * 1e3,
-                if self.exact_edges { "f64 (exact)" } else { "f32" }
+                ms(self.setup),
+                ms(self.compile),
+                if self.exact_edges { "f64 (exact)" } else { "f32" },
+                if self.unfused { "no fused multiply-adds" } else { "the driver may fuse multiply-adds" },
+                if self.subnormals { "kept" } else { "may be flushed" },
+                match self.loop_cap {
+                    Some(cap) => format!(
+                        "loops capped at {cap} iterations, {} an invocation (longer walks finish on the CPU)",
+                        self.lane_budget.unwrap_or(cap)
+                    ),
+                    None => "no loop cap".to_string(),
+                }
             ),
-            format!("{:<11} {:>9} {:>22} {:>22}  checksum", "set", "rays", "kernel Mrays/s", "with transfers"),
+            format!(
+                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>11}  checksum",
+                "set", "rays", "kernel Mrays/s (GPU)", "kernel (host)", "with transfers", "first call"
+            ),
         ];
         for s in &self.sets {
             let check = super::checksum(s.name, s.hits, s.sum_t);
             lines.push(format!(
-                "{:<11} {:>9} {:>22} {:>22}  {}; {} rays differ from the CPU",
+                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>8.1} ms  {}; {} rays differ from the CPU",
                 s.name,
                 thousands(s.rays as u64),
+                s.kernel_device.as_ref().map_or("no timestamps".to_string(), fmt),
                 fmt(&s.kernel),
                 fmt(&s.end_to_end),
+                ms(s.first_call),
                 check,
                 s.differ
             ));
@@ -108,9 +153,16 @@ impl GpuReport {
         json!({
             "adapter": self.adapter,
             "exact_edges": self.exact_edges,
-            "upload_s": self.upload.as_secs_f64(),
+            "unfused": self.unfused,
+            "keeps_subnormals": self.subnormals,
+            "setup_s": self.setup.as_secs_f64(),
+            "compile_s": self.compile.as_secs_f64(),
+            "loop_cap": self.loop_cap,
+            "lane_budget": self.lane_budget,
             "sets": self.sets.iter().map(|s| json!({
-                "set": s.name, "rays": s.rays, "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
+                "set": s.name, "rays": s.rays, "mrays_kernel_device": s.kernel_device,
+                "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
+                "first_call_s": s.first_call.as_secs_f64(),
                 "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,
             })).collect::<Vec<_>>(),
         })
