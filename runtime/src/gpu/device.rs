@@ -1,0 +1,288 @@
+//! The device and what its driver does: the Vulkan context, the loop cap some drivers
+//! put on shader invocations and the budget the kernels keep under it, GPU timestamps,
+//! and reading buffers back.
+
+use std::time::Duration;
+
+use super::{GpuError, GpuResult};
+
+/// A Vulkan device and its queue.
+#[derive(Debug)]
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// What the adapter is (name, driver, device type).
+    pub info: wgpu::AdapterInfo,
+}
+
+impl GpuContext {
+    /// Opens the first Vulkan adapter (a discrete GPU preferred), with the largest
+    /// storage bindings and buffers it allows and 64-bit floats where it has them.
+    ///
+    /// # Errors
+    /// [`GpuError::NoAdapter`] without a Vulkan driver; [`GpuError::Device`] if the
+    /// adapter refuses the device.
+    pub fn new() -> GpuResult<GpuContext> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::VULKAN;
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let limits = adapter.limits();
+        let required_limits = wgpu::Limits {
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
+            max_buffer_size: limits.max_buffer_size,
+            max_storage_buffers_per_shader_stage: limits.max_storage_buffers_per_shader_stage,
+            max_buffers_and_acceleration_structures_per_shader_stage: limits
+                .max_buffers_and_acceleration_structures_per_shader_stage,
+            ..wgpu::Limits::defaults()
+        };
+        // 64-bit floats for the exact paths; kernels compiled here (`spirv`); timestamps to
+        // time kernels on the device.
+        let wanted = wgpu::Features::SHADER_F64 | wgpu::Features::PASSTHROUGH_SHADERS | wgpu::Features::TIMESTAMP_QUERY;
+        let required_features = adapter.features() & wanted;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("octrace"),
+            required_features,
+            required_limits,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(GpuContext { device, queue, info: adapter.get_info() })
+    }
+
+    /// One line about the adapter: name, driver, type.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        format!("{} ({} {}, {:?})", i.name, i.driver, i.driver_info, i.device_type)
+    }
+}
+
+/// Threads a workgroup (`WORKGROUP_SIZE` in trace.wgsl) where the adapter runs loops
+/// without a cap.
+const WORKGROUP: u32 = 64;
+/// Workgroups a dispatch dimension may hold (WebGPU's limit).
+const MAX_WORKGROUPS: u32 = 65_535;
+
+/// How the kernels bound their loops on this adapter (see [`loop_cap`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Budget {
+    /// Invocations a workgroup.
+    pub workgroup: u32,
+    /// Loop iterations an invocation may run (`u32::MAX`: no bound).
+    pub loops: u32,
+}
+
+impl Budget {
+    /// The budget for an adapter that caps the loop iterations of a group of `lanes`
+    /// invocations run in lockstep at `cap` (`None`: no cap). The driver counts an
+    /// iteration of a loop whenever one lane of the group runs it, over all loops
+    /// together, so the group's count is at most the sum of its lanes' own: a lane gets
+    /// `cap / (2 lanes)`, and workgroups stay full. Half, because the driver's count
+    /// runs ahead of the kernel's own (lavapipe cut the render kernel short when the
+    /// kernel had counted 58,000 to 61,300 iterations alone: loops of its own making,
+    /// about 10 %). A lane that spends its budget stops, and the host finishes its ray
+    /// or pixel on the CPU. Where the group is the whole workgroup (`lanes` =
+    /// [`WORKGROUP`]), each invocation gets a workgroup of its own instead, and half the
+    /// cap.
+    pub(super) fn for_cap(cap: Option<u32>, lanes: u32) -> Budget {
+        match cap {
+            Some(cap) if lanes < WORKGROUP => Budget { workgroup: WORKGROUP, loops: cap / (2 * lanes.max(1)) },
+            Some(cap) => Budget { workgroup: 1, loops: cap / 2 },
+            None => Budget { workgroup: WORKGROUP, loops: u32::MAX },
+        }
+    }
+
+    /// Items (rays, pixels) a dispatch takes at most, given a preferred batch.
+    pub(super) fn per_dispatch(&self, preferred: u32) -> u32 {
+        preferred.min(MAX_WORKGROUPS * self.workgroup)
+    }
+}
+
+/// Loop iterations a probe kernel asks one invocation for.
+const PROBE_ITERATIONS: u32 = 1 << 20;
+
+/// The cap the adapter puts on the loop iterations of one shader invocation, if it has
+/// one: one invocation asked for 2^20 iterations of a loop reports how many it ran.
+/// Mesa's llvmpipe (lavapipe) stops every loop of an invocation once their iterations
+/// together reach 65,535 (its guard against infinite loops), without an error: a walk
+/// or a ray tree that needs more is cut short. Hardware drivers have no such cap.
+pub fn loop_cap(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Option<u32>> {
+    let source = format!(
+        "@group(0) @binding(0) var<storage, read_write> out: array<u32>;\n\
+         @compute @workgroup_size(1)\n\
+         fn main() {{\n    var n = 0u;\n    for (var i = 0u; i < {PROBE_ITERATIONS}u; i++) {{\n        n += 1u;\n    }}\n    out[0] = n;\n}}\n"
+    );
+    let ran = run_probe(device, queue, &source, "octrace loop probe", 1)?[0];
+    Ok((ran < PROBE_ITERATIONS).then_some(ran))
+}
+
+/// How many invocations of a workgroup share the adapter's loop count, under a loop
+/// `cap` ([`loop_cap`]): the lanes of one SIMD group, run in lockstep (lavapipe: 8, the
+/// 256-bit vectors of its LLVM build), or 64 if the whole workgroup does.
+/// Lane `l` of a workgroup of 64 runs a loop of `m` iterations (more than
+/// half the cap) at the `l`-th step of an outer loop: in a shared count, lane 0 runs
+/// whole and its neighbours are cut short, until the lane that begins the next group
+/// runs whole again.
+pub fn lockstep_lanes(device: &wgpu::Device, queue: &wgpu::Queue, cap: u32) -> GpuResult<u32> {
+    let m = cap / 2 + cap / 8;
+    let source = format!(
+        "@group(0) @binding(0) var<storage, read_write> out: array<u32>;\n\
+         @compute @workgroup_size({WORKGROUP})\n\
+         fn main(@builtin(local_invocation_index) l: u32) {{\n    var n = 0u;\n    \
+         for (var k = 0u; k < {WORKGROUP}u; k++) {{\n        if k == l {{\n            \
+         for (var j = 0u; j < {m}u; j++) {{\n                n += 1u;\n            }}\n        }}\n    }}\n    \
+         out[l] = n;\n}}\n"
+    );
+    let ran = run_probe(device, queue, &source, "octrace lockstep probe", WORKGROUP)?;
+    Ok((1..WORKGROUP).find(|&l| ran[l as usize] == m).unwrap_or(WORKGROUP))
+}
+
+/// Runs a one-workgroup probe kernel writing `words` words to its one binding, and
+/// reads them back.
+pub(super) fn run_probe(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    source: &str,
+    label: &str,
+    words: u32,
+) -> GpuResult<Vec<u32>> {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: 4 * u64::from(words),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }],
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
+    queue.submit([encoder.finish()]);
+    read_buffer::<u32>(device, queue, &out, 4 * u64::from(words))
+}
+
+/// Two timestamps around each compute pass, where the device has timestamp queries.
+#[derive(Debug)]
+pub(super) struct Stopwatch {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    /// Nanoseconds a timestamp tick.
+    period: f64,
+}
+
+impl Stopwatch {
+    pub(super) fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Option<Stopwatch> {
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("octrace kernel time"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("octrace kernel time"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        Some(Stopwatch { queries, resolve, period: f64::from(queue.get_timestamp_period()) })
+    }
+
+    /// The pass's timestamp writes.
+    pub(super) fn writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
+    /// Resolves the pass's timestamps (after the pass, in the same encoder).
+    pub(super) fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2, &self.resolve, 0);
+    }
+
+    /// The time between the pass's two timestamps (once its work is done).
+    pub(super) fn elapsed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Duration> {
+        let ticks = read_buffer::<u64>(device, queue, &self.resolve, 16)?;
+        Ok(Duration::from_nanos((ticks[1].saturating_sub(ticks[0]) as f64 * self.period) as u64))
+    }
+}
+
+/// Waits for the device's work.
+pub(super) fn wait(device: &wgpu::Device) -> GpuResult<()> {
+    device
+        .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
+        .map(drop)
+        .map_err(|e| GpuError::Device(e.to_string()))
+}
+
+/// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
+pub(super) fn read_buffer<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+) -> GpuResult<Vec<T>> {
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("octrace readback"),
+        size: bytes.max(4),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    read_buffer_into(device, queue, buffer, &readback, bytes)
+}
+
+/// The first `bytes` of `buffer`, through `readback` (a mappable buffer).
+pub(super) fn read_buffer_into<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    readback: &wgpu::Buffer,
+    bytes: u64,
+) -> GpuResult<Vec<T>> {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, readback, 0, bytes);
+    queue.submit([encoder.finish()]);
+    let slice = readback.slice(..bytes);
+    let (send, receive) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = send.send(r);
+    });
+    wait(device)?;
+    receive.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
+    let out = {
+        let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
+        bytemuck::cast_slice(&mapped).to_vec()
+    };
+    readback.unmap();
+    Ok(out)
+}
