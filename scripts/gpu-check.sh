@@ -5,8 +5,9 @@
 #   scripts/gpu-check.sh pack [--bundle DIR]
 #       Here, with the Rust toolchain: builds the CLI (release) and the integration test
 #       binary, strips them, and puts them in the bundle (default .gpu-check/, ignored by
-#       git) with the dragon (gzip) and the Vulkan loader's Debian package, for a GPU
-#       machine that has a driver but no toolchain, no network, maybe no loader.
+#       git) with the dragon (gzip) and the Debian packages of the Vulkan loader and
+#       glvnd, for a GPU machine that has a driver but no toolchain, no network, maybe no
+#       loader (NVIDIA's Vulkan driver also needs glvnd's libGLdispatch).
 #   scripts/gpu-check.sh run [--bundle DIR] [--json FILE] [--quick] [--no-tests]
 #                            [--no-bench] [--octrace BIN]
 #       On the GPU machine, from the repository's root (the tests read tests/data and
@@ -67,15 +68,17 @@ for line in sys.stdin:
     else
         echo "no ../shared/meshes/dragon.obj: the bundle checks the bunny only" >&2
     fi
-    if ! ls "$bundle"/vulkan/libvulkan1_*.deb >/dev/null 2>&1; then
-        echo "== the Vulkan loader (libvulkan1, amd64)"
-        local lists
-        lists=$(mktemp -d)
-        mkdir -p "$lists/partial"
-        local o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 "-oDir::State::Lists=$lists")
+    if ! ls "$bundle"/vulkan/libvulkan1_*.deb "$bundle"/vulkan/libglvnd0_*.deb >/dev/null 2>&1; then
+        # The Vulkan loader, and glvnd, which NVIDIA's Vulkan driver (libGLX_nvidia) loads.
+        echo "== the Vulkan loader and glvnd (Debian packages, amd64)"
+        local apt
+        apt=$(mktemp -d)
+        mkdir -p "$apt/lists/partial" "$apt/cache"
+        local o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 "-oDir::State::Lists=$apt/lists"
+            "-oDir::Cache=$apt/cache")
         apt-get "${o[@]}" update -qq
-        (cd "$bundle/vulkan" && apt-get "${o[@]}" download libvulkan1)
-        rm -rf "$lists"
+        (cd "$bundle/vulkan" && apt-get "${o[@]}" download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 libopengl0 libgles2)
+        rm -rf "$apt"
     fi
     du -sh "$bundle"
     echo "bundle ready: carry it to the GPU machine with the repository, then: scripts/gpu-check.sh run --bundle $bundle"
@@ -100,14 +103,21 @@ run() {
     mkdir -p "$(dirname "$json")"
     export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$work}"
 
-    # The Vulkan loader: a GPU machine may have the driver and not the loader.
-    if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1 '; then
+    # The Vulkan loader, and the glvnd dispatch library NVIDIA's Vulkan driver loads
+    # (without it the loader finds the driver and gets no vkCreateInstance from it): a
+    # GPU machine may have the driver and not these. Wanted only where a driver asks.
+    local missing=""
+    ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1 ' || missing="libvulkan.so.1"
+    if ls /usr/share/vulkan/icd.d/nvidia* /usr/local/nvidia/share/vulkan/icd.d/nvidia* >/dev/null 2>&1; then
+        ldconfig -p 2>/dev/null | grep -q 'libGLdispatch.so.0 ' || missing="$missing libGLdispatch.so.0"
+    fi
+    if [ -n "$missing" ]; then
         if ls "$bundle"/vulkan/*.deb >/dev/null 2>&1 && [ "$(id -u)" -eq 0 ]; then
-            echo "== no Vulkan loader: unpacking the bundle's"
+            echo "== missing $missing: unpacking the bundle's packages"
             for f in "$bundle"/vulkan/*.deb; do dpkg -x "$f" /; done
             ldconfig
         else
-            echo "gpu-check: no Vulkan loader (libvulkan.so.1), and none to unpack as root" >&2
+            echo "gpu-check: missing $missing, and no bundle packages to unpack as root" >&2
         fi
     fi
     # NVIDIA's driver may keep its Vulkan manifest where the loader does not look.

@@ -1343,3 +1343,28 @@ fn the_gpu_check_fails_when_a_gpu_answer_differs() {
         .collect();
     assert_eq!(failed, ["trace bunny primary nearest"], "{stdout}");
 }
+
+/// `bench --gpu` compares the GPU's nearest hits with the CPU's bit for bit where the
+/// kernel computes as the CPU does (f64 on the adapter), times the kernel on the GPU's
+/// clock where it has timestamps and the first call apart; `rays --set shadow` writes
+/// the shadow set `bench` traces.
+#[test]
+fn bench_on_the_gpu_compares_bits_and_times_the_kernel_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let args = ["bench", "cube.oct", "--gpu", "--no-peer", "--no-queries", "--runs", "5", "--json"];
+    let Some(out) = on_gpu(d, &args, "bench_on_the_gpu_compares_bits_and_times_the_kernel_apart") else { return };
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let gpu = &json["gpu"];
+    assert_eq!(gpu["compared_bits"], gpu["exact_edges"], "{gpu}");
+    for s in gpu["sets"].as_array().unwrap() {
+        assert_eq!(s["differ_from_cpu"], 0, "{s}");
+        assert!(s["first_call_s"].as_f64().unwrap() > 0.0, "{s}");
+        assert!(s["mrays_kernel"]["median"].as_f64().unwrap() > 0.0, "{s}");
+    }
+    ok(d, &["rays", "cube.oct", "--set", "shadow", "-o", "shadow.bin"]);
+    let shadow = json["sets"].as_array().unwrap().iter().find(|s| s["set"] == "shadow").unwrap();
+    assert_eq!(shadow["rays"].as_u64(), Some(std::fs::metadata(d.join("shadow.bin")).unwrap().len() / 32));
+}

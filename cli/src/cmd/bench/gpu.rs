@@ -20,14 +20,18 @@ pub(super) struct GpuSet {
     first_call: Duration,
     hits: usize,
     sum_t: f64,
-    /// Rays whose answer differs from the CPU's (another triangle at the same
-    /// distance counts as the same answer).
+    /// Rays whose answer differs from the CPU's: in any bit of (triangle, t, u, v)
+    /// where the kernel computes as the CPU does (f64 on the adapter, the watertight
+    /// test), else by another distance (1e-5 t; another triangle at the same distance
+    /// counts as the same answer).
     differ: usize,
 }
 
 pub(super) struct GpuReport {
     adapter: String,
     exact_edges: bool,
+    /// Whether nearest hits were compared bit for bit.
+    bitwise: bool,
     unfused: bool,
     subnormals: bool,
     /// Uploading the scene and making the kernels.
@@ -46,6 +50,7 @@ pub(super) fn measure(
     sets: &[(&'static str, Vec<Ray>, bool)],
     cpu: &[super::SetResult],
     runs: usize,
+    watertight: bool,
 ) -> anyhow::Result<GpuReport> {
     let gpu = GpuContext::new()?;
     let t = Instant::now();
@@ -68,7 +73,12 @@ pub(super) fn measure(
         let differ = if *occlusion {
             cpu.occluded.iter().zip(&hits).filter(|(c, g)| **c != g.is_some()).count()
         } else {
-            cpu.nearest.iter().zip(&hits).filter(|(c, g)| !same(c, g)).count()
+            let bitwise = watertight && tracer.uses_f64();
+            cpu.nearest
+                .iter()
+                .zip(&hits)
+                .filter(|(c, g)| if bitwise { bits(c) != bits(g) } else { !same(c, g) })
+                .count()
         };
         let (found, sum_t) = super::hit_sums(&hits);
         out.push(GpuSet {
@@ -86,6 +96,7 @@ pub(super) fn measure(
     Ok(GpuReport {
         adapter: gpu.describe(),
         exact_edges: tracer.uses_f64(),
+        bitwise: watertight && tracer.uses_f64(),
         unfused: tracer.unfused(),
         subnormals: tracer.keeps_subnormals(),
         setup,
@@ -94,6 +105,11 @@ pub(super) fn measure(
         lane_budget: tracer.lane_budget(),
         sets: out,
     })
+}
+
+/// A hit's bits: (triangle, t, u, v).
+fn bits(h: &&Option<Hit>) -> Option<[u32; 4]> {
+    h.map(|h| [h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()])
 }
 
 /// The same answer: both miss, or hits at the same distance (1e-5 relative).
@@ -135,7 +151,7 @@ impl GpuReport {
         for s in &self.sets {
             let check = super::checksum(s.name, s.hits, s.sum_t);
             lines.push(format!(
-                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>8.1} ms  {}; {} rays differ from the CPU",
+                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>8.1} ms  {}; {} rays differ from the CPU{}",
                 s.name,
                 thousands(s.rays as u64),
                 s.kernel_device.as_ref().map_or("no timestamps".to_string(), fmt),
@@ -143,7 +159,8 @@ impl GpuReport {
                 fmt(&s.end_to_end),
                 ms(s.first_call),
                 check,
-                s.differ
+                s.differ,
+                if self.bitwise || s.name == "shadow" { "" } else { " (by distance)" }
             ));
         }
         lines.join("\n")
@@ -153,6 +170,7 @@ impl GpuReport {
         json!({
             "adapter": self.adapter,
             "exact_edges": self.exact_edges,
+            "compared_bits": self.bitwise,
             "unfused": self.unfused,
             "keeps_subnormals": self.subnormals,
             "setup_s": self.setup.as_secs_f64(),

@@ -223,7 +223,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         }
         results.push(r);
     }
-    let gpu = if args.gpu { Some(gpu::measure(&loaded.scene, &sets, &results, args.runs)?) } else { None };
+    let gpu = if args.gpu {
+        Some(gpu::measure(&loaded.scene, &sets, &results, args.runs, !args.moller_trumbore)?)
+    } else {
+        None
+    };
     let queries = match sets.iter().find(|s| s.0 == "incoherent") {
         Some((_, rays, _)) if !args.no_queries => {
             #[cfg(feature = "embree")]
