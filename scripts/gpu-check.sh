@@ -337,7 +337,8 @@ for name, result, detail in records:
             cpu_rate = f"{med(c.get('mrays_all_threads'))} Mrays/s ({b.get('threads')} threads)"
             rows.append((f"bench {scene} {s['set']}", f"{med(s.get('mrays_kernel_device'))}",
                          f"kernel Mrays/s on the GPU's clock; host clock {med(s['mrays_kernel'])}, with transfers "
-                         f"{med(s['mrays_end_to_end'])}; first call {s['first_call_s'] * 1e3:.0f} ms; "
+                         f"{med(s['mrays_end_to_end'])} (up {med(s.get('upload_ms'))} + down "
+                         f"{med(s.get('download_ms'))} ms); first call {s['first_call_s'] * 1e3:.0f} ms; "
                          f"CPU {cpu_rate}; {s['differ_from_cpu']} rays differ"))
             checks.append({"name": f"bench {scene} {s['set']}", "ok": s["differ_from_cpu"] == 0, **s})
         continue

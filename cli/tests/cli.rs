@@ -1363,6 +1363,8 @@ fn bench_on_the_gpu_compares_bits_and_times_the_kernel_apart() {
         assert_eq!(s["differ_from_cpu"], 0, "{s}");
         assert!(s["first_call_s"].as_f64().unwrap() > 0.0, "{s}");
         assert!(s["mrays_kernel"]["median"].as_f64().unwrap() > 0.0, "{s}");
+        assert!(s["upload_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
+        assert!(s["download_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
     }
     ok(d, &["rays", "cube.oct", "--set", "shadow", "-o", "shadow.bin"]);
     let shadow = json["sets"].as_array().unwrap().iter().find(|s| s["set"] == "shadow").unwrap();

@@ -16,6 +16,9 @@ pub(super) struct GpuSet {
     /// The kernel as the host sees it (submitted to finished).
     kernel: Spread,
     end_to_end: Spread,
+    /// Milliseconds uploading the rays and reading the hits back.
+    upload_ms: Spread,
+    download_ms: Spread,
     /// The set's first, untimed call (the driver may compile at its first dispatch).
     first_call: Duration,
     hits: usize,
@@ -63,11 +66,14 @@ pub(super) fn measure(
         tracer.trace_timed(rays, *occlusion)?;
         let first_call = t.elapsed();
         let (mut device, mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut up, mut down) = (Vec::new(), Vec::new());
         for _ in 0..runs {
             let (h, timings) = tracer.trace_timed(rays, *occlusion)?;
             device.extend(timings.kernel_device.map(mrays));
             kernel.push(mrays(timings.kernel));
             total.push(mrays(timings.upload + timings.kernel + timings.download));
+            up.push(timings.upload.as_secs_f64() * 1e3);
+            down.push(timings.download.as_secs_f64() * 1e3);
             hits = h;
         }
         let differ = if *occlusion {
@@ -87,6 +93,8 @@ pub(super) fn measure(
             kernel_device: (!device.is_empty()).then(|| Spread::of(device)),
             kernel: Spread::of(kernel),
             end_to_end: Spread::of(total),
+            upload_ms: Spread::of(up),
+            download_ms: Spread::of(down),
             first_call,
             hits: found,
             sum_t: if *occlusion { 0.0 } else { sum_t },
@@ -144,19 +152,20 @@ impl GpuReport {
                 }
             ),
             format!(
-                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>11}  checksum",
-                "set", "rays", "kernel Mrays/s (GPU)", "kernel (host)", "with transfers", "first call"
+                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>15} {:>11}  checksum",
+                "set", "rays", "kernel Mrays/s (GPU)", "kernel (host)", "with transfers", "up + down ms", "first call"
             ),
         ];
         for s in &self.sets {
             let check = super::checksum(s.name, s.hits, s.sum_t);
             lines.push(format!(
-                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>8.1} ms  {}; {} rays differ from the CPU{}",
+                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>15} {:>8.1} ms  {}; {} rays differ from the CPU{}",
                 s.name,
                 thousands(s.rays as u64),
                 s.kernel_device.as_ref().map_or("no timestamps".to_string(), fmt),
                 fmt(&s.kernel),
                 fmt(&s.end_to_end),
+                format!("{:.1} + {:.1}", s.upload_ms.median, s.download_ms.median),
                 ms(s.first_call),
                 check,
                 s.differ,
@@ -180,6 +189,7 @@ impl GpuReport {
             "sets": self.sets.iter().map(|s| json!({
                 "set": s.name, "rays": s.rays, "mrays_kernel_device": s.kernel_device,
                 "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
+                "upload_ms": s.upload_ms, "download_ms": s.download_ms,
                 "first_call_s": s.first_call.as_secs_f64(),
                 "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,
             })).collect::<Vec<_>>(),
