@@ -269,6 +269,21 @@ pub(super) fn read_buffer_into<T: bytemuck::Pod>(
     readback: &wgpu::Buffer,
     bytes: u64,
 ) -> GpuResult<Vec<T>> {
+    let mut out = Vec::new();
+    read_buffer_append(device, queue, buffer, readback, bytes, &mut out)?;
+    Ok(out)
+}
+
+/// The first `bytes` of `buffer`, through `readback`, appended to `out` straight from
+/// the mapped range (one copy on the host).
+pub(super) fn read_buffer_append<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    readback: &wgpu::Buffer,
+    bytes: u64,
+    out: &mut Vec<T>,
+) -> GpuResult<()> {
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_buffer_to_buffer(buffer, 0, readback, 0, bytes);
     queue.submit([encoder.finish()]);
@@ -279,10 +294,10 @@ pub(super) fn read_buffer_into<T: bytemuck::Pod>(
     });
     wait(device)?;
     receive.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
-    let out = {
+    {
         let mapped = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?;
-        bytemuck::cast_slice(&mapped).to_vec()
-    };
+        out.extend_from_slice(bytemuck::cast_slice(&mapped));
+    }
     readback.unmap();
-    Ok(out)
+    Ok(())
 }

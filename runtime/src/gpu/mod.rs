@@ -42,7 +42,7 @@ pub use device::{lockstep_lanes, loop_cap, GpuContext};
 pub use render::{GpuRenderer, MAX_GPU_DEPTH};
 
 use buffers::{bind_group_layout, check_bindings, offsets_of, upload, TRACE_ARRAYS, TRACE_EXTRA_BINDINGS};
-use device::{read_buffer, read_buffer_into, wait, Budget, Stopwatch};
+use device::{read_buffer, read_buffer_append, read_buffer_into, wait, Budget, Stopwatch};
 use source::shader_source;
 
 use crate::ray::{Hit, Ray};
@@ -451,7 +451,7 @@ impl<'s> GpuTracer<'s> {
 
             let t = Instant::now();
             let bytes = (part.len() * std::mem::size_of::<HitOut>()) as u64;
-            out.extend(self.read_back_into::<HitOut>(&hit_buffer, &readback, bytes)?);
+            read_buffer_append(&self.device, &self.queue, &hit_buffer, &readback, bytes, &mut out)?;
             timings.download += t.elapsed();
         }
         Ok((out, timings))
