@@ -177,15 +177,25 @@ pub(super) fn run_probe(
         layout: &pipeline.get_bind_group_layout(0),
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }],
     });
+    dispatch_once(device, queue, &pipeline, &group);
+    read_buffer::<u32>(device, queue, &out, 4 * u64::from(words))
+}
+
+/// Submits one workgroup of `pipeline` with `group` bound (the probes').
+pub(super) fn dispatch_once(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    pipeline: &wgpu::ComputePipeline,
+    group: &wgpu::BindGroup,
+) {
     let mut encoder = device.create_command_encoder(&Default::default());
     {
         let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &group, &[]);
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(1, 1, 1);
     }
     queue.submit([encoder.finish()]);
-    read_buffer::<u32>(device, queue, &out, 4 * u64::from(words))
 }
 
 /// Two timestamps around each compute pass, where the device has timestamp queries.
@@ -258,19 +268,8 @@ pub(super) fn read_buffer<T: bytemuck::Pod>(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    read_buffer_into(device, queue, buffer, &readback, bytes)
-}
-
-/// The first `bytes` of `buffer`, through `readback` (a mappable buffer).
-pub(super) fn read_buffer_into<T: bytemuck::Pod>(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    buffer: &wgpu::Buffer,
-    readback: &wgpu::Buffer,
-    bytes: u64,
-) -> GpuResult<Vec<T>> {
     let mut out = Vec::new();
-    read_buffer_append(device, queue, buffer, readback, bytes, &mut out)?;
+    read_buffer_append(device, queue, buffer, &readback, bytes, &mut out)?;
     Ok(out)
 }
 

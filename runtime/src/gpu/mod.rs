@@ -42,7 +42,7 @@ pub use device::{lockstep_lanes, loop_cap, GpuContext};
 pub use render::{GpuRenderer, MAX_GPU_DEPTH};
 
 use buffers::{bind_group_layout, check_bindings, offsets_of, upload, TRACE_ARRAYS, TRACE_EXTRA_BINDINGS};
-use device::{read_buffer, read_buffer_append, read_buffer_into, wait, Budget, Stopwatch};
+use device::{dispatch_once, read_buffer, read_buffer_append, wait, Budget, Stopwatch};
 use source::shader_source;
 
 use crate::ray::{Hit, Ray};
@@ -502,19 +502,7 @@ impl<'s> GpuTracer<'s> {
 
     /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
-        let readback =
-            self.buffer("octrace readback", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        self.read_back_into(buffer, &readback, bytes)
-    }
-
-    /// The first `bytes` of `buffer`, through `readback` (a mappable buffer).
-    fn read_back_into<T: bytemuck::Pod>(
-        &self,
-        buffer: &wgpu::Buffer,
-        readback: &wgpu::Buffer,
-        bytes: u64,
-    ) -> GpuResult<Vec<T>> {
-        read_buffer_into(&self.device, &self.queue, buffer, readback, bytes)
+        read_buffer(&self.device, &self.queue, buffer, bytes)
     }
 
     fn wait(&self) -> GpuResult<()> {

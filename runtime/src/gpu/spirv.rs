@@ -54,7 +54,8 @@ impl Compiler {
             // SAFETY: the words are naga's SPIR-V of a module naga validated, with
             // bounds checks on every index and buffer access (Restrict), plus
             // decorations that only constrain the driver (`NoContraction`) and an
-            // execution mode the probe showed this driver honours.
+            // execution mode the probe showed this driver honours (or, in the probe,
+            // inside an error scope that catches a driver refusing it).
             unsafe {
                 device.create_shader_module_passthrough(wgpu::ShaderModuleDescriptorPassthrough {
                     label: Some(label),
@@ -196,7 +197,6 @@ fn string_words(s: &str) -> Vec<u32> {
 fn keeps_subnormals(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<bool> {
     const PROBE: &str = "@group(0) @binding(0) var<storage, read_write> io: array<f32>;\n\
         @compute @workgroup_size(1)\nfn main() {\n    io[1] = io[0] * io[0];\n}\n";
-    let words = compile(PROBE, "main", &[], true)?;
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("octrace subnormal probe"),
         entries: &[wgpu::BindGroupLayoutEntry {
@@ -216,26 +216,8 @@ fn keeps_subnormals(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<boo
         immediate_size: 0,
     });
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    // SAFETY: as in `Compiler::pipeline`.
-    let module = unsafe {
-        device.create_shader_module_passthrough(wgpu::ShaderModuleDescriptorPassthrough {
-            label: Some("octrace subnormal probe"),
-            entry_points: std::borrow::Cow::Owned(vec![wgpu::PassthroughShaderEntryPoint {
-                name: "main".into(),
-                workgroup_size: (1, 1, 1),
-            }]),
-            spirv: Some(std::borrow::Cow::Owned(words)),
-            ..Default::default()
-        })
-    };
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("octrace subnormal probe"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let probe = Compiler { passthrough: true, denormals: true };
+    let pipeline = probe.pipeline(device, &pipeline_layout, PROBE, "main", &[], "octrace subnormal probe")?;
     if pollster::block_on(scope.pop()).is_some() {
         return Ok(false);
     }
@@ -252,14 +234,7 @@ fn keeps_subnormals(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<boo
         layout: &layout,
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: io.as_entire_binding() }],
     });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups(1, 1, 1);
-    }
-    queue.submit([encoder.finish()]);
+    super::dispatch_once(device, queue, &pipeline, &group);
     let out = super::read_buffer::<f32>(device, queue, &io, 8)?;
     Ok(out[1] == 2f32.powi(-140))
 }
