@@ -68,6 +68,17 @@ impl GpuContext {
 /// Threads a workgroup (`WORKGROUP_SIZE` in trace.wgsl) where the adapter runs loops
 /// without a cap.
 const WORKGROUP: u32 = 64;
+/// Threads a workgroup where the adapter has no loop cap: [`WORKGROUP`], or
+/// `OCTRACE_GPU_WORKGROUP` (32, 64, 128 or 256; WebGPU's default limit is 256) to measure
+/// occupancy on a given GPU. Answers do not depend on it: every ray is walked by one
+/// invocation alone.
+fn uncapped_workgroup() -> u32 {
+    match std::env::var("OCTRACE_GPU_WORKGROUP").ok().and_then(|v| v.parse::<u32>().ok()) {
+        Some(n @ (32 | 64 | 128 | 256)) => n,
+        _ => WORKGROUP,
+    }
+}
+
 /// Workgroups a dispatch dimension may hold (WebGPU's limit).
 const MAX_WORKGROUPS: u32 = 65_535;
 
@@ -96,7 +107,7 @@ impl Budget {
         match cap {
             Some(cap) if lanes < WORKGROUP => Budget { workgroup: WORKGROUP, loops: cap / (2 * lanes.max(1)) },
             Some(cap) => Budget { workgroup: 1, loops: cap / 2 },
-            None => Budget { workgroup: WORKGROUP, loops: u32::MAX },
+            None => Budget { workgroup: uncapped_workgroup(), loops: u32::MAX },
         }
     }
 
