@@ -5,9 +5,10 @@
 #   scripts/gpu-check.sh pack [--bundle DIR]
 #       Here, with the Rust toolchain: builds the CLI (release) and the integration test
 #       binary, strips them, and puts them in the bundle (default .gpu-check/, ignored by
-#       git) with the dragon (gzip) and the Debian packages of the Vulkan loader and
-#       glvnd, for a GPU machine that has a driver but no toolchain, no network, maybe no
-#       loader (NVIDIA's Vulkan driver also needs glvnd's libGLdispatch).
+#       git) with the dragon (gzip), DamagedHelmet and the Debian packages of the Vulkan
+#       loader and glvnd, for a GPU machine that has a driver but no toolchain, no
+#       network, maybe no loader (NVIDIA's Vulkan driver also needs glvnd's
+#       libGLdispatch).
 #   scripts/gpu-check.sh run [--bundle DIR] [--json FILE] [--quick] [--no-tests]
 #                            [--no-bench] [--octrace BIN]
 #       On the GPU machine, from the repository's root (the tests read tests/data and
@@ -67,6 +68,11 @@ for line in sys.stdin:
         [ -e "$bundle/shared/meshes/dragon.obj.gz" ] || gzip -9 -c ../shared/meshes/dragon.obj >"$bundle/shared/meshes/dragon.obj.gz"
     else
         echo "no ../shared/meshes/dragon.obj: the bundle checks the bunny only" >&2
+    fi
+    # The GPU tests' real asset (emissive textures).
+    if [ -e ../shared/gltf/DamagedHelmet.glb ]; then
+        mkdir -p "$bundle/shared/gltf"
+        cp ../shared/gltf/DamagedHelmet.glb "$bundle/shared/gltf/"
     fi
     if ! ls "$bundle"/vulkan/libvulkan1_*.deb "$bundle"/vulkan/libglvnd0_*.deb >/dev/null 2>&1; then
         # The Vulkan loader, and glvnd, which NVIDIA's Vulkan driver (libGLX_nvidia) loads.
@@ -136,6 +142,12 @@ run() {
             gunzip -c "$dragon_gz" >"$work/shared/meshes/dragon.obj"
         elif [ -e ../shared/meshes/dragon.obj ]; then
             ln -s "$(realpath ../shared/meshes/dragon.obj)" "$work/shared/meshes/dragon.obj"
+        fi
+        local helmet="$bundle/shared/gltf/DamagedHelmet.glb"
+        [ -e "$helmet" ] || helmet=../shared/gltf/DamagedHelmet.glb
+        if [ -e "$helmet" ]; then
+            mkdir -p "$work/shared/gltf"
+            ln -s "$(realpath "$helmet")" "$work/shared/gltf/DamagedHelmet.glb"
         fi
         if [ -e "$work/shared/meshes/dragon.obj" ]; then
             bake "$work/shared/meshes/dragon.obj" dragon

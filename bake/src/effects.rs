@@ -1,7 +1,7 @@
 //! The effects a scene calls for, decided once at bake from its materials and lights,
 //! each with the reason a user can check.
 
-use octrace_format::{AlphaMode, Effect, EffectReason, Material, VISIBLE_WEIGHT};
+use octrace_format::{AlphaMode, Effect, EffectReason, LitTexels, Material, VISIBLE_WEIGHT};
 
 use crate::mesh::Mesh;
 
@@ -10,7 +10,10 @@ use crate::mesh::Mesh;
 ///
 /// * shadows: any punctual light or emissive triangle, when some surface is lit (not
 ///   `KHR_materials_unlit`);
-/// * soft shadows: emissive triangles (area lights), likewise;
+/// * soft shadows: emissive triangles (area lights), likewise; a triangle whose
+///   material's emissive texture is black over all the texels it can read is none,
+///   and emission through textures lights nothing in a scene without other light
+///   (punctual lights or emitters without a texture): the headlight lights it;
 /// * reflection: a lit material whose mirror weight ([`Material::mirror`]) is
 ///   visible, or a transmissive one with an index of refraction above 1 (its Fresnel
 ///   reflection);
@@ -40,7 +43,21 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     }
     let used_materials: Vec<(&Material, usize)> =
         mesh.materials.iter().zip(counts.iter().copied()).filter(|&(_, n)| n > 0).collect();
-    let emitters: Vec<(&Material, usize)> = used_materials.iter().copied().filter(|(m, _)| m.is_emissive()).collect();
+    let emitting = emitting_triangles(mesh, used);
+    // (material, its triangles, those that emit) of each material with emitting triangles.
+    let emitters: Vec<(&Material, usize, usize)> = mesh
+        .materials
+        .iter()
+        .zip(&counts)
+        .zip(&emitting)
+        .filter(|&(_, &lit)| lit > 0)
+        .map(|((m, &n), &lit)| (m, n, lit))
+        .collect();
+    // Emission through a texture lights the scene only beside other light: alone, it
+    // shows where it is seen and the renderer's headlight lights the scene, as a glTF
+    // viewer shows it (runtime `Emitters::need_headlight`).
+    let lights_scene = !mesh.lights.is_empty() || emitters.iter().any(|(m, ..)| m.emissive_texture.is_none());
+    let emitters = if lights_scene { emitters } else { Vec::new() };
     let mut effects = Vec::new();
     let mut add = |effect: Effect, reasons: Vec<String>| {
         if let Some(first) = reasons.first() {
@@ -51,10 +68,20 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
             effects.push(EffectReason { effect, reason });
         }
     };
-    let area = |(m, n): &(&Material, usize)| {
+    // "area light: material 'lamp' emits (1.00, 1.00, 1.00) on 2 triangles", and with an
+    // emissive texture "... times texture 'image 2' on 120 of 15452 triangles (the rest
+    // under black texels)".
+    let area = |&(m, n, lit): &(&Material, usize, usize)| {
         let e = m.emissive;
-        let s = if *n == 1 { "" } else { "s" };
-        format!("area light: material '{}' emits ({:.2}, {:.2}, {:.2}) on {n} triangle{s}", m.name, e[0], e[1], e[2])
+        let s = if n == 1 { "" } else { "s" };
+        let emits = format!("area light: material '{}' emits ({:.2}, {:.2}, {:.2})", m.name, e[0], e[1], e[2]);
+        match m.emissive_texture.and_then(|t| mesh.textures.get(t as usize)) {
+            Some(t) if lit < n => {
+                format!("{emits} times texture {} on {lit} of {n} triangles (the rest under black texels)", t.name)
+            }
+            Some(t) => format!("{emits} times texture {} on {n} triangle{s}", t.name),
+            None => format!("{emits} on {n} triangle{s}"),
+        }
     };
     // A mesh without materials is lit (the renderer's plain material).
     let lit = used_materials.is_empty() || used_materials.iter().any(|(m, _)| !m.unlit);
@@ -104,4 +131,26 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     });
     add(Effect::Alpha, cut.collect());
     effects
+}
+
+/// How many of the triangles in `used` emit light, per material: all of an emissive
+/// material's, or, with an emissive texture, those whose texels are not all black
+/// ([`LitTexels::any_lit`], as the renderer decides its area lights).
+fn emitting_triangles(mesh: &Mesh, used: &[u32]) -> Vec<usize> {
+    let mut emitting = vec![0usize; mesh.materials.len()];
+    let mut tables: Vec<Option<LitTexels>> = vec![None; mesh.textures.len()];
+    for &t in used {
+        let Some(&id) = mesh.material_ids.get(t as usize) else { continue };
+        let Some(m) = mesh.materials.get(id as usize).filter(|m| m.is_emissive()) else { continue };
+        let lit = match m.emissive_texture.filter(|&i| (i as usize) < mesh.textures.len()) {
+            Some(i) => {
+                let table =
+                    tables[i as usize].get_or_insert_with(|| LitTexels::new(&mesh.textures[i as usize], &mesh.texels));
+                table.any_lit(mesh.uvs.get(t as usize).copied().unwrap_or_default())
+            }
+            None => true,
+        };
+        emitting[id as usize] += usize::from(lit);
+    }
+    emitting
 }

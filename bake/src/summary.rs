@@ -54,6 +54,7 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
                 "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
                 "unlit": m.unlit, "base_color_texture": m.base_color_texture,
+                "emissive_texture": m.emissive_texture,
             })).collect::<Vec<_>>(),
             "parts": v.shading.parts.iter().map(|p| {
                 let mut part = json!({

@@ -25,7 +25,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 6.0, 0.0 MB
+cube.oct: octrace scene, format 7.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208

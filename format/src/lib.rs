@@ -52,7 +52,9 @@ pub use shading::{
     AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, MeshPart, PartSource, Shading, DIELECTRIC_F0,
     VISIBLE_WEIGHT,
 };
-pub use texture::{srgb_to_linear16, Filter, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS};
+pub use texture::{
+    linear16, srgb_to_linear16, Filter, LitTexels, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS,
+};
 pub use view::{LeafRecord, SceneView, StoredIndex, COLOR_SCALE, COLOR_WORDS};
 pub use write::write_atomically;
 

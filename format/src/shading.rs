@@ -40,7 +40,9 @@ pub struct Material {
     /// glTF `roughnessFactor`; for MTL, from `Ns` (`sqrt(2 / (Ns + 2))`).
     pub roughness: f32,
     /// Emitted radiance: glTF `emissiveFactor` times `KHR_materials_emissive_strength`;
-    /// MTL `Ke`. Triangles of an emissive material are area lights.
+    /// MTL `Ke`; times [`Material::emissive_texture`] where there is one. Triangles
+    /// of an emissive material are area lights (with a texture, only those whose
+    /// texels are not all black: [`crate::LitTexels`]).
     pub emissive: [f32; 3],
     /// glTF `alphaMode`; MTL: `Blend` when `d < 1` without an index of refraction.
     pub alpha_mode: AlphaMode,
@@ -63,6 +65,10 @@ pub struct Material {
     /// `base_color` (glTF `baseColorTexture`), sampled at the triangle's texture
     /// coordinates.
     pub base_color_texture: Option<u32>,
+    /// The texture (an index into [`Shading::textures`]) whose colour multiplies
+    /// `emissive` (glTF `emissiveTexture`, sRGB like the base colour), sampled at the
+    /// same texture coordinates as the base colour texture.
+    pub emissive_texture: Option<u32>,
 }
 
 impl Default for Material {
@@ -82,6 +88,7 @@ impl Default for Material {
             illum: None,
             unlit: false,
             base_color_texture: None,
+            emissive_texture: None,
         }
     }
 }
@@ -447,7 +454,7 @@ impl Shading {
             }
         }
         for m in &self.materials {
-            if m.base_color_texture.is_some_and(|t| t as usize >= self.textures.len()) {
+            if [m.base_color_texture, m.emissive_texture].iter().flatten().any(|&t| t as usize >= self.textures.len()) {
                 return Err(corrupt(format!(
                     "material '{}' names a texture beyond the {} there are",
                     m.name,

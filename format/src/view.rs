@@ -168,6 +168,20 @@ impl<'a> SceneView<'a> {
         color
     }
 
+    /// The light `material` emits at barycentrics `(u, v)` of stored triangle `index`:
+    /// its emissive factor, times its emissive texture's colour there when it has one
+    /// (sampled at the coordinates [`SceneView::uv_at`] gives).
+    pub fn emissive_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 3] {
+        let e = material.emissive;
+        match material.emissive_texture.and_then(|t| self.shading.textures.get(t as usize)) {
+            Some(texture) => {
+                let texel = texture.sample(self.texels, self.uv_at(index, u, v));
+                [e[0] * texel[0], e[1] * texel[1], e[2] * texel[2]]
+            }
+            None => e,
+        }
+    }
+
     /// Number of leaves.
     pub fn leaf_count(&self) -> usize {
         self.boxes.len() / crate::layout::BOX_FLOATS

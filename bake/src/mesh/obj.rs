@@ -254,6 +254,7 @@ fn material(m: &tobj::Material) -> Material {
         illum: Some(m.illumination_model.map_or(2, u32::from)),
         unlit: false,
         base_color_texture: None,
+        emissive_texture: None,
     }
 }
 

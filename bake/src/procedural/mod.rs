@@ -99,10 +99,11 @@ pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
         wrap: Default::default(),
         filter: Default::default(),
         min_alpha: 0.0,
+        srgb: false,
     };
-    // Linear RGBA16, two words a texel (`r | g << 16`, `b | a << 16`): the first texel's
-    // alpha is 0.
-    let texels = vec![0xffff_0000, 0x0000_8000, 0x0000_ffff, 0xffff_0000, 0x8000_8000, 0xffff_8000, 1, 0x8000_0001];
+    // Linear RGBA, 8 bits a channel (`r | g << 8 | b << 16 | a << 24`): the first
+    // texel's alpha is 0.
+    let texels = vec![0x0080_ff00, 0xff00_00ff, 0xff80_8080, 0x8001_0001];
     let mut out = Mesh { materials: vec![material], textures: vec![texture], texels, ..Mesh::default() };
     for t in torus([0.0; 3], 1.0, 0.3, rings, sides).triangles {
         let normals = Some([crate::mesh::face_normal(&t); 3]);

@@ -53,7 +53,8 @@ pub(super) struct RenderParams {
     o_texels: u32,
     o_colors: u32,
     has_colors: u32,
-    pad: u32,
+    /// `octrace_format::linear16`'s table, 256 words.
+    o_srgb: u32,
 }
 
 #[cfg(test)]
@@ -277,7 +278,7 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     params.o_materials = 0;
     for m in shading.materials.iter().chain([&PLAIN]) {
         let before = words.len();
-        f(&mut words, &material_record(m));
+        f(&mut words, &material_record(m, shading.textures.len()));
         debug_assert_eq!(words.len() - before, MATERIAL_WORDS);
     }
     params.plain_material = shading.materials.len() as u32;
@@ -327,9 +328,11 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
             Filter::Nearest => 0,
             Filter::Linear => 1,
         };
-        words.extend([t.width, t.height, t.first, wrap(t.wrap[0]), wrap(t.wrap[1]), filter, 0, 0]);
+        words.extend([t.width, t.height, t.first, wrap(t.wrap[0]), wrap(t.wrap[1]), filter, u32::from(t.srgb), 0]);
     }
     debug_assert_eq!(words.len() - params.o_textures as usize, TEXTURE_WORDS * shading.textures.len());
+    params.o_srgb = words.len() as u32;
+    words.extend(octrace_format::linear16().iter().map(|&c| u32::from(c)));
     params.o_texels = words.len() as u32;
     words.extend_from_slice(view.texels);
     if words.is_empty() {
@@ -343,7 +346,11 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
 /// CPU's functions so both sides use the same numbers, then the factors the kernel
 /// derives them from again where a texture changes the base colour (`surface` in
 /// render.wgsl, the operations of lighting.rs and `Material::mirror`).
-fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
+///
+/// A texture index past the `textures` the scene has (a file on the trusted path) is
+/// none, as the CPU's `SceneView::base_color_at` and `emissive_at` read it.
+fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
+    let texture = |t: Option<u32>| t.filter(|&t| (t as usize) < textures).map_or(0, |t| t + 1);
     let (ks, exponent) = lighting::highlight(m);
     let parts: [(Vec3, f32); 7] = [
         (Vec3::from(m.emissive), m.coverage()),
@@ -365,12 +372,12 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
         AlphaMode::Mask => 1,
         AlphaMode::Blend => 2,
     };
-    record[28..43].copy_from_slice(&[
+    record[28..44].copy_from_slice(&[
         m.base_color[0],
         m.base_color[1],
         m.base_color[2],
         m.base_color[3],
-        bits(m.base_color_texture.map_or(0, |t| t + 1)),
+        bits(texture(m.base_color_texture)),
         bits(u32::from(m.unlit)),
         metallic,
         m.gloss(),
@@ -381,6 +388,7 @@ fn material_record(m: &Material) -> [f32; MATERIAL_WORDS] {
         lighting::shadow_keep(m),
         bits(alpha_mode),
         m.alpha_cutoff,
+        bits(texture(m.emissive_texture)),
     ]);
     record
 }

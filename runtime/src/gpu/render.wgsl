@@ -52,11 +52,12 @@ struct RenderParams {
     // Vertex colours (absent when has_colors is 0): six words a triangle.
     o_colors: u32,
     has_colors: u32,
-    pad0: u32,
+    // octrace_format::linear16: the 16-bit linear value of each 8-bit sRGB value.
+    o_srgb: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
-// Materials (28 words each, see `MaterialRecord` in render.rs), lights (16 words),
+// Materials (44 words each, see `material_record` in render.rs), lights (16 words),
 // emitters (4 words: radiance rgb, running area), emitter triangles (1 word), material
 // ids and normals (the file's sections, as they are).
 @group(1) @binding(1) var<storage, read> shade: array<u32>;
@@ -119,6 +120,8 @@ struct Material {
     keep_shadow: f32,
     alpha_mode: u32,
     alpha_cutoff: f32,
+    // The emissive texture's index plus one, 0 for none.
+    emissive_texture: u32,
 }
 
 // A hit prepared for spawning rays (runtime/src/spawn.rs, SpawnPoint).
@@ -194,12 +197,17 @@ fn next_down(x: f32) -> f32 {
     return -next_up(-x);
 }
 
-fn material(prim: u32) -> Material {
+// The record of `prim`'s material (the plain one for a triangle without).
+fn material_at(prim: u32) -> u32 {
     var id = rp.plain_material;
     if rp.has_material_ids != 0u {
         id = min(shade[rp.o_material_ids + prim], rp.plain_material);
     }
-    let at = rp.o_materials + 44u * id;
+    return rp.o_materials + 44u * id;
+}
+
+fn material(prim: u32) -> Material {
+    let at = material_at(prim);
     var m: Material;
     m.emissive = sv3(at);
     m.coverage = sf(at + 3u);
@@ -224,6 +232,7 @@ fn material(prim: u32) -> Material {
     m.keep_shadow = sf(at + 40u);
     m.alpha_mode = shade[at + 41u];
     m.alpha_cutoff = sf(at + 42u);
+    m.emissive_texture = shade[at + 43u];
     return m;
 }
 
@@ -283,12 +292,15 @@ fn wrap_index(wrap: u32, i: i32, n: i32) -> i32 {
     }
 }
 
-// One texel's four 16-bit channels.
-fn texel(first: u32, w: i32, x: i32, y: i32) -> vec4<u32> {
-    let at = rp.o_texels + 2u * (first + u32(y * w + x));
-    let a = shade[at];
-    let b = shade[at + 1u];
-    return vec4<u32>(a & 0xffffu, a >> 16u, b & 0xffffu, b >> 16u);
+// One texel's four channels decoded to 16 bits (Texture::decode): stored 8 bits a
+// channel, colour through the sRGB table or times 257, alpha times 257.
+fn texel(first: u32, srgb: bool, w: i32, x: i32, y: i32) -> vec4<u32> {
+    let word = shade[rp.o_texels + first + u32(y * w + x)];
+    let c = vec4<u32>(word & 0xffu, (word >> 8u) & 0xffu, (word >> 16u) & 0xffu, word >> 24u);
+    if srgb {
+        return vec4<u32>(shade[rp.o_srgb + c.x], shade[rp.o_srgb + c.y], shade[rp.o_srgb + c.z], c.w * 257u);
+    }
+    return c * 257u;
 }
 
 // Texture::sample: integers up to the final scale, so the CPU's values exactly.
@@ -299,13 +311,14 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
     let first = shade[at + 2u];
     let wrap_u = shade[at + 3u];
     let wrap_v = shade[at + 4u];
+    let srgb = shade[at + 6u] != 0u;
     let cu = reduce(wrap_u, uv.x);
     let cv = reduce(wrap_v, uv.y);
     var sum = vec4<u32>(0u);
     if shade[at + 5u] == 0u {
         let x = wrap_index(wrap_u, i32(floor(cu * f32(w))), w);
         let y = wrap_index(wrap_v, i32(floor(cv * f32(h))), h);
-        sum = texel(first, w, x, y) << vec4<u32>(16u);
+        sum = texel(first, srgb, w, x, y) << vec4<u32>(16u);
     } else {
         let fx = i32(floor(cu * f32(w * 256))) - 128;
         let fy = i32(floor(cv * f32(h * 256))) - 128;
@@ -318,8 +331,8 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
         let xb = wrap_index(wrap_u, x0 + 1, w);
         let ya = wrap_index(wrap_v, y0, h);
         let yb = wrap_index(wrap_v, y0 + 1, h);
-        sum = texel(first, w, xa, ya) * ((256u - ax) * (256u - ay)) + texel(first, w, xb, ya) * (ax * (256u - ay))
-            + texel(first, w, xa, yb) * ((256u - ax) * ay) + texel(first, w, xb, yb) * (ax * ay);
+        sum = texel(first, srgb, w, xa, ya) * ((256u - ax) * (256u - ay)) + texel(first, srgb, w, xb, ya) * (ax * (256u - ay))
+            + texel(first, srgb, w, xa, yb) * ((256u - ax) * ay) + texel(first, srgb, w, xb, yb) * (ax * ay);
     }
     return vec4<f32>(sum >> vec4<u32>(8u)) * SAMPLE_SCALE;
 }
@@ -329,6 +342,9 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
 // from it, in the CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
 fn surface(hit: HitOut) -> Material {
     var m = material(hit.prim);
+    if m.emissive_texture != 0u {
+        m.emissive = m.emissive * sample(m.emissive_texture - 1u, uv_at(hit.prim, hit.u, hit.v)).xyz;
+    }
     if m.texture == 0u && rp.has_colors == 0u {
         return m;
     }
@@ -636,18 +652,28 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
     let scale = div(rp.emitter_area, f32(samples));
     for (var k = 0u; k < samples && tick(); k++) {
         let e = pick_emitter(uniform2(pixel, depth, 2u * k).x);
-        let emitted = sv3(rp.o_emitters + 4u * e);
+        var emitted = sv3(rp.o_emitters + 4u * e);
         let prim = shade[rp.o_emitters + 4u * rp.emitter_count + e];
         let a = vertex(prim, 0u);
         let b = vertex(prim, 1u);
         let c = vertex(prim, 2u);
         var y: vec3<f32>;
+        // The point's barycentrics (weights of b and c), lighting::point_on's.
+        var wb = 1.0 / 3.0;
+        var wc = 1.0 / 3.0;
         if SOFT_SHADOWS {
             let uv = uniform2(pixel, depth, 2u * k + 1u);
             let r = root(uv.x);
-            y = a * (1.0 - r) + b * (r * (1.0 - uv.y)) + c * (r * uv.y);
+            wb = r * (1.0 - uv.y);
+            wc = r * uv.y;
+            y = a * (1.0 - r) + b * wb + c * wc;
         } else {
             y = div3(a + b + c, 3.0);
+        }
+        // The emission where the point is, through the material's emissive texture.
+        let emissive_texture = shade[material_at(prim) + 43u];
+        if emissive_texture != 0u {
+            emitted = emitted * sample(emissive_texture - 1u, uv_at(prim, wb, wc)).xyz;
         }
         let to = y - p;
         let d2 = dot3(to, to);

@@ -464,14 +464,16 @@ impl<'a> Context<'a> {
     }
 
     /// The material at `hit`, its base colour taken where the hit is (times its
-    /// texture and the vertex colour there, when there are).
+    /// texture and the vertex colour there, when there are), and its emission (times
+    /// its emissive texture there).
     fn surface(&self, hit: &Hit) -> Cow<'a, Material> {
         let m = self.material(hit.prim);
-        if m.base_color_texture.is_none() && self.view.colors.is_empty() {
+        if m.base_color_texture.is_none() && m.emissive_texture.is_none() && self.view.colors.is_empty() {
             return Cow::Borrowed(m);
         }
         let base_color = self.view.base_color_at(m, hit.prim, hit.u, hit.v);
-        Cow::Owned(Material { name: String::new(), base_color, ..*m })
+        let emissive = self.view.emissive_at(m, hit.prim, hit.u, hit.v);
+        Cow::Owned(Material { name: String::new(), base_color, emissive, ..*m })
     }
 
     /// Adds to `sum` the light `task` receives from its hit that needs no further ray,
@@ -559,11 +561,18 @@ impl<'a> Context<'a> {
             let (prim, emitted) = self.emitters.pick(pick);
             let tri = self.view.triangle(StoredIndex(prim));
             let [a, b, c] = tri.map(Vec3::from);
-            let y = if soft {
+            let (y, [bu, bv]) = if soft {
                 let (u, v) = lighting::uniform2(task.pixel, task.depth, 2 * s + 1);
                 lighting::point_on(&tri, u, v)
             } else {
-                (a + b + c) / 3.0
+                ((a + b + c) / 3.0, [1.0 / 3.0; 2])
+            };
+            // The emission where the point is, through the material's emissive texture.
+            let m = self.material(StoredIndex(prim));
+            let emitted = if m.emissive_texture.is_some() {
+                Vec3::from(self.view.emissive_at(m, StoredIndex(prim), bu, bv))
+            } else {
+                emitted
             };
             let to = y - p;
             let d2 = to.length_squared();

@@ -4,7 +4,7 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use octrace_format::{Light, LightKind, Material, SceneView, StoredIndex, VISIBLE_WEIGHT};
+use octrace_format::{Light, LightKind, LitTexels, Material, SceneView, StoredIndex, VISIBLE_WEIGHT};
 
 /// The material of a triangle with none (a mesh without materials): white, diffuse.
 pub(crate) static PLAIN: Material = Material {
@@ -21,6 +21,7 @@ pub(crate) static PLAIN: Material = Material {
     illum: None,
     unlit: false,
     base_color_texture: None,
+    emissive_texture: None,
 };
 
 /// The base colour of a material, without alpha.
@@ -198,21 +199,38 @@ pub(crate) fn punctual(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
 
 /// The scene's emissive triangles, chosen by area for sampling.
 pub(crate) struct Emitters {
-    /// Stored triangle index and emitted radiance of each emitter.
+    /// Stored triangle index and emitted radiance of each emitter (the material's
+    /// factor: a texture's colour is sampled where a point of the triangle is).
     triangles: Vec<(u32, Vec3)>,
     /// Running sum of the areas (summed in `f64`, each rounded to `f32`, the GPU's
     /// copy), ending at the total.
     cumulative: Vec<f32>,
+    /// Whether some emitter's material has no emissive texture.
+    untextured: bool,
 }
 
 impl Emitters {
-    /// The emissive triangles of `view` (triangles whose material emits).
+    /// The emissive triangles of `view`: triangles whose material emits, and, where
+    /// its emission comes through a texture, whose texels are not all black
+    /// ([`LitTexels::any_lit`]; the bake counts them the same way).
     pub(crate) fn of(view: &SceneView<'_>) -> Emitters {
         let mut triangles = Vec::new();
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
+        let mut untextured = false;
+        let mut tables: Vec<Option<LitTexels>> = vec![None; view.shading.textures.len()];
         for prim in 0..view.triangle_count() as u32 {
             let Some(m) = view.material(StoredIndex(prim)).filter(|m| m.is_emissive()) else { continue };
+            if let Some(t) = m.emissive_texture.filter(|&t| (t as usize) < tables.len()) {
+                let table = tables[t as usize]
+                    .get_or_insert_with(|| LitTexels::new(&view.shading.textures[t as usize], view.texels));
+                let corners = view.corner_uvs(StoredIndex(prim)).unwrap_or_default();
+                if !table.any_lit(corners) {
+                    continue;
+                }
+            } else {
+                untextured = true;
+            }
             let area = area(&view.triangle(StoredIndex(prim)));
             if area > 0.0 {
                 total += area as f64;
@@ -220,13 +238,17 @@ impl Emitters {
                 cumulative.push(total as f32);
             }
         }
-        Emitters { triangles, cumulative }
+        Emitters { triangles, cumulative, untextured }
     }
 
     /// Whether a scene with `lights` and these emitters is lit by the headlight
-    /// instead: it has neither (the CPU renderer and the GPU kernel both ask this).
+    /// instead: it has no punctual light and no emitter but those whose emission comes
+    /// through a texture (labels, screens, a helmet's lamps: what a glTF viewer shows as
+    /// glow on a surface it lights itself). Then area lights are not sampled; their
+    /// emission shows where a ray meets them. The CPU renderer and the GPU kernel both
+    /// ask this.
     pub(crate) fn need_headlight(&self, lights: &[Light]) -> bool {
-        lights.is_empty() && self.is_empty()
+        lights.is_empty() && !self.untextured
     }
 
     /// Whether the scene has area lights.
@@ -260,11 +282,13 @@ pub(crate) fn area(t: &[[f32; 3]; 3]) -> f32 {
     0.5 * (b - a).cross(c - a).length()
 }
 
-/// A point of triangle `t`, uniform in area, from two uniform numbers.
-pub(crate) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> Vec3 {
+/// A point of triangle `t`, uniform in area, from two uniform numbers, and its
+/// barycentrics (the weights of the second and third corners).
+pub(crate) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> (Vec3, [f32; 2]) {
     let [a, b, c] = t.map(Vec3::from);
     let s = u.sqrt();
-    a * (1.0 - s) + b * (s * (1.0 - v)) + c * (s * v)
+    let (wb, wc) = (s * (1.0 - v), s * v);
+    (a * (1.0 - s) + b * wb + c * wc, [wb, wc])
 }
 
 /// Uniform numbers in `[0, 1)` that depend only on their inputs, so an image does not

@@ -37,14 +37,14 @@ fn wrong_magic_is_bad_magic() {
 
 #[test]
 fn older_and_newer_versions_name_both_versions() {
-    for (major, minor) in [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 7), (7, 0)] {
+    for (major, minor) in [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 7), (8, 0)] {
         let mut bytes = scene().to_file_bytes(0).unwrap();
         bytes[8..10].copy_from_slice(&major.to_le_bytes());
         bytes[10..12].copy_from_slice(&minor.to_le_bytes());
         let err = open(&bytes).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, Error::UnsupportedVersion { .. }), "{msg}");
-        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("6.0"), "{msg}");
+        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("7.0"), "{msg}");
     }
 }
 
@@ -516,6 +516,7 @@ fn geometry_and_shading_that_break_the_rules_are_rejected() {
                     wrap: [octrace_format::Wrap::Repeat; 2],
                     filter: octrace_format::Filter::Linear,
                     min_alpha: 1.0,
+                    srgb: true,
                 })
             }),
             "larger than 8192 a side",

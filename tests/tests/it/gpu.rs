@@ -592,3 +592,32 @@ fn vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu() {
     let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 512, 512);
     renders_as_on_the_cpu("vertex colours", ctx, &tracer, &camera, &options);
 }
+
+/// Emission through emissive textures on the GPU (issue 34): the glow scene with its
+/// light (the orange panel an area light, soft shadows, the black one none) and without
+/// (the headlight), and DamagedHelmet when `../shared` is there: the CPU's rays of
+/// every kind and its image.
+#[test]
+fn emissive_textures_render_on_the_gpu_as_on_the_cpu() {
+    use octrace_format::Effect;
+    use octrace_runtime::render::effects::{EffectSet, RayKind, RenderOptions};
+    let test = "emissive_textures_render_on_the_gpu_as_on_the_cpu";
+    let Some(ctx) = gpu(test) else { return };
+    let mut scenes = vec![
+        ("glow, lit", crate::materials::glow_scene(true)),
+        ("glow, headlight", crate::materials::glow_scene(false)),
+    ];
+    if let Some(path) = octrace_tests::shared_file("gltf/DamagedHelmet.glb", test) {
+        scenes.push(("DamagedHelmet", octrace_bake::Mesh::load(path).unwrap()));
+    }
+    for (name, mesh) in scenes {
+        let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+        let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+        let effects = EffectSet::NONE.with(Effect::Shadows).with(Effect::SoftShadows);
+        let options = RenderOptions { effects, soft_samples: 4, ..RenderOptions::for_scene(scene.shading()) };
+        let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 96, 96);
+        let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
+        let soft = counts.get(RayKind::SoftShadow);
+        assert_eq!(soft > 0, name == "glow, lit", "{name}: {counts:?}");
+    }
+}

@@ -1,16 +1,16 @@
-//! glTF materials and their base colour textures: images decoded, texels stored
-//! linear, samplers and `KHR_texture_transform` resolved at bake.
+//! glTF materials and their base colour and emissive textures: images decoded, texels
+//! stored at 8 bits a channel, samplers and `KHR_texture_transform` resolved at bake.
 
 use std::collections::HashMap;
 use std::path::Path;
 
-use octrace_format::{srgb_to_linear16, AlphaMode, Filter, Material, Texture, Wrap};
+use octrace_format::{AlphaMode, Filter, Material, Texture, Wrap};
 
 use super::super::refs::{self, LoadOptions};
 use super::super::{image, Mesh};
 use crate::error::{Error, Result};
 
-/// Texels a scene may hold in all (2 GiB of texel data): a bound on what a small file
+/// Texels a scene may hold in all (1 GiB of texel data): a bound on what a small file
 /// of many images can make the bake allocate.
 pub(super) const MAX_SCENE_TEXELS: usize = 1 << 28;
 
@@ -37,6 +37,21 @@ impl UvMap {
     }
 }
 
+/// The texture coordinates a texture slot reads: its `TEXCOORD_n` set and its
+/// `KHR_texture_transform`.
+fn uv_map(info: &gltf::texture::Info<'_>) -> UvMap {
+    let mut uv = UvMap { set: info.tex_coord(), transform: None };
+    if let Some(t) = info.texture_transform() {
+        uv.set = t.tex_coord().unwrap_or(uv.set);
+        let ([ox, oy], r, [sx, sy]) = (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
+        // KHR_texture_transform: translation * rotation * scale, the rotation
+        // matrix as the spec writes it, rows (cos r, sin r), (-sin r, cos r).
+        let (c, s) = (r.cos(), r.sin());
+        uv.transform = Some([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]]);
+    }
+    uv
+}
+
 /// What loading a document's materials needs.
 pub(super) struct Materials<'a> {
     pub path: &'a Path,
@@ -60,21 +75,23 @@ impl Materials<'_> {
         let pbr = m.pbr_metallic_roughness();
         let strength = m.emissive_strength().unwrap_or(1.0);
         let unit = |v: f32| v.clamp(0.0, 1.0);
-        let mut uv = UvMap { set: 0, transform: None };
-        let mut texture = None;
-        if let Some(info) = pbr.base_color_texture() {
-            uv.set = info.tex_coord();
-            if let Some(t) = info.texture_transform() {
-                uv.set = t.tex_coord().unwrap_or(uv.set);
-                let ([ox, oy], r, [sx, sy]) =
-                    (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
-                // KHR_texture_transform: translation * rotation * scale, the rotation
-                // matrix as the spec writes it, rows (cos r, sin r), (-sin r, cos r).
-                let (c, s) = (r.cos(), r.sin());
-                uv.transform = Some([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]]);
+        // The coordinates the base colour texture reads, else the emissive texture's:
+        // the bake stores one set a triangle, so both slots read the same.
+        let base_info = pbr.base_color_texture();
+        let emissive_info = m.emissive_texture();
+        let uv = base_info.as_ref().or(emissive_info.as_ref()).map_or(UvMap { set: 0, transform: None }, uv_map);
+        if let (Some(_), Some(e)) = (&base_info, &emissive_info) {
+            if uv_map(e) != uv {
+                mesh.warnings.push(format!(
+                    "{}: material '{name}': its emissive texture reads other texture coordinates (TEXCOORD_{} or \
+                     another KHR_texture_transform) than its base colour texture: sampled at the base colour's",
+                    self.path.display(),
+                    uv_map(e).set
+                ));
             }
-            texture = self.texture(&info.texture(), &name, mesh);
         }
+        let texture = base_info.and_then(|info| self.texture(&info.texture(), &name, "base colour", mesh));
+        let emissive_texture = emissive_info.and_then(|info| self.texture(&info.texture(), &name, "emissive", mesh));
         let out = Material {
             base_color: pbr.base_color_factor().map(unit),
             metallic: unit(pbr.metallic_factor()),
@@ -92,6 +109,7 @@ impl Materials<'_> {
             illum: None,
             unlit: m.unlit(),
             base_color_texture: texture,
+            emissive_texture,
             name,
         };
         let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
@@ -108,7 +126,7 @@ impl Materials<'_> {
     /// The index in `mesh.textures` of `texture`'s image with its sampler, loading it
     /// the first time; `None`, with a warning naming the image, when it cannot be read
     /// or decoded.
-    fn texture(&mut self, texture: &gltf::Texture<'_>, material: &str, mesh: &mut Mesh) -> Option<u32> {
+    fn texture(&mut self, texture: &gltf::Texture<'_>, material: &str, slot: &str, mesh: &mut Mesh) -> Option<u32> {
         let image = texture.source();
         let sampler = texture.sampler();
         let key = (image.index(), sampler.index());
@@ -138,12 +156,10 @@ impl Materials<'_> {
                     return None;
                 };
                 let mut min_alpha = 255u8;
-                // The sRGB decoding of each 8-bit value, once rather than per channel.
-                let linear: [u32; 256] = std::array::from_fn(|c| u32::from(srgb_to_linear16(c as u8)));
-                for [r, g, b, a] in &rgba.pixels {
-                    let [r, g, b] = [*r, *g, *b].map(|c| linear[c as usize]);
-                    mesh.texels.extend([r | g << 16, b | (u32::from(*a) * 257) << 16]);
-                    min_alpha = min_alpha.min(*a);
+                // As the image holds them, 8 bits a channel; sampling decodes sRGB.
+                for &pixel in &rgba.pixels {
+                    mesh.texels.push(u32::from_le_bytes(pixel));
+                    min_alpha = min_alpha.min(pixel[3]);
                 }
                 mesh.textures.push(Texture {
                     name: label,
@@ -156,12 +172,14 @@ impl Materials<'_> {
                         _ => Filter::Linear,
                     },
                     min_alpha: f32::from(min_alpha) / 255.0,
+                    // Base colour and emissive textures: sRGB-encoded (glTF).
+                    srgb: true,
                 });
                 Some(mesh.textures.len() as u32 - 1)
             }
             Err(why) => {
                 mesh.warnings.push(format!(
-                    "{}: {label} (base colour texture of material '{material}') left out: {why}",
+                    "{}: {label} ({slot} texture of material '{material}') left out: {why}",
                     self.path.display()
                 ));
                 None
