@@ -15,8 +15,8 @@ use crate::mesh::Mesh;
 ///   and emission through textures lights nothing in a scene without other light
 ///   (punctual lights or emitters without a texture): the headlight lights it;
 /// * reflection: a lit material whose mirror weight ([`Material::mirror`]) is
-///   visible, or a transmissive one with an index of refraction above 1 (its Fresnel
-///   reflection);
+///   visible (with a metallic-roughness texture, at its most mirror-like texel), or a
+///   transmissive one with an index of refraction above 1 (its Fresnel reflection);
 /// * refraction: a lit material with transmission above zero;
 /// * alpha: coverage ([`Material::coverage_at`]) below one somewhere: the alpha
 ///   factor times the smallest alpha of the material's texture and of the vertex
@@ -96,13 +96,28 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
         if m.transmission > 0.0 && m.ior > 1.0 {
             return Some(format!("material '{}', transmission {:.2} (Fresnel reflection)", m.name, m.transmission));
         }
-        let w = m.mirror();
-        (w.iter().fold(0.0f32, |a, &b| a.max(b)) >= VISIBLE_WEIGHT).then(|| match m.illum {
-            Some(illum) => {
+        // With a metallic-roughness texture, the most mirror-like texel decides: the
+        // least roughness, and the mirror weight (linear in metallic) at either end of
+        // the texture's metallic range.
+        let (metallic, roughness, texture) = match metallic_roughness_range(mesh, m) {
+            Some((t, [lo, hi], rough)) => {
+                let mirror = |metallic: f32| Material { metallic, roughness: rough, ..(*m).clone() }.mirror();
+                let best = if max3(mirror(hi)) >= max3(mirror(lo)) { hi } else { lo };
+                (best, rough, Some(t))
+            }
+            None => (m.metallic, m.roughness, None),
+        };
+        let w = Material { metallic, roughness, ..(*m).clone() }.mirror();
+        (max3(w) >= VISIBLE_WEIGHT).then(|| match (m.illum, texture) {
+            (Some(illum), _) => {
                 let k = m.specular;
                 format!("material '{}', illum {illum}, Ks ({:.2}, {:.2}, {:.2})", m.name, k[0], k[1], k[2])
             }
-            None => format!("material '{}', metallic {:.2}, roughness {:.2}", m.name, m.metallic, m.roughness),
+            (None, Some(t)) => format!(
+                "material '{}', metallic {metallic:.2}, roughness down to {roughness:.2} (texture {})",
+                m.name, t.name
+            ),
+            (None, None) => format!("material '{}', metallic {:.2}, roughness {:.2}", m.name, m.metallic, m.roughness),
         })
     });
     add(Effect::Reflection, mirrors.collect());
@@ -131,6 +146,28 @@ pub fn decide(mesh: &Mesh, used: &[u32]) -> Vec<EffectReason> {
     });
     add(Effect::Alpha, cut.collect());
     effects
+}
+
+/// The largest channel of a colour.
+fn max3(c: [f32; 3]) -> f32 {
+    c[0].max(c[1]).max(c[2])
+}
+
+/// A material's metallic-roughness texture with the range of metallic it gives (the
+/// factor times the blue channel's smallest and largest texel) and its least roughness
+/// (the factor times the green channel's smallest).
+fn metallic_roughness_range<'m>(mesh: &'m Mesh, m: &Material) -> Option<(&'m octrace_format::Texture, [f32; 2], f32)> {
+    let t = mesh.textures.get(m.metallic_roughness_texture? as usize)?;
+    let texels = mesh.texels.get(t.first as usize..)?.iter().take(t.width as usize * t.height as usize);
+    let (mut blue, mut green) = ([u8::MAX, 0], u8::MAX);
+    for texel in texels {
+        let [_, g, b, _] = texel.to_le_bytes();
+        blue = [blue[0].min(b), blue[1].max(b)];
+        green = green.min(g);
+    }
+    // Decoded as sampling decodes a linear texture (c * 257, then scaled to [0, 1]).
+    let unit = |c: u8| f32::from(c) / 255.0;
+    Some((t, [m.metallic * unit(blue[0]), m.metallic * unit(blue[1])], m.roughness * unit(green)))
 }
 
 /// How many of the triangles in `used` emit light, per material: all of an emissive

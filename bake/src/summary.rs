@@ -55,6 +55,8 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
                 "unlit": m.unlit, "base_color_texture": m.base_color_texture,
                 "emissive_texture": m.emissive_texture,
+                "metallic_roughness_texture": m.metallic_roughness_texture,
+                "occlusion_texture": m.occlusion_texture, "occlusion_strength": m.occlusion_strength,
             })).collect::<Vec<_>>(),
             "parts": v.shading.parts.iter().map(|p| {
                 let mut part = json!({

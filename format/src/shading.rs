@@ -69,6 +69,16 @@ pub struct Material {
     /// `emissive` (glTF `emissiveTexture`, sRGB like the base colour), sampled at the
     /// same texture coordinates as the base colour texture.
     pub emissive_texture: Option<u32>,
+    /// The texture whose blue channel multiplies `metallic` and green channel
+    /// multiplies `roughness` (glTF `metallicRoughnessTexture`, linear), sampled at the
+    /// same coordinates.
+    pub metallic_roughness_texture: Option<u32>,
+    /// The texture whose red channel darkens the light that reaches the surface from
+    /// all around (glTF `occlusionTexture`, linear): the renderer's ambient term, times
+    /// `1 + occlusion_strength * (red - 1)`.
+    pub occlusion_texture: Option<u32>,
+    /// glTF `occlusionTexture.strength` (1 by default), in `[0, 1]`.
+    pub occlusion_strength: f32,
 }
 
 impl Default for Material {
@@ -89,6 +99,9 @@ impl Default for Material {
             unlit: false,
             base_color_texture: None,
             emissive_texture: None,
+            metallic_roughness_texture: None,
+            occlusion_texture: None,
+            occlusion_strength: 1.0,
         }
     }
 }
@@ -169,6 +182,14 @@ impl Material {
         }
     }
 
+    /// The textures the material reads (base colour, emissive, metallic-roughness,
+    /// occlusion), those it has.
+    pub fn textures(&self) -> impl Iterator<Item = u32> {
+        [self.base_color_texture, self.emissive_texture, self.metallic_roughness_texture, self.occlusion_texture]
+            .into_iter()
+            .flatten()
+    }
+
     /// Whether the material emits light.
     pub fn is_emissive(&self) -> bool {
         self.emissive.iter().any(|&e| e > 0.0)
@@ -177,6 +198,7 @@ impl Material {
     /// Every number of the material is finite and in its range.
     fn check(&self) -> std::result::Result<(), String> {
         let all = self.base_color.iter().chain(&self.emissive).chain(&self.specular).chain([
+            &self.occlusion_strength,
             &self.metallic,
             &self.roughness,
             &self.alpha_cutoff,
@@ -454,7 +476,7 @@ impl Shading {
             }
         }
         for m in &self.materials {
-            if [m.base_color_texture, m.emissive_texture].iter().flatten().any(|&t| t as usize >= self.textures.len()) {
+            if m.textures().any(|t| t as usize >= self.textures.len()) {
                 return Err(corrupt(format!(
                     "material '{}' names a texture beyond the {} there are",
                     m.name,

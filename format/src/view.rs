@@ -173,13 +173,37 @@ impl<'a> SceneView<'a> {
     /// (sampled at the coordinates [`SceneView::uv_at`] gives).
     pub fn emissive_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 3] {
         let e = material.emissive;
-        match material.emissive_texture.and_then(|t| self.shading.textures.get(t as usize)) {
-            Some(texture) => {
-                let texel = texture.sample(self.texels, self.uv_at(index, u, v));
-                [e[0] * texel[0], e[1] * texel[1], e[2] * texel[2]]
-            }
+        match self.texture_at(material.emissive_texture, index, u, v) {
+            Some(texel) => [e[0] * texel[0], e[1] * texel[1], e[2] * texel[2]],
             None => e,
         }
+    }
+
+    /// `material`'s metallic and roughness at barycentrics `(u, v)` of stored triangle
+    /// `index`: its factors, times its metallic-roughness texture's blue and green
+    /// channels there when it has one.
+    pub fn metallic_roughness_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> (f32, f32) {
+        match self.texture_at(material.metallic_roughness_texture, index, u, v) {
+            Some(texel) => (material.metallic * texel[2], material.roughness * texel[1]),
+            None => (material.metallic, material.roughness),
+        }
+    }
+
+    /// How much of the light from all around reaches `material` at barycentrics
+    /// `(u, v)` of stored triangle `index`: `1 + strength * (red - 1)` of its occlusion
+    /// texture there, 1 without one.
+    pub fn occlusion_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> f32 {
+        match self.texture_at(material.occlusion_texture, index, u, v) {
+            Some(texel) => 1.0 + material.occlusion_strength * (texel[0] - 1.0),
+            None => 1.0,
+        }
+    }
+
+    /// Texture `texture`'s sample at barycentrics `(u, v)` of stored triangle `index`,
+    /// or `None` for no texture (or one past the scene's).
+    fn texture_at(&self, texture: Option<u32>, index: StoredIndex, u: f32, v: f32) -> Option<[f32; 4]> {
+        let texture = self.shading.textures.get(texture? as usize)?;
+        Some(texture.sample(self.texels, self.uv_at(index, u, v)))
     }
 
     /// Number of leaves.

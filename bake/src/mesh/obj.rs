@@ -255,6 +255,9 @@ fn material(m: &tobj::Material) -> Material {
         unlit: false,
         base_color_texture: None,
         emissive_texture: None,
+        metallic_roughness_texture: None,
+        occlusion_texture: None,
+        occlusion_strength: 1.0,
     }
 }
 

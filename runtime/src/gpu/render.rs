@@ -19,7 +19,7 @@ const PIXELS_PER_DISPATCH: u32 = 1 << 20;
 /// Words of a pixel's record in the kernel's `pixel_io` (render.wgsl).
 const PIXEL_WORDS: usize = 8;
 /// Words of a material record (`material` in render.wgsl).
-const MATERIAL_WORDS: usize = 44;
+const MATERIAL_WORDS: usize = 52;
 /// Words of a texture record (`sample` in render.wgsl).
 const TEXTURE_WORDS: usize = 8;
 /// Words of a light record (`punctual` in render.wgsl).
@@ -372,7 +372,7 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         AlphaMode::Mask => 1,
         AlphaMode::Blend => 2,
     };
-    record[28..44].copy_from_slice(&[
+    record[28..49].copy_from_slice(&[
         m.base_color[0],
         m.base_color[1],
         m.base_color[2],
@@ -389,6 +389,11 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         bits(alpha_mode),
         m.alpha_cutoff,
         bits(texture(m.emissive_texture)),
+        bits(texture(m.metallic_roughness_texture)),
+        m.roughness.clamp(0.0, 1.0),
+        m.dielectric_f0(),
+        bits(texture(m.occlusion_texture)),
+        m.occlusion_strength,
     ]);
     record
 }

@@ -57,7 +57,7 @@ struct RenderParams {
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
-// Materials (44 words each, see `material_record` in render.rs), lights (16 words),
+// Materials (52 words each, see `material_record` in render.rs), lights (16 words),
 // emitters (4 words: radiance rgb, running area), emitter triangles (1 word), material
 // ids and normals (the file's sections, as they are).
 @group(1) @binding(1) var<storage, read> shade: array<u32>;
@@ -122,6 +122,16 @@ struct Material {
     alpha_cutoff: f32,
     // The emissive texture's index plus one, 0 for none.
     emissive_texture: u32,
+    // The metallic-roughness texture's index plus one, the roughness factor and the
+    // dielectric's F0, from which a hit's metal, gloss and highlight are derived again.
+    mr_texture: u32,
+    roughness: f32,
+    f0: f32,
+    // The occlusion texture's index plus one, its strength, and its value at the hit
+    // (1 without one): what reaches the ambient term.
+    occlusion_texture: u32,
+    occlusion_strength: f32,
+    occlusion: f32,
 }
 
 // A hit prepared for spawning rays (runtime/src/spawn.rs, SpawnPoint).
@@ -203,7 +213,7 @@ fn material_at(prim: u32) -> u32 {
     if rp.has_material_ids != 0u {
         id = min(shade[rp.o_material_ids + prim], rp.plain_material);
     }
-    return rp.o_materials + 44u * id;
+    return rp.o_materials + 52u * id;
 }
 
 fn material(prim: u32) -> Material {
@@ -233,6 +243,12 @@ fn material(prim: u32) -> Material {
     m.alpha_mode = shade[at + 41u];
     m.alpha_cutoff = sf(at + 42u);
     m.emissive_texture = shade[at + 43u];
+    m.mr_texture = shade[at + 44u];
+    m.roughness = sf(at + 45u);
+    m.f0 = sf(at + 46u);
+    m.occlusion_texture = shade[at + 47u];
+    m.occlusion_strength = sf(at + 48u);
+    m.occlusion = 1.0;
     return m;
 }
 
@@ -345,8 +361,27 @@ fn surface(hit: HitOut) -> Material {
     if m.emissive_texture != 0u {
         m.emissive = m.emissive * sample(m.emissive_texture - 1u, uv_at(hit.prim, hit.u, hit.v)).xyz;
     }
-    if m.texture == 0u && rp.has_colors == 0u {
+    if m.occlusion_texture != 0u {
+        let r = sample(m.occlusion_texture - 1u, uv_at(hit.prim, hit.u, hit.v)).x;
+        m.occlusion = 1.0 + m.occlusion_strength * (r - 1.0);
+    }
+    if m.texture == 0u && rp.has_colors == 0u && m.mr_texture == 0u {
         return m;
+    }
+    if m.mr_texture != 0u {
+        // SceneView::metallic_roughness_at, then what lighting.rs and Material derive
+        // from them (gloss, metal, the dielectric mirror, the highlight's F0 and
+        // exponent), in their operations.
+        let mr = sample(m.mr_texture - 1u, uv_at(hit.prim, hit.u, hit.v));
+        m.metallic = m.metallic * mr.z;
+        let r = clamp(m.roughness * mr.y, 0.0, 1.0);
+        let rough = 1.0 - r;
+        m.gloss = rough * rough;
+        m.keep_metal = 1.0 - m.metallic * m.gloss;
+        m.dielectric = (1.0 - m.metallic) * m.keep_transmission * m.f0;
+        m.highlight_a = m.f0 * (1.0 - m.metallic);
+        let alpha = max(r * r, 1e-2);
+        m.exponent = clamp(div(2.0, alpha * alpha) - 2.0, 1.0, 1e4);
     }
     var bc = m.factor;
     if m.texture != 0u {
@@ -734,7 +769,7 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     let p = s.sp.point;
     if HEADLIGHT {
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
-        add_light(s.weight * kd * (HEADLIGHT_AMBIENT + HEADLIGHT_DIRECT * abs(dot3(s.n, s.v))));
+        add_light(s.weight * kd * (HEADLIGHT_AMBIENT * s.m.occlusion + HEADLIGHT_DIRECT * abs(dot3(s.n, s.v))));
     } else {
         for (var i = 0u; i < rp.light_count && tick(); i++) {
             punctual(s, i, p);

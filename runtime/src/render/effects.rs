@@ -464,16 +464,21 @@ impl<'a> Context<'a> {
     }
 
     /// The material at `hit`, its base colour taken where the hit is (times its
-    /// texture and the vertex colour there, when there are), and its emission (times
-    /// its emissive texture there).
+    /// texture and the vertex colour there, when there are), its emission (times its
+    /// emissive texture there) and its metallic and roughness (times its
+    /// metallic-roughness texture there).
     fn surface(&self, hit: &Hit) -> Cow<'a, Material> {
         let m = self.material(hit.prim);
-        if m.base_color_texture.is_none() && m.emissive_texture.is_none() && self.view.colors.is_empty() {
+        let textured =
+            m.base_color_texture.is_some() || m.emissive_texture.is_some() || m.metallic_roughness_texture.is_some();
+        if !textured && self.view.colors.is_empty() {
             return Cow::Borrowed(m);
         }
-        let base_color = self.view.base_color_at(m, hit.prim, hit.u, hit.v);
-        let emissive = self.view.emissive_at(m, hit.prim, hit.u, hit.v);
-        Cow::Owned(Material { name: String::new(), base_color, emissive, ..*m })
+        let (view, (prim, u, v)) = (&self.view, (hit.prim, hit.u, hit.v));
+        let base_color = view.base_color_at(m, prim, u, v);
+        let emissive = view.emissive_at(m, prim, u, v);
+        let (metallic, roughness) = view.metallic_roughness_at(m, prim, u, v);
+        Cow::Owned(Material { name: String::new(), base_color, emissive, metallic, roughness, ..*m })
     }
 
     /// Adds to `sum` the light `task` receives from its hit that needs no further ray,
@@ -515,6 +520,8 @@ impl<'a> Context<'a> {
         sum.add(weight * Vec3::from(m.emissive));
         if self.headlight {
             let (ambient, direct) = HEADLIGHT;
+            // The occlusion texture darkens the ambient part, the light from all around.
+            let ambient = ambient * self.view.occlusion_at(m, hit.prim, hit.u, hit.v);
             sum.add(weight * lighting::albedo(m, transmits) * (ambient + direct * n.dot(v).abs()));
         } else {
             let mut light = |to: Vec3, tmax: f32, incident: Vec3, kind: RayKind| {

@@ -22,6 +22,9 @@ pub(crate) static PLAIN: Material = Material {
     unlit: false,
     base_color_texture: None,
     emissive_texture: None,
+    metallic_roughness_texture: None,
+    occlusion_texture: None,
+    occlusion_strength: 1.0,
 };
 
 /// The base colour of a material, without alpha.

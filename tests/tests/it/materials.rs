@@ -620,3 +620,111 @@ fn damaged_helmet_glows_only_where_its_emissive_texture_is_bright() {
     assert!(share(glowing) > 0.005 && share(glowing) < 0.15, "{glowing} of {} pixels glow", helmet.len());
     assert!(share(white) < 0.02, "{white} of {} pixels are white", helmet.len());
 }
+
+/// A lit panel in two halves before a ball on a floor (issue 34): with `textured`, one
+/// material (metallic 1, roughness 1) whose metallic-roughness texture makes the left
+/// half a rough dielectric (green 255, blue 0) and the right a polished metal (green 0,
+/// blue 255); without, two materials with those values as factors. With `occlusion`,
+/// the floor's occlusion texture (red 0 on its left half, 255 on its right, strength
+/// 1) and no light: the headlight's ambient term is what occlusion darkens.
+pub(crate) fn metal_scene(textured: bool, occlusion: bool) -> Mesh {
+    let mut mesh = Mesh::default();
+    // Texture 0: metallic-roughness, 2 x 1; texture 1: occlusion, 2 x 1.
+    let (mr, mut texels) =
+        texture(2, 1, [Wrap::ClampToEdge; 2], Filter::Nearest, |i, c| [[0, 255, 0, 255], [0, 0, 255, 255]][i][c]);
+    let (occ, occ_texels) =
+        texture(2, 1, [Wrap::ClampToEdge; 2], Filter::Nearest, |i, c| [[0, 0, 0, 255], [255, 0, 0, 255]][i][c]);
+    mesh.textures = vec![mr, Texture { first: texels.len() as u32, ..occ }];
+    texels.extend(occ_texels);
+    mesh.texels = texels;
+    let floor = mesh.materials.len() as u32;
+    let occlusion_texture = occlusion.then_some(1);
+    mesh.materials.push(Material { occlusion_texture, ..diffuse("floor", 0.7) });
+    let quad = |mesh: &mut Mesh, p: [[f32; 3]; 4], uv: [[f32; 2]; 4], material: u32| {
+        mesh.push([p[0], p[1], p[2]], None, Some([uv[0], uv[1], uv[2]]));
+        mesh.push([p[0], p[2], p[3]], None, Some([uv[0], uv[2], uv[3]]));
+        mesh.material_ids.extend([material; 2]);
+    };
+    for (x0, u0) in [(-4.0f32, 0.1f32), (0.0, 0.6)] {
+        let p = [[x0, 0.0, 4.0], [x0 + 4.0, 0.0, 4.0], [x0 + 4.0, 0.0, -4.0], [x0, 0.0, -4.0]];
+        quad(&mut mesh, p, [[u0, 0.5], [u0 + 0.3, 0.5], [u0 + 0.3, 0.5], [u0, 0.5]], floor);
+    }
+    let panel = |metallic: f32, roughness: f32| Material { metallic, roughness, ..diffuse("panel", 0.8) };
+    let first = mesh.materials.len() as u32;
+    if textured {
+        mesh.materials.push(Material { metallic_roughness_texture: Some(0), ..panel(1.0, 1.0) });
+    } else {
+        mesh.materials.extend([panel(0.0, 1.0), panel(1.0, 0.0)]);
+    }
+    for (k, (x0, u0)) in [(-1.6f32, 0.1f32), (0.0, 0.6)].into_iter().enumerate() {
+        let p = [[x0, 0.1, -1.5], [x0 + 1.6, 0.1, -1.5], [x0 + 1.6, 1.7, -1.5], [x0, 1.7, -1.5]];
+        let material = if textured { first } else { first + k as u32 };
+        quad(&mut mesh, p, [[u0, 0.5], [u0 + 0.3, 0.5], [u0 + 0.3, 0.5], [u0, 0.5]], material);
+    }
+    add(&mut mesh, procedural::sphere([0.0, 0.5, 0.2], 0.5, 12, 16), diffuse("ball", 0.5));
+    if !occlusion {
+        mesh.lights.push(point_light([0.5, 3.0, 2.5], 30.0));
+    }
+    mesh
+}
+
+/// A metallic-roughness texture (issue 34) shades each point as its texel says: the
+/// panel whose texture makes one half a rough dielectric and the other a polished metal
+/// renders to exactly the image (and the rays of each kind) of the panel made of two
+/// materials with those values, and the bake decides the reflection its polished half
+/// calls for, naming the texture. Before, the texture was ignored: the whole panel was
+/// a rough metal, and nothing reflected.
+#[test]
+fn a_metallic_roughness_texture_shades_as_its_values_would() {
+    let (textured, plain) = (metal_scene(true, false), metal_scene(false, false));
+    let used: Vec<u32> = (0..textured.triangles.len() as u32).collect();
+    let effects = octrace_bake::effects::decide(&textured, &used);
+    let reflection = effects.iter().find(|e| e.effect == Effect::Reflection).expect("reflection: the metal half");
+    assert!(reflection.reason.contains("roughness down to 0.00 (texture t)"), "{}", reflection.reason);
+    assert_eq!(
+        effects.iter().map(|e| e.effect).collect::<Vec<_>>(),
+        octrace_bake::effects::decide(&plain, &used).iter().map(|e| e.effect).collect::<Vec<_>>()
+    );
+    let cam = camera([0.0, 1.4, 4.0], [0.0, 0.7, -1.5], 128);
+    let (a, ca) = render(&scene_of(&textured), &cam, EffectSet::NONE.with(Effect::Shadows).with(Effect::Reflection));
+    let (b, cb) = render(&scene_of(&plain), &cam, EffectSet::NONE.with(Effect::Shadows).with(Effect::Reflection));
+    assert!(ca.get(RayKind::Reflection) > 1000, "{ca:?}");
+    assert_eq!(format!("{ca:?}"), format!("{cb:?}"));
+    let differ = a.pixels.iter().zip(&b.pixels).filter(|(x, y)| x != y).count();
+    assert_eq!(differ, 0, "{differ} pixels differ");
+}
+
+/// An occlusion texture (issue 34) darkens the light from all around, and nothing
+/// else: under the headlight, the floor's half whose texels say "occluded" loses its
+/// ambient part (0.1 of the albedo, here 0.07), the other half and everything else
+/// render exactly as without the texture.
+#[test]
+fn an_occlusion_texture_darkens_only_the_ambient_light_where_it_says() {
+    let (occluded, open) = (metal_scene(false, true), metal_scene(false, false));
+    let mut open_under_headlight = open.clone();
+    open_under_headlight.lights.clear();
+    let scene = scene_of(&occluded);
+    let cam = camera([0.0, 1.4, 4.0], [0.0, 0.7, -1.5], 128);
+    let (a, _) = render(&scene, &cam, EffectSet::NONE);
+    let (b, _) = render(&scene_of(&open_under_headlight), &cam, EffectSet::NONE);
+    let (mut darker, mut same) = (0, 0);
+    for y in 0..a.height {
+        for x in 0..a.width {
+            let ray = cam.ray(x, y);
+            let (pa, pb) = (a.at(x, y), b.at(x, y));
+            let on_left_floor = scene.intersect(&ray).is_some_and(|hit| {
+                let p = ray.origin + hit.t * ray.dir;
+                scene.view().material(hit.prim).is_some_and(|m| m.name == "floor") && p.x < 0.0
+            });
+            if on_left_floor {
+                let lost = pb - pa;
+                assert!((lost - Vec3::splat(0.07)).abs().max_element() < 1e-6, "({x}, {y}): {pa} against {pb}");
+                darker += 1;
+            } else {
+                assert_eq!(pa, pb, "({x}, {y})");
+                same += 1;
+            }
+        }
+    }
+    assert!(darker > 1000 && same > 1000, "{darker} darker, {same} the same");
+}

@@ -1,5 +1,6 @@
-//! glTF materials and their base colour and emissive textures: images decoded, texels
-//! stored at 8 bits a channel, samplers and `KHR_texture_transform` resolved at bake.
+//! glTF materials and their textures (base colour, emissive, metallic-roughness,
+//! occlusion): images decoded, texels stored at 8 bits a channel, samplers and
+//! `KHR_texture_transform` resolved at bake.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -52,15 +53,19 @@ fn uv_map(info: &gltf::texture::Info<'_>) -> UvMap {
     uv
 }
 
+/// A material's texture slot: its name, its texture and coordinates if it has one,
+/// and whether its colour is sRGB-encoded.
+type Slot<'a> = (&'static str, Option<(gltf::Texture<'a>, UvMap)>, bool);
+
 /// What loading a document's materials needs.
 pub(super) struct Materials<'a> {
     pub path: &'a Path,
     pub base: Option<&'a Path>,
     pub options: &'a LoadOptions,
     pub buffers: &'a [super::Buffer<'a>],
-    /// Textures already loaded: (image, sampler) to the index in `mesh.textures`, or
-    /// `None` when the image could not be used.
-    pub loaded: HashMap<(usize, Option<usize>), Option<u32>>,
+    /// Textures already loaded: (image, sampler, sRGB) to the index in
+    /// `mesh.textures`, or `None` when the image could not be used.
+    pub loaded: HashMap<(usize, Option<usize>, bool), Option<u32>>,
 }
 
 impl Materials<'_> {
@@ -75,23 +80,46 @@ impl Materials<'_> {
         let pbr = m.pbr_metallic_roughness();
         let strength = m.emissive_strength().unwrap_or(1.0);
         let unit = |v: f32| v.clamp(0.0, 1.0);
-        // The coordinates the base colour texture reads, else the emissive texture's:
-        // the bake stores one set a triangle, so both slots read the same.
-        let base_info = pbr.base_color_texture();
-        let emissive_info = m.emissive_texture();
-        let uv = base_info.as_ref().or(emissive_info.as_ref()).map_or(UvMap { set: 0, transform: None }, uv_map);
-        if let (Some(_), Some(e)) = (&base_info, &emissive_info) {
-            if uv_map(e) != uv {
+        // Each texture slot with its texture and the coordinates it reads: the bake stores
+        // one set of coordinates a triangle, the first slot's (base colour, emissive,
+        // metallic-roughness, occlusion), and every slot samples there.
+        let occlusion = m.occlusion_texture();
+        let slots: [Slot<'_>; 4] = [
+            ("base colour", pbr.base_color_texture().map(|i| (i.texture(), uv_map(&i))), true),
+            ("emissive", m.emissive_texture().map(|i| (i.texture(), uv_map(&i))), true),
+            ("metallic-roughness", pbr.metallic_roughness_texture().map(|i| (i.texture(), uv_map(&i))), false),
+            // The gltf crate does not give an occlusion texture's KHR_texture_transform:
+            // its set alone.
+            (
+                "occlusion",
+                occlusion.as_ref().map(|o| (o.texture(), UvMap { set: o.tex_coord(), transform: None })),
+                false,
+            ),
+        ];
+        let uv =
+            slots.iter().find_map(|(_, s, _)| s.as_ref().map(|s| s.1)).unwrap_or(UvMap { set: 0, transform: None });
+        let first = slots.iter().find(|(_, s, _)| s.is_some()).map_or("", |s| s.0);
+        let mut textures = [None; 4];
+        for (k, (slot, texture, srgb)) in slots.iter().enumerate() {
+            let Some((texture, map)) = texture else { continue };
+            if *map != uv {
                 mesh.warnings.push(format!(
-                    "{}: material '{name}': its emissive texture reads other texture coordinates (TEXCOORD_{} or \
-                     another KHR_texture_transform) than its base colour texture: sampled at the base colour's",
+                    "{}: material '{name}': its {slot} texture reads other texture coordinates (TEXCOORD_{} or \
+                     another KHR_texture_transform) than its {first} texture: sampled at the {first} texture's",
                     self.path.display(),
-                    uv_map(e).set
+                    map.set
                 ));
             }
+            textures[k] = self.texture(texture, &name, slot, *srgb, mesh);
         }
-        let texture = base_info.and_then(|info| self.texture(&info.texture(), &name, "base colour", mesh));
-        let emissive_texture = emissive_info.and_then(|info| self.texture(&info.texture(), &name, "emissive", mesh));
+        let [texture, emissive_texture, metallic_roughness_texture, occlusion_texture] = textures;
+        if let Some(normal) = m.normal_texture() {
+            mesh.warnings.push(format!(
+                "{}: material '{name}': its normal texture (texture {}) is not read: shading uses the mesh's normals",
+                self.path.display(),
+                normal.texture().index()
+            ));
+        }
         let out = Material {
             base_color: pbr.base_color_factor().map(unit),
             metallic: unit(pbr.metallic_factor()),
@@ -110,6 +138,9 @@ impl Materials<'_> {
             unlit: m.unlit(),
             base_color_texture: texture,
             emissive_texture,
+            metallic_roughness_texture,
+            occlusion_texture,
+            occlusion_strength: occlusion.as_ref().map_or(1.0, |o| unit(o.strength())),
             name,
         };
         let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
@@ -126,10 +157,17 @@ impl Materials<'_> {
     /// The index in `mesh.textures` of `texture`'s image with its sampler, loading it
     /// the first time; `None`, with a warning naming the image, when it cannot be read
     /// or decoded.
-    fn texture(&mut self, texture: &gltf::Texture<'_>, material: &str, slot: &str, mesh: &mut Mesh) -> Option<u32> {
+    fn texture(
+        &mut self,
+        texture: &gltf::Texture<'_>,
+        material: &str,
+        slot: &str,
+        srgb: bool,
+        mesh: &mut Mesh,
+    ) -> Option<u32> {
         let image = texture.source();
         let sampler = texture.sampler();
-        let key = (image.index(), sampler.index());
+        let key = (image.index(), sampler.index(), srgb);
         if let Some(&done) = self.loaded.get(&key) {
             return done;
         }
@@ -172,8 +210,9 @@ impl Materials<'_> {
                         _ => Filter::Linear,
                     },
                     min_alpha: f32::from(min_alpha) / 255.0,
-                    // Base colour and emissive textures: sRGB-encoded (glTF).
-                    srgb: true,
+                    // Base colour and emissive textures are sRGB-encoded (glTF), the
+                    // others linear.
+                    srgb,
                 });
                 Some(mesh.textures.len() as u32 - 1)
             }
