@@ -79,6 +79,13 @@ pub struct Material {
     pub occlusion_texture: Option<u32>,
     /// glTF `occlusionTexture.strength` (1 by default), in `[0, 1]`.
     pub occlusion_strength: f32,
+    /// The texture of tangent-space normals that perturb the shading normal (glTF
+    /// `normalTexture`, linear): `(2 r - 1) scale, (2 g - 1) scale, 2 b - 1` in the frame
+    /// of the triangle's tangent (the direction of increasing `u`, made orthogonal to
+    /// the shading normal), the normal crossed with it, and the normal.
+    pub normal_texture: Option<u32>,
+    /// glTF `normalTexture.scale` (1 by default).
+    pub normal_scale: f32,
 }
 
 impl Default for Material {
@@ -102,6 +109,8 @@ impl Default for Material {
             metallic_roughness_texture: None,
             occlusion_texture: None,
             occlusion_strength: 1.0,
+            normal_texture: None,
+            normal_scale: 1.0,
         }
     }
 }
@@ -185,9 +194,15 @@ impl Material {
     /// The textures the material reads (base colour, emissive, metallic-roughness,
     /// occlusion), those it has.
     pub fn textures(&self) -> impl Iterator<Item = u32> {
-        [self.base_color_texture, self.emissive_texture, self.metallic_roughness_texture, self.occlusion_texture]
-            .into_iter()
-            .flatten()
+        [
+            self.base_color_texture,
+            self.emissive_texture,
+            self.metallic_roughness_texture,
+            self.occlusion_texture,
+            self.normal_texture,
+        ]
+        .into_iter()
+        .flatten()
     }
 
     /// Whether the material emits light.
@@ -207,6 +222,9 @@ impl Material {
         ]);
         if let Some(bad) = all.clone().find(|v| !v.is_finite()) {
             return Err(format!("material '{}' holds {bad}", self.name));
+        }
+        if !self.normal_scale.is_finite() {
+            return Err(format!("material '{}' holds normal scale {}", self.name, self.normal_scale));
         }
         if all.clone().any(|&v| v < 0.0) || self.ior == 0.0 {
             return Err(format!("material '{}' holds a negative value or a zero index of refraction", self.name));

@@ -258,6 +258,8 @@ fn material(m: &tobj::Material) -> Material {
         metallic_roughness_texture: None,
         occlusion_texture: None,
         occlusion_strength: 1.0,
+        normal_texture: None,
+        normal_scale: 1.0,
     }
 }
 

@@ -372,7 +372,7 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         AlphaMode::Mask => 1,
         AlphaMode::Blend => 2,
     };
-    record[28..49].copy_from_slice(&[
+    record[28..51].copy_from_slice(&[
         m.base_color[0],
         m.base_color[1],
         m.base_color[2],
@@ -394,6 +394,8 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         m.dielectric_f0(),
         bits(texture(m.occlusion_texture)),
         m.occlusion_strength,
+        bits(texture(m.normal_texture)),
+        m.normal_scale,
     ]);
     record
 }

@@ -132,6 +132,9 @@ struct Material {
     occlusion_texture: u32,
     occlusion_strength: f32,
     occlusion: f32,
+    // The normal texture's index plus one, and its scale.
+    normal_texture: u32,
+    normal_scale: f32,
 }
 
 // A hit prepared for spawning rays (runtime/src/spawn.rs, SpawnPoint).
@@ -249,6 +252,8 @@ fn material(prim: u32) -> Material {
     m.occlusion_texture = shade[at + 47u];
     m.occlusion_strength = sf(at + 48u);
     m.occlusion = 1.0;
+    m.normal_texture = shade[at + 49u];
+    m.normal_scale = sf(at + 50u);
     return m;
 }
 
@@ -582,7 +587,50 @@ fn shadowed(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32, value0: vec3<f32
 }
 
 // The interpolated shading normal on the side of `ng`, or `ng`.
-fn shading_normal(hit: HitOut, ng: vec3<f32>) -> vec3<f32> {
+// Context::shading_normal: the interpolated normal, then the material's normal map.
+fn shading_normal(hit: HitOut, ng: vec3<f32>, m: Material) -> vec3<f32> {
+    let n = interpolated_normal(hit, ng);
+    if m.normal_texture == 0u || rp.has_uvs == 0u {
+        return n;
+    }
+    return mapped_normal(hit, n, ng, m.normal_texture - 1u, m.normal_scale);
+}
+
+// Context::mapped_normal, in its operations.
+fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: f32) -> vec3<f32> {
+    let at = rp.o_uvs + 6u * hit.prim;
+    let du1 = sf(at + 2u) - sf(at);
+    let dv1 = sf(at + 3u) - sf(at + 1u);
+    let du2 = sf(at + 4u) - sf(at);
+    let dv2 = sf(at + 5u) - sf(at + 1u);
+    let det = du1 * dv2 - du2 * dv1;
+    if det == 0.0 || !is_finite(det) {
+        return n;
+    }
+    let p0 = vertex(hit.prim, 0u);
+    let e1 = vertex(hit.prim, 1u) - p0;
+    let e2 = vertex(hit.prim, 2u) - p0;
+    let back = dot3(n, cross3(e1, e2)) < 0.0;
+    let front = select(n, -n, back);
+    let t0 = (e1 * dv2 - e2 * dv1) * select(-1.0, 1.0, det > 0.0);
+    let t = normalize_or_zero(t0 - front * dot3(front, t0));
+    if all(t == vec3<f32>(0.0)) {
+        return n;
+    }
+    let b = cross3(front, t);
+    let texel = sample(texture, uv_at(hit.prim, hit.u, hit.v));
+    let x = (texel.x * 2.0 - 1.0) * scale;
+    let y = (texel.y * 2.0 - 1.0) * scale;
+    let z = texel.z * 2.0 - 1.0;
+    var mapped = normalize_or_zero(t * x + b * y + front * z);
+    mapped = select(mapped, -mapped, back);
+    if all(mapped == vec3<f32>(0.0)) || !(is_finite(mapped.x) && is_finite(mapped.y) && is_finite(mapped.z)) || dot3(mapped, ng) <= 0.0 {
+        return n;
+    }
+    return mapped;
+}
+
+fn interpolated_normal(hit: HitOut, ng: vec3<f32>) -> vec3<f32> {
     if rp.has_normals == 0u {
         return ng;
     }
@@ -741,7 +789,7 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
         ng = -ng;
     }
     s.ng = ng;
-    s.n = shading_normal(hit, ng);
+    s.n = shading_normal(hit, ng, s.m);
     let can_continue = task.depth < rp.max_depth;
     var coverage = 1.0;
     if ALPHA {

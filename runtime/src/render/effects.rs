@@ -494,7 +494,7 @@ impl<'a> Context<'a> {
         if !entering {
             ng = -ng;
         }
-        let n = self.shading_normal(hit, ng);
+        let n = self.shading_normal(hit, ng, m);
         let can_continue = task.depth < self.options.max_depth;
         let coverage = if self.has(Effect::Alpha) { m.coverage() } else { 1.0 };
         if coverage < 1.0 && can_continue {
@@ -645,8 +645,18 @@ impl<'a> Context<'a> {
     }
 
     /// The interpolated shading normal on the side of `ng`, or `ng` when the scene has
-    /// no normals (or they are degenerate there).
-    fn shading_normal(&self, hit: &Hit, ng: Vec3) -> Vec3 {
+    /// no normals (or they are degenerate there); perturbed by `m`'s normal map when it
+    /// has one.
+    fn shading_normal(&self, hit: &Hit, ng: Vec3, m: &Material) -> Vec3 {
+        let n = self.interpolated_normal(hit, ng);
+        match m.normal_texture.and_then(|t| self.view.shading.textures.get(t as usize)) {
+            Some(texture) => self.mapped_normal(hit, n, ng, texture, m.normal_scale),
+            None => n,
+        }
+    }
+
+    /// The corners' normals mixed at the hit and turned to `ng`'s side, else `ng`.
+    fn interpolated_normal(&self, hit: &Hit, ng: Vec3) -> Vec3 {
         let Some(corners) = self.view.corner_normals(hit.prim) else { return ng };
         let [n0, n1, n2] = corners.map(Vec3::from);
         let n = (n0 * (1.0 - hit.u - hit.v) + n1 * hit.u + n2 * hit.v).normalize_or_zero();
@@ -657,6 +667,44 @@ impl<'a> Context<'a> {
             -n
         } else {
             n
+        }
+    }
+
+    /// Normal `n` perturbed by a normal map (glTF `normalTexture`): the texel's
+    /// tangent-space normal `((2 r - 1) scale, (2 g - 1) scale, 2 b - 1)` in the frame
+    /// of the triangle's tangent `t` (the direction of increasing `u`, from its corners'
+    /// coordinates, made orthogonal to the front's normal), the normal crossed with it,
+    /// and the normal, as Khronos' sample viewer builds it where a file gives no
+    /// tangents; on the back of the triangle (`n` faces the ray), the front's result
+    /// reversed, as that viewer does. `n` itself where the triangle's coordinates give
+    /// no tangent or the result is not a direction on `ng`'s side. The GPU kernel
+    /// computes the same operations in the same order.
+    fn mapped_normal(&self, hit: &Hit, n: Vec3, ng: Vec3, texture: &octrace_format::Texture, scale: f32) -> Vec3 {
+        let Some([uv0, uv1, uv2]) = self.view.corner_uvs(hit.prim) else { return n };
+        let [p0, p1, p2] = self.view.triangle(hit.prim).map(Vec3::from);
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let (du1, dv1, du2, dv2) = (uv1[0] - uv0[0], uv1[1] - uv0[1], uv2[0] - uv0[0], uv2[1] - uv0[1]);
+        let det = du1 * dv2 - du2 * dv1;
+        if det == 0.0 || !det.is_finite() {
+            return n;
+        }
+        let back = n.dot(e1.cross(e2)) < 0.0;
+        let front = if back { -n } else { n };
+        let t = (e1 * dv2 - e2 * dv1) * if det > 0.0 { 1.0 } else { -1.0 };
+        let t = (t - front * front.dot(t)).normalize_or_zero();
+        if t == Vec3::ZERO {
+            return n;
+        }
+        let b = front.cross(t);
+        let texel = texture.sample(self.view.texels, self.view.uv_at(hit.prim, hit.u, hit.v));
+        let (x, y, z) = ((texel[0] * 2.0 - 1.0) * scale, (texel[1] * 2.0 - 1.0) * scale, texel[2] * 2.0 - 1.0);
+        let mapped = (t * x + b * y + front * z).normalize_or_zero();
+        let mapped = if back { -mapped } else { mapped };
+        // A map that tips the normal below the surface: the interpolated normal.
+        if mapped == Vec3::ZERO || !mapped.is_finite() || mapped.dot(ng) <= 0.0 {
+            n
+        } else {
+            mapped
         }
     }
 }

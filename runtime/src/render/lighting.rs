@@ -25,6 +25,8 @@ pub(crate) static PLAIN: Material = Material {
     metallic_roughness_texture: None,
     occlusion_texture: None,
     occlusion_strength: 1.0,
+    normal_texture: None,
+    normal_scale: 1.0,
 };
 
 /// The base colour of a material, without alpha.

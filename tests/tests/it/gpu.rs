@@ -622,24 +622,30 @@ fn emissive_textures_render_on_the_gpu_as_on_the_cpu() {
     }
 }
 
-/// Metallic-roughness and occlusion textures on the GPU (issue 34): the panel scene lit
-/// (the polished half reflects) and under the headlight with the floor's occlusion
-/// texture: the CPU's rays of every kind and its image.
+/// Metallic-roughness, occlusion and normal textures on the GPU (issue 34): the panel
+/// scene lit (the polished half reflects) and under the headlight with the floor's
+/// occlusion texture, the normal-mapped floor: the CPU's rays of every kind and its
+/// image.
 #[test]
-fn metallic_roughness_and_occlusion_textures_render_on_the_gpu_as_on_the_cpu() {
+fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_cpu() {
     use octrace_format::Effect;
     use octrace_runtime::render::effects::{EffectSet, RayKind, RenderOptions};
-    let Some(ctx) = gpu("metallic_roughness_and_occlusion_textures_render_on_the_gpu_as_on_the_cpu") else { return };
-    for (name, mesh) in [
+    let Some(ctx) = gpu("metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_cpu") else {
+        return;
+    };
+    let scenes = [
         ("metal", crate::materials::metal_scene(true, false)),
         ("occlusion", crate::materials::metal_scene(true, true)),
-    ] {
+        ("normal map", crate::materials::bump_scene(0.8)),
+    ];
+    for (name, mesh) in scenes {
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
         let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
         let effects = EffectSet::NONE.with(Effect::Shadows).with(Effect::Reflection);
         let options = RenderOptions { effects, ..RenderOptions::for_scene(scene.shading()) };
         let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 96, 96);
         let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
-        assert!(counts.get(RayKind::Reflection) > 0, "{name}: {counts:?}");
+        let wanted = if name == "normal map" { RayKind::Shadow } else { RayKind::Reflection };
+        assert!(counts.get(wanted) > 0, "{name}: {counts:?}");
     }
 }

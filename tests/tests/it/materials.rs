@@ -728,3 +728,81 @@ fn an_occlusion_texture_darkens_only_the_ambient_light_where_it_says() {
     }
     assert!(darker > 1000 && same > 1000, "{darker} darker, {same} the same");
 }
+
+/// A floor in two halves under a directional light (issue 34), one material with a
+/// normal texture of two texels: the left half's tips the normal 45 degrees towards
+/// +x (towards the light), the right half's is flat.
+pub(crate) fn bump_scene(scale: f32) -> Mesh {
+    let mut mesh = Mesh::default();
+    let (t, texels) = texture(2, 1, [Wrap::ClampToEdge; 2], Filter::Nearest, |i, c| {
+        [[218, 128, 218, 255], [128, 128, 255, 255]][i][c]
+    });
+    mesh.textures.push(t);
+    mesh.texels = texels;
+    mesh.materials.push(Material { normal_texture: Some(0), normal_scale: scale, ..diffuse("floor", 0.7) });
+    for (x0, u0) in [(-4.0f32, 0.1f32), (0.0, 0.6)] {
+        let p = [[x0, 0.0, 4.0], [x0 + 4.0, 0.0, 4.0], [x0 + 4.0, 0.0, -4.0], [x0, 0.0, -4.0]];
+        let uv = [[u0, 1.0], [u0 + 0.3, 1.0], [u0 + 0.3, 0.0], [u0, 0.0]];
+        mesh.push([p[0], p[1], p[2]], None, Some([uv[0], uv[1], uv[2]]));
+        mesh.push([p[0], p[2], p[3]], None, Some([uv[0], uv[2], uv[3]]));
+        mesh.material_ids.extend([0; 2]);
+    }
+    let sun = octrace_format::Light {
+        name: "sun".into(),
+        kind: octrace_format::LightKind::Directional,
+        direction: [-0.6, -0.8, 0.0],
+        intensity: 2.0,
+        ..point_light([0.0; 3], 1.0)
+    };
+    mesh.lights.push(sun);
+    mesh
+}
+
+/// A normal texture (issue 34) turns the shading normal as its texels say: on a flat
+/// floor whose tangent is +x (u grows with x) and bitangent the normal crossed with it
+/// (-z), each pixel's radiance is Lambert's with the normal the texel gives
+/// (`normalize(t (2r - 1) scale + b (2g - 1) scale + n (2b - 1))`, computed here in f64),
+/// to 1e-5: the tipped half brighter (towards the light), the flat half as without a
+/// map; with a scale of 0 the map only shortens the normal, and both halves light as
+/// the plain floor. Before, the map was ignored.
+#[test]
+fn a_normal_texture_turns_the_shading_normal_as_its_texels_say() {
+    for scale in [1.0f32, 0.0] {
+        let mesh = bump_scene(scale);
+        let scene = scene_of(&mesh);
+        let cam = camera([0.0, 5.0, 3.0], [0.0, 0.0, 0.0], 96);
+        let (image, _) = render(&scene, &cam, EffectSet::of(scene.shading()));
+        let l = DVec3::new(0.6, 0.8, 0.0);
+        let expected = |texel: [u8; 3]| {
+            let c = texel.map(|c| f64::from(c) / 255.0 * 2.0 - 1.0);
+            let n = (DVec3::X * c[0] * scale as f64 + DVec3::NEG_Z * c[1] * scale as f64 + DVec3::Y * c[2]).normalize();
+            0.7 / std::f64::consts::PI * 2.0 * n.dot(l).max(0.0)
+        };
+        let (left, right) = (expected([218, 128, 218]), expected([128, 128, 255]));
+        let mut seen = [0; 2];
+        for y in 0..image.height {
+            for x in 0..image.width {
+                let ray = cam.ray(x, y);
+                let Some(hit) = scene.intersect(&ray) else { continue };
+                let p = ray.origin + hit.t * ray.dir;
+                let (want, side) = if p.x < -0.05 {
+                    (left, 0)
+                } else if p.x > 0.05 {
+                    (right, 1)
+                } else {
+                    continue;
+                };
+                let got = image.at(x, y);
+                assert!(
+                    ((got.x as f64) - want).abs() < 1e-5 * want.max(1.0),
+                    "scale {scale}, ({x}, {y}): {got} against {want}"
+                );
+                seen[side] += 1;
+            }
+        }
+        assert!(seen[0] > 500 && seen[1] > 500, "{seen:?}");
+        if scale == 1.0 {
+            assert!(left > 1.2 * right, "{left} {right}");
+        }
+    }
+}

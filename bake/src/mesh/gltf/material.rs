@@ -84,22 +84,24 @@ impl Materials<'_> {
         // one set of coordinates a triangle, the first slot's (base colour, emissive,
         // metallic-roughness, occlusion), and every slot samples there.
         let occlusion = m.occlusion_texture();
-        let slots: [Slot<'_>; 4] = [
+        let normal = m.normal_texture();
+        let slots: [Slot<'_>; 5] = [
             ("base colour", pbr.base_color_texture().map(|i| (i.texture(), uv_map(&i))), true),
             ("emissive", m.emissive_texture().map(|i| (i.texture(), uv_map(&i))), true),
             ("metallic-roughness", pbr.metallic_roughness_texture().map(|i| (i.texture(), uv_map(&i))), false),
-            // The gltf crate does not give an occlusion texture's KHR_texture_transform:
-            // its set alone.
+            // The gltf crate does not give an occlusion or normal texture's
+            // KHR_texture_transform: their set alone.
             (
                 "occlusion",
                 occlusion.as_ref().map(|o| (o.texture(), UvMap { set: o.tex_coord(), transform: None })),
                 false,
             ),
+            ("normal", normal.as_ref().map(|n| (n.texture(), UvMap { set: n.tex_coord(), transform: None })), false),
         ];
         let uv =
             slots.iter().find_map(|(_, s, _)| s.as_ref().map(|s| s.1)).unwrap_or(UvMap { set: 0, transform: None });
         let first = slots.iter().find(|(_, s, _)| s.is_some()).map_or("", |s| s.0);
-        let mut textures = [None; 4];
+        let mut textures = [None; 5];
         for (k, (slot, texture, srgb)) in slots.iter().enumerate() {
             let Some((texture, map)) = texture else { continue };
             if *map != uv {
@@ -112,14 +114,7 @@ impl Materials<'_> {
             }
             textures[k] = self.texture(texture, &name, slot, *srgb, mesh);
         }
-        let [texture, emissive_texture, metallic_roughness_texture, occlusion_texture] = textures;
-        if let Some(normal) = m.normal_texture() {
-            mesh.warnings.push(format!(
-                "{}: material '{name}': its normal texture (texture {}) is not read: shading uses the mesh's normals",
-                self.path.display(),
-                normal.texture().index()
-            ));
-        }
+        let [texture, emissive_texture, metallic_roughness_texture, occlusion_texture, normal_texture] = textures;
         let out = Material {
             base_color: pbr.base_color_factor().map(unit),
             metallic: unit(pbr.metallic_factor()),
@@ -141,9 +136,16 @@ impl Materials<'_> {
             metallic_roughness_texture,
             occlusion_texture,
             occlusion_strength: occlusion.as_ref().map_or(1.0, |o| unit(o.strength())),
+            normal_texture,
+            normal_scale: normal.as_ref().map_or(1.0, |n| n.scale()),
             name,
         };
-        let numbers = out.base_color.iter().chain(&out.emissive).chain([&out.alpha_cutoff, &out.ior, &strength]);
+        let numbers = out.base_color.iter().chain(&out.emissive).chain([
+            &out.alpha_cutoff,
+            &out.ior,
+            &strength,
+            &out.normal_scale,
+        ]);
         if let Some(bad) = numbers.into_iter().find(|v| !v.is_finite()) {
             return Err(Error::Parse {
                 path: self.path.into(),
