@@ -54,6 +54,22 @@ effects            none (primary rays only)
     assert_eq!(bytes + octrace_format::HEADER_LEN as u64, json["file_bytes"].as_u64().unwrap());
 }
 
+/// `inspect` names each texture's encoding and what reads it: the textured sample's
+/// checker and leaf, both base colour textures (sRGB), each of its material.
+#[test]
+fn inspect_says_how_each_texture_is_encoded_and_what_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let leaf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/textured/leaf.gltf");
+    ok(dir.path(), &["bake", leaf.to_str().unwrap(), "-o", "leaf.oct"]);
+    let text = ok(dir.path(), &["inspect", "leaf.oct"]);
+    for want in [
+        "image 0 'checker': 8 x 8, sRGB colour, nearest filter, wrap repeat / repeat, alpha down to 1.00; base colour of 'checker floor'",
+        "image 1 'leaf.png': 64 x 64, sRGB colour, linear filter, wrap clamp to edge / clamp to edge, alpha down to 0.00; base colour of 'leaf'",
+    ] {
+        assert!(text.contains(want), "{want}\nnot in\n{text}");
+    }
+}
+
 /// Two cubes and a lamp, with an MTL library: a mirror, a glass and an emitter.
 const MTL_OBJ: &str = "mtllib scene.mtl
 v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1

@@ -216,14 +216,16 @@ impl<'a> Report<'a> {
         for (i, t) in sh.textures.iter().enumerate() {
             let label = if i == 0 { "textures" } else { "" };
             text.push_str(&format!(
-                "\n{label:<18} {}: {} x {}, {} filter, wrap {} / {}, alpha down to {:.2}",
+                "\n{label:<18} {}: {} x {}, {}, {} filter, wrap {} / {}, alpha down to {:.2}{}",
                 t.name,
                 t.width,
                 t.height,
+                if t.srgb { "sRGB colour" } else { "linear colour" },
                 t.filter.name(),
                 t.wrap[0].name(),
                 t.wrap[1].name(),
-                t.min_alpha
+                t.min_alpha,
+                texture_uses(&sh.materials, i as u32)
             ));
         }
         text
@@ -256,5 +258,26 @@ pub(crate) fn surface(e: &octrace_format::topology::EdgeCensus) -> String {
             thousands(e.flipped),
             thousands(e.edges)
         )
+    }
+}
+
+/// What reads texture `index`: "; emissive of 'Material_MR'", a material's slots named as
+/// glTF names them, the first three and how many more; empty when nothing does.
+fn texture_uses(materials: &[octrace_format::Material], index: u32) -> String {
+    let mut uses = Vec::new();
+    for m in materials {
+        let slots = [
+            ("base colour", m.base_color_texture),
+            ("emissive", m.emissive_texture),
+            ("metallic-roughness", m.metallic_roughness_texture),
+            ("occlusion", m.occlusion_texture),
+            ("normal", m.normal_texture),
+        ];
+        uses.extend(slots.iter().filter(|(_, t)| *t == Some(index)).map(|(slot, _)| format!("{slot} of '{}'", m.name)));
+    }
+    match uses.len() {
+        0 => String::new(),
+        n if n <= 3 => format!("; {}", uses.join(", ")),
+        n => format!("; {} and {} more", uses[..3].join(", "), n - 3),
     }
 }
