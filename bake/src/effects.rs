@@ -1,7 +1,7 @@
 //! The effects a scene calls for, decided once at bake from its materials and lights,
 //! each with the reason a user can check.
 
-use octrace_format::{AlphaMode, Effect, EffectReason, LitTexels, Material, VISIBLE_WEIGHT};
+use octrace_format::{AlphaMode, Effect, EffectReason, EmissiveTriangles, Material, VISIBLE_WEIGHT};
 
 use crate::mesh::Mesh;
 
@@ -172,22 +172,15 @@ fn metallic_roughness_range<'m>(mesh: &'m Mesh, m: &Material) -> Option<(&'m oct
 
 /// How many of the triangles in `used` emit light, per material: all of an emissive
 /// material's, or, with an emissive texture, those whose texels are not all black
-/// ([`LitTexels::any_lit`], as the renderer decides its area lights).
+/// ([`EmissiveTriangles`], as the renderer decides its area lights).
 fn emitting_triangles(mesh: &Mesh, used: &[u32]) -> Vec<usize> {
     let mut emitting = vec![0usize; mesh.materials.len()];
-    let mut tables: Vec<Option<LitTexels>> = vec![None; mesh.textures.len()];
+    let mut emissive = EmissiveTriangles::new(&mesh.textures, &mesh.texels);
     for &t in used {
         let Some(&id) = mesh.material_ids.get(t as usize) else { continue };
-        let Some(m) = mesh.materials.get(id as usize).filter(|m| m.is_emissive()) else { continue };
-        let lit = match m.emissive_texture.filter(|&i| (i as usize) < mesh.textures.len()) {
-            Some(i) => {
-                let table =
-                    tables[i as usize].get_or_insert_with(|| LitTexels::new(&mesh.textures[i as usize], &mesh.texels));
-                table.any_lit(mesh.uvs.get(t as usize).copied().unwrap_or_default())
-            }
-            None => true,
-        };
-        emitting[id as usize] += usize::from(lit);
+        let Some(m) = mesh.materials.get(id as usize) else { continue };
+        let corners = mesh.uvs.get(t as usize).copied().unwrap_or_default();
+        emitting[id as usize] += usize::from(emissive.emits(m, corners));
     }
     emitting
 }

@@ -53,7 +53,8 @@ pub use shading::{
     VISIBLE_WEIGHT,
 };
 pub use texture::{
-    linear16, srgb_to_linear16, Filter, LitTexels, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS,
+    linear16, srgb_to_linear16, EmissiveTriangles, Filter, LitTexels, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE,
+    TEXEL_WORDS,
 };
 pub use view::{LeafRecord, SceneView, StoredIndex, COLOR_SCALE, COLOR_WORDS};
 pub use write::write_atomically;

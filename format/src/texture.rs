@@ -272,6 +272,39 @@ impl LitTexels {
     }
 }
 
+/// Whether triangles emit light, as the bake and the renderer decide it: a triangle of
+/// an emissive material emits, unless the material's emissive texture is black over all
+/// the texels the triangle can read ([`LitTexels::any_lit`], each texture's table built
+/// the first time it is asked). An emissive texture past `textures` counts as none.
+#[derive(Debug)]
+pub struct EmissiveTriangles<'a> {
+    textures: &'a [Texture],
+    texels: &'a [u32],
+    tables: Vec<Option<LitTexels>>,
+}
+
+impl<'a> EmissiveTriangles<'a> {
+    /// For a scene's `textures` and their `texels`.
+    pub fn new(textures: &'a [Texture], texels: &'a [u32]) -> Self {
+        EmissiveTriangles { textures, texels, tables: vec![None; textures.len()] }
+    }
+
+    /// Whether a triangle of `material` whose corners have texture coordinates
+    /// `corners` emits light.
+    pub fn emits(&mut self, material: &crate::Material, corners: [[f32; 2]; 3]) -> bool {
+        if !material.is_emissive() {
+            return false;
+        }
+        match material.emissive_texture.map(|t| t as usize).filter(|&t| t < self.textures.len()) {
+            Some(t) => {
+                let (texture, texels) = (&self.textures[t], self.texels);
+                self.tables[t].get_or_insert_with(|| LitTexels::new(texture, texels)).any_lit(corners)
+            }
+            None => true,
+        }
+    }
+}
+
 /// The texel indices (inclusive ranges in `0..n`, at most three) that samples at
 /// coordinates between the smallest and largest of `c` can read along one axis.
 fn axis_spans(wrap: Wrap, c: [f32; 3], n: i64) -> [Option<(i64, i64)>; 3] {

@@ -252,14 +252,8 @@ fn material(m: &tobj::Material) -> Material {
         ior: ior.unwrap_or(1.5),
         specular: colour(m.specular, 0.0),
         illum: Some(m.illumination_model.map_or(2, u32::from)),
-        unlit: false,
-        base_color_texture: None,
-        emissive_texture: None,
-        metallic_roughness_texture: None,
-        occlusion_texture: None,
-        occlusion_strength: 1.0,
-        normal_texture: None,
-        normal_scale: 1.0,
+        // No textures: MTL maps are not read.
+        ..Material::default()
     }
 }
 

@@ -276,7 +276,7 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     let mut params = RenderParams::default();
     let f = |words: &mut Vec<u32>, v: &[f32]| words.extend(v.iter().map(|x| x.to_bits()));
     params.o_materials = 0;
-    for m in shading.materials.iter().chain([&PLAIN]) {
+    for m in shading.materials.iter().chain([&*PLAIN]) {
         let before = words.len();
         f(&mut words, &material_record(m, shading.textures.len()));
         debug_assert_eq!(words.len() - before, MATERIAL_WORDS);

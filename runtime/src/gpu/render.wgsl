@@ -210,6 +210,9 @@ fn next_down(x: f32) -> f32 {
     return -next_up(-x);
 }
 
+// The word of a material record that holds its emissive texture (`material_record`).
+const EMISSIVE_TEXTURE_WORD: u32 = 43u;
+
 // The record of `prim`'s material (the plain one for a triangle without).
 fn material_at(prim: u32) -> u32 {
     var id = rp.plain_material;
@@ -245,7 +248,7 @@ fn material(prim: u32) -> Material {
     m.keep_shadow = sf(at + 40u);
     m.alpha_mode = shade[at + 41u];
     m.alpha_cutoff = sf(at + 42u);
-    m.emissive_texture = shade[at + 43u];
+    m.emissive_texture = shade[at + EMISSIVE_TEXTURE_WORD];
     m.mr_texture = shade[at + 44u];
     m.roughness = sf(at + 45u);
     m.f0 = sf(at + 46u);
@@ -363,11 +366,20 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
 // from it, in the CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
 fn surface(hit: HitOut) -> Material {
     var m = material(hit.prim);
+    let textured = (m.texture | m.emissive_texture | m.occlusion_texture | m.mr_texture) != 0u;
+    if !textured && rp.has_colors == 0u {
+        return m;
+    }
+    // The hit's texture coordinates, once for every texture the material reads.
+    var uv = vec2<f32>(0.0);
+    if textured {
+        uv = uv_at(hit.prim, hit.u, hit.v);
+    }
     if m.emissive_texture != 0u {
-        m.emissive = m.emissive * sample(m.emissive_texture - 1u, uv_at(hit.prim, hit.u, hit.v)).xyz;
+        m.emissive = m.emissive * sample(m.emissive_texture - 1u, uv).xyz;
     }
     if m.occlusion_texture != 0u {
-        let r = sample(m.occlusion_texture - 1u, uv_at(hit.prim, hit.u, hit.v)).x;
+        let r = sample(m.occlusion_texture - 1u, uv).x;
         m.occlusion = 1.0 + m.occlusion_strength * (r - 1.0);
     }
     if m.texture == 0u && rp.has_colors == 0u && m.mr_texture == 0u {
@@ -377,7 +389,7 @@ fn surface(hit: HitOut) -> Material {
         // SceneView::metallic_roughness_at, then what lighting.rs and Material derive
         // from them (gloss, metal, the dielectric mirror, the highlight's F0 and
         // exponent), in their operations.
-        let mr = sample(m.mr_texture - 1u, uv_at(hit.prim, hit.u, hit.v));
+        let mr = sample(m.mr_texture - 1u, uv);
         m.metallic = m.metallic * mr.z;
         let r = clamp(m.roughness * mr.y, 0.0, 1.0);
         let rough = 1.0 - r;
@@ -390,7 +402,7 @@ fn surface(hit: HitOut) -> Material {
     }
     var bc = m.factor;
     if m.texture != 0u {
-        bc = bc * sample(m.texture - 1u, uv_at(hit.prim, hit.u, hit.v));
+        bc = bc * sample(m.texture - 1u, uv);
     }
     if rp.has_colors != 0u {
         bc = bc * color_at(hit.prim, hit.u, hit.v);
@@ -754,7 +766,7 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
             y = div3(a + b + c, 3.0);
         }
         // The emission where the point is, through the material's emissive texture.
-        let emissive_texture = shade[material_at(prim) + 43u];
+        let emissive_texture = shade[material_at(prim) + EMISSIVE_TEXTURE_WORD];
         if emissive_texture != 0u {
             emitted = emitted * sample(emissive_texture - 1u, uv_at(prim, wb, wc)).xyz;
         }

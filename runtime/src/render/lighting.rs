@@ -4,30 +4,12 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use octrace_format::{Light, LightKind, LitTexels, Material, SceneView, StoredIndex, VISIBLE_WEIGHT};
+use octrace_format::{EmissiveTriangles, Light, LightKind, Material, SceneView, StoredIndex, VISIBLE_WEIGHT};
 
-/// The material of a triangle with none (a mesh without materials): white, diffuse.
-pub(crate) static PLAIN: Material = Material {
-    name: String::new(),
-    base_color: [1.0; 4],
-    metallic: 0.0,
-    roughness: 1.0,
-    emissive: [0.0; 3],
-    alpha_mode: octrace_format::AlphaMode::Opaque,
-    alpha_cutoff: 0.5,
-    transmission: 0.0,
-    ior: 1.5,
-    specular: [0.0; 3],
-    illum: None,
-    unlit: false,
-    base_color_texture: None,
-    emissive_texture: None,
-    metallic_roughness_texture: None,
-    occlusion_texture: None,
-    occlusion_strength: 1.0,
-    normal_texture: None,
-    normal_scale: 1.0,
-};
+/// The material of a triangle with none (a mesh without materials): white, diffuse
+/// (glTF's default material, not metallic).
+pub(crate) static PLAIN: std::sync::LazyLock<Material> =
+    std::sync::LazyLock::new(|| Material { name: String::new(), metallic: 0.0, ..Material::default() });
 
 /// The base colour of a material, without alpha.
 pub(crate) fn base(m: &Material) -> Vec3 {
@@ -217,25 +199,19 @@ pub(crate) struct Emitters {
 impl Emitters {
     /// The emissive triangles of `view`: triangles whose material emits, and, where
     /// its emission comes through a texture, whose texels are not all black
-    /// ([`LitTexels::any_lit`]; the bake counts them the same way).
+    /// ([`EmissiveTriangles`]; the bake counts them the same way).
     pub(crate) fn of(view: &SceneView<'_>) -> Emitters {
         let mut triangles = Vec::new();
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
         let mut untextured = false;
-        let mut tables: Vec<Option<LitTexels>> = vec![None; view.shading.textures.len()];
+        let mut emissive = EmissiveTriangles::new(&view.shading.textures, view.texels);
         for prim in 0..view.triangle_count() as u32 {
-            let Some(m) = view.material(StoredIndex(prim)).filter(|m| m.is_emissive()) else { continue };
-            if let Some(t) = m.emissive_texture.filter(|&t| (t as usize) < tables.len()) {
-                let table = tables[t as usize]
-                    .get_or_insert_with(|| LitTexels::new(&view.shading.textures[t as usize], view.texels));
-                let corners = view.corner_uvs(StoredIndex(prim)).unwrap_or_default();
-                if !table.any_lit(corners) {
-                    continue;
-                }
-            } else {
-                untextured = true;
+            let Some(m) = view.material(StoredIndex(prim)) else { continue };
+            if !emissive.emits(m, view.corner_uvs(StoredIndex(prim)).unwrap_or_default()) {
+                continue;
             }
+            untextured |= m.emissive_texture.is_none_or(|t| t as usize >= view.shading.textures.len());
             let area = area(&view.triangle(StoredIndex(prim)));
             if area > 0.0 {
                 total += area as f64;
