@@ -31,6 +31,7 @@ leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
 triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
 overfull leaves    0
+fans               none (no leaf of 64+ references has 24+ triangles around one vertex)
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
 bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
@@ -52,6 +53,31 @@ effects            none (primary rays only)
     assert_eq!(names, octrace_format::SECTION_NAMES);
     let bytes: u64 = sections.iter().map(|s| s["bytes"].as_u64().unwrap()).sum();
     assert_eq!(bytes + octrace_format::HEADER_LEN as u64, json["file_bytes"].as_u64().unwrap());
+}
+
+/// A disk fanned from its centre leaves a leaf at the depth limit holding every
+/// triangle: `inspect` says it is a fan, which rays cross through a hierarchy.
+#[test]
+fn inspect_reports_the_leaves_that_are_fans() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 300;
+    let mut obj = String::from("v 0 0 0\n");
+    for k in 0..n {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        obj.push_str(&format!("v {} 0 {}\n", a.cos(), a.sin()));
+    }
+    for k in 0..n {
+        obj.push_str(&format!("f 1 {} {}\n", k + 2, (k + 1) % n + 2));
+    }
+    std::fs::write(dir.path().join("disk.obj"), obj).unwrap();
+    ok(dir.path(), &["bake", "disk.obj", "-o", "disk.oct"]);
+    let text = ok(dir.path(), &["inspect", "disk.oct"]);
+    let line = text.lines().find(|l| l.starts_with("fans ")).expect("a fans line");
+    assert!(line.contains("around a shared vertex") && line.contains("up to 300 in one; 0 others"), "{line}");
+    let json: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "disk.oct", "--json"])).unwrap();
+    assert!(json["fans"]["leaves"].as_u64().unwrap() >= 1, "{}", json["fans"]);
+    assert_eq!(json["fans"]["largest"], 300);
+    assert_eq!(json["fans"]["other_references"], 0);
 }
 
 /// `inspect` names each texture's encoding and what reads it: the textured sample's

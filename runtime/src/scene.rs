@@ -44,6 +44,8 @@ struct Inner {
     source: Source,
     /// Point location's top levels, built on the first tracer.
     grid: std::sync::OnceLock<LocateGrid>,
+    /// The fans of the crowded leaves, found with the first tracer.
+    fans: std::sync::OnceLock<crate::cpu::FanIndex>,
     /// The tracers' frame, computed once.
     frame: std::sync::OnceLock<crate::cpu::TreeFrame>,
     /// The leaves' inside and outside labels, made on the first query that needs
@@ -135,6 +137,7 @@ impl Scene {
         let inner = Inner {
             source,
             grid: std::sync::OnceLock::new(),
+            fans: std::sync::OnceLock::new(),
             frame: std::sync::OnceLock::new(),
             solid: std::sync::OnceLock::new(),
         };
@@ -173,7 +176,14 @@ impl Scene {
         let view = self.view();
         let grid = self.inner.grid.get_or_init(|| LocateGrid::build(&view));
         let frame = *self.inner.frame.get_or_init(|| crate::cpu::TreeFrame::of(&view));
-        Tracer::with_frame(view, frame).with_locate_grid(grid)
+        let fans = self.fans();
+        Tracer::with_frame(view, frame).with_locate_grid(grid).with_fans((!fans.is_empty()).then_some(fans))
+    }
+
+    /// The scene's crowded leaves, whose fans the walks use ([`crate::cpu::FanIndex`]):
+    /// found on the first call (or tracer), reading every leaf record once.
+    pub fn fans(&self) -> &crate::cpu::FanIndex {
+        self.inner.fans.get_or_init(|| crate::cpu::FanIndex::new(&self.view()))
     }
 
     /// The scene's own tracer, made once: the one-ray calls pay no setup.

@@ -33,13 +33,21 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 pub(crate) struct Report<'a> {
     view: SceneView<'a>,
     stats: SceneStatistics,
+    /// The leaves whose triangles share a vertex, walked through their hierarchies.
+    fans: octrace_runtime::cpu::FanSummary,
     header: octrace_format::Header,
     file_bytes: u64,
 }
 
 impl<'a> Report<'a> {
     pub(crate) fn new(view: &SceneView<'a>, header: &octrace_format::Header, file_bytes: u64) -> anyhow::Result<Self> {
-        Ok(Report { stats: SceneStatistics::compute(view)?, view: view.clone(), header: *header, file_bytes })
+        Ok(Report {
+            stats: SceneStatistics::compute(view)?,
+            fans: octrace_runtime::cpu::FanIndex::survey(view),
+            view: view.clone(),
+            header: *header,
+            file_bytes,
+        })
     }
 
     fn balance_growth(&self) -> f64 {
@@ -58,6 +66,28 @@ impl<'a> Report<'a> {
         } else {
             format!(" (zstd-compressed: {} on disk)", mb(self.file_bytes))
         }
+    }
+
+    /// The fans line: how many crowded leaves are fans, and what a ray tests there.
+    fn fans_line(&self) -> String {
+        let f = &self.fans;
+        if f.leaves == 0 {
+            return format!(
+                "fans               none (no leaf of {}+ references has {}+ triangles around one vertex)",
+                octrace_runtime::cpu::FAN_MIN_REFERENCES,
+                octrace_runtime::cpu::FAN_MIN_TRIANGLES
+            );
+        }
+        format!(
+            "fans               {} {} of {}+ references around a shared vertex ({} of their references, up to {} \
+             in one; {} others): a ray tests the few whose wedge its plane crosses",
+            thousands(f.leaves),
+            if f.leaves == 1 { "leaf" } else { "leaves" },
+            octrace_runtime::cpu::FAN_MIN_REFERENCES,
+            thousands(f.fan_references),
+            thousands(f.largest),
+            thousands(f.other_references)
+        )
     }
 
     fn bake_time(&self) -> String {
@@ -111,7 +141,7 @@ impl<'a> Report<'a> {
                 if s.overfull_leaves > 0 {
                     format!(
                         " at the depth limit with more than {} x the leaf size ({} references: triangles sharing \
-                         cells at every depth, fans or copies; a ray through one tests them all)",
+                         cells at every depth, fans or copies)",
                         octrace_format::stats::OVERFULL_FACTOR,
                         thousands(s.overfull_references)
                     )
@@ -119,6 +149,7 @@ impl<'a> Report<'a> {
                     String::new()
                 }
             ),
+            self.fans_line(),
             format!("neighbours / leaf  mean {:.2}", s.neighbours_per_leaf_mean),
             format!("cube map           {res} x {res} texels a face, level {}", v.params.cube_level),
             format!(
@@ -232,7 +263,15 @@ impl<'a> Report<'a> {
     }
 
     pub(crate) fn json(&self) -> serde_json::Value {
-        octrace_bake::summary::json(&self.view, &self.stats, &self.header, self.file_bytes)
+        let mut json = octrace_bake::summary::json(&self.view, &self.stats, &self.header, self.file_bytes);
+        let f = &self.fans;
+        json["fans"] = serde_json::json!({
+            "leaves": f.leaves,
+            "fan_references": f.fan_references,
+            "other_references": f.other_references,
+            "largest": f.largest,
+        });
+        json
     }
 }
 

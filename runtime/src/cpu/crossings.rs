@@ -17,6 +17,7 @@ use std::ops::ControlFlow;
 
 use octrace_format::layout::{LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
+use super::fans;
 use super::tables::ExitRule;
 use super::tracer::Tracer;
 use super::walk::RayWalk;
@@ -216,13 +217,23 @@ impl Tracer<'_> {
             let a = w.address() as usize;
             // A hostile file's link past the array (on the trusted path) ends the walk.
             let Some(rec) = v.octree.get(a..a + LEAF_HEADER_WORDS) else { return };
-            let (count, offset, ncount) = (rec[0], rec[1], rec[3]);
+            let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
             let exit = self.exit_of(&w);
             let n = (ncount >> (4 * exit.face)) & 0xF;
             let last = exit.t >= stop || n == 0;
             let hi = if last { tmax } else { exit.t.max(lo.unwrap_or(tmin)) };
             // The leaf's crossings in its piece.
-            let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+            let mut refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+            // A fan's leaf: the triangles its hierarchy picks (`fans.rs`), in the same order.
+            let mut picked: fans::Candidates;
+            if count >= fans::MIN_REFERENCES && !exact {
+                picked = fans::candidates_room();
+                if let Some(fan) =
+                    self.fans.and_then(|f| f.candidates(v, (box_index, offset, refs), &shear, &mut picked))
+                {
+                    refs = fan;
+                }
+            }
             buffer.0.clear();
             for &prim in refs {
                 let Some(tri) =

@@ -4,6 +4,7 @@
 //! * `walk.rs`: a walk's state, the leaf visit every form shares, and the scalar step
 //!   (the always-compiled reference the SIMD forms are tested against, bit for bit);
 //! * `locate.rs`: where a walk starts (point location, the cube map);
+//! * `fans.rs`: the hierarchies of the leaves whose triangles share one vertex;
 //! * `simd/`: the SSE step and the eight-lane AVX2 step, on `hw.rs`'s primitives;
 //! * `one_ray.rs` and `batch.rs`: the calls, which pick a form (`order.rs`: the
 //!   memory order of incoherent batches).
@@ -13,6 +14,7 @@
 
 mod batch;
 mod crossings;
+pub(crate) mod fans;
 mod hw;
 pub(crate) mod inside;
 mod locate;
@@ -26,6 +28,7 @@ mod walk;
 pub mod watertight;
 
 pub use crossings::{BatchCrossings, Crossing, CrossingCount};
+pub use fans::{FanIndex, FanSummary, MIN_REFERENCES as FAN_MIN_REFERENCES, MIN_TRIANGLES as FAN_MIN_TRIANGLES};
 pub use inside::{Solid, COUNT_DIRECTION};
 pub use locate::LocateGrid;
 pub(crate) use tracer::{box_slack, BOX_T_SLACK};

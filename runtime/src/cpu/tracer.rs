@@ -6,6 +6,7 @@
 use octrace_format::layout::MAX_LEVEL;
 use octrace_format::SceneView;
 
+use super::fans::FanIndex;
 use super::locate::LocateGrid;
 use super::tables::RuleScale;
 use super::triangle::{intersect, intersect_f64, TriRay};
@@ -20,6 +21,8 @@ pub struct Tracer<'a> {
     pub(super) exit: ExitTest,
     /// The top levels of point location as a grid, when the scene has one.
     pub(super) grid: Option<&'a LocateGrid>,
+    /// The fans of the scene's crowded leaves, when built for it ([`FanIndex`]).
+    pub(super) fans: Option<&'a FanIndex>,
     /// Whether the walks run the code compiled for x86-64-v3 (where the processor
     /// has it).
     pub(super) v3: bool,
@@ -263,6 +266,7 @@ impl<'a> Tracer<'a> {
             test: TriangleTest::default(),
             exit: ExitTest::default(),
             grid: None,
+            fans: None,
             v3: frame.v3,
             lanes: true,
             memory_order: MemoryOrder::Auto,
@@ -354,6 +358,15 @@ impl<'a> Tracer<'a> {
     #[inline]
     pub fn with_locate_grid(mut self, grid: &'a LocateGrid) -> Self {
         self.grid = Some(grid);
+        self
+    }
+
+    /// The same tracer testing the leaves that `fans` (built for this scene) indexes
+    /// through their hierarchies, or, with `None`, every triangle of every leaf. The
+    /// answers are the same bits either way; a [`crate::Scene`]'s tracers have it.
+    #[inline]
+    pub fn with_fans(mut self, fans: Option<&'a FanIndex>) -> Self {
+        self.fans = fans;
         self
     }
 

@@ -26,6 +26,7 @@
 use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 use octrace_format::StoredIndex;
 
+use super::fans;
 use super::tables::{exact_exit, exact_side, exit_code, exit_rule, octant, ExitRule, EXIT_FACE};
 use super::tracer::{ExitTest, Tally, Tracer, TriangleTest, BOX_T_SLACK};
 use super::triangle::TriRay;
@@ -85,6 +86,13 @@ pub(crate) trait LeafTest {
     fn batch<const ANY: bool>(&self, _triangles: &[f32], _refs: &[u32], _tmin: f32, _tmax: f32) -> Batch {
         Batch::OneByOne
     }
+
+    /// The shear of [`Shear::intersect`], where every triangle is tested with it (so a
+    /// fan's hierarchy may choose which: `fans.rs`); `None` for the other tests.
+    #[inline(always)]
+    fn fan_shear(&self) -> Option<&Shear> {
+        None
+    }
 }
 
 /// What a batch of triangles tested at once answered ([`LeafTest::batch`]). Only the
@@ -119,6 +127,11 @@ impl LeafTest for ScalarTest<'_, '_> {
             return self.shear.intersect_f64(t, tmin, tmax);
         }
         self.tracer.hit_triangle(&self.shear, &self.tri, t, tmin, tmax)
+    }
+
+    #[inline(always)]
+    fn fan_shear(&self) -> Option<&Shear> {
+        (!self.exact && self.tracer.triangle_test() == TriangleTest::Watertight).then_some(&self.shear)
     }
 }
 
@@ -365,8 +378,9 @@ impl Tracer<'_> {
         // ends the walk here.
         let rec = v.octree.get(a..a + LEAF_HEADER_WORDS)?;
         let (count, offset, box_index, ncount) = (rec[0], rec[1], rec[2], rec[3]);
-        stats.tests(count);
-        (!self.test_leaf::<ANY>(count, offset, box_index, walk, test)).then_some((box_index, ncount))
+        let (answered, tested) = self.test_leaf_counted::<ANY>(count, offset, box_index, walk, test);
+        stats.tests(tested);
+        (!answered).then_some((box_index, ncount))
     }
 
     /// Tests a leaf's `count` triangles (references from `offset` on), keeping the
@@ -380,9 +394,46 @@ impl Tracer<'_> {
         walk: &mut LeafVisit<'_>,
         test: &impl LeafTest,
     ) -> bool {
-        let v = &self.view;
+        self.test_leaf_counted::<ANY>(count, offset, box_index, walk, test).0
+    }
+
+    /// [`Tracer::test_leaf`], and how many triangles it tested: in a fan's leaf, those
+    /// its hierarchy picked (`fans.rs`), else all `count`.
+    #[inline(always)]
+    fn test_leaf_counted<const ANY: bool>(
+        &self,
+        count: u32,
+        offset: u32,
+        box_index: u32,
+        walk: &mut LeafVisit<'_>,
+        test: &impl LeafTest,
+    ) -> (bool, u32) {
         // References past the array (a hostile file on the trusted path): none.
-        let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+        let refs = self.view.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+        if count >= fans::MIN_REFERENCES {
+            // A crowded leaf: through its fan's hierarchy, when it has one and the test
+            // allows (`fans.rs`), the same answer as testing them all.
+            if let (Some(index), Some(shear)) = (self.fans, test.fan_shear()) {
+                let mut out = fans::candidates_room();
+                if let Some(picked) = index.candidates(&self.view, (box_index, offset, refs), shear, &mut out) {
+                    return (self.test_refs::<ANY>(picked, box_index, walk, test), picked.len() as u32);
+                }
+            }
+        }
+        (self.test_refs::<ANY>(refs, box_index, walk, test), count)
+    }
+
+    /// Tests the stored triangles `refs` in their order (eight at a time where the
+    /// test can), keeping the nearest hit; returns whether an any-hit query is answered.
+    #[inline(always)]
+    fn test_refs<const ANY: bool>(
+        &self,
+        refs: &[u32],
+        box_index: u32,
+        walk: &mut LeafVisit<'_>,
+        test: &impl LeafTest,
+    ) -> bool {
+        let v = &self.view;
         let size = test.batch_size();
         if size == 0 {
             return self.one_by_one::<ANY>(refs, box_index, walk, test);

@@ -17,6 +17,7 @@ use super::avx2::{self, crossings8};
 use super::begin8::mask8;
 use super::lanes::{advance, records, refill, Feed, Group, Recent, Walk, F8, GROUPS, LANES, RECENT};
 use crate::cpu::crossings::{arrives_on_front, Crossing, CrossingSink, LeafCrossings};
+use crate::cpu::fans;
 use crate::cpu::tracer::Tracer;
 use crate::cpu::walk::RayWalk;
 use crate::ray::Ray;
@@ -134,10 +135,10 @@ unsafe fn step(t: &Tracer<'_>, g: &mut Group, ls: &mut [Lane; LANES], recent: &m
             full &= full - 1;
             let Some(w) = g.walks[lane].as_ref() else { continue };
             let a = g.v.address.0[lane] as usize;
-            let offset = octree[a + 1];
+            let (offset, box_index) = (octree[a + 1], octree[a + 2]);
             // Tested up to the ray's tmax (`t_best`, never lowered here).
             let tmax = g.v.t_best.0[lane];
-            leaf_crossings(t, w, &mut ls[lane], counts[lane], offset, tmax);
+            leaf_crossings(t, w, &mut ls[lane], (counts[lane], offset, box_index), tmax);
             found |= (!ls[lane].pending.is_empty() as u32) << lane;
         }
         let mut exits = F8::default();
@@ -179,13 +180,21 @@ fn lo_of(ls: &[Lane; LANES]) -> [f32; LANES] {
     std::array::from_fn(|i| ls[i].lo)
 }
 
-/// Lane `l`'s crossings in its leaf (`count` references from `offset`) past its piece's
-/// start, up to `tmax`, into `l.pending`: eight triangles at a time, one by one where
-/// an edge function is zero (ownership) or an index is out of range.
+/// Lane `l`'s crossings in its leaf (`count` references from `offset`, box index
+/// `box_index`) past its piece's start, up to `tmax`, into `l.pending`: eight triangles
+/// at a time, one by one where an edge function is zero (ownership) or an index is out
+/// of range. In a fan's leaf, the triangles its hierarchy picks (`fans.rs`).
 #[inline(always)]
-fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, count: u32, offset: u32, tmax: f32) {
+fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, (count, offset, box_index): (u32, u32, u32), tmax: f32) {
     let v = t.view();
-    let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+    let mut refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+    let mut picked: fans::Candidates;
+    if count >= fans::MIN_REFERENCES {
+        picked = fans::candidates_room();
+        if let Some(fan) = t.fans.and_then(|f| f.candidates(v, (box_index, offset, refs), &w.shear, &mut picked)) {
+            refs = fan;
+        }
+    }
     let lo = l.lo;
     for chunk in refs.chunks(LANES) {
         let mut push = |prim: u32, (tt, u, vv): (f32, f32, f32), enters: bool| {

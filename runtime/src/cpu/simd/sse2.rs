@@ -302,6 +302,11 @@ impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
         // x86-64-v3 walk); `batch_size` is 0 otherwise and the step does not call this.
         unsafe { avx2::hit8::<ANY>(self.shear.scalar(), triangles, refs, tmin, tmax) }
     }
+
+    #[inline(always)]
+    fn fan_shear(&self) -> Option<&Shear> {
+        (TEST == TEST_WATERTIGHT).then(|| self.shear.scalar())
+    }
 }
 
 /// The lanes equal to `axis`, all ones.
