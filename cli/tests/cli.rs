@@ -31,7 +31,7 @@ leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
 triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
 overfull leaves    0
-fans               none (no leaf of 64+ references has 24+ triangles around one vertex)
+fans               none (no leaf of 256+ references has 24+ triangles around one vertex)
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
 bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB

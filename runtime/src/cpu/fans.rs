@@ -36,13 +36,18 @@
 //!
 //! # When and what it costs
 //! Only leaves of [`MIN_REFERENCES`] references or more are looked at (below that,
-//! eight triangles at a time cost less than the hierarchy's nodes), on a ray's first
-//! visit: the first tracer lists them (one pass over the leaf records), and each
-//! leaf's hierarchy is made when a ray first crosses it, about 12 bytes a reference,
+//! eight triangles at a time cost less than the hierarchy's nodes: with 64, random
+//! rays through a 20,000-triangle disk ran at 0.85 against 1.28 Mrays/s), on a ray's
+//! first visit: the first tracer lists them (one pass over the leaf records), and each
+//! leaf's hierarchy is made when a ray first crosses it, 12 to 20 bytes a reference,
 //! within a budget (the larger of 16 MiB and the scene's reference array) past which
 //! leaves are tested whole. Measured on disks of 2,000 to 200,000 triangles
 //! (`cargo bench -p octrace-runtime --bench fans`, BENCHMARKS.md): rays aimed near the
-//! centre 8 to 60 times faster, random rays unchanged.
+//! centre 8 to 70 times faster, random rays unchanged within noise.
+//!
+//! # On the GPU
+//! The tracer uploads every crowded leaf's hierarchy ([`FanIndex::gpu_words`]) and
+//! the kernels run the same filter (`fan_pick` in trace.wgsl), up to 64 picks.
 
 use octrace_format::layout::TRIANGLE_FLOATS;
 use octrace_format::SceneView;
@@ -50,7 +55,7 @@ use octrace_format::SceneView;
 use super::watertight::Shear;
 
 /// Leaves with at least this many references are looked at for a fan.
-pub const MIN_REFERENCES: u32 = 64;
+pub const MIN_REFERENCES: u32 = 256;
 /// Fewest triangles around one vertex that make a fan.
 pub const MIN_TRIANGLES: usize = 24;
 /// The most triangles a ray tests in a fan's leaf through the hierarchy; past it
@@ -87,6 +92,8 @@ const WIDEST_COS: f64 = -0.9;
 pub struct FanIndex {
     /// `(box index, slot)` of the crowded leaves, sorted by box index.
     by_box: Vec<(u32, u32)>,
+    /// Each slot's references: `(offset, count)`.
+    records: Vec<(u32, u32)>,
     /// Each crowded leaf's fan, once asked for: `None` when it has none (or the
     /// budget was spent).
     slots: Vec<std::sync::OnceLock<Option<Box<Fan>>>>,
@@ -164,16 +171,17 @@ impl FanIndex {
     /// The crowded leaves of `view` (reads every leaf record once; no hierarchy is
     /// made yet).
     pub fn new(view: &SceneView<'_>) -> FanIndex {
-        let mut by_box: Vec<(u32, u32)> = Vec::new();
+        let (mut by_box, mut records) = (Vec::<(u32, u32)>::new(), Vec::<(u32, u32)>::new());
         for rec in view.leaves() {
             if rec.tri_count >= MIN_REFERENCES {
                 by_box.push((rec.box_index, by_box.len() as u32));
+                records.push((rec.tri_offset, rec.tri_count));
             }
         }
         by_box.sort_unstable();
         let slots = (0..by_box.len()).map(|_| std::sync::OnceLock::new()).collect();
         let budget = (16usize << 20).max(4 * view.tri_refs.len());
-        FanIndex { by_box, slots, spent: Default::default(), budget }
+        FanIndex { by_box, records, slots, spent: Default::default(), budget }
     }
 
     /// Whether no leaf is crowded.
@@ -336,6 +344,55 @@ impl FanIndex {
             *p = *refs.get(*p as usize)?;
         }
         Some(picked)
+    }
+}
+
+/// Words of a fan record's header in [`FanIndex::gpu_words`].
+const GPU_HEADER_WORDS: usize = 12;
+
+impl FanIndex {
+    /// Every crowded leaf's fan (within the budget) as the GPU kernels read them
+    /// (`fan_pick` in trace.wgsl): empty when there is none; else one word a leaf
+    /// (its record's offset in these words, or `u32::MAX`), then the records:
+    /// `offset, count, vertex xyz, reach, slack, rest count, rest at, arcs at, pairs
+    /// at, 0`, the pairs (two nodes of `lo xyz, hi xyz, first, count`), the arcs'
+    /// positions, the rest's. Offsets are in words from the start.
+    pub(crate) fn gpu_words(view: &SceneView<'_>) -> Vec<u32> {
+        let index = FanIndex::new(view);
+        let mut words = vec![u32::MAX; view.leaf_count()];
+        let mut any = false;
+        for &(box_index, slot) in &index.by_box {
+            let (offset, count) = index.records[slot as usize];
+            let Some(fan) = index.make(view, offset, count) else { continue };
+            if box_index as usize >= view.leaf_count() {
+                continue;
+            }
+            any = true;
+            let at = words.len();
+            // Overwrites a duplicate box index's (a hostile file, trusted): the kernel
+            // then finds another record's references and tests the leaf whole.
+            words[box_index as usize] = at as u32;
+            let pairs_at = at + GPU_HEADER_WORDS;
+            let arcs_at = pairs_at + 16 * fan.pairs.len();
+            let rest_at = arcs_at + fan.arcs.len();
+            let v = fan.vertex.map(f32::to_bits);
+            words.extend([offset, count, v[0], v[1], v[2], fan.reach.to_bits(), fan.slack.to_bits()]);
+            words.extend([fan.rest.len() as u32, rest_at as u32, arcs_at as u32, pairs_at as u32, 0]);
+            for pair in fan.pairs.iter() {
+                for node in &pair.0 {
+                    words.extend(node.lo.map(f32::to_bits));
+                    words.extend(node.hi.map(f32::to_bits));
+                    words.extend([node.first, node.count]);
+                }
+            }
+            words.extend(fan.arcs.iter());
+            words.extend(fan.rest.iter());
+        }
+        if any {
+            words
+        } else {
+            Vec::new()
+        }
     }
 }
 

@@ -13,20 +13,23 @@ pub(super) struct Offsets {
     pub(super) boxes: u32,
     pub(super) cube: u32,
     pub(super) nodes: u32,
+    pub(super) fans: u32,
     pub(super) total: u64,
 }
 
 /// The arrays the kernel walks: octree, tri_refs, triangles, triangle_ids, boxes,
-/// cube_map, nodes.
-pub(super) const TRACE_ARRAYS: usize = 7;
+/// cube_map, nodes (the file's), and the fans' hierarchies (made at upload:
+/// `cpu::FanIndex::gpu_words`).
+pub(super) const TRACE_ARRAYS: usize = 8;
 
 pub(super) fn offsets_of(arrays: &[&[u32]; TRACE_ARRAYS]) -> GpuResult<Offsets> {
-    let mut at = [0u64; 8];
+    let mut at = [0u64; TRACE_ARRAYS + 1];
     for (i, a) in arrays.iter().enumerate() {
         at[i + 1] = at[i] + a.len() as u64;
     }
     let word = |i: usize| {
-        u32::try_from(at[i]).map_err(|_| GpuError::TooLarge(format!("{} scene words, more than 2^32", at[7])))
+        u32::try_from(at[i])
+            .map_err(|_| GpuError::TooLarge(format!("{} scene words, more than 2^32", at[TRACE_ARRAYS])))
     };
     Ok(Offsets {
         octree: word(0)?,
@@ -36,7 +39,8 @@ pub(super) fn offsets_of(arrays: &[&[u32]; TRACE_ARRAYS]) -> GpuResult<Offsets> 
         boxes: word(4)?,
         cube: word(5)?,
         nodes: word(6)?,
-        total: at[7],
+        fans: word(7)?,
+        total: at[TRACE_ARRAYS],
     })
 }
 

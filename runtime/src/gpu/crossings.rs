@@ -174,7 +174,14 @@ impl GpuTracer<'_> {
                 let source = self.source();
                 let make = |label, mode: f64| {
                     self.compiler
-                        .pipeline(&self.device, &self.pipeline_layout, &source, "main", &[("MODE", mode)], label)
+                        .pipeline(
+                            &self.device,
+                            &self.pipeline_layout,
+                            &source,
+                            "main",
+                            &[("MODE", mode), ("FANS", self.fans_constant())],
+                            label,
+                        )
                         .map_err(|e| e.to_string())
                 };
                 Ok([make("octrace count crossings", 1.0)?, make("octrace crossings", 2.0)?])

@@ -93,6 +93,11 @@ struct Params {
     cube_level: u32,
     root_node: u32,
     offsets: [u32; 7],
+    /// The fans' words (`o_fans`), and whether there are any (`fans`; the kernel's
+    /// `FANS` constant says the same), then padding to the vectors' alignment.
+    o_fans: u32,
+    fans: u32,
+    pad: [u32; 2],
     root_lo: [f32; 4],
     root_hi: [f32; 4],
     box_lo: [f32; 4],
@@ -138,6 +143,8 @@ pub struct GpuTracer<'s> {
     scene_buffers: Vec<wgpu::Buffer>,
     params: Params,
     chunk_words: u64,
+    /// Whether the scene has fans (the kernels' `FANS` constant).
+    fans: bool,
     f64_edges: bool,
     stopwatch: Option<Stopwatch>,
     compile: Duration,
@@ -186,9 +193,12 @@ impl<'s> GpuTracer<'s> {
         // shift and a mask.
         let chunk_words = 1u64 << (max_binding / 4).max(1).ilog2().min(31);
         // The tracing arrays: the file's first seven sections (the shading arrays that
-        // follow are the host's business).
+        // follow are the host's business), and the fans' hierarchies.
         let words = view.section_words();
-        let arrays: [&[u32]; TRACE_ARRAYS] = std::array::from_fn(|i| words[i]);
+        let fan_words = crate::cpu::FanIndex::gpu_words(&view);
+        let arrays: [&[u32]; TRACE_ARRAYS] =
+            std::array::from_fn(|i| if i + 1 < TRACE_ARRAYS { words[i] } else { &fan_words[..] });
+        let fans = !fan_words.is_empty();
         let offsets = offsets_of(&arrays)?;
         let chunks = offsets.total.div_ceil(chunk_words).max(1);
         // The rays and hits take two storage bindings besides the scene's, and the
@@ -218,7 +228,7 @@ impl<'s> GpuTracer<'s> {
                 &pipeline_layout,
                 &source,
                 "main",
-                &[("ANY_HIT", if any { 1.0 } else { 0.0 })],
+                &[("ANY_HIT", if any { 1.0 } else { 0.0 }), ("FANS", if fans { 1.0 } else { 0.0 })],
                 label,
             )
         };
@@ -246,6 +256,9 @@ impl<'s> GpuTracer<'s> {
                 offsets.cube,
                 offsets.nodes,
             ],
+            o_fans: offsets.fans,
+            fans: fans as u32,
+            pad: [0; 2],
             root_lo: [root_lo[0], root_lo[1], root_lo[2], b.root_size],
             root_hi: [root_hi[0], root_hi[1], root_hi[2], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
             box_lo: [lo[0], lo[1], lo[2], rule.root as f32],
@@ -267,6 +280,7 @@ impl<'s> GpuTracer<'s> {
             scene_buffers,
             params,
             chunk_words,
+            fans,
             f64_edges,
             stopwatch: Stopwatch::new(device, queue),
         })
@@ -455,6 +469,15 @@ impl<'s> GpuTracer<'s> {
             timings.download += t.elapsed();
         }
         Ok((out, timings))
+    }
+
+    /// The kernels' `FANS` constant: 1 when the scene has fans (trace.wgsl, `fan_pick`).
+    fn fans_constant(&self) -> f64 {
+        if self.fans {
+            1.0
+        } else {
+            0.0
+        }
     }
 
     /// The kernel's source for this scene's bindings.

@@ -151,7 +151,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             bind_group_layouts: &[Some(&tracer.layout), Some(&render_layout)],
             immediate_size: 0,
         });
-        let constants = overrides(options.effects, headlight);
+        let mut constants = overrides(options.effects, headlight);
+        constants.push(("FANS", tracer.fans_constant()));
         let pipeline =
             tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
         let scene_group = tracer.scene_bind_group();

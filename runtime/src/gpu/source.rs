@@ -32,6 +32,8 @@ pub(super) fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, bu
         // The product of two f32s is exact in f64: rounded to f32 it is the f32
         // product, bit for bit, and no longer a multiply a compiler may fuse.
         g += "fn product(a: f32, b: f32) -> f32 {\n    return f32(f64(a) * f64(b));\n}\n";
+        // The products round as the CPU's (trace.wgsl, `fan_pick`).
+        g += "const PRODUCTS_EXACT: bool = true;\n";
         // SceneView::uv_at: exact products, one f64 sum, rounded once.
         g += "fn uv_mix(a: f32, b: f32, c: f32, w: f32, u: f32, v: f32) -> f32 {\n    \
               return f32(f64(a) * f64(w) + f64(b) * f64(u) + f64(c) * f64(v));\n}\n";
@@ -60,6 +62,7 @@ pub(super) fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, bu
     } else {
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
         g += "fn product(a: f32, b: f32) -> f32 {\n    return a * b;\n}\n";
+        g += "const PRODUCTS_EXACT: bool = false;\n";
         g += "fn uv_mix(a: f32, b: f32, c: f32, w: f32, u: f32, v: f32) -> f32 {\n    \
               return a * w + b * u + c * v;\n}\n";
         g += "fn grid_coord(p: f32, lo: f32) -> u32 {\n    \

@@ -12,6 +12,8 @@
 
 // Any hit (shadow rays) rather than the nearest.
 override ANY_HIT: bool = false;
+// Whether the scene has fans (`fan_pick`); without, their code is left out.
+override FANS: bool = false;
 // 0: the nearest hit (or with ANY_HIT any hit) a ray; 1: crossing counts (`hits[i]`:
 // `triangle` the crossings, `leaf` those arriving on a front); 2: every crossing, as
 // records of their own (`cross`), at offsets the host puts after the rays.
@@ -30,6 +32,11 @@ struct Params {
     o_boxes: u32,
     o_cube: u32,
     o_nodes: u32,
+    // The fans' words (cpu::FanIndex::gpu_words), and whether there are any.
+    o_fans: u32,
+    fans: u32,
+    pad0: u32,
+    pad1: u32,
     // xyz: the root cube's low corner; w: its edge.
     root_lo: vec4<f32>,
     // xyz: the root cube's high corner; w: 2^max_depth / edge.
@@ -305,6 +312,133 @@ fn owns(positive: bool, fx: f32, fy: f32, tx: f32, ty: f32) -> bool {
     return up || (ty == fy && right);
 }
 
+// Fans (runtime/src/cpu/fans.rs): a crowded leaf whose triangles share a vertex
+// lists, through the hierarchy of their wedges at it, the few the ray's plane may
+// cross. Fills `picked` with their positions in the leaf, ascending, and returns how
+// many, or NO_FAN to test the whole leaf (no fan, the exact rule, a ray through the
+// vertex, more than FAN_PICKS, the loop budget). The same filter as the CPU's (with,
+// on adapters without f64, an absolute slack for the sheared vertex besides): the
+// answers are those of testing them all.
+const NO_FAN: u32 = 0xFFFFFFFFu;
+const FAN_MIN_REFERENCES: u32 = 256u;
+const FAN_PICKS: u32 = 64u;
+const FAN_STACK: u32 = 32u;
+// Beyond any finite f32 product here: a NaN or an infinity fails `< FAN_HUGE`.
+const FAN_HUGE: f32 = 3.0e38;
+
+fn with_fcomponent(v: vec3<f32>, i: u32, x: f32) -> vec3<f32> {
+    return vec3<f32>(select(v.x, x, i == 0u), select(v.y, x, i == 1u), select(v.z, x, i == 2u));
+}
+
+fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
+            picked: ptr<function, array<u32, 64>>) -> u32 {
+    let leaves = (params.o_cube - params.o_boxes) / 6u;
+    if !FANS || count < FAN_MIN_REFERENCES || (*wk).rule == RULE_EXACT || box_index >= leaves {
+        return NO_FAN;
+    }
+    let at = word(params.o_fans + box_index);
+    if at == NO_FAN {
+        return NO_FAN;
+    }
+    let f = params.o_fans + at;
+    if word(f) != offset || word(f + 1u) != count {
+        return NO_FAN;
+    }
+    let v = vec3<f32>(wordf(f + 2u), wordf(f + 3u), wordf(f + 4u));
+    let reach = wordf(f + 5u);
+    let fan_slack = wordf(f + 6u);
+    let n_rest = word(f + 7u);
+    let o_rest = params.o_fans + word(f + 8u);
+    let o_arcs = params.o_fans + word(f + 9u);
+    let o_pairs = params.o_fans + word(f + 10u);
+    // The sheared vertex, as hit_triangle computes it.
+    let r = v - (*wk).o;
+    let k = (*wk).k;
+    let s = (*wk).s;
+    let rz = component(r, k.z);
+    let vx = component(r, k.x) - product(s.x, rz);
+    let vy = component(r, k.y) - product(s.y, rz);
+    var n = with_fcomponent(vec3<f32>(0.0), k.x, -vy);
+    n = with_fcomponent(n, k.y, vx);
+    n = with_fcomponent(n, k.z, product(s.x, vy) - product(s.y, vx));
+    let l1 = abs(r.x) + abs(r.y) + abs(r.z);
+    // Where the adapter has no f64, a product may be fused into the subtraction in one
+    // place and not the other: the sheared vertex may then differ from the test's by a
+    // few ulps of |r|, which the slack allows for.
+    let loose = select(4.7683716e-7 * l1, 0.0, PRODUCTS_EXACT);
+    let slack = ((abs(vx) + abs(vy)) * (l1 + reach) * fan_slack + loose) * 1.001;
+    let fine = abs(n.x) < FAN_HUGE && abs(n.y) < FAN_HUGE && abs(n.z) < FAN_HUGE;
+    if !(slack > 0.0 && slack < FAN_HUGE) || !fine {
+        return NO_FAN;
+    }
+    let limit = min(FAN_PICKS, count / 2u);
+    if n_rest >= limit {
+        return NO_FAN;
+    }
+    var found = 0u;
+    for (var i = 0u; i < n_rest; i++) {
+        (*picked)[found] = word(o_rest + i);
+        found += 1u;
+    }
+    var stack: array<u32, 32>;
+    stack[0] = 0u;
+    var top = 1u;
+    loop {
+        if top == 0u {
+            break;
+        }
+        if !tick() {
+            return NO_FAN;
+        }
+        top -= 1u;
+        let pair = o_pairs + 16u * stack[top];
+        for (var h = 0u; h < 2u; h++) {
+            let node = pair + 8u * h;
+            let node_count = word(node + 7u);
+            if node_count == NO_FAN {
+                continue;
+            }
+            let a = n * vec3<f32>(wordf(node), wordf(node + 1u), wordf(node + 2u));
+            let b = n * vec3<f32>(wordf(node + 3u), wordf(node + 4u), wordf(node + 5u));
+            let lo = min(a, b);
+            let hi = max(a, b);
+            if lo.x + lo.y + lo.z > slack || hi.x + hi.y + hi.z < -slack {
+                continue;
+            }
+            let first = word(node + 6u);
+            if node_count > 0u {
+                if found + node_count > limit {
+                    return NO_FAN;
+                }
+                for (var i = 0u; i < node_count; i++) {
+                    (*picked)[found] = word(o_arcs + first + i);
+                    found += 1u;
+                }
+            } else {
+                if top == FAN_STACK {
+                    return NO_FAN;
+                }
+                stack[top] = first;
+                top += 1u;
+            }
+        }
+    }
+    // In the leaf's order (insertion sort: a few dozen at most).
+    for (var i = 1u; i < found; i++) {
+        let key = (*picked)[i];
+        var j = i;
+        loop {
+            if j == 0u || (*picked)[j - 1u] <= key {
+                break;
+            }
+            (*picked)[j] = (*picked)[j - 1u];
+            j -= 1u;
+        }
+        (*picked)[j] = key;
+    }
+    return found;
+}
+
 // Visits the current leaf: its triangles, then the neighbour to go on to. Sets
 // `done` when the walk is over; with `any`, at the first hit.
 fn step(wk: ptr<function, Walk>, any: bool) {
@@ -320,10 +454,14 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let offset = word(rec + 1u);
     let box_index = word(rec + 2u);
     let ncount = word(rec + 3u);
-    (*wk).tests += count;
-    // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
-    for (var j = 0u; j < count && tick(); j++) {
-        let tri = word(params.o_refs + offset + j);
+    // 1. The leaf's triangles: keep the nearest in [tmin, t_best] (in a fan's leaf,
+    // those its hierarchy picks).
+    var picked: array<u32, 64>;
+    let fan = fan_pick(wk, box_index, offset, count, &picked);
+    let tested = select(count, fan, fan != NO_FAN);
+    (*wk).tests += tested;
+    for (var j = 0u; j < tested && tick(); j++) {
+        let tri = word(params.o_refs + offset + select(j, picked[min(j, FAN_PICKS - 1u)], fan != NO_FAN));
         var h: vec4<f32>;
         if (*wk).rule == RULE_EXACT {
             // In f64 throughout (generated: cpu::watertight::Shear::intersect_f64).
@@ -712,8 +850,11 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
             hi = max(l.t, select(lo, wk.tmin, first));
         }
         let leaf_start = total;
-        for (var j = 0u; j < count && tick(); j++) {
-            let tri = word(params.o_refs + offset + j);
+        var picked: array<u32, 64>;
+        let fan = fan_pick(&wk, word(rec + 2u), offset, count, &picked);
+        let tested = select(count, fan, fan != NO_FAN);
+        for (var j = 0u; j < tested && tick(); j++) {
+            let tri = word(params.o_refs + offset + select(j, picked[min(j, FAN_PICKS - 1u)], fan != NO_FAN));
             let at = params.o_tris + 9u * tri;
             var h: vec4<f32>;
             if exact {
