@@ -196,6 +196,18 @@ impl FanIndex {
 
     /// The crowded leaves of `view` that are fans, counted (every leaf's shared
     /// vertex found; no hierarchy made).
+    ///
+    /// # Example
+    /// A disk of 300 triangles fanned from its centre: the leaf at the centre lists
+    /// them all, around one vertex.
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{cpu::FanIndex, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::fan(300, 1.0), &BuildParams::auto())?)?;
+    /// let fans = FanIndex::survey(&scene.view());
+    /// assert_eq!((fans.largest, fans.other_references), (300, 0));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn survey(view: &SceneView<'_>) -> FanSummary {
         let mut s = FanSummary::default();
         for rec in view.leaves() {
@@ -609,10 +621,11 @@ mod tests {
                 eprintln!("{name} set {set}: {with} tests with the hierarchy, {without} without");
             }
             // Rays aimed at the centre, or near it: each tested every triangle of the
-            // centre's leaf; now a few hundred at most on average.
+            // leaves around it; now those of leaves under 256 references and a few in
+            // the others (the disk's near rays 125 times fewer, the cone's 9).
             let (aimed, near) = (tests[1], tests[2]);
             assert!(aimed.1 >= 1500 * n / 2, "{name}: the centre's leaf was not crowded");
-            assert!(near.0 * 50 < near.1 && aimed.0 * 3 / 2 < aimed.1, "{name}: {tests:?}");
+            assert!(near.0 * 5 < near.1 && aimed.0 * 5 / 4 < aimed.1, "{name}: {tests:?}");
         }
     }
 
