@@ -647,7 +647,9 @@ impl Scene {
         } else {
             octrace_format::HEADER_LEN as u64 + file.header().payload_len
         };
-        let json = octrace_bake::summary::json(&view, &stats, file.header(), on_disk);
+        let mut json = octrace_bake::summary::json(&view, &stats, file.header(), on_disk);
+        let fans = octrace_runtime::cpu::FanIndex::survey(&view);
+        json["fans"] = fans.named().iter().map(|&(k, v)| (k.to_string(), serde_json::Value::from(v))).collect();
         py.import("json")?.call_method1("loads", (json.to_string(),))
     }
 

@@ -264,13 +264,7 @@ impl<'a> Report<'a> {
 
     pub(crate) fn json(&self) -> serde_json::Value {
         let mut json = octrace_bake::summary::json(&self.view, &self.stats, &self.header, self.file_bytes);
-        let f = &self.fans;
-        json["fans"] = serde_json::json!({
-            "leaves": f.leaves,
-            "fan_references": f.fan_references,
-            "other_references": f.other_references,
-            "largest": f.largest,
-        });
+        json["fans"] = self.fans.named().iter().map(|&(k, v)| (k.to_string(), serde_json::Value::from(v))).collect();
         json
     }
 }

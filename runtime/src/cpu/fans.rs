@@ -92,7 +92,8 @@ const WIDEST_COS: f64 = -0.9;
 pub struct FanIndex {
     /// `(box index, slot)` of the crowded leaves, sorted by box index.
     by_box: Vec<(u32, u32)>,
-    /// Each slot's references: `(offset, count)`.
+    /// Each slot's references: `(offset, count)` (for the GPU's upload).
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     records: Vec<(u32, u32)>,
     /// Each crowded leaf's fan, once asked for: `None` when it has none (or the
     /// budget was spent).
@@ -114,6 +115,19 @@ pub struct FanSummary {
     pub other_references: u64,
     /// Most triangles around one vertex in one leaf.
     pub largest: u64,
+}
+
+impl FanSummary {
+    /// The counts by name, as `octrace inspect --json` (and Python's `Scene.inspect`)
+    /// list them under `fans`.
+    pub fn named(&self) -> [(&'static str, u64); 4] {
+        [
+            ("leaves", self.leaves),
+            ("fan_references", self.fan_references),
+            ("other_references", self.other_references),
+            ("largest", self.largest),
+        ]
+    }
 }
 
 /// One leaf's fan: the shared vertex, the scale of its slack, its hierarchy.
@@ -360,8 +374,10 @@ impl FanIndex {
 }
 
 /// Words of a fan record's header in [`FanIndex::gpu_words`].
+#[cfg(feature = "gpu")]
 const GPU_HEADER_WORDS: usize = 12;
 
+#[cfg(feature = "gpu")]
 impl FanIndex {
     /// Every crowded leaf's fan (within the budget) as the GPU kernels read them
     /// (`fan_pick` in trace.wgsl): empty when there is none; else one word a leaf
