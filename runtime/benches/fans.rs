@@ -9,8 +9,8 @@ use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
 use glam::Vec3;
-use octrace_bake::procedural::SplitMix;
-use octrace_bake::{bake, BuildParams, Mesh};
+use octrace_bake::procedural::{self, SplitMix};
+use octrace_bake::{bake, BuildParams};
 use octrace_runtime::{Hit, Ray, Scene};
 
 fn main() {
@@ -20,20 +20,11 @@ fn main() {
 const SIZES: [u32; 3] = [2_000, 20_000, 200_000];
 const RAYS: usize = 4_000;
 
-/// The disk of `n` triangles around the origin in the plane y = 0, radius 1.
-fn disk(n: u32) -> Mesh {
-    let rim = |k: u32| {
-        let a = std::f64::consts::TAU * k as f64 / n as f64;
-        [a.cos() as f32, 0.0, a.sin() as f32]
-    };
-    Mesh::from_triangles((0..n).map(|k| [[0.0; 3], rim(k), rim(k + 1)]).collect())
-}
-
 fn scene(n: u32) -> &'static Scene {
     static SCENES: OnceLock<Mutex<HashMap<u32, &'static Scene>>> = OnceLock::new();
     let mut map = SCENES.get_or_init(Default::default).lock().unwrap();
     map.entry(n).or_insert_with(|| {
-        let baked = bake(&disk(n), &BuildParams::auto()).expect("bake");
+        let baked = bake(&procedural::fan(n, 1.0), &BuildParams::auto()).expect("bake");
         Box::leak(Box::new(Scene::from_baked(baked).expect("scene")))
     })
 }

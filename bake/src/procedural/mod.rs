@@ -164,12 +164,21 @@ pub fn grid(n: u32, size: f32) -> Mesh {
 
 /// A fan of `n` thin triangles around the origin in the plane `y = 0`.
 pub fn fan(n: u32, radius: f32) -> Mesh {
+    cone(n, [0.0; 3], radius, 0.0)
+}
+
+/// An open cone of `n` thin triangles sharing its apex, `height` above `centre` (a
+/// flat fan when 0): the rim of radius `radius` around `centre` in the plane
+/// `y = centre.y`, each triangle `apex, rim(k), rim(k + 1)`.
+pub fn cone(n: u32, centre: [f32; 3], radius: f32, height: f32) -> Mesh {
     let n = n.max(1);
     let rim = |k: u32| {
         let a = std::f64::consts::TAU * k as f64 / n as f64;
-        [(radius as f64 * a.cos()) as f32, 0.0, (radius as f64 * a.sin()) as f32]
+        let (x, z) = ((radius as f64 * a.cos()) as f32, (radius as f64 * a.sin()) as f32);
+        [centre[0] + x, centre[1], centre[2] + z]
     };
-    mesh((0..n).map(|k| [[0.0; 3], rim(k), rim(k + 1)]).collect())
+    let apex = [centre[0], centre[1] + height, centre[2]];
+    mesh((0..n).map(|k| [apex, rim(k), rim(k + 1)]).collect())
 }
 
 /// `n` random triangles in `[0, scale]^3`, each with edges up to `size`, from `seed`.

@@ -223,17 +223,11 @@ impl Tracer<'_> {
             let last = exit.t >= stop || n == 0;
             let hi = if last { tmax } else { exit.t.max(lo.unwrap_or(tmin)) };
             // The leaf's crossings in its piece.
-            let mut refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+            let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
             // A fan's leaf: the triangles its hierarchy picks (`fans.rs`), in the same order.
-            let mut picked: fans::Candidates;
-            if count >= fans::MIN_REFERENCES && !exact {
-                picked = fans::candidates_room();
-                if let Some(fan) =
-                    self.fans.and_then(|f| f.candidates(v, (box_index, offset, refs), &shear, &mut picked))
-                {
-                    refs = fan;
-                }
-            }
+            let mut room = fans::candidates_room();
+            let refs =
+                self.fan_refs((box_index, offset, refs), || (!exact).then_some(&shear), &mut room).unwrap_or(refs);
             buffer.0.clear();
             for &prim in refs {
                 let Some(tri) =

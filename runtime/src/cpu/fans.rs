@@ -86,7 +86,7 @@ const WIDEST_COS: f64 = -0.9;
 /// The leaves of a scene crowded enough for a fan ([`MIN_REFERENCES`] or more
 /// references), each with its hierarchy made on the first ray through it
 /// ([`FanIndex::new`]; [`crate::Scene::tracer`] makes one with the first tracer and
-/// the walks use it). Hierarchies take about 12 bytes a reference; past the budget
+/// the walks use it). Hierarchies take 12 to 20 bytes a reference; past the budget
 /// (the larger of 16 MiB and the scene's reference array) leaves are tested whole.
 #[derive(Debug, Default)]
 pub struct FanIndex {
@@ -201,11 +201,6 @@ impl FanIndex {
     /// Whether no leaf is crowded.
     pub fn is_empty(&self) -> bool {
         self.by_box.is_empty()
-    }
-
-    /// Bytes the hierarchies made so far take.
-    pub fn bytes(&self) -> usize {
-        self.spent.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// The crowded leaves of `view` that are fans, counted (every leaf's shared
@@ -373,6 +368,27 @@ impl FanIndex {
     }
 }
 
+impl super::Tracer<'_> {
+    /// In a crowded leaf (`refs` from `offset`, box index `box_index`) with a fan, the
+    /// references a ray with the shear `shear()` gives may hit, into `room`; `None`
+    /// to test them all (no fans, a leaf under [`MIN_REFERENCES`], no shear: a test
+    /// other than the watertight one in `f32`). What every walk that tests a leaf asks
+    /// first; `shear` is asked last, in crowded leaves only.
+    #[inline(always)]
+    pub(crate) fn fan_refs<'r, 's>(
+        &self,
+        leaf: (u32, u32, &[u32]),
+        shear: impl FnOnce() -> Option<&'s Shear>,
+        room: &'r mut Candidates,
+    ) -> Option<&'r [u32]> {
+        let index = self.fans?;
+        if (leaf.2.len() as u32) < MIN_REFERENCES {
+            return None;
+        }
+        index.candidates(&self.view, leaf, shear()?, room)
+    }
+}
+
 /// Words of a fan record's header in [`FanIndex::gpu_words`].
 #[cfg(feature = "gpu")]
 const GPU_HEADER_WORDS: usize = 12;
@@ -536,17 +552,6 @@ mod tests {
     use crate::{Ray, Scene, WalkStats};
     use octrace_bake::{bake, procedural, BuildParams, Mesh};
 
-    /// A fan of `n` triangles around `centre`, its rim at `radius` in the plane
-    /// `y = centre.y`, its apex raised by `height` (a cone's tip when not 0).
-    fn cone(n: u32, centre: [f32; 3], radius: f32, height: f32) -> Mesh {
-        let rim = |k: u32| {
-            let a = std::f64::consts::TAU * k as f64 / n as f64;
-            [centre[0] + (radius as f64 * a.cos()) as f32, centre[1], centre[2] + (radius as f64 * a.sin()) as f32]
-        };
-        let apex = [centre[0], centre[1] + height, centre[2]];
-        Mesh::from_triangles((0..n).map(|k| [apex, rim(k), rim(k + 1)]).collect())
-    }
-
     /// Rays from a box three times the mesh's around `centre`: `n` random, `n` aimed at
     /// the centre, `n` aimed at points within `1e-6` to `1e-2` of it, and the six
     /// axis rays through it.
@@ -625,10 +630,10 @@ mod tests {
     #[test]
     fn a_fans_hierarchy_answers_as_testing_every_triangle_and_tests_few() {
         let cases = [
-            ("disk", cone(2000, [0.0; 3], 1.0, 0.0), [0.0f32; 3]),
-            ("disk off the grid", cone(3000, [0.1234, -0.377, 0.05], 1.0, 0.0), [0.1234, -0.377, 0.05]),
-            ("cone", cone(2000, [0.0; 3], 1.0, 0.7), [0.0, 0.7, 0.0]),
-            ("flat cone", cone(1000, [0.3; 3], 2.0, 0.01), [0.3, 0.31, 0.3]),
+            ("disk", procedural::cone(2000, [0.0; 3], 1.0, 0.0), [0.0f32; 3]),
+            ("disk off the grid", procedural::cone(3000, [0.1234, -0.377, 0.05], 1.0, 0.0), [0.1234, -0.377, 0.05]),
+            ("cone", procedural::cone(2000, [0.0; 3], 1.0, 0.7), [0.0, 0.7, 0.0]),
+            ("flat cone", procedural::cone(1000, [0.3; 3], 2.0, 0.01), [0.3, 0.31, 0.3]),
         ];
         for (name, mesh, centre) in &cases {
             let tests = same_answers(name, mesh, *centre, 1.0);

@@ -409,23 +409,16 @@ impl Tracer<'_> {
         test: &impl LeafTest,
     ) -> (bool, u32) {
         // References past the array (a hostile file on the trusted path): none.
-        let mut refs = self.view.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+        let refs = self.view.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
         // A crowded leaf: through its fan's hierarchy, when it has one and the test
         // allows (`fans.rs`), the same answer as testing them all. (One call of
         // `test_refs` either way: a second copy inlined into the lanes' step cost
         // incoherent batches 10 %.)
-        let mut out = fans::candidates_room();
-        let mut tested = count;
-        if let Some(index) = self.fans {
-            if count >= fans::MIN_REFERENCES {
-                if let Some(shear) = test.fan_shear() {
-                    if let Some(picked) = index.candidates(&self.view, (box_index, offset, refs), shear, &mut out) {
-                        refs = picked;
-                        tested = picked.len() as u32;
-                    }
-                }
-            }
-        }
+        let mut room = fans::candidates_room();
+        let (refs, tested) = match self.fan_refs((box_index, offset, refs), || test.fan_shear(), &mut room) {
+            Some(picked) => (picked, picked.len() as u32),
+            None => (refs, count),
+        };
         (self.test_refs::<ANY>(refs, box_index, walk, test), tested)
     }
 

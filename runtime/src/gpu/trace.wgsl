@@ -331,7 +331,7 @@ fn with_fcomponent(v: vec3<f32>, i: u32, x: f32) -> vec3<f32> {
 }
 
 fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
-            picked: ptr<function, array<u32, 64>>) -> u32 {
+            picked: ptr<function, array<u32, FAN_PICKS>>) -> u32 {
     let leaves = (params.o_cube - params.o_boxes) / 6u;
     if !FANS || count < FAN_MIN_REFERENCES || (*wk).rule == RULE_EXACT || box_index >= leaves {
         return NO_FAN;
@@ -380,7 +380,7 @@ fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
         (*picked)[found] = word(o_rest + i);
         found += 1u;
     }
-    var stack: array<u32, 32>;
+    var stack: array<u32, FAN_STACK>;
     stack[0] = 0u;
     var top = 1u;
     loop {
@@ -456,7 +456,7 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let ncount = word(rec + 3u);
     // 1. The leaf's triangles: keep the nearest in [tmin, t_best] (in a fan's leaf,
     // those its hierarchy picks).
-    var picked: array<u32, 64>;
+    var picked: array<u32, FAN_PICKS>;
     let fan = fan_pick(wk, box_index, offset, count, &picked);
     let tested = select(count, fan, fan != NO_FAN);
     (*wk).tests += tested;
@@ -850,7 +850,7 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
             hi = max(l.t, select(lo, wk.tmin, first));
         }
         let leaf_start = total;
-        var picked: array<u32, 64>;
+        var picked: array<u32, FAN_PICKS>;
         let fan = fan_pick(&wk, word(rec + 2u), offset, count, &picked);
         let tested = select(count, fan, fan != NO_FAN);
         for (var j = 0u; j < tested && tick(); j++) {

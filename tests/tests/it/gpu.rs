@@ -650,17 +650,6 @@ fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_
     }
 }
 
-/// A fan of `n` triangles around `centre` (radius 1, in the plane y = centre.y), its
-/// apex raised by `height`.
-fn fan_mesh(n: u32, centre: [f32; 3], height: f32) -> octrace_bake::Mesh {
-    let rim = |k: u32| {
-        let a = std::f64::consts::TAU * k as f64 / n as f64;
-        [centre[0] + a.cos() as f32, centre[1], centre[2] + a.sin() as f32]
-    };
-    let apex = [centre[0], centre[1] + height, centre[2]];
-    octrace_bake::Mesh::from_triangles((0..n).map(|k| [apex, rim(k), rim(k + 1)]).collect())
-}
-
 /// Fans on the GPU (issue 33): a disk and a cone, rays random, aimed at the centre and
 /// aimed near it; the kernels' hierarchy picks the triangles the CPU's picks, every
 /// nearest hit is the CPU's bit for bit, every occlusion and crossing list the same,
@@ -672,7 +661,7 @@ fn fans_trace_on_the_gpu_as_on_the_cpu_and_test_few_triangles() {
     let Some(ctx) = gpu("fans_trace_on_the_gpu_as_on_the_cpu_and_test_few_triangles") else { return };
     let mut rng = octrace_bake::procedural::SplitMix(3);
     for (name, centre, height) in [("disk", [0.0f32; 3], 0.0f32), ("cone", [0.1234, -0.377, 0.05], 0.6)] {
-        let mesh = fan_mesh(2000, centre, height);
+        let mesh = octrace_bake::procedural::cone(2000, centre, 1.0, height);
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
         let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
         let apex = Vec3::new(centre[0], centre[1] + height, centre[2]);

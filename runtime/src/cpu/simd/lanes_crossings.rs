@@ -187,14 +187,9 @@ fn lo_of(ls: &[Lane; LANES]) -> [f32; LANES] {
 #[inline(always)]
 fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, (count, offset, box_index): (u32, u32, u32), tmax: f32) {
     let v = t.view();
-    let mut refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
-    let mut picked: fans::Candidates;
-    if count >= fans::MIN_REFERENCES {
-        picked = fans::candidates_room();
-        if let Some(fan) = t.fans.and_then(|f| f.candidates(v, (box_index, offset, refs), &w.shear, &mut picked)) {
-            refs = fan;
-        }
-    }
+    let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
+    let mut room = fans::candidates_room();
+    let refs = t.fan_refs((box_index, offset, refs), || Some(&w.shear), &mut room).unwrap_or(refs);
     let lo = l.lo;
     for chunk in refs.chunks(LANES) {
         let mut push = |prim: u32, (tt, u, vv): (f32, f32, f32), enters: bool| {
