@@ -69,6 +69,12 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
             "textures": v.shading.textures.iter().map(|t| json!({
                 "name": t.name, "width": t.width, "height": t.height,
                 "filter": t.filter.name(), "wrap": t.wrap.map(Wrap::name), "min_alpha": t.min_alpha,
+                "srgb": t.srgb,
+                "kept_as": t.encoded.map_or("texels", |e| match e.kind {
+                    octrace_format::ImageKind::Png => "png",
+                    octrace_format::ImageKind::Jpeg => "jpeg",
+                }),
+                "encoded_bytes": t.encoded.map(|e| e.bytes),
             })).collect::<Vec<_>>(),
             "lights": v.shading.lights.iter().map(|l| json!({
                 "name": l.name, "kind": format!("{:?}", l.kind).to_lowercase(), "color": l.color,

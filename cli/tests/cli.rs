@@ -25,7 +25,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 7.0, 0.0 MB
+cube.oct: octrace scene, format 8.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
@@ -89,8 +89,8 @@ fn inspect_says_how_each_texture_is_encoded_and_what_reads_it() {
     ok(dir.path(), &["bake", leaf.to_str().unwrap(), "-o", "leaf.oct"]);
     let text = ok(dir.path(), &["inspect", "leaf.oct"]);
     for want in [
-        "image 0 'checker': 8 x 8, sRGB colour, nearest filter, wrap repeat / repeat, alpha down to 1.00; base colour of 'checker floor'",
-        "image 1 'leaf.png': 64 x 64, sRGB colour, linear filter, wrap clamp to edge / clamp to edge, alpha down to 0.00; base colour of 'leaf'",
+        "image 0 'checker': 8 x 8, sRGB colour, nearest filter, wrap repeat / repeat, alpha down to 1.00, kept as a PNG of 85 bytes; base colour of 'checker floor'",
+        "image 1 'leaf.png': 64 x 64, sRGB colour, linear filter, wrap clamp to edge / clamp to edge, alpha down to 0.00, kept as a PNG of 1,376 bytes; base colour of 'leaf'",
     ] {
         assert!(text.contains(want), "{want}\nnot in\n{text}");
     }
@@ -1411,4 +1411,25 @@ fn bench_on_the_gpu_compares_bits_and_times_the_kernel_apart() {
     ok(d, &["rays", "cube.oct", "--set", "shadow", "-o", "shadow.bin"]);
     let shadow = json["sets"].as_array().unwrap().iter().find(|s| s["set"] == "shadow").unwrap();
     assert_eq!(shadow["rays"].as_u64(), Some(std::fs::metadata(d.join("shadow.bin")).unwrap().len() / 32));
+}
+
+/// A scene whose encoded image decodes to other texels than the bake's (a file edited
+/// after the bake, its checksums made good again) opens, and `render` refuses it naming
+/// the texture, before rendering it with a white texture; `inspect` says how each
+/// texture is kept.
+#[test]
+fn render_refuses_an_image_that_decodes_to_other_texels() {
+    let dir = tempfile::tempdir().unwrap();
+    let leaf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/textured/leaf.gltf");
+    let mesh = octrace_bake::Mesh::load(&leaf).unwrap();
+    let mut scene = octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap();
+    let t = scene.shading.textures.iter_mut().find(|t| t.encoded.is_some()).expect("a PNG kept encoded");
+    let name = t.name.clone();
+    t.encoded.as_mut().unwrap().texels_hash ^= 1;
+    scene.write(dir.path().join("leaf.oct"), 0).unwrap();
+    let text = ok(dir.path(), &["inspect", "leaf.oct"]);
+    assert!(text.contains("kept as a PNG of "), "{text}");
+    fails_saying(dir.path(), &["render", "leaf.oct", "-o", "leaf.png"], &format!("texture '{name}'"));
+    fails_saying(dir.path(), &["render", "leaf.oct", "-o", "leaf.png"], "decodes to other texels than at bake");
+    assert!(!dir.path().join("leaf.png").exists());
 }

@@ -37,6 +37,8 @@ pub struct SceneFile {
     /// The archive's shading data, deserialized at open (a few kilobytes at most for
     /// materials, lights and cameras): the views borrow it.
     shading: Shading,
+    /// The encoded images' texels, decoded when first read.
+    decoded: crate::TexelCache,
 }
 
 impl std::fmt::Debug for SceneFile {
@@ -211,7 +213,7 @@ impl SceneFile {
         let archived = rkyv::access::<ArchivedBakedScene, rancor::BoxedError>(payload_of(&storage))
             .map_err(|e| Error::corrupt(format!("archive structure: {e}")))?;
         let shading = deserialize_shading(archived)?;
-        Ok(SceneFile { storage, header, shading })
+        Ok(SceneFile { storage, header, shading, decoded: crate::TexelCache::new() })
     }
 
     /// The scene's materials, lights, cameras and effects.
@@ -238,7 +240,7 @@ impl SceneFile {
     /// The scene's arrays, borrowed.
     #[inline]
     pub fn view(&self) -> SceneView<'_> {
-        view_of(self.archived(), &self.shading)
+        view_of(self.archived(), &self.shading, &self.decoded)
     }
 
     /// The archive's root.
@@ -283,7 +285,7 @@ fn check_sections(header: &Header, payload: &[u8]) -> Result<()> {
 /// describes the archive it guards.
 fn check_arrays_in_sections(header: &Header, payload: &[u8], a: &ArchivedBakedScene) -> Result<()> {
     let base = payload.as_ptr() as usize;
-    for (words, s) in view_of(a, &EMPTY_SHADING).section_words().into_iter().zip(&header.sections) {
+    for (words, s) in view_of(a, &EMPTY_SHADING, &NO_TEXELS).section_words().into_iter().zip(&header.sections) {
         let (at, len) = ((words.as_ptr() as usize).wrapping_sub(base) as u64, words.len());
         if 4 * len as u64 != s.len || (len > 0 && at != s.offset) {
             return Err(Error::corrupt(format!(
@@ -370,7 +372,11 @@ fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
 /// Builds a view with native-typed slices over an archive (inlined: a view is a few
 /// hundred bytes, and a call per ray returning it by value was mostly `memmove`).
 #[inline]
-pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> SceneView<'a> {
+pub(crate) fn view_of<'a>(
+    a: &'a ArchivedBakedScene,
+    shading: &'a Shading,
+    decoded: &'a crate::TexelCache,
+) -> SceneView<'a> {
     let v3 = |x: &[rkyv::rend::f32_le; 3]| [x[0].to_native(), x[1].to_native(), x[2].to_native()];
     SceneView {
         params: BakeParams {
@@ -413,7 +419,12 @@ pub(crate) fn view_of<'a>(a: &'a ArchivedBakedScene, shading: &'a Shading) -> Sc
         normals: bytemuck::cast_slice(a.normals.as_slice()),
         uvs: bytemuck::cast_slice(a.uvs.as_slice()),
         colors: bytemuck::cast_slice(a.colors.as_slice()),
-        texels: bytemuck::cast_slice(a.texels.as_slice()),
+        texels: crate::Texels::new(
+            bytemuck::cast_slice(a.texels.as_slice()),
+            bytemuck::cast_slice(a.images.as_slice()),
+            &shading.textures,
+            decoded,
+        ),
         root: a.root.to_native(),
         shading,
     }
@@ -428,6 +439,9 @@ pub(crate) static EMPTY_SHADING: Shading = Shading {
     parts: Vec::new(),
     effects: Vec::new(),
 };
+
+/// The cache of views with no textures.
+pub(crate) static NO_TEXELS: crate::TexelCache = crate::TexelCache::new();
 
 /// The archive's shading data as native values.
 fn deserialize_shading(a: &ArchivedBakedScene) -> Result<Shading> {

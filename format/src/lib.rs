@@ -28,11 +28,13 @@
 mod error;
 mod file;
 mod header;
+pub mod image;
 mod input;
 pub mod layout;
 mod scene;
 mod shading;
 pub mod stats;
+mod texels;
 mod texture;
 pub mod topology;
 pub mod validate;
@@ -52,9 +54,10 @@ pub use shading::{
     AlphaMode, Camera, Effect, EffectReason, Light, LightKind, Material, MeshPart, PartSource, Shading, DIELECTRIC_F0,
     VISIBLE_WEIGHT,
 };
+pub use texels::{TexelCache, Texels};
 pub use texture::{
-    linear16, srgb_to_linear16, EmissiveTriangles, Filter, LitTexels, Texture, Wrap, MAX_TEXTURE_SIDE, TEXEL_SCALE,
-    TEXEL_WORDS,
+    linear16, srgb_to_linear16, texels_hash, EmissiveTriangles, Encoded, Filter, ImageKind, LitTexels, Texture, Wrap,
+    MAX_TEXTURE_SIDE, TEXEL_SCALE, TEXEL_WORDS,
 };
 pub use view::{LeafRecord, SceneView, StoredIndex, COLOR_SCALE, COLOR_WORDS};
 pub use write::write_atomically;
@@ -75,8 +78,9 @@ pub mod testing {
         aligned.extend_from_slice(payload);
         let mut lens = [0u64; SECTION_COUNT];
         if let Ok(a) = rkyv::access::<crate::scene::ArchivedBakedScene, rkyv::rancor::Error>(&aligned) {
-            for (len, words) in
-                lens.iter_mut().zip(crate::file::view_of(a, &crate::file::EMPTY_SHADING).section_words())
+            for (len, words) in lens
+                .iter_mut()
+                .zip(crate::file::view_of(a, &crate::file::EMPTY_SHADING, &crate::file::NO_TEXELS).section_words())
             {
                 *len = 4 * words.len() as u64;
             }
@@ -119,8 +123,10 @@ pub mod testing {
             uvs: vec![],
             colors: vec![],
             texels: vec![],
+            images: vec![],
             root: 0,
             shading: Default::default(),
+            decoded: Default::default(),
         }
     }
 
@@ -158,7 +164,10 @@ pub mod testing {
                     0 => poke_floats(&mut s.normals, &mut pick),
                     1 => poke_floats(&mut s.uvs, &mut pick),
                     2 => poke_words(&mut s.colors, &mut pick),
-                    _ => poke_words(&mut s.texels, &mut pick),
+                    _ => match pick(2) {
+                        0 => poke_words(&mut s.texels, &mut pick),
+                        _ => poke_words(&mut s.images, &mut pick),
+                    },
                 },
             }
         }

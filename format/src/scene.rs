@@ -88,13 +88,19 @@ pub struct BakedScene {
     /// RGBA at 16 bits a channel, two words a corner (`r | g << 16`, `b | a << 16`),
     /// or empty.
     pub colors: Vec<u32>,
-    /// The texels of every texture ([`crate::Texture`], [`crate::TEXEL_WORDS`] words a
-    /// texel), or empty.
+    /// The texels of every texture whose texels are stored ([`crate::Texture`],
+    /// [`crate::TEXEL_WORDS`] words a texel), or empty.
     pub texels: Vec<u32>,
+    /// The encoded images of the textures kept encoded ([`crate::Encoded`]), their
+    /// bytes four to a word (little-endian, the last word padded with zeros), or empty.
+    pub images: Vec<u32>,
     /// The point-location tree's root reference.
     pub root: u32,
     /// Materials, lights, cameras and the effects the scene calls for.
     pub shading: crate::Shading,
+    /// The encoded images' texels once decoded (not part of the file).
+    #[rkyv(with = rkyv::with::Skip)]
+    pub decoded: crate::TexelCache,
 }
 
 impl BakedScene {
@@ -121,7 +127,12 @@ impl BakedScene {
             normals: &self.normals,
             uvs: &self.uvs,
             colors: &self.colors,
-            texels: &self.texels,
+            texels: crate::Texels::new(
+                &self.texels,
+                bytemuck::cast_slice(&self.images),
+                &self.shading.textures,
+                &self.decoded,
+            ),
             root: self.root,
             shading: &self.shading,
         }

@@ -524,12 +524,58 @@ impl Shading {
     ///
     /// # Errors
     /// [`crate::Error::Corrupt`] naming the first bad texture.
-    pub fn validate_texels(&self, words: usize) -> crate::Result<()> {
+    pub fn validate_texels(&self, texels: &crate::Texels<'_>) -> crate::Result<()> {
+        let words = texels.stored().len();
+        // The decoded images follow the stored texels, texture after texture.
+        let mut decoded_end = (words / TEXEL_WORDS) as u64;
         for t in &self.textures {
             let sides = 1..=MAX_TEXTURE_SIDE;
+            if let Some(e) = &t.encoded {
+                if !sides.contains(&t.width) || !sides.contains(&t.height) || u64::from(t.first) != decoded_end {
+                    return Err(crate::Error::corrupt(format!(
+                        "texture '{}' ({} x {}, encoded) is empty, larger than {MAX_TEXTURE_SIDE} a side, or its \
+                         texels start at {} rather than {decoded_end}, after the texels before it",
+                        t.name, t.width, t.height, t.first
+                    )));
+                }
+                decoded_end += u64::from(t.width) * u64::from(t.height);
+                let decoded = decoded_end - (words / TEXEL_WORDS) as u64;
+                if decoded > crate::image::MAX_SCENE_TEXELS as u64 {
+                    return Err(crate::Error::corrupt(format!(
+                        "the encoded images hold {decoded} texels or more, past the {} a scene may have",
+                        crate::image::MAX_SCENE_TEXELS
+                    )));
+                }
+                let image = texels.images();
+                let bytes = e.offset.checked_add(e.bytes).and_then(|end| image.get(e.offset as usize..end as usize));
+                let Some(bytes) = bytes else {
+                    return Err(crate::Error::corrupt(format!(
+                        "texture '{}': its image ({} bytes from {}) runs past the {} bytes of images",
+                        t.name,
+                        e.bytes,
+                        e.offset,
+                        image.len()
+                    )));
+                };
+                // The header only: the pixels are decoded when first read.
+                let found = crate::image::dimensions(bytes)
+                    .map_err(|why| crate::Error::corrupt(format!("texture '{}': {why}", t.name)))?;
+                if found != (e.kind, t.width, t.height) {
+                    return Err(crate::Error::corrupt(format!(
+                        "texture '{}': its image is a {} of {} x {}, its record says a {} of {} x {}",
+                        t.name,
+                        found.0.name(),
+                        found.1,
+                        found.2,
+                        e.kind.name(),
+                        t.width,
+                        t.height
+                    )));
+                }
+            }
             // Saturating: a hostile size must be refused, not overflow (found by fuzzing).
             let end = (t.first as u64 + t.width as u64 * t.height as u64).saturating_mul(TEXEL_WORDS as u64);
-            if !sides.contains(&t.width) || !sides.contains(&t.height) || end > words as u64 {
+            if t.encoded.is_none() && (!sides.contains(&t.width) || !sides.contains(&t.height) || end > words as u64) {
                 return Err(crate::Error::corrupt(format!(
                     "texture '{}' ({} x {} from texel {}) is empty, larger than {MAX_TEXTURE_SIDE} a side, \
                      or runs past the {} texels there are",

@@ -116,7 +116,8 @@ impl SceneStatistics {
                         + view.normals.len()
                         + view.uvs.len()
                         + view.colors.len()
-                        + view.texels.len(),
+                        + view.texels.stored().len()
+                        + view.texels.images().len() / 4,
                 ),
             },
         })

@@ -92,6 +92,53 @@ pub struct Texture {
     /// Whether the colour channels are sRGB-encoded (decoded to linear light when
     /// read) rather than linear.
     pub srgb: bool,
+    /// Where the texture's image is kept encoded (a PNG or a JPEG in the scene's
+    /// `images`, decoded the first time texels are read), or `None` when its texels
+    /// are stored in the `texels` section.
+    pub encoded: Option<Encoded>,
+}
+
+/// The encodings a texture's image may be kept in.
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[rkyv(derive(Debug))]
+#[repr(u8)]
+pub enum ImageKind {
+    /// A PNG image.
+    Png,
+    /// A (baseline or progressive) JPEG image.
+    Jpeg,
+}
+
+impl ImageKind {
+    /// `PNG` or `JPEG`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ImageKind::Png => "PNG",
+            ImageKind::Jpeg => "JPEG",
+        }
+    }
+}
+
+/// A texture kept as its source image encodes it: smaller than its texels (a JPEG of
+/// 2048 x 2048 texels takes about 1 MB against 16 MB), decoded the first time the
+/// scene's texels are read ([`crate::Texels`]), with the decoder the bake used; the
+/// hash of the texels the bake decoded checks that they are the same.
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[rkyv(derive(Debug))]
+pub struct Encoded {
+    /// PNG or JPEG.
+    pub kind: ImageKind,
+    /// Offset of its first byte in the scene's images (bytes).
+    pub offset: u64,
+    /// Its length in bytes.
+    pub bytes: u64,
+    /// xxh3-64 of the texels it decodes to, their words' little-endian bytes.
+    pub texels_hash: u64,
+}
+
+/// The hash [`Encoded::texels_hash`] keeps of a decoded image's texels.
+pub fn texels_hash(texels: &[u32]) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(texels))
 }
 
 /// `1 / (65535 * 256)`: the scale from a sample's 24-bit fixed point to `[0, 1]`.
@@ -214,7 +261,7 @@ pub fn srgb_to_linear16(c: u8) -> u16 {
 /// // 4 x 1 texels, clamped: three black, then white (RGBA, 8 bits a channel).
 /// let texels = [0xff00_0000, 0xff00_0000, 0xff00_0000, 0xffff_ffff];
 /// let texture = Texture { name: "t".into(), width: 4, height: 1, first: 0, wrap: [Wrap::ClampToEdge; 2],
-///     filter: Filter::Nearest, min_alpha: 1.0, srgb: true };
+///     filter: Filter::Nearest, min_alpha: 1.0, srgb: true, encoded: None };
 /// let lit = LitTexels::new(&texture, &texels);
 /// assert!(!lit.any_lit([[0.1, 0.5], [0.2, 0.5], [0.1, 0.6]])); // over the black texels
 /// assert!(lit.any_lit([[0.1, 0.5], [0.9, 0.5], [0.1, 0.6]])); // reaching the white one

@@ -214,7 +214,7 @@ impl SceneView<'_> {
                 )));
             }
         }
-        self.shading.validate_texels(self.texels.len())
+        self.shading.validate_texels(&self.texels)
     }
 
     fn check_triangle_ids(&self) -> Result<()> {

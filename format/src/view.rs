@@ -56,8 +56,9 @@ pub struct SceneView<'a> {
     pub uvs: &'a [f32],
     /// Vertex colours, six words a stored triangle, or empty.
     pub colors: &'a [u32],
-    /// Texels of the scene's textures, or empty.
-    pub texels: &'a [u32],
+    /// Texels of the scene's textures (stored, and decoded from the encoded images
+    /// when first read), or empty.
+    pub texels: crate::Texels<'a>,
     /// Root reference of the point-location tree.
     pub root: u32,
     /// Materials, lights, cameras and effects.
@@ -93,7 +94,7 @@ impl LeafRecord<'_> {
 impl<'a> SceneView<'a> {
     /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
     /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs,
-    /// colors, texels):
+    /// colors, texels, images):
     /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
@@ -108,7 +109,8 @@ impl<'a> SceneView<'a> {
             bytemuck::cast_slice(self.normals),
             bytemuck::cast_slice(self.uvs),
             self.colors,
-            self.texels,
+            self.texels.stored(),
+            bytemuck::cast_slice(self.texels.images()),
         ]
     }
 
@@ -159,7 +161,7 @@ impl<'a> SceneView<'a> {
     pub fn base_color_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 4] {
         let mut color = material.base_color;
         if let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) {
-            let texel = texture.sample(self.texels, self.uv_at(index, u, v));
+            let texel = texture.sample(self.texels.get(), self.uv_at(index, u, v));
             color = [0, 1, 2, 3].map(|c| color[c] * texel[c]);
         }
         if let Some(vertex) = self.color_at(index, u, v) {
@@ -203,7 +205,7 @@ impl<'a> SceneView<'a> {
     /// or `None` for no texture (or one past the scene's).
     fn texture_at(&self, texture: Option<u32>, index: StoredIndex, u: f32, v: f32) -> Option<[f32; 4]> {
         let texture = self.shading.textures.get(texture? as usize)?;
-        Some(texture.sample(self.texels, self.uv_at(index, u, v)))
+        Some(texture.sample(self.texels.get(), self.uv_at(index, u, v)))
     }
 
     /// Number of leaves.

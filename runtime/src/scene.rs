@@ -153,6 +153,31 @@ impl Scene {
         }
     }
 
+    /// Decodes the images of the textures the file keeps encoded (PNGs and JPEGs;
+    /// once, on the first call or the first texture lookup, whichever comes first) and
+    /// says whether they decoded to the texels the bake saw. Renders call it first;
+    /// where it fails, a texture reads as white.
+    ///
+    /// # Example
+    /// ```
+    /// let scene = octrace_runtime::Scene::from_baked(octrace_bake::bake(
+    ///     &octrace_bake::procedural::shaded_torus(8, 4),
+    ///     &octrace_bake::BuildParams::auto(),
+    /// )?)?;
+    /// assert!(scene.view().texels.has_encoded()); // its occlusion texture is a PNG
+    /// scene.decode_textures()?;
+    /// assert!(scene.view().texels.is_decoded());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`crate::Error::Format`] naming the first texture whose image is damaged or
+    /// decodes to other texels than at bake.
+    pub fn decode_textures(&self) -> Result<()> {
+        self.view().texels.check()?;
+        Ok(())
+    }
+
     /// The scene's materials, lights, cameras and effects.
     pub fn shading(&self) -> &octrace_format::Shading {
         match &self.inner.source {

@@ -10,6 +10,7 @@ use crate::{Ray, Scene};
 /// the scene's shading calls for (two soft-shadow samples, ray trees three deep). On a
 /// hostile file each must end, with some answer: a panic or a hang here is a bug.
 pub fn exercise(scene: &Scene, rays: &[Ray]) {
+    let _ = scene.decode_textures();
     let tracer = scene.tracer();
     for r in rays {
         let _ = tracer.intersect(r);

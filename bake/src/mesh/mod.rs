@@ -1,7 +1,6 @@
 //! Mesh input: OBJ and glTF 2.0 (`.gltf`, `.glb`), each optionally zstd-compressed.
 
 mod gltf;
-mod image;
 mod obj;
 mod obj_plain;
 mod refs;
@@ -48,8 +47,11 @@ pub struct Mesh {
     pub parts: Vec<octrace_format::MeshPart>,
     /// Texture images (glTF base colour textures), their texels in `texels`.
     pub textures: Vec<octrace_format::Texture>,
-    /// The textures' texels, decoded and linear ([`octrace_format::Texture`]).
+    /// The textures' texels, decoded, 8 bits a channel ([`octrace_format::Texture`]),
+    /// those of the images kept encoded included.
     pub texels: Vec<u32>,
+    /// The encoded images of the textures kept encoded ([`octrace_format::Encoded`]).
+    pub images: Vec<u8>,
     /// Things skipped while loading (non-triangle glTF primitives, ...), one line each.
     pub warnings: Vec<String>,
     /// The files read besides the mesh file itself (glTF buffers, OBJ material
@@ -58,6 +60,28 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// The textures and texel arrays as a baked scene stores them: the texels of the
+    /// textures kept whole first, then (without their texels) the textures kept
+    /// encoded, whose texels follow in the array the file's readers decode; and the
+    /// images' bytes in words.
+    pub(crate) fn texel_sections(&self) -> (Vec<octrace_format::Texture>, Vec<u32>, Vec<u32>) {
+        let mut textures = self.textures.clone();
+        let mut stored = Vec::new();
+        for t in textures.iter_mut().filter(|t| t.encoded.is_none()) {
+            let n = t.width as usize * t.height as usize * octrace_format::TEXEL_WORDS;
+            let from = (t.first as usize * octrace_format::TEXEL_WORDS).min(self.texels.len());
+            t.first = (stored.len() / octrace_format::TEXEL_WORDS) as u32;
+            stored.extend_from_slice(&self.texels[from..(from + n).min(self.texels.len())]);
+        }
+        let mut next = (stored.len() / octrace_format::TEXEL_WORDS) as u32;
+        for t in textures.iter_mut().filter(|t| t.encoded.is_some()) {
+            t.first = next;
+            next = next.saturating_add(t.width * t.height);
+        }
+        let images = self.images.chunks(4).map(|c| c.iter().rev().fold(0u32, |w, &b| w << 8 | u32::from(b))).collect();
+        (textures, stored, images)
+    }
+
     /// A mesh of bare triangles: no materials, lights or cameras.
     ///
     /// # Example

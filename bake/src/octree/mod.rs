@@ -282,11 +282,12 @@ fn bake_within(
         let range = p.first as usize..(p.first as usize + p.count as usize).min(mesh.triangles.len());
         p.edges = EdgeCensus::of(&mesh.triangles[range]);
     }
+    let (textures, texels, images) = mesh.texel_sections();
     let shading = octrace_format::Shading {
         materials: mesh.materials.clone(),
         lights: mesh.lights.clone(),
         cameras: mesh.cameras.clone(),
-        textures: mesh.textures.clone(),
+        textures,
         parts,
         effects: crate::effects::decide(mesh, &triangle_ids),
     };
@@ -315,9 +316,11 @@ fn bake_within(
         normals,
         uvs,
         colors,
-        texels: mesh.texels.clone(),
+        texels,
+        images,
         root: arrays.root,
         shading,
+        decoded: Default::default(),
     })
 }
 

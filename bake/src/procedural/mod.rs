@@ -84,13 +84,27 @@ pub fn torus(center: [f32; 3], major: f32, minor: f32, rings: u32, sides: u32) -
     mesh(tris)
 }
 
+/// A 2 x 2 PNG, grey levels 255, 96 / 160, 255 (78 bytes).
+const GREY_PNG: [u8; 78] = [
+    0x89, 0x50, 0x4e, 0x47, 0xd, 0xa, 0x1a, 0xa, 0x0, 0x0, 0x0, 0xd, 0x49, 0x48, 0x44, 0x52, 0x0, 0x0, 0x0, 0x2, 0x0,
+    0x0, 0x0, 0x2, 0x8, 0x2, 0x0, 0x0, 0x0, 0xfd, 0xd4, 0x9a, 0x73, 0x0, 0x0, 0x0, 0x15, 0x49, 0x44, 0x41, 0x54, 0x78,
+    0xda, 0x63, 0xf8, 0xff, 0xff, 0x7f, 0x42, 0x42, 0x2, 0xc3, 0x82, 0x5, 0xb, 0x80, 0x2c, 0x0, 0x3d, 0x64, 0x8, 0xfb,
+    0x25, 0x41, 0x3b, 0xf9, 0x0, 0x0, 0x0, 0x0, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82,
+];
+
 /// A unit torus (minor radius 0.3) with every kind of shading data: one material, its
-/// base colour from a 2 x 2 texture with a transparent texel (alpha mask), face
-/// normals, texture coordinates and vertex colours. Baked, every section of the file
-/// holds bytes: for the format's tests and the trusted-path fuzz target.
+/// base colour from a 2 x 2 texture with a transparent texel (alpha mask), its
+/// occlusion from a 2 x 2 PNG kept encoded, face normals, texture coordinates and
+/// vertex colours. Baked, every section of the file holds bytes: for the format's
+/// tests and the trusted-path fuzz target.
 pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
-    use octrace_format::{AlphaMode, Material, Texture};
-    let material = Material { base_color_texture: Some(0), alpha_mode: AlphaMode::Mask, ..Default::default() };
+    use octrace_format::{AlphaMode, Encoded, ImageKind, Material, Texture};
+    let material = Material {
+        base_color_texture: Some(0),
+        occlusion_texture: Some(1),
+        alpha_mode: AlphaMode::Mask,
+        ..Default::default()
+    };
     let texture = Texture {
         name: "2 x 2".into(),
         width: 2,
@@ -100,11 +114,33 @@ pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
         filter: Default::default(),
         min_alpha: 0.0,
         srgb: false,
+        encoded: None,
     };
     // Linear RGBA, 8 bits a channel (`r | g << 8 | b << 16 | a << 24`): the first
     // texel's alpha is 0.
-    let texels = vec![0x0080_ff00, 0xff00_00ff, 0xff80_8080, 0x8001_0001];
-    let mut out = Mesh { materials: vec![material], textures: vec![texture], texels, ..Mesh::default() };
+    let mut texels = vec![0x0080_ff00, 0xff00_00ff, 0xff80_8080, 0x8001_0001];
+    let grey = octrace_format::image::decode(&GREY_PNG, 4).expect("a sound PNG");
+    let grey: Vec<u32> = grey.pixels.into_iter().map(u32::from_le_bytes).collect();
+    let occlusion = Texture {
+        name: "2 x 2 PNG".into(),
+        first: texels.len() as u32,
+        min_alpha: 1.0,
+        encoded: Some(Encoded {
+            kind: ImageKind::Png,
+            offset: 0,
+            bytes: GREY_PNG.len() as u64,
+            texels_hash: octrace_format::texels_hash(&grey),
+        }),
+        ..texture.clone()
+    };
+    texels.extend_from_slice(&grey);
+    let mut out = Mesh {
+        materials: vec![material],
+        textures: vec![texture, occlusion],
+        texels,
+        images: GREY_PNG.to_vec(),
+        ..Mesh::default()
+    };
     for t in torus([0.0; 3], 1.0, 0.3, rings, sides).triangles {
         let normals = Some([crate::mesh::face_normal(&t); 3]);
         let colors = Some([[65535, 0, 0, 65535], [0, 65535, 0, 30000], [0, 0, 65535, 65535]]);

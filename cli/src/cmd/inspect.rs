@@ -247,7 +247,7 @@ impl<'a> Report<'a> {
         for (i, t) in sh.textures.iter().enumerate() {
             let label = if i == 0 { "textures" } else { "" };
             text.push_str(&format!(
-                "\n{label:<18} {}: {} x {}, {}, {} filter, wrap {} / {}, alpha down to {:.2}{}",
+                "\n{label:<18} {}: {} x {}, {}, {} filter, wrap {} / {}, alpha down to {:.2}, {}{}",
                 t.name,
                 t.width,
                 t.height,
@@ -256,6 +256,10 @@ impl<'a> Report<'a> {
                 t.wrap[0].name(),
                 t.wrap[1].name(),
                 t.min_alpha,
+                match t.encoded {
+                    Some(e) => format!("kept as a {} of {} bytes", e.kind.name(), crate::output::thousands(e.bytes)),
+                    None => "stored as texels".into(),
+                },
                 texture_uses(&sh.materials, i as u32)
             ));
         }

@@ -157,6 +157,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
     }
     let scene = crate::open::open_scene(&args.scene)?;
+    // The images kept encoded are decoded before the clock starts (and a damaged one
+    // refused by name rather than rendered white).
+    scene.decode_textures()?;
     let camera = camera(&scene, &args)?;
     // A scene camera's aspect ratio sets the height: checked again.
     check_size(camera.width, camera.height)?;

@@ -69,6 +69,9 @@ pub enum GpuError {
     /// A request the GPU path does not serve.
     #[error("not on the GPU: {0}")]
     Unsupported(String),
+    /// The scene's data cannot be used (a texture's image that does not decode).
+    #[error("{0}")]
+    Scene(String),
 }
 
 /// The GPU result type.

@@ -130,7 +130,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let scene_bytes = tracer.scene_buffers.iter().map(wgpu::Buffer::size).sum();
         let chunk_bytes = tracer.scene_buffers.first().map_or(0, wgpu::Buffer::size);
         super::check_bindings(&limits, chunks, (storage + 3, buffers + 4), scene_bytes, chunk_bytes)?;
-        let (words, mut params, headlight) = shading_words(tracer.scene());
+        let texels = tracer.scene().view().texels.check().map_err(|e| GpuError::Scene(e.to_string()))?;
+        let (words, mut params, headlight) = shading_words(tracer.scene(), texels);
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
@@ -270,7 +271,7 @@ fn overrides(effects: EffectSet, headlight: bool) -> Vec<(&'static str, f64)> {
 
 /// The words of the kernel's `shade` binding, the parameters that locate them, and
 /// whether the scene is lit by the headlight.
-fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
+fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool) {
     let view = scene.view();
     let shading = view.shading;
     let mut words: Vec<u32> = Vec::new();
@@ -335,7 +336,7 @@ fn shading_words(scene: &Scene) -> (Vec<u32>, RenderParams, bool) {
     params.o_srgb = words.len() as u32;
     words.extend(octrace_format::linear16().iter().map(|&c| u32::from(c)));
     params.o_texels = words.len() as u32;
-    words.extend_from_slice(view.texels);
+    words.extend_from_slice(texels);
     if words.is_empty() {
         words.push(0);
     }

@@ -696,7 +696,7 @@ impl<'a> Context<'a> {
             return n;
         }
         let b = front.cross(t);
-        let texel = texture.sample(self.view.texels, self.view.uv_at(hit.prim, hit.u, hit.v));
+        let texel = texture.sample(self.view.texels.get(), self.view.uv_at(hit.prim, hit.u, hit.v));
         let (x, y, z) = ((texel[0] * 2.0 - 1.0) * scale, (texel[1] * 2.0 - 1.0) * scale, texel[2] * 2.0 - 1.0);
         let mapped = (t * x + b * y + front * z).normalize_or_zero();
         let mapped = if back { -mapped } else { mapped };

@@ -205,7 +205,7 @@ impl Emitters {
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
         let mut untextured = false;
-        let mut emissive = EmissiveTriangles::new(&view.shading.textures, view.texels);
+        let mut emissive = EmissiveTriangles::new(&view.shading.textures, view.texels.get());
         for prim in 0..view.triangle_count() as u32 {
             let Some(m) = view.material(StoredIndex(prim)) else { continue };
             if !emissive.emits(m, view.corner_uvs(StoredIndex(prim)).unwrap_or_default()) {

@@ -37,14 +37,14 @@ fn wrong_magic_is_bad_magic() {
 
 #[test]
 fn older_and_newer_versions_name_both_versions() {
-    for (major, minor) in [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 7), (8, 0)] {
+    for (major, minor) in [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 0), (8, 8), (9, 0)] {
         let mut bytes = scene().to_file_bytes(0).unwrap();
         bytes[8..10].copy_from_slice(&major.to_le_bytes());
         bytes[10..12].copy_from_slice(&minor.to_le_bytes());
         let err = open(&bytes).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, Error::UnsupportedVersion { .. }), "{msg}");
-        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("7.0"), "{msg}");
+        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("8.0"), "{msg}");
     }
 }
 
@@ -153,6 +153,11 @@ fn a_section_table_that_lies_about_the_archive_is_rejected() {
 }
 
 /// Rewrites a scene with one change and a valid checksum: only validation can refuse it.
+/// The torus's texture kept encoded.
+fn encoded(s: &mut BakedScene) -> &mut octrace_format::Encoded {
+    s.shading.textures[1].encoded.as_mut().expect("the torus's occlusion texture is encoded")
+}
+
 fn corrupt(change: impl FnOnce(&mut BakedScene)) -> Error {
     let mut s = scene();
     change(&mut s);
@@ -517,9 +522,33 @@ fn geometry_and_shading_that_break_the_rules_are_rejected() {
                     filter: octrace_format::Filter::Linear,
                     min_alpha: 1.0,
                     srgb: true,
+                    encoded: None,
                 })
             }),
             "larger than 8192 a side",
+        ),
+        // The torus's occlusion texture is a 2 x 2 PNG kept encoded.
+        ("an encoded image past the images", Box::new(|s: &mut BakedScene| encoded(s).bytes += 3), "runs past"),
+        ("an encoded image's far offset", Box::new(|s: &mut BakedScene| encoded(s).offset = u64::MAX - 1), "runs past"),
+        (
+            "an encoded image of another size",
+            Box::new(|s: &mut BakedScene| s.shading.textures[1].width = 3),
+            "its image is a PNG of 2 x 2, its record says a PNG of 3 x 2",
+        ),
+        (
+            "an encoded image of another kind",
+            Box::new(|s: &mut BakedScene| encoded(s).kind = octrace_format::ImageKind::Jpeg),
+            "its record says a JPEG",
+        ),
+        (
+            "an encoded image's texels overlapping the stored ones",
+            Box::new(|s: &mut BakedScene| s.shading.textures[1].first -= 1),
+            "texels start at 3 rather than 4",
+        ),
+        (
+            "an encoded image's bytes that are not an image",
+            Box::new(|s: &mut BakedScene| s.images[0] ^= 1),
+            "neither a PNG nor a JPEG",
         ),
     ];
     for (what, change, says) in cases {

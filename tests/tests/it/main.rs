@@ -10,6 +10,7 @@ mod gpu;
 mod gpu_crossings;
 mod hard_cases;
 mod hostile;
+mod images;
 mod inside;
 mod materials;
 mod mesh;

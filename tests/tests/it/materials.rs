@@ -17,7 +17,20 @@ use crate::effects::{add, base_scene, camera, diffuse, point_light, render, scen
 /// (8 bits).
 fn texture(w: u32, h: u32, wrap: [Wrap; 2], filter: Filter, value: impl Fn(usize, usize) -> u8) -> (Texture, Vec<u32>) {
     let texels = (0..(w * h) as usize).map(|i| u32::from_le_bytes([0, 1, 2, 3].map(|c| value(i, c)))).collect();
-    (Texture { name: "t".into(), width: w, height: h, first: 0, wrap, filter, min_alpha: 0.0, srgb: false }, texels)
+    (
+        Texture {
+            name: "t".into(),
+            width: w,
+            height: h,
+            first: 0,
+            wrap,
+            filter,
+            min_alpha: 0.0,
+            srgb: false,
+            encoded: None,
+        },
+        texels,
+    )
 }
 
 /// The sample glTF describes in words: wrap the coordinate into one period, then the

@@ -5,15 +5,12 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use octrace_format::{AlphaMode, Filter, Material, Texture, Wrap};
+use octrace_format::{AlphaMode, Encoded, Filter, Material, Texture, Wrap};
 
 use super::super::refs::{self, LoadOptions};
-use super::super::{image, Mesh};
+use super::super::Mesh;
 use crate::error::{Error, Result};
-
-/// Texels a scene may hold in all (1 GiB of texel data): a bound on what a small file
-/// of many images can make the bake allocate.
-pub(super) const MAX_SCENE_TEXELS: usize = 1 << 28;
+use octrace_format::image::{self, MAX_SCENE_TEXELS};
 
 /// How a material's texture coordinates are found: the `TEXCOORD_n` set its base
 /// colour texture reads, and the affine map `KHR_texture_transform` applies to it
@@ -66,6 +63,9 @@ pub(super) struct Materials<'a> {
     /// Textures already loaded: (image, sampler, sRGB) to the index in
     /// `mesh.textures`, or `None` when the image could not be used.
     pub loaded: HashMap<(usize, Option<usize>, bool), Option<u32>>,
+    /// Images kept encoded: image index to (offset, length) in `mesh.images` (two
+    /// textures of one image, as sRGB colour and as linear data, share its bytes).
+    pub kept: HashMap<usize, (u64, u64)>,
 }
 
 impl Materials<'_> {
@@ -181,9 +181,9 @@ impl Materials<'_> {
             _ => format!("image {}", image.index()),
         };
         let budget = MAX_SCENE_TEXELS.saturating_sub(mesh.texels.len() / octrace_format::TEXEL_WORDS);
-        let decoded = self.image_bytes(&image, mesh).and_then(|bytes| image::decode(&bytes, budget));
+        let decoded = self.image_bytes(&image, mesh).and_then(|bytes| Ok((image::decode(&bytes, budget)?, bytes)));
         let index = match decoded {
-            Ok(rgba) => {
+            Ok((rgba, bytes)) => {
                 use gltf::texture::{MagFilter, WrappingMode};
                 let wrap = |w: WrappingMode| match w {
                     WrappingMode::Repeat => Wrap::Repeat,
@@ -201,6 +201,19 @@ impl Materials<'_> {
                     mesh.texels.push(u32::from_le_bytes(pixel));
                     min_alpha = min_alpha.min(pixel[3]);
                 }
+                // An image smaller encoded than as texels (a JPEG, most PNGs) is kept
+                // as it is and decoded when first read, with the same decoder: the hash
+                // of what it decodes to here checks that.
+                let raw = rgba.pixels.len() as u64 * 4;
+                let encoded = image::kind(&bytes).filter(|_| (bytes.len() as u64) < raw).map(|kind| {
+                    let (offset, len) = *self.kept.entry(image.index()).or_insert_with(|| {
+                        let at = mesh.images.len() as u64;
+                        mesh.images.extend_from_slice(&bytes);
+                        (at, bytes.len() as u64)
+                    });
+                    let words = &mesh.texels[first as usize..];
+                    Encoded { kind, offset, bytes: len, texels_hash: octrace_format::texels_hash(words) }
+                });
                 mesh.textures.push(Texture {
                     name: label,
                     width: rgba.width,
@@ -215,6 +228,7 @@ impl Materials<'_> {
                     // Base colour and emissive textures are sRGB-encoded (glTF), the
                     // others linear.
                     srgb,
+                    encoded,
                 });
                 Some(mesh.textures.len() as u32 - 1)
             }

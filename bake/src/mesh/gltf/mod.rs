@@ -134,7 +134,14 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
     }
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.len()).sum::<usize>();
     let mut mesh = Mesh { sources, warnings, ..Mesh::default() };
-    let mut materials = material::Materials { path, base, options, buffers: &buffers, loaded: Default::default() };
+    let mut materials = material::Materials {
+        path,
+        base,
+        options,
+        buffers: &buffers,
+        loaded: Default::default(),
+        kept: Default::default(),
+    };
     let mut uv_maps = Vec::new();
     for m in document.materials() {
         let (m, uv) = materials.material(&m, &mut mesh)?;

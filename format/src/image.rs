@@ -1,21 +1,69 @@
 //! PNG and JPEG images for textures: decoded to 8-bit RGBA, within a size limit
 //! checked before the pixels are allocated.
+//!
+//! The bake decodes a glTF's images with these functions, and a baked scene that keeps
+//! an image encoded (see [`crate::Encoded`]) is decoded with the same ones when its
+//! texels are first read, so both see the same pixels (and a hash of them, taken at
+//! bake, checks it).
 
-use octrace_format::MAX_TEXTURE_SIDE;
+use crate::texture::{ImageKind, MAX_TEXTURE_SIDE};
+
+/// Texels a scene may hold in all (1 GiB of texel data): a bound on what a small file
+/// of many images can make the bake, or the decoding of a baked scene's images,
+/// allocate.
+pub const MAX_SCENE_TEXELS: usize = 1 << 28;
 
 /// A decoded image: `width * height` RGBA pixels, rows top to bottom.
-pub(crate) struct Rgba8 {
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Rgba8 {
+    /// Pixels per row.
     pub width: u32,
+    /// Rows.
     pub height: u32,
+    /// `r, g, b, a`, 8 bits each, row after row.
     pub pixels: Vec<[u8; 4]>,
+}
+
+/// What an encoded image is: [`ImageKind::Png`] or [`ImageKind::Jpeg`] by its
+/// signature, whatever a file's MIME type says; `None` for anything else.
+pub fn kind(bytes: &[u8]) -> Option<ImageKind> {
+    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        Some(ImageKind::Png)
+    } else if bytes.starts_with(&[0xff, 0xd8, 0xff]) {
+        Some(ImageKind::Jpeg)
+    } else {
+        None
+    }
+}
+
+/// An encoded image's kind and size in pixels, read from its header alone (no pixel
+/// is decoded).
+///
+/// # Errors
+/// A message for an image that is neither a PNG nor a JPEG, or whose header cannot be
+/// read.
+pub fn dimensions(bytes: &[u8]) -> Result<(ImageKind, u32, u32), String> {
+    match kind(bytes) {
+        Some(ImageKind::Png) => {
+            let reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| format!("PNG: {e}"))?;
+            Ok((ImageKind::Png, reader.info().width, reader.info().height))
+        }
+        Some(ImageKind::Jpeg) => {
+            let mut decoder = zune_jpeg::JpegDecoder::new(zune_core::bytestream::ZCursor::new(bytes));
+            decoder.decode_headers().map_err(|e| format!("JPEG: {e}"))?;
+            let info = decoder.info().ok_or("JPEG: no image header")?;
+            Ok((ImageKind::Jpeg, u32::from(info.width), u32::from(info.height)))
+        }
+        None => Err("neither a PNG nor a JPEG image".into()),
+    }
 }
 
 /// Pixels an image may decode to per byte of its encoding, beyond
 /// [`PIXELS_SLACK`]: real textures compress 3 to 20 times; a flat image declaring
 /// thousands of pixels per byte is a bomb.
-pub(crate) const PIXELS_PER_ENCODED_BYTE: usize = 256;
+pub const PIXELS_PER_ENCODED_BYTE: usize = 256;
 /// Pixels any image may have whatever its encoded size (a 2048 x 2048 texture).
-pub(crate) const PIXELS_SLACK: usize = 1 << 22;
+pub const PIXELS_SLACK: usize = 1 << 22;
 
 /// Decodes a PNG or JPEG (told apart by their signatures, whatever the file's MIME
 /// type says), if its declared size is at most `max_pixels` and
@@ -25,14 +73,12 @@ pub(crate) const PIXELS_SLACK: usize = 1 << 22;
 /// # Errors
 /// A message for an image of another format, a malformed one, or one larger than
 /// [`MAX_TEXTURE_SIDE`] on a side or than the limits.
-pub(crate) fn decode(bytes: &[u8], max_pixels: usize) -> Result<Rgba8, String> {
+pub fn decode(bytes: &[u8], max_pixels: usize) -> Result<Rgba8, String> {
     let limit = max_pixels.min(bytes.len().saturating_mul(PIXELS_PER_ENCODED_BYTE).saturating_add(PIXELS_SLACK));
-    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        png(bytes, limit)
-    } else if bytes.starts_with(&[0xff, 0xd8, 0xff]) {
-        jpeg(bytes, limit)
-    } else {
-        Err("neither a PNG nor a JPEG image".into())
+    match kind(bytes) {
+        Some(ImageKind::Png) => png(bytes, limit),
+        Some(ImageKind::Jpeg) => jpeg(bytes, limit),
+        None => Err("neither a PNG nor a JPEG image".into()),
     }
 }
 
