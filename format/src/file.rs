@@ -419,6 +419,7 @@ pub(crate) fn view_of<'a>(
         normals: bytemuck::cast_slice(a.normals.as_slice()),
         uvs: bytemuck::cast_slice(a.uvs.as_slice()),
         colors: bytemuck::cast_slice(a.colors.as_slice()),
+        tangents: bytemuck::cast_slice(a.tangents.as_slice()),
         texels: crate::Texels::new(
             bytemuck::cast_slice(a.texels.as_slice()),
             bytemuck::cast_slice(a.images.as_slice()),

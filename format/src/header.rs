@@ -26,12 +26,13 @@ pub const SECTION_NAMES: [&str; SECTION_COUNT] = [
     "normals",
     "uvs",
     "colors",
+    "tangents",
     "texels",
     "images",
     "root",
 ];
 /// Number of sections in a version 8.0 file.
-pub const SECTION_COUNT: usize = 14;
+pub const SECTION_COUNT: usize = 15;
 /// Header length in bytes, section table included; the archive starts right after it.
 pub const HEADER_LEN: usize = FIXED_HEADER_LEN + SECTION_COUNT * SECTION_ENTRY_LEN;
 /// Alignment of the archive within the file and in memory.
@@ -52,6 +53,7 @@ const SECTION_LABELS: [&str; SECTION_COUNT] = [
     "section normals",
     "section uvs",
     "section colors",
+    "section tangents",
     "section texels",
     "section images",
     "section root",

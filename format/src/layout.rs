@@ -48,6 +48,28 @@ pub const INTERNAL_BIT: u32 = 1 << 31;
 pub const TRIANGLE_FLOATS: usize = 9;
 /// `f32`s a triangle's texture coordinates take: `u v` for each of its three corners.
 pub const UV_FLOATS: usize = 6;
+/// Words a triangle's tangents take: two a corner, `x | y << 16` and `z | w << 16`, each
+/// a signed 16-bit fraction of 32767 ([`decode_tangent`]).
+pub const TANGENT_WORDS: usize = 6;
+/// From a stored tangent component to its value: `1 / 32767`.
+pub const TANGENT_SCALE: f32 = 1.0 / 32767.0;
+
+/// A corner's tangent stored as two words (`x | y << 16`, `z | w << 16`, signed 16-bit
+/// fractions of 32767; `w` is 32767 or -32767, the bitangent's sign, or all four are
+/// zero where there is no tangent).
+pub fn encode_tangent(t: [f32; 4]) -> [u32; 2] {
+    let q = |c: f32| ((c.clamp(-1.0, 1.0) * 32767.0).round() as i16 as u16) as u32;
+    [q(t[0]) | q(t[1]) << 16, q(t[2]) | q(t[3]) << 16]
+}
+
+/// A corner's tangent from its two words: `x y z` each `i16 * TANGENT_SCALE` (one
+/// rounding, as the GPU kernel computes it), `w` 1, -1 or 0 by the sign of its `i16`.
+pub fn decode_tangent(words: [u32; 2]) -> [f32; 4] {
+    let c = |word: u32, high: bool| (if high { word >> 16 } else { word & 0xffff }) as u16 as i16;
+    let w = c(words[1], true);
+    let f = |q: i16| f32::from(q) * TANGENT_SCALE;
+    [f(c(words[0], false)), f(c(words[0], true)), f(c(words[1], false)), f32::from(w.signum())]
+}
 /// `f32`s a box takes in the box array: `lo.xyz`, then `hi.xyz`.
 pub const BOX_FLOATS: usize = 6;
 /// Deepest octree level the format allows (cell coordinates must fit in 24 bits and
@@ -214,5 +236,22 @@ mod tests {
             let next = cell_box(lo, size, level + 1, [2 * (3 % (1 << level)) + 2, 0, 0]);
             assert_eq!(a[3], next[0]);
         }
+    }
+}
+
+#[cfg(test)]
+mod tangent_tests {
+    use super::*;
+
+    /// The GPU kernel's `tangent_at` reads the scale from these bits; stored unit
+    /// tangents decode within 2^-15 of their components, signs and absence kept.
+    #[test]
+    fn tangents_round_trip_within_the_quantum() {
+        assert_eq!(TANGENT_SCALE.to_bits(), 0x3800_0100);
+        for t in [[1.0, 0.0, 0.0, 1.0], [0.0, -1.0, 0.0, -1.0], [0.6, 0.0, -0.8, 1.0], [0.0; 4]] {
+            let back = decode_tangent(encode_tangent(t));
+            assert!(t.iter().zip(back).all(|(a, b)| (a - b).abs() <= 1.0 / 65534.0), "{t:?} {back:?}");
+        }
+        assert_eq!(encode_tangent([0.0; 4]), [0, 0]);
     }
 }

@@ -122,6 +122,7 @@ pub mod testing {
             normals: vec![],
             uvs: vec![],
             colors: vec![],
+            tangents: vec![],
             texels: vec![],
             images: vec![],
             root: 0,
@@ -160,8 +161,9 @@ pub mod testing {
                     }
                 }
                 14 => poke_words(&mut s.material_ids, &mut pick),
-                _ => match pick(4) {
+                _ => match pick(5) {
                     0 => poke_floats(&mut s.normals, &mut pick),
+                    3 => poke_words(&mut s.tangents, &mut pick),
                     1 => poke_floats(&mut s.uvs, &mut pick),
                     2 => poke_words(&mut s.colors, &mut pick),
                     _ => match pick(2) {

@@ -88,6 +88,12 @@ pub struct BakedScene {
     /// RGBA at 16 bits a channel, two words a corner (`r | g << 16`, `b | a << 16`),
     /// or empty.
     pub colors: Vec<u32>,
+    /// Tangents of each stored triangle's three corners, world space (two words a
+    /// corner, [`crate::layout::encode_tangent`]: a unit `x y z` along which the normal
+    /// texture's `u` grows, and `w`, the sign of the bitangent `w (n x t)`; all zero on
+    /// the triangles of a part that has none), or empty. From the file's `TANGENT`,
+    /// else MikkTSpace, for the parts whose material has a normal texture.
+    pub tangents: Vec<u32>,
     /// The texels of every texture whose texels are stored ([`crate::Texture`],
     /// [`crate::TEXEL_WORDS`] words a texel), or empty.
     pub texels: Vec<u32>,
@@ -127,6 +133,7 @@ impl BakedScene {
             normals: &self.normals,
             uvs: &self.uvs,
             colors: &self.colors,
+            tangents: &self.tangents,
             texels: crate::Texels::new(
                 &self.texels,
                 bytemuck::cast_slice(&self.images),

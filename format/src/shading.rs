@@ -599,7 +599,7 @@ impl Shading {
 const UNIT_TOLERANCE: f64 = 1e-4;
 
 /// Whether `v`'s length is 1 within [`UNIT_TOLERANCE`].
-fn is_unit(v: [f32; 3]) -> bool {
+pub(crate) fn is_unit(v: [f32; 3]) -> bool {
     let len2 = v.iter().map(|&x| x as f64 * x as f64).sum::<f64>();
     (len2.sqrt() - 1.0).abs() <= UNIT_TOLERANCE
 }

@@ -116,6 +116,7 @@ impl SceneStatistics {
                         + view.normals.len()
                         + view.uvs.len()
                         + view.colors.len()
+                        + view.tangents.len()
                         + view.texels.stored().len()
                         + view.texels.images().len() / 4,
                 ),

@@ -7,7 +7,7 @@
 use crate::error::{Error, Result};
 use crate::layout::{
     cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef, BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL,
-    TRIANGLE_FLOATS, UV_FLOATS,
+    TANGENT_WORDS, TRIANGLE_FLOATS, UV_FLOATS,
 };
 use crate::view::SceneView;
 
@@ -189,6 +189,7 @@ impl SceneView<'_> {
             ("normal", self.normals.len(), TRIANGLE_FLOATS),
             ("texture-coordinate", self.uvs.len(), UV_FLOATS),
             ("vertex-colour", self.colors.len(), crate::COLOR_WORDS),
+            ("tangent", self.tangents.len(), TANGENT_WORDS),
         ] {
             if len != 0 && Some(len) != n.checked_mul(per) {
                 return Err(Error::corrupt(format!(
@@ -199,6 +200,24 @@ impl SceneView<'_> {
         }
         if self.normals.iter().chain(self.uvs).any(|v| !v.is_finite()) {
             return Err(Error::corrupt("a shading normal or texture coordinate is not finite"));
+        }
+        // A corner's tangent: a unit vector and a sign, or all zero (none).
+        for (i, words) in self.tangents.chunks_exact(2).enumerate() {
+            let t = crate::layout::decode_tangent([words[0], words[1]]);
+            let sign = words[1] >> 16;
+            let none = words == [0, 0];
+            if !none && (![32767, 32769].contains(&sign) || !crate::shading::is_unit([t[0], t[1], t[2]])) {
+                return Err(Error::corrupt(format!(
+                    "tangent of corner {} of stored triangle {} is ({}, {}, {}, {}): not a unit vector and a sign \
+                     of 1 or -1, nor zero",
+                    i % 3,
+                    i / 3,
+                    t[0],
+                    t[1],
+                    t[2],
+                    t[3]
+                )));
+            }
         }
         let materials = self.shading.materials.len();
         if let Some(bad) = self.material_ids.iter().find(|&&m| m as usize >= materials) {

@@ -1,8 +1,8 @@
 //! A borrowed, validated view of a baked scene's arrays: what the tracers read.
 
 use crate::layout::{
-    neighbour_count, LEAF_HEADER_WORDS, TRIANGLE_FLOATS, UV_FLOATS, WORD_BOX, WORD_NCOUNT, WORD_TRI_COUNT,
-    WORD_TRI_OFFSET,
+    neighbour_count, LEAF_HEADER_WORDS, TANGENT_WORDS, TRIANGLE_FLOATS, UV_FLOATS, WORD_BOX, WORD_NCOUNT,
+    WORD_TRI_COUNT, WORD_TRI_OFFSET,
 };
 use crate::scene::{BakeParams, BakeStats, Bounds};
 
@@ -56,6 +56,8 @@ pub struct SceneView<'a> {
     pub uvs: &'a [f32],
     /// Vertex colours, six words a stored triangle, or empty.
     pub colors: &'a [u32],
+    /// Tangents, six words a stored triangle ([`crate::layout::decode_tangent`]), or empty.
+    pub tangents: &'a [u32],
     /// Texels of the scene's textures (stored, and decoded from the encoded images
     /// when first read), or empty.
     pub texels: crate::Texels<'a>,
@@ -94,7 +96,7 @@ impl LeafRecord<'_> {
 impl<'a> SceneView<'a> {
     /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
     /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs,
-    /// colors, texels, images):
+    /// colors, tangents, texels, images):
     /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
@@ -109,6 +111,7 @@ impl<'a> SceneView<'a> {
             bytemuck::cast_slice(self.normals),
             bytemuck::cast_slice(self.uvs),
             self.colors,
+            self.tangents,
             self.texels.stored(),
             bytemuck::cast_slice(self.texels.images()),
         ]
@@ -124,6 +127,14 @@ impl<'a> SceneView<'a> {
     /// The shading normals of stored triangle `index`'s corners, when the scene has them.
     pub fn corner_normals(&self, index: StoredIndex) -> Option<[[f32; 3]; 3]> {
         Some(corners(self.normals.get(index.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?))
+    }
+
+    /// The tangents of stored triangle `index`'s corners (`x y z w`, decoded), when the
+    /// scene has them and they are not all zero there.
+    pub fn corner_tangents(&self, index: StoredIndex) -> Option<[[f32; 4]; 3]> {
+        let t = self.tangents.get(index.0 as usize * TANGENT_WORDS..)?.get(..TANGENT_WORDS)?;
+        let corners = [[t[0], t[1]], [t[2], t[3]], [t[4], t[5]]].map(crate::layout::decode_tangent);
+        corners.iter().any(|c| c[3] != 0.0).then_some(corners)
     }
 
     /// The texture coordinates of stored triangle `index`'s corners, when the scene has them.

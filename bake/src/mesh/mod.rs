@@ -35,6 +35,11 @@ pub struct Mesh {
     /// Vertex colours (glTF `COLOR_0`) of each triangle's corners, linear RGBA at 16
     /// bits a channel, or empty (white for the parts of the file without them).
     pub colors: Vec<[[u16; 4]; 3]>,
+    /// Tangents of each triangle's corners, world space (`x y z` along which the normal
+    /// texture's `u` grows, `w` the bitangent's sign, 1 or -1), or empty: from glTF
+    /// `TANGENT`, else MikkTSpace, for the parts whose material has a normal texture;
+    /// zeros for the others (the renderer then takes each triangle's own tangent).
+    pub tangents: Vec<[[f32; 4]; 3]>,
     /// Materials (glTF materials, MTL materials), in file order, then a `"default"`
     /// one when some triangles have none.
     pub materials: Vec<octrace_format::Material>,
@@ -131,6 +136,14 @@ impl Mesh {
         }
     }
 
+    /// The tangents of the triangles pushed last, `count` of them: the first that
+    /// has them gives the earlier triangles zeros (none).
+    pub(crate) fn push_tangents(&mut self, tangents: Vec<[[f32; 4]; 3]>, count: usize) {
+        self.tangents.resize(self.triangles.len() - count, [[0.0; 4]; 3]);
+        self.tangents.extend(tangents);
+        self.tangents.resize(self.triangles.len(), [[0.0; 4]; 3]);
+    }
+
     /// Ends a part: the triangles pushed since the last part (none: nothing), from
     /// `source` in the file and named `name()`.
     pub fn end_part(&mut self, source: octrace_format::PartSource, name: impl FnOnce() -> String) {
@@ -179,6 +192,7 @@ impl Mesh {
             ("normals", self.normals.len()),
             ("uvs", self.uvs.len()),
             ("colors", self.colors.len()),
+            ("tangents", self.tangents.len()),
         ] {
             if len != 0 && len != n {
                 return Err(bad(what, len));

@@ -272,6 +272,10 @@ fn bake_within(
     let material_ids = stored(&mesh.material_ids, &triangle_ids, |m| m);
     let normals = stored(&mesh.normals, &triangle_ids, |n| n.concat()).concat();
     let uvs = stored(&mesh.uvs, &triangle_ids, |t| t.concat()).concat();
+    let tangents = stored(&mesh.tangents, &triangle_ids, |t| {
+        t.map(|c| octrace_format::layout::encode_tangent(unit_tangent(c))).concat()
+    })
+    .concat();
     let colors = stored(&mesh.colors, &triangle_ids, |c| {
         c.map(|[r, g, b, a]| [r as u32 | (g as u32) << 16, b as u32 | (a as u32) << 16]).concat()
     })
@@ -316,12 +320,23 @@ fn bake_within(
         normals,
         uvs,
         colors,
+        tangents,
         texels,
         images,
         root: arrays.root,
         shading,
         decoded: Default::default(),
     })
+}
+
+/// A corner's tangent as the format stores it: a unit `x y z` and a sign of 1 or -1,
+/// or zeros where it has none (a zero sign or a direction that does not normalise).
+fn unit_tangent(t: [f32; 4]) -> [f32; 4] {
+    let v = glam::Vec3::new(t[0], t[1], t[2]).normalize_or_zero();
+    if t[3] == 0.0 || !t[3].is_finite() || v == glam::Vec3::ZERO {
+        return [0.0; 4];
+    }
+    [v.x, v.y, v.z, if t[3] > 0.0 { 1.0 } else { -1.0 }]
 }
 
 /// What every build starts from.

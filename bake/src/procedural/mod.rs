@@ -94,14 +94,15 @@ const GREY_PNG: [u8; 78] = [
 
 /// A unit torus (minor radius 0.3) with every kind of shading data: one material, its
 /// base colour from a 2 x 2 texture with a transparent texel (alpha mask), its
-/// occlusion from a 2 x 2 PNG kept encoded, face normals, texture coordinates and
-/// vertex colours. Baked, every section of the file holds bytes: for the format's
+/// occlusion and normals from a 2 x 2 PNG kept encoded, face normals, tangents, texture
+/// coordinates and vertex colours. Baked, every section of the file holds bytes: for the format's
 /// tests and the trusted-path fuzz target.
 pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
     use octrace_format::{AlphaMode, Encoded, ImageKind, Material, Texture};
     let material = Material {
         base_color_texture: Some(0),
         occlusion_texture: Some(1),
+        normal_texture: Some(1),
         alpha_mode: AlphaMode::Mask,
         ..Default::default()
     };
@@ -146,6 +147,10 @@ pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
         let colors = Some([[65535, 0, 0, 65535], [0, 65535, 0, 30000], [0, 0, 65535, 65535]]);
         out.push_colored(t, normals, Some([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), colors);
         out.material_ids.push(0);
+        // Along the first edge (where u grows), every other triangle's sign reversed.
+        let e = glam::Vec3::from(t[1]) - glam::Vec3::from(t[0]);
+        let w = if out.tangents.len().is_multiple_of(2) { 1.0 } else { -1.0 };
+        out.tangents.push([[e.x, e.y, e.z, w]; 3]);
     }
     out
 }

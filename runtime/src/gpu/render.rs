@@ -55,17 +55,21 @@ pub(super) struct RenderParams {
     has_colors: u32,
     /// `octrace_format::linear16`'s table, 256 words.
     o_srgb: u32,
+    o_tangents: u32,
+    has_tangents: u32,
+    pad: [u32; 2],
 }
 
 #[cfg(test)]
 impl RenderParams {
     /// Members of the WGSL struct and the Rust fields' offsets, for the layout test.
-    pub(super) const OFFSETS: [(&'static str, usize); 5] = [
+    pub(super) const OFFSETS: [(&'static str, usize); 6] = [
         ("eye", std::mem::offset_of!(RenderParams, eye)),
         ("width", std::mem::offset_of!(RenderParams, width)),
         ("o_materials", std::mem::offset_of!(RenderParams, o_materials)),
         ("plain_material", std::mem::offset_of!(RenderParams, plain_material)),
         ("emitter_area", std::mem::offset_of!(RenderParams, emitter_area)),
+        ("o_tangents", std::mem::offset_of!(RenderParams, o_tangents)),
     ];
 }
 
@@ -316,6 +320,9 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool
     params.o_uvs = words.len() as u32;
     params.has_uvs = u32::from(!view.uvs.is_empty());
     f(&mut words, view.uvs);
+    params.o_tangents = words.len() as u32;
+    params.has_tangents = u32::from(!view.tangents.is_empty());
+    words.extend_from_slice(view.tangents);
     params.o_colors = words.len() as u32;
     params.has_colors = u32::from(!view.colors.is_empty());
     words.extend_from_slice(view.colors);

@@ -54,6 +54,11 @@ struct RenderParams {
     has_colors: u32,
     // octrace_format::linear16: the 16-bit linear value of each 8-bit sRGB value.
     o_srgb: u32,
+    // Tangents (absent when has_tangents is 0): twelve words a triangle, x y z w a corner.
+    o_tangents: u32,
+    has_tangents: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
@@ -609,27 +614,57 @@ fn shading_normal(hit: HitOut, ng: vec3<f32>, m: Material) -> vec3<f32> {
 }
 
 // Context::mapped_normal, in its operations.
+// A corner's stored tangent (two words, octrace_format::layout::decode_tangent): x y z
+// as i16 times 1 / 32767, and w's sign.
+fn tangent_at(at: u32) -> vec4<f32> {
+    let a = shade[at];
+    let b = shade[at + 1u];
+    let s = bitcast<f32>(0x38000100u);
+    let x = f32(bitcast<i32>(a << 16u) >> 16u) * s;
+    let y = f32(bitcast<i32>(a) >> 16u) * s;
+    let z = f32(bitcast<i32>(b << 16u) >> 16u) * s;
+    return vec4<f32>(x, y, z, sign(f32(bitcast<i32>(b) >> 16u)));
+}
+
 fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: f32) -> vec3<f32> {
-    let at = rp.o_uvs + 6u * hit.prim;
-    let du1 = sf(at + 2u) - sf(at);
-    let dv1 = sf(at + 3u) - sf(at + 1u);
-    let du2 = sf(at + 4u) - sf(at);
-    let dv2 = sf(at + 5u) - sf(at + 1u);
-    let det = du1 * dv2 - du2 * dv1;
-    if det == 0.0 || !is_finite(det) {
-        return n;
-    }
     let p0 = vertex(hit.prim, 0u);
     let e1 = vertex(hit.prim, 1u) - p0;
     let e2 = vertex(hit.prim, 2u) - p0;
     let back = dot3(n, cross3(e1, e2)) < 0.0;
     let front = select(n, -n, back);
-    let t0 = (e1 * dv2 - e2 * dv1) * select(-1.0, 1.0, det > 0.0);
+    var t0: vec3<f32>;
+    var sign = 1.0;
+    // The corners' tangents where the scene has them and they are not all zero here.
+    let tt = rp.o_tangents + 6u * hit.prim;
+    var c0 = vec4<f32>(0.0);
+    var c1 = vec4<f32>(0.0);
+    var c2 = vec4<f32>(0.0);
+    if rp.has_tangents != 0u {
+        c0 = tangent_at(tt);
+        c1 = tangent_at(tt + 2u);
+        c2 = tangent_at(tt + 4u);
+    }
+    if c0.w != 0.0 || c1.w != 0.0 || c2.w != 0.0 {
+        t0 = c0.xyz * (1.0 - hit.u - hit.v) + c1.xyz * hit.u + c2.xyz * hit.v;
+        let w = c0.w * (1.0 - hit.u - hit.v) + c1.w * hit.u + c2.w * hit.v;
+        sign = select(1.0, -1.0, w < 0.0);
+    } else {
+        let at = rp.o_uvs + 6u * hit.prim;
+        let du1 = sf(at + 2u) - sf(at);
+        let dv1 = sf(at + 3u) - sf(at + 1u);
+        let du2 = sf(at + 4u) - sf(at);
+        let dv2 = sf(at + 5u) - sf(at + 1u);
+        let det = du1 * dv2 - du2 * dv1;
+        if det == 0.0 || !is_finite(det) {
+            return n;
+        }
+        t0 = (e1 * dv2 - e2 * dv1) * select(-1.0, 1.0, det > 0.0);
+    }
     let t = normalize_or_zero(t0 - front * dot3(front, t0));
-    if all(t == vec3<f32>(0.0)) {
+    if all(t == vec3<f32>(0.0)) || !(is_finite(t.x) && is_finite(t.y) && is_finite(t.z)) {
         return n;
     }
-    let b = cross3(front, t);
+    let b = cross3(front, t) * sign;
     let texel = sample(texture, uv_at(hit.prim, hit.u, hit.v));
     let x = (texel.x * 2.0 - 1.0) * scale;
     let y = (texel.y * 2.0 - 1.0) * scale;

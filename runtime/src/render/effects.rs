@@ -672,30 +672,41 @@ impl<'a> Context<'a> {
 
     /// Normal `n` perturbed by a normal map (glTF `normalTexture`): the texel's
     /// tangent-space normal `((2 r - 1) scale, (2 g - 1) scale, 2 b - 1)` in the frame
-    /// of the triangle's tangent `t` (the direction of increasing `u`, from its corners'
-    /// coordinates, made orthogonal to the front's normal), the normal crossed with it,
-    /// and the normal, as Khronos' sample viewer builds it where a file gives no
-    /// tangents; on the back of the triangle (`n` faces the ray), the front's result
-    /// reversed, as that viewer does. `n` itself where the triangle's coordinates give
-    /// no tangent or the result is not a direction on `ng`'s side. The GPU kernel
-    /// computes the same operations in the same order.
+    /// of the tangent `t` made orthogonal to the front's normal, the bitangent
+    /// `w (n x t)`, and the normal. The tangent is the corners' (`x y z w`, from the
+    /// file's `TANGENT` or MikkTSpace at bake) mixed at the hit, `w` its sign; where the
+    /// scene has none, the triangle's own direction of increasing `u` (from its
+    /// corners' coordinates) with `w` 1, as Khronos' sample viewer builds it without
+    /// tangents. On the back of the triangle (`n` faces the ray), the front's result
+    /// reversed, as that viewer does. `n` itself where there is no tangent or the
+    /// result is not a direction on `ng`'s side. The GPU kernel computes the same
+    /// operations in the same order.
     fn mapped_normal(&self, hit: &Hit, n: Vec3, ng: Vec3, texture: &octrace_format::Texture, scale: f32) -> Vec3 {
         let Some([uv0, uv1, uv2]) = self.view.corner_uvs(hit.prim) else { return n };
         let [p0, p1, p2] = self.view.triangle(hit.prim).map(Vec3::from);
         let (e1, e2) = (p1 - p0, p2 - p0);
-        let (du1, dv1, du2, dv2) = (uv1[0] - uv0[0], uv1[1] - uv0[1], uv2[0] - uv0[0], uv2[1] - uv0[1]);
-        let det = du1 * dv2 - du2 * dv1;
-        if det == 0.0 || !det.is_finite() {
-            return n;
-        }
         let back = n.dot(e1.cross(e2)) < 0.0;
         let front = if back { -n } else { n };
-        let t = (e1 * dv2 - e2 * dv1) * if det > 0.0 { 1.0 } else { -1.0 };
+        let (t, sign) = match self.view.corner_tangents(hit.prim) {
+            Some(corners) => {
+                let [t0, t1, t2] = corners.map(|c| Vec3::new(c[0], c[1], c[2]));
+                let w = corners[0][3] * (1.0 - hit.u - hit.v) + corners[1][3] * hit.u + corners[2][3] * hit.v;
+                (t0 * (1.0 - hit.u - hit.v) + t1 * hit.u + t2 * hit.v, if w < 0.0 { -1.0 } else { 1.0 })
+            }
+            None => {
+                let (du1, dv1, du2, dv2) = (uv1[0] - uv0[0], uv1[1] - uv0[1], uv2[0] - uv0[0], uv2[1] - uv0[1]);
+                let det = du1 * dv2 - du2 * dv1;
+                if det == 0.0 || !det.is_finite() {
+                    return n;
+                }
+                ((e1 * dv2 - e2 * dv1) * if det > 0.0 { 1.0 } else { -1.0 }, 1.0)
+            }
+        };
         let t = (t - front * front.dot(t)).normalize_or_zero();
-        if t == Vec3::ZERO {
+        if t == Vec3::ZERO || !t.is_finite() {
             return n;
         }
-        let b = front.cross(t);
+        let b = front.cross(t) * sign;
         let texel = texture.sample(self.view.texels.get(), self.view.uv_at(hit.prim, hit.u, hit.v));
         let (x, y, z) = ((texel[0] * 2.0 - 1.0) * scale, (texel[1] * 2.0 - 1.0) * scale, texel[2] * 2.0 - 1.0);
         let mapped = (t * x + b * y + front * z).normalize_or_zero();

@@ -527,6 +527,20 @@ fn geometry_and_shading_that_break_the_rules_are_rejected() {
             }),
             "larger than 8192 a side",
         ),
+        // The torus's tangents: a corner's direction halved, a sign of 2.
+        (
+            "a tangent that is not a unit vector",
+            Box::new(|s: &mut BakedScene| {
+                let t = octrace_format::layout::decode_tangent([s.tangents[0], s.tangents[1]]);
+                s.tangents[0] = octrace_format::layout::encode_tangent(t.map(|c| c * 0.5))[0];
+            }),
+            "tangent of corner 0 of stored triangle 0",
+        ),
+        (
+            "a tangent's sign of 2",
+            Box::new(|s: &mut BakedScene| s.tangents[3] = (s.tangents[3] & 0xffff) | 2 << 16),
+            "not a unit vector and a sign of 1 or -1",
+        ),
         // The torus's occlusion texture is a 2 x 2 PNG kept encoded.
         ("an encoded image past the images", Box::new(|s: &mut BakedScene| encoded(s).bytes += 3), "runs past"),
         ("an encoded image's far offset", Box::new(|s: &mut BakedScene| encoded(s).offset = u64::MAX - 1), "runs past"),

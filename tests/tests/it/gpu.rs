@@ -624,8 +624,9 @@ fn emissive_textures_render_on_the_gpu_as_on_the_cpu() {
 
 /// Metallic-roughness, occlusion and normal textures on the GPU (issue 34): the panel
 /// scene lit (the polished half reflects) and under the headlight with the floor's
-/// occlusion texture, the normal-mapped floor: the CPU's rays of every kind and its
-/// image.
+/// occlusion texture, the normal-mapped floor, without tangents and with tangents that
+/// turn from corner to corner (mixed at each hit) and change sign: the CPU's rays of
+/// every kind and its image.
 #[test]
 fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_cpu() {
     use octrace_format::Effect;
@@ -637,6 +638,17 @@ fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_
         ("metal", crate::materials::metal_scene(true, false)),
         ("occlusion", crate::materials::metal_scene(true, true)),
         ("normal map", crate::materials::bump_scene(0.8)),
+        ("normal map, tangents", {
+            let mut mesh = crate::materials::bump_scene(0.8);
+            mesh.tangents = (0..mesh.triangles.len())
+                .map(|k| {
+                    let a = k as f32 * 0.7;
+                    let w = if k % 3 == 0 { -1.0 } else { 1.0 };
+                    [0.0, 1.1, 2.3].map(|d| [(a + d).cos(), 0.0, (a + d).sin(), w])
+                })
+                .collect();
+            mesh
+        }),
     ];
     for (name, mesh) in scenes {
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -645,7 +657,7 @@ fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_
         let options = RenderOptions { effects, ..RenderOptions::for_scene(scene.shading()) };
         let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 96, 96);
         let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
-        let wanted = if name == "normal map" { RayKind::Shadow } else { RayKind::Reflection };
+        let wanted = if name.starts_with("normal map") { RayKind::Shadow } else { RayKind::Reflection };
         assert!(counts.get(wanted) > 0, "{name}: {counts:?}");
     }
 }

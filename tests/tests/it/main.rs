@@ -16,5 +16,6 @@ mod materials;
 mod mesh;
 mod raysets;
 mod render;
+mod tangents;
 mod trusted;
 mod unconstrained;
