@@ -179,7 +179,8 @@ fn emitting_triangles(mesh: &Mesh, used: &[u32]) -> Vec<usize> {
     for &t in used {
         let Some(&id) = mesh.material_ids.get(t as usize) else { continue };
         let Some(m) = mesh.materials.get(id as usize) else { continue };
-        let corners = mesh.uvs.get(t as usize).copied().unwrap_or_default();
+        // The coordinates its emissive texture reads.
+        let corners = mesh.corner_uvs(t as usize, m.uv_channel(1)).unwrap_or_default();
         emitting[id as usize] += usize::from(emissive.emits(m, corners));
     }
     emitting

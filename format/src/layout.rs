@@ -48,6 +48,8 @@ pub const INTERNAL_BIT: u32 = 1 << 31;
 pub const TRIANGLE_FLOATS: usize = 9;
 /// `f32`s a triangle's texture coordinates take: `u v` for each of its three corners.
 pub const UV_FLOATS: usize = 6;
+/// Texture-coordinate channels a scene may have: one a texture slot of a material.
+pub const MAX_UV_CHANNELS: usize = 5;
 /// Words a triangle's tangents take: two a corner, `x | y << 16` and `z | w << 16`, each
 /// a signed 16-bit fraction of 32767 ([`decode_tangent`]).
 pub const TANGENT_WORDS: usize = 6;

@@ -86,6 +86,11 @@ pub struct Material {
     pub normal_texture: Option<u32>,
     /// glTF `normalTexture.scale` (1 by default).
     pub normal_scale: f32,
+    /// The texture-coordinate channel each texture slot reads, in the order of
+    /// [`Material::TEXTURE_SLOTS`]: a channel is a glTF `TEXCOORD_n` set through one
+    /// `KHR_texture_transform` (the `uvs` section holds a scene's channels one after
+    /// the other); 0 for every slot that reads what the first does.
+    pub uv_channels: [u8; 5],
 }
 
 impl Default for Material {
@@ -111,6 +116,7 @@ impl Default for Material {
             occlusion_strength: 1.0,
             normal_texture: None,
             normal_scale: 1.0,
+            uv_channels: [0; 5],
         }
     }
 }
@@ -191,8 +197,18 @@ impl Material {
         }
     }
 
+    /// The texture slots, in the order of [`Material::uv_channels`].
+    pub const TEXTURE_SLOTS: [&'static str; 5] =
+        ["base colour", "emissive", "metallic-roughness", "occlusion", "normal"];
+
+    /// The texture-coordinate channel texture slot `slot` reads
+    /// ([`Material::TEXTURE_SLOTS`]'s order).
+    pub fn uv_channel(&self, slot: usize) -> usize {
+        self.uv_channels.get(slot).map_or(0, |&c| c as usize)
+    }
+
     /// The textures the material reads (base colour, emissive, metallic-roughness,
-    /// occlusion), those it has.
+    /// occlusion, normal), those it has.
     pub fn textures(&self) -> impl Iterator<Item = u32> {
         [
             self.base_color_texture,

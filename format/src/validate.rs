@@ -7,7 +7,7 @@
 use crate::error::{Error, Result};
 use crate::layout::{
     cell_box, face_axis, face_is_high, other_axes, texel_index, NodeRef, BOX_FLOATS, LEAF_HEADER_WORDS, MAX_LEVEL,
-    TANGENT_WORDS, TRIANGLE_FLOATS, UV_FLOATS,
+    MAX_UV_CHANNELS, TANGENT_WORDS, TRIANGLE_FLOATS, UV_FLOATS,
 };
 use crate::view::SceneView;
 
@@ -187,7 +187,6 @@ impl SceneView<'_> {
         for (name, len, per) in [
             ("material-id", self.material_ids.len(), 1),
             ("normal", self.normals.len(), TRIANGLE_FLOATS),
-            ("texture-coordinate", self.uvs.len(), UV_FLOATS),
             ("vertex-colour", self.colors.len(), crate::COLOR_WORDS),
             ("tangent", self.tangents.len(), TANGENT_WORDS),
         ] {
@@ -197,6 +196,29 @@ impl SceneView<'_> {
                     n.saturating_mul(per)
                 )));
             }
+        }
+        // Texture coordinates: one to MAX_UV_CHANNELS channels of six a triangle, and
+        // every material's slots reading one of them.
+        let channels = self.uv_channel_count();
+        if !self.uvs.is_empty()
+            && (channels == 0
+                || channels > MAX_UV_CHANNELS
+                || Some(self.uvs.len()) != n.checked_mul(UV_FLOATS * channels))
+        {
+            return Err(Error::corrupt(format!(
+                "texture-coordinate array holds {} values, {n} triangles need {} a channel, 1 to \
+                 {MAX_UV_CHANNELS} channels (or none)",
+                self.uvs.len(),
+                n.saturating_mul(UV_FLOATS)
+            )));
+        }
+        if let Some(m) =
+            self.shading.materials.iter().find(|m| m.uv_channels.iter().any(|&c| c as usize >= channels.max(1)))
+        {
+            return Err(Error::corrupt(format!(
+                "material '{}' reads texture-coordinate channels {:?}; the scene has {}",
+                m.name, m.uv_channels, channels
+            )));
         }
         if self.normals.iter().chain(self.uvs).any(|v| !v.is_finite()) {
             return Err(Error::corrupt("a shading normal or texture coordinate is not finite"));

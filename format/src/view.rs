@@ -52,7 +52,8 @@ pub struct SceneView<'a> {
     pub material_ids: &'a [u32],
     /// Shading normals, nine `f32` a stored triangle, or empty.
     pub normals: &'a [f32],
-    /// Texture coordinates, six `f32` a stored triangle, or empty.
+    /// Texture coordinates, six `f32` a stored triangle a channel, channel after
+    /// channel ([`crate::Material::uv_channels`]), or empty.
     pub uvs: &'a [f32],
     /// Vertex colours, six words a stored triangle, or empty.
     pub colors: &'a [u32],
@@ -137,9 +138,23 @@ impl<'a> SceneView<'a> {
         corners.iter().any(|c| c[3] != 0.0).then_some(corners)
     }
 
-    /// The texture coordinates of stored triangle `index`'s corners, when the scene has them.
+    /// The texture coordinates of stored triangle `index`'s corners (the first
+    /// channel), when the scene has them.
     pub fn corner_uvs(&self, index: StoredIndex) -> Option<[[f32; 2]; 3]> {
-        let t = self.uvs.get(index.0 as usize * UV_FLOATS..)?.get(..UV_FLOATS)?;
+        self.corner_uvs_in(index, 0)
+    }
+
+    /// The texture-coordinate channels the scene has (0 without coordinates).
+    pub fn uv_channel_count(&self) -> usize {
+        self.uvs.len() / (self.triangles.len() / TRIANGLE_FLOATS * UV_FLOATS).max(1)
+    }
+
+    /// The texture coordinates of stored triangle `index`'s corners in `channel`, when
+    /// the scene has them.
+    pub fn corner_uvs_in(&self, index: StoredIndex, channel: usize) -> Option<[[f32; 2]; 3]> {
+        let n = self.triangles.len() / TRIANGLE_FLOATS;
+        let at = channel.checked_mul(n)?.checked_add(index.0 as usize)?.checked_mul(UV_FLOATS)?;
+        let t = self.uvs.get(at..)?.get(..UV_FLOATS)?;
         Some([[t[0], t[1]], [t[2], t[3]], [t[4], t[5]]])
     }
 
@@ -148,7 +163,12 @@ impl<'a> SceneView<'a> {
     /// rounded once to `f32`, so that the GPU kernel, which computes it the same way
     /// where it has `f64`, finds the same texels.
     pub fn uv_at(&self, index: StoredIndex, u: f32, v: f32) -> [f32; 2] {
-        let Some([t0, t1, t2]) = self.corner_uvs(index) else { return [0.0; 2] };
+        self.uv_at_in(index, 0, u, v)
+    }
+
+    /// [`SceneView::uv_at`] in texture-coordinate channel `channel`.
+    pub fn uv_at_in(&self, index: StoredIndex, channel: usize, u: f32, v: f32) -> [f32; 2] {
+        let Some([t0, t1, t2]) = self.corner_uvs_in(index, channel) else { return [0.0; 2] };
         [0, 1].map(|c| mix([t0[c], t1[c], t2[c]], u, v))
     }
 
@@ -172,7 +192,7 @@ impl<'a> SceneView<'a> {
     pub fn base_color_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 4] {
         let mut color = material.base_color;
         if let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) {
-            let texel = texture.sample(self.texels.get(), self.uv_at(index, u, v));
+            let texel = texture.sample(self.texels.get(), self.uv_at_in(index, material.uv_channel(0), u, v));
             color = [0, 1, 2, 3].map(|c| color[c] * texel[c]);
         }
         if let Some(vertex) = self.color_at(index, u, v) {
@@ -183,10 +203,10 @@ impl<'a> SceneView<'a> {
 
     /// The light `material` emits at barycentrics `(u, v)` of stored triangle `index`:
     /// its emissive factor, times its emissive texture's colour there when it has one
-    /// (sampled at the coordinates [`SceneView::uv_at`] gives).
+    /// (sampled at its channel's coordinates, [`SceneView::uv_at_in`]).
     pub fn emissive_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 3] {
         let e = material.emissive;
-        match self.texture_at(material.emissive_texture, index, u, v) {
+        match self.texture_at(material, 1, index, u, v) {
             Some(texel) => [e[0] * texel[0], e[1] * texel[1], e[2] * texel[2]],
             None => e,
         }
@@ -196,7 +216,7 @@ impl<'a> SceneView<'a> {
     /// `index`: its factors, times its metallic-roughness texture's blue and green
     /// channels there when it has one.
     pub fn metallic_roughness_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> (f32, f32) {
-        match self.texture_at(material.metallic_roughness_texture, index, u, v) {
+        match self.texture_at(material, 2, index, u, v) {
             Some(texel) => (material.metallic * texel[2], material.roughness * texel[1]),
             None => (material.metallic, material.roughness),
         }
@@ -206,17 +226,31 @@ impl<'a> SceneView<'a> {
     /// `(u, v)` of stored triangle `index`: `1 + strength * (red - 1)` of its occlusion
     /// texture there, 1 without one.
     pub fn occlusion_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> f32 {
-        match self.texture_at(material.occlusion_texture, index, u, v) {
+        match self.texture_at(material, 3, index, u, v) {
             Some(texel) => 1.0 + material.occlusion_strength * (texel[0] - 1.0),
             None => 1.0,
         }
     }
 
-    /// Texture `texture`'s sample at barycentrics `(u, v)` of stored triangle `index`,
-    /// or `None` for no texture (or one past the scene's).
-    fn texture_at(&self, texture: Option<u32>, index: StoredIndex, u: f32, v: f32) -> Option<[f32; 4]> {
+    /// The sample of `material`'s texture in slot `slot` ([`crate::Material::TEXTURE_SLOTS`]:
+    /// 1 emissive, 2 metallic-roughness, 3 occlusion) at barycentrics `(u, v)` of stored
+    /// triangle `index`, in the slot's channel; `None` for no texture (or one past the
+    /// scene's).
+    fn texture_at(
+        &self,
+        material: &crate::Material,
+        slot: usize,
+        index: StoredIndex,
+        u: f32,
+        v: f32,
+    ) -> Option<[f32; 4]> {
+        let texture = match slot {
+            1 => material.emissive_texture,
+            2 => material.metallic_roughness_texture,
+            _ => material.occlusion_texture,
+        };
         let texture = self.shading.textures.get(texture? as usize)?;
-        Some(texture.sample(self.texels.get(), self.uv_at(index, u, v)))
+        Some(texture.sample(self.texels.get(), self.uv_at_in(index, material.uv_channel(slot), u, v)))
     }
 
     /// Number of leaves.

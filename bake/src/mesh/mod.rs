@@ -32,6 +32,10 @@ pub struct Mesh {
     /// Texture coordinates of each triangle's corners, or empty (zeros for the parts of
     /// the file without them).
     pub uvs: Vec<[[f32; 2]; 3]>,
+    /// Texture coordinates of each triangle's corners in the channels after the first
+    /// ([`octrace_format::Material::uv_channels`]: channel `c` is `more_uvs[c - 1]`),
+    /// each empty or one entry a triangle (zeros where a part has none).
+    pub more_uvs: Vec<Vec<[[f32; 2]; 3]>>,
     /// Vertex colours (glTF `COLOR_0`) of each triangle's corners, linear RGBA at 16
     /// bits a channel, or empty (white for the parts of the file without them).
     pub colors: Vec<[[u16; 4]; 3]>,
@@ -144,6 +148,29 @@ impl Mesh {
         self.tangents.resize(self.triangles.len(), [[0.0; 4]; 3]);
     }
 
+    /// The texture coordinates in channel `channel` (1 or more) of the triangles
+    /// pushed last, `count` of them: the first that has them gives the earlier
+    /// triangles zeros.
+    pub(crate) fn push_uv_channel(&mut self, channel: usize, uvs: Vec<[[f32; 2]; 3]>, count: usize) {
+        if self.more_uvs.len() < channel {
+            self.more_uvs.resize(channel, Vec::new());
+        }
+        let n = self.triangles.len();
+        let values = &mut self.more_uvs[channel - 1];
+        values.resize(n - count, [[0.0; 2]; 3]);
+        values.extend(uvs);
+        values.resize(n, [[0.0; 2]; 3]);
+    }
+
+    /// The texture coordinates of triangle `t`'s corners in `channel`, when the mesh
+    /// has them.
+    pub fn corner_uvs(&self, t: usize, channel: usize) -> Option<[[f32; 2]; 3]> {
+        match channel {
+            0 => self.uvs.get(t).copied(),
+            c => self.more_uvs.get(c - 1)?.get(t).copied(),
+        }
+    }
+
     /// Ends a part: the triangles pushed since the last part (none: nothing), from
     /// `source` in the file and named `name()`.
     pub fn end_part(&mut self, source: octrace_format::PartSource, name: impl FnOnce() -> String) {
@@ -197,6 +224,10 @@ impl Mesh {
             if len != 0 && len != n {
                 return Err(bad(what, len));
             }
+        }
+        let max = octrace_format::layout::MAX_UV_CHANNELS;
+        if self.more_uvs.len() >= max || self.more_uvs.iter().any(|c| !c.is_empty() && c.len() != n) {
+            return Err(bad("uv channels", self.more_uvs.len() + 1));
         }
         if let Some(&m) = self.material_ids.iter().find(|&&m| m as usize >= self.materials.len()) {
             return Err(Error::IndexOutOfRange {

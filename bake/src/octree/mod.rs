@@ -271,7 +271,23 @@ fn bake_within(
     }
     let material_ids = stored(&mesh.material_ids, &triangle_ids, |m| m);
     let normals = stored(&mesh.normals, &triangle_ids, |n| n.concat()).concat();
-    let uvs = stored(&mesh.uvs, &triangle_ids, |t| t.concat()).concat();
+    // Texture coordinates, channel after channel: as many as the data or a material
+    // asks for (a channel no primitive had is zeros), none without any coordinates.
+    let mut materials = mesh.materials.clone();
+    let with_data =
+        mesh.more_uvs.iter().rposition(|c| !c.is_empty()).map_or(usize::from(!mesh.uvs.is_empty()), |c| c + 2);
+    let asked = materials.iter().flat_map(|m| m.uv_channels).max().map_or(0, |c| c as usize + 1);
+    let channels = if with_data == 0 { 0 } else { with_data.max(asked) };
+    if channels == 0 {
+        materials.iter_mut().for_each(|m| m.uv_channels = [0; 5]);
+    }
+    let zeros = vec![[[0.0f32; 2]; 3]; mesh.triangles.len()];
+    let uvs = (0..channels)
+        .flat_map(|c| {
+            let data = if c == 0 { &mesh.uvs } else { mesh.more_uvs.get(c - 1).unwrap_or(&zeros) };
+            stored(if data.is_empty() { &zeros } else { data }, &triangle_ids, |t| t.concat()).concat()
+        })
+        .collect();
     let tangents = stored(&mesh.tangents, &triangle_ids, |t| {
         t.map(|c| octrace_format::layout::encode_tangent(unit_tangent(c))).concat()
     })
@@ -288,7 +304,7 @@ fn bake_within(
     }
     let (textures, texels, images) = mesh.texel_sections();
     let shading = octrace_format::Shading {
-        materials: mesh.materials.clone(),
+        materials,
         lights: mesh.lights.clone(),
         cameras: mesh.cameras.clone(),
         textures,

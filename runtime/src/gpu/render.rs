@@ -57,7 +57,9 @@ pub(super) struct RenderParams {
     o_srgb: u32,
     o_tangents: u32,
     has_tangents: u32,
-    pad: [u32; 2],
+    /// Words a texture-coordinate channel takes (six a triangle).
+    uv_channel_words: u32,
+    pad: u32,
 }
 
 #[cfg(test)]
@@ -318,6 +320,7 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool
     params.has_normals = u32::from(!view.normals.is_empty());
     f(&mut words, view.normals);
     params.o_uvs = words.len() as u32;
+    params.uv_channel_words = (view.triangles.len() / 9 * 6) as u32;
     params.has_uvs = u32::from(!view.uvs.is_empty());
     f(&mut words, view.uvs);
     params.o_tangents = words.len() as u32;
@@ -406,6 +409,9 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         bits(texture(m.normal_texture)),
         m.normal_scale,
     ]);
+    // The texture-coordinate channel of each slot, three bits each.
+    let channels = m.uv_channels.iter().enumerate().fold(0u32, |w, (k, &c)| w | u32::from(c.min(7)) << (3 * k));
+    record[51] = bits(channels);
     record
 }
 

@@ -57,8 +57,9 @@ struct RenderParams {
     // Tangents (absent when has_tangents is 0): twelve words a triangle, x y z w a corner.
     o_tangents: u32,
     has_tangents: u32,
-    pad0: u32,
-    pad1: u32,
+    // Words a texture-coordinate channel takes (six a triangle), channel after channel.
+    uv_channel_words: u32,
+    pad: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
@@ -140,6 +141,9 @@ struct Material {
     // The normal texture's index plus one, and its scale.
     normal_texture: u32,
     normal_scale: f32,
+    // The texture-coordinate channel of each slot (base colour, emissive,
+    // metallic-roughness, occlusion, normal), three bits each.
+    uv_channels: u32,
 }
 
 // A hit prepared for spawning rays (runtime/src/spawn.rs, SpawnPoint).
@@ -262,16 +266,22 @@ fn material(prim: u32) -> Material {
     m.occlusion = 1.0;
     m.normal_texture = shade[at + 49u];
     m.normal_scale = sf(at + 50u);
+    m.uv_channels = shade[at + 51u];
     return m;
 }
 
-// SceneView::uv_at: the texture coordinates at the hit (`uv_mix` is generated: exact
-// products in f64 where the adapter has it).
-fn uv_at(prim: u32, u: f32, v: f32) -> vec2<f32> {
+// The texture-coordinate channel of texture slot `slot` (Material::TEXTURE_SLOTS' order).
+fn channel_of(m: Material, slot: u32) -> u32 {
+    return (m.uv_channels >> (3u * slot)) & 7u;
+}
+
+// SceneView::uv_at_in: the texture coordinates at the hit in `channel` (`uv_mix` is
+// generated: exact products in f64 where the adapter has it).
+fn uv_at(prim: u32, channel: u32, u: f32, v: f32) -> vec2<f32> {
     if rp.has_uvs == 0u {
         return vec2<f32>(0.0);
     }
-    let at = rp.o_uvs + 6u * prim;
+    let at = rp.o_uvs + channel * rp.uv_channel_words + 6u * prim;
     let w = 1.0 - u - v;
     return vec2<f32>(uv_mix(sf(at), sf(at + 2u), sf(at + 4u), w, u, v), uv_mix(sf(at + 1u), sf(at + 3u), sf(at + 5u), w, u, v));
 }
@@ -366,6 +376,16 @@ fn sample(t: u32, uv: vec2<f32>) -> vec4<f32> {
     return vec4<f32>(sum >> vec4<u32>(8u)) * SAMPLE_SCALE;
 }
 
+// The coordinates slot `slot` of `m` reads at the hit: `first`, the first channel's,
+// or its own channel's.
+fn slot_uv(m: Material, slot: u32, first: vec2<f32>, hit: HitOut) -> vec2<f32> {
+    let channel = channel_of(m, slot);
+    if channel == 0u {
+        return first;
+    }
+    return uv_at(hit.prim, channel, hit.u, hit.v);
+}
+
 // Context::surface: the material at a hit, its base colour times its texture and its
 // vertex colour there, and what shading derives from the base colour computed again
 // from it, in the CPU's operations (lighting.rs; `product` keeps a multiply from being fused).
@@ -375,16 +395,17 @@ fn surface(hit: HitOut) -> Material {
     if !textured && rp.has_colors == 0u {
         return m;
     }
-    // The hit's texture coordinates, once for every texture the material reads.
+    // The hit's texture coordinates, once for every texture of the first channel;
+    // the others' where a slot reads another.
     var uv = vec2<f32>(0.0);
     if textured {
-        uv = uv_at(hit.prim, hit.u, hit.v);
+        uv = uv_at(hit.prim, 0u, hit.u, hit.v);
     }
     if m.emissive_texture != 0u {
-        m.emissive = m.emissive * sample(m.emissive_texture - 1u, uv).xyz;
+        m.emissive = m.emissive * sample(m.emissive_texture - 1u, slot_uv(m, 1u, uv, hit)).xyz;
     }
     if m.occlusion_texture != 0u {
-        let r = sample(m.occlusion_texture - 1u, uv).x;
+        let r = sample(m.occlusion_texture - 1u, slot_uv(m, 3u, uv, hit)).x;
         m.occlusion = 1.0 + m.occlusion_strength * (r - 1.0);
     }
     if m.texture == 0u && rp.has_colors == 0u && m.mr_texture == 0u {
@@ -394,7 +415,7 @@ fn surface(hit: HitOut) -> Material {
         // SceneView::metallic_roughness_at, then what lighting.rs and Material derive
         // from them (gloss, metal, the dielectric mirror, the highlight's F0 and
         // exponent), in their operations.
-        let mr = sample(m.mr_texture - 1u, uv);
+        let mr = sample(m.mr_texture - 1u, slot_uv(m, 2u, uv, hit));
         m.metallic = m.metallic * mr.z;
         let r = clamp(m.roughness * mr.y, 0.0, 1.0);
         let rough = 1.0 - r;
@@ -407,7 +428,7 @@ fn surface(hit: HitOut) -> Material {
     }
     var bc = m.factor;
     if m.texture != 0u {
-        bc = bc * sample(m.texture - 1u, uv);
+        bc = bc * sample(m.texture - 1u, slot_uv(m, 0u, uv, hit));
     }
     if rp.has_colors != 0u {
         bc = bc * color_at(hit.prim, hit.u, hit.v);
@@ -610,7 +631,7 @@ fn shading_normal(hit: HitOut, ng: vec3<f32>, m: Material) -> vec3<f32> {
     if m.normal_texture == 0u || rp.has_uvs == 0u {
         return n;
     }
-    return mapped_normal(hit, n, ng, m.normal_texture - 1u, m.normal_scale);
+    return mapped_normal(hit, n, ng, m.normal_texture - 1u, m.normal_scale, channel_of(m, 4u));
 }
 
 // Context::mapped_normal, in its operations.
@@ -626,7 +647,7 @@ fn tangent_at(at: u32) -> vec4<f32> {
     return vec4<f32>(x, y, z, sign(f32(bitcast<i32>(b) >> 16u)));
 }
 
-fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: f32) -> vec3<f32> {
+fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: f32, channel: u32) -> vec3<f32> {
     let p0 = vertex(hit.prim, 0u);
     let e1 = vertex(hit.prim, 1u) - p0;
     let e2 = vertex(hit.prim, 2u) - p0;
@@ -649,7 +670,7 @@ fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: 
         let w = c0.w * (1.0 - hit.u - hit.v) + c1.w * hit.u + c2.w * hit.v;
         sign = select(1.0, -1.0, w < 0.0);
     } else {
-        let at = rp.o_uvs + 6u * hit.prim;
+        let at = rp.o_uvs + channel * rp.uv_channel_words + 6u * hit.prim;
         let du1 = sf(at + 2u) - sf(at);
         let dv1 = sf(at + 3u) - sf(at + 1u);
         let du2 = sf(at + 4u) - sf(at);
@@ -665,7 +686,7 @@ fn mapped_normal(hit: HitOut, n: vec3<f32>, ng: vec3<f32>, texture: u32, scale: 
         return n;
     }
     let b = cross3(front, t) * sign;
-    let texel = sample(texture, uv_at(hit.prim, hit.u, hit.v));
+    let texel = sample(texture, uv_at(hit.prim, channel, hit.u, hit.v));
     let x = (texel.x * 2.0 - 1.0) * scale;
     let y = (texel.y * 2.0 - 1.0) * scale;
     let z = texel.z * 2.0 - 1.0;
@@ -803,7 +824,8 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
         // The emission where the point is, through the material's emissive texture.
         let emissive_texture = shade[material_at(prim) + EMISSIVE_TEXTURE_WORD];
         if emissive_texture != 0u {
-            emitted = emitted * sample(emissive_texture - 1u, uv_at(prim, wb, wc)).xyz;
+            let channel = (shade[material_at(prim) + 51u] >> 3u) & 7u;
+            emitted = emitted * sample(emissive_texture - 1u, uv_at(prim, channel, wb, wc)).xyz;
         }
         let to = y - p;
         let d2 = dot3(to, to);

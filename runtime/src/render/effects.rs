@@ -650,7 +650,7 @@ impl<'a> Context<'a> {
     fn shading_normal(&self, hit: &Hit, ng: Vec3, m: &Material) -> Vec3 {
         let n = self.interpolated_normal(hit, ng);
         match m.normal_texture.and_then(|t| self.view.shading.textures.get(t as usize)) {
-            Some(texture) => self.mapped_normal(hit, n, ng, texture, m.normal_scale),
+            Some(texture) => self.mapped_normal(hit, n, ng, texture, m),
             None => n,
         }
     }
@@ -681,8 +681,10 @@ impl<'a> Context<'a> {
     /// reversed, as that viewer does. `n` itself where there is no tangent or the
     /// result is not a direction on `ng`'s side. The GPU kernel computes the same
     /// operations in the same order.
-    fn mapped_normal(&self, hit: &Hit, n: Vec3, ng: Vec3, texture: &octrace_format::Texture, scale: f32) -> Vec3 {
-        let Some([uv0, uv1, uv2]) = self.view.corner_uvs(hit.prim) else { return n };
+    fn mapped_normal(&self, hit: &Hit, n: Vec3, ng: Vec3, texture: &octrace_format::Texture, m: &Material) -> Vec3 {
+        let scale = m.normal_scale;
+        let channel = m.uv_channel(4);
+        let Some([uv0, uv1, uv2]) = self.view.corner_uvs_in(hit.prim, channel) else { return n };
         let [p0, p1, p2] = self.view.triangle(hit.prim).map(Vec3::from);
         let (e1, e2) = (p1 - p0, p2 - p0);
         let back = n.dot(e1.cross(e2)) < 0.0;
@@ -707,7 +709,7 @@ impl<'a> Context<'a> {
             return n;
         }
         let b = front.cross(t) * sign;
-        let texel = texture.sample(self.view.texels.get(), self.view.uv_at(hit.prim, hit.u, hit.v));
+        let texel = texture.sample(self.view.texels.get(), self.view.uv_at_in(hit.prim, channel, hit.u, hit.v));
         let (x, y, z) = ((texel[0] * 2.0 - 1.0) * scale, (texel[1] * 2.0 - 1.0) * scale, texel[2] * 2.0 - 1.0);
         let mapped = (t * x + b * y + front * z).normalize_or_zero();
         let mapped = if back { -mapped } else { mapped };

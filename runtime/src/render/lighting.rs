@@ -208,7 +208,7 @@ impl Emitters {
         let mut emissive = EmissiveTriangles::new(&view.shading.textures, view.texels.get());
         for prim in 0..view.triangle_count() as u32 {
             let Some(m) = view.material(StoredIndex(prim)) else { continue };
-            if !emissive.emits(m, view.corner_uvs(StoredIndex(prim)).unwrap_or_default()) {
+            if !emissive.emits(m, view.corner_uvs_in(StoredIndex(prim), m.uv_channel(1)).unwrap_or_default()) {
                 continue;
             }
             untextured |= m.emissive_texture.is_none_or(|t| t as usize >= view.shading.textures.len());

@@ -625,8 +625,9 @@ fn emissive_textures_render_on_the_gpu_as_on_the_cpu() {
 /// Metallic-roughness, occlusion and normal textures on the GPU (issue 34): the panel
 /// scene lit (the polished half reflects) and under the headlight with the floor's
 /// occlusion texture, the normal-mapped floor, without tangents and with tangents that
-/// turn from corner to corner (mixed at each hit) and change sign: the CPU's rays of
-/// every kind and its image.
+/// turn from corner to corner (mixed at each hit) and change sign, and a quad whose
+/// base colour, emissive, occlusion and normal textures read four texture-coordinate
+/// channels: the CPU's rays of every kind and its image.
 #[test]
 fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_cpu() {
     use octrace_format::Effect;
@@ -649,6 +650,7 @@ fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_
                 .collect();
             mesh
         }),
+        ("four channels", crate::texcoords::two_set_mesh()),
     ];
     for (name, mesh) in scenes {
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -657,7 +659,11 @@ fn metallic_roughness_occlusion_and_normal_textures_render_on_the_gpu_as_on_the_
         let options = RenderOptions { effects, ..RenderOptions::for_scene(scene.shading()) };
         let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 96, 96);
         let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
-        let wanted = if name.starts_with("normal map") { RayKind::Shadow } else { RayKind::Reflection };
+        let wanted = match name {
+            "four channels" => RayKind::Primary,
+            n if n.starts_with("normal map") => RayKind::Shadow,
+            _ => RayKind::Reflection,
+        };
         assert!(counts.get(wanted) > 0, "{name}: {counts:?}");
     }
 }

@@ -17,5 +17,6 @@ mod mesh;
 mod raysets;
 mod render;
 mod tangents;
+mod texcoords;
 mod trusted;
 mod unconstrained;

@@ -41,13 +41,32 @@ fn uv_map(info: &gltf::texture::Info<'_>) -> UvMap {
     let mut uv = UvMap { set: info.tex_coord(), transform: None };
     if let Some(t) = info.texture_transform() {
         uv.set = t.tex_coord().unwrap_or(uv.set);
-        let ([ox, oy], r, [sx, sy]) = (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
-        // KHR_texture_transform: translation * rotation * scale, the rotation
-        // matrix as the spec writes it, rows (cos r, sin r), (-sin r, cos r).
-        let (c, s) = (r.cos(), r.sin());
-        uv.transform = Some([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]]);
+        let (offset, r, scale) = (t.offset().map(f64::from), t.rotation() as f64, t.scale().map(f64::from));
+        uv.transform = Some(transform_matrix(offset, r, scale));
     }
     uv
+}
+
+/// The coordinates of a slot the gltf crate gives no transform for (occlusion,
+/// normal): its `texCoord`, and its `KHR_texture_transform` as JSON (`offset`,
+/// `rotation`, `scale`, `texCoord`; a value of another type is left at its default).
+fn raw_uv_map(tex_coord: u32, transform: Option<&gltf::json::Value>) -> UvMap {
+    let Some(t) = transform else { return UvMap { set: tex_coord, transform: None } };
+    let pair = |key: &str, default: f64| {
+        let v = t.get(key).and_then(|v| v.as_array());
+        let c = |i: usize| v.and_then(|v| v.get(i)).and_then(|c| c.as_f64()).unwrap_or(default);
+        [c(0), c(1)]
+    };
+    let set = t.get("texCoord").and_then(|c| c.as_u64()).and_then(|c| u32::try_from(c).ok()).unwrap_or(tex_coord);
+    let rotation = t.get("rotation").and_then(|r| r.as_f64()).unwrap_or(0.0);
+    UvMap { set, transform: Some(transform_matrix(pair("offset", 0.0), rotation, pair("scale", 1.0))) }
+}
+
+/// KHR_texture_transform's matrix: translation * rotation * scale, the rotation as the
+/// spec writes it, rows (cos r, sin r), (-sin r, cos r).
+fn transform_matrix([ox, oy]: [f64; 2], r: f64, [sx, sy]: [f64; 2]) -> [[f64; 3]; 2] {
+    let (c, s) = (r.cos(), r.sin());
+    [[c * sx, s * sy, ox], [-s * sx, c * sy, oy]]
 }
 
 /// A material's texture slot: its name, its texture and coordinates if it has one,
@@ -75,44 +94,54 @@ impl Materials<'_> {
     ///
     /// # Errors
     /// [`Error::Parse`] for a value that is not finite (a JSON number beyond `f32`).
-    pub fn material(&mut self, m: &gltf::Material<'_>, mesh: &mut Mesh) -> Result<(Material, UvMap)> {
+    pub fn material(&mut self, m: &gltf::Material<'_>, mesh: &mut Mesh) -> Result<(Material, Vec<UvMap>)> {
         let name = m.name().map_or_else(|| format!("material {}", m.index().unwrap_or(0)), str::to_string);
         let pbr = m.pbr_metallic_roughness();
         let strength = m.emissive_strength().unwrap_or(1.0);
         let unit = |v: f32| v.clamp(0.0, 1.0);
-        // Each texture slot with its texture and the coordinates it reads: the bake stores
-        // one set of coordinates a triangle, the first slot's (base colour, emissive,
-        // metallic-roughness, occlusion), and every slot samples there.
+        // Each texture slot with its texture and the coordinates it reads: a channel for
+        // each distinct set and transform, the first slot's first (one channel for
+        // most materials).
         let occlusion = m.occlusion_texture();
         let normal = m.normal_texture();
+        let [base_name, emissive_name, mr_name, occlusion_name, normal_name] = Material::TEXTURE_SLOTS;
         let slots: [Slot<'_>; 5] = [
-            ("base colour", pbr.base_color_texture().map(|i| (i.texture(), uv_map(&i))), true),
-            ("emissive", m.emissive_texture().map(|i| (i.texture(), uv_map(&i))), true),
-            ("metallic-roughness", pbr.metallic_roughness_texture().map(|i| (i.texture(), uv_map(&i))), false),
-            // The gltf crate does not give an occlusion or normal texture's
-            // KHR_texture_transform: their set alone.
+            (base_name, pbr.base_color_texture().map(|i| (i.texture(), uv_map(&i))), true),
+            (emissive_name, m.emissive_texture().map(|i| (i.texture(), uv_map(&i))), true),
+            (mr_name, pbr.metallic_roughness_texture().map(|i| (i.texture(), uv_map(&i))), false),
+            // The gltf crate gives an occlusion or normal texture's KHR_texture_transform
+            // only as JSON.
             (
-                "occlusion",
-                occlusion.as_ref().map(|o| (o.texture(), UvMap { set: o.tex_coord(), transform: None })),
+                occlusion_name,
+                occlusion
+                    .as_ref()
+                    .map(|o| (o.texture(), raw_uv_map(o.tex_coord(), o.extension_value("KHR_texture_transform")))),
                 false,
             ),
-            ("normal", normal.as_ref().map(|n| (n.texture(), UvMap { set: n.tex_coord(), transform: None })), false),
+            (
+                normal_name,
+                normal
+                    .as_ref()
+                    .map(|n| (n.texture(), raw_uv_map(n.tex_coord(), n.extension_value("KHR_texture_transform")))),
+                false,
+            ),
         ];
-        let uv =
-            slots.iter().find_map(|(_, s, _)| s.as_ref().map(|s| s.1)).unwrap_or(UvMap { set: 0, transform: None });
-        let first = slots.iter().find(|(_, s, _)| s.is_some()).map_or("", |s| s.0);
+        let mut maps: Vec<UvMap> = Vec::new();
+        let mut uv_channels = [0u8; 5];
         let mut textures = [None; 5];
         for (k, (slot, texture, srgb)) in slots.iter().enumerate() {
             let Some((texture, map)) = texture else { continue };
-            if *map != uv {
-                mesh.warnings.push(format!(
-                    "{}: material '{name}': its {slot} texture reads other texture coordinates (TEXCOORD_{} or \
-                     another KHR_texture_transform) than its {first} texture: sampled at the {first} texture's",
-                    self.path.display(),
-                    map.set
-                ));
-            }
             textures[k] = self.texture(texture, &name, slot, *srgb, mesh);
+            if textures[k].is_some() {
+                let channel = maps.iter().position(|m| m == map).unwrap_or_else(|| {
+                    maps.push(*map);
+                    maps.len() - 1
+                });
+                uv_channels[k] = channel as u8;
+            }
+        }
+        if maps.is_empty() {
+            maps.push(UvMap { set: 0, transform: None });
         }
         let [texture, emissive_texture, metallic_roughness_texture, occlusion_texture, normal_texture] = textures;
         let out = Material {
@@ -138,6 +167,7 @@ impl Materials<'_> {
             occlusion_strength: occlusion.as_ref().map_or(1.0, |o| unit(o.strength())),
             normal_texture,
             normal_scale: normal.as_ref().map_or(1.0, |n| n.scale()),
+            uv_channels,
             name,
         };
         let numbers = out.base_color.iter().chain(&out.emissive).chain([
@@ -153,7 +183,7 @@ impl Materials<'_> {
                 message: format!("value {bad} is not a finite number"),
             });
         }
-        Ok((out, uv))
+        Ok((out, maps))
     }
 
     /// The index in `mesh.textures` of `texture`'s image with its sampler, loading it

@@ -393,7 +393,9 @@ struct Loader<'a> {
     input_bytes: usize,
     mesh: Mesh,
     /// Where each material's texture coordinates come from.
-    uv_maps: Vec<UvMap>,
+    /// Each glTF material's texture-coordinate channels (its distinct sets and
+    /// transforms, [`octrace_format::Material::uv_channels`]).
+    uv_maps: Vec<Vec<UvMap>>,
     /// The first primitive skipped for its mode, for the error when nothing else is left.
     skipped: Option<(String, String)>,
     /// Index of glTF's default material, once a primitive without one needed it.
@@ -677,13 +679,11 @@ impl Loader<'_> {
         out.tangents
     }
 
-    /// The primitive's texture coordinates, when it has usable ones (as
-    /// [`Loader::normals`]): the set its material's texture reads (`TEXCOORD_0`
-    /// without one), through the texture's transform.
-    fn uvs(&mut self, prim: &gltf::Primitive<'_>, vertices: usize, element: &str) -> Option<Vec<[f32; 2]>> {
+    /// The primitive's texture coordinates in one of its material's channels, when it
+    /// has usable ones (as [`Loader::normals`]): the set `map` reads, through its
+    /// transform.
+    fn uvs(&mut self, prim: &gltf::Primitive<'_>, map: UvMap, vertices: usize, element: &str) -> Option<Vec<[f32; 2]>> {
         use gltf::accessor::{DataType, Dimensions};
-        let map = prim.material().index().and_then(|i| self.uv_maps.get(i)).copied();
-        let map = map.unwrap_or(UvMap { set: 0, transform: None });
         let a = prim.get(&gltf::Semantic::TexCoords(map.set))?;
         let usable = matches!(a.data_type(), DataType::F32 | DataType::U8 | DataType::U16)
             && a.dimensions() == Dimensions::Vec2
@@ -825,12 +825,22 @@ impl Loader<'_> {
             _ => (n.saturating_sub(2), &|k| [index(0), index(k + 1), index(k + 2)]),
         };
         let normals = self.normals(prim, world, verts.len(), &element);
-        let uvs = self.uvs(prim, verts.len(), &element);
+        // A channel for each distinct set and transform the material's textures read.
+        let maps = prim.material().index().and_then(|i| self.uv_maps.get(i)).cloned();
+        let maps = maps.unwrap_or_else(|| vec![UvMap { set: 0, transform: None }]);
+        let mut channels: Vec<_> = maps.iter().map(|&map| self.uvs(prim, map, verts.len(), &element)).collect();
+        let uvs = channels.first_mut().and_then(Option::take);
         let colors = self.colors(prim, verts.len(), &element);
         let material = self.material_of(prim);
-        let normal_mapped = self.mesh.materials.get(material as usize).is_some_and(|m| m.normal_texture.is_some());
-        let tangents = match (normal_mapped, &normals, &uvs) {
-            (true, Some(normals), Some(uvs)) => {
+        let normal_mapped = self.mesh.materials.get(material as usize).filter(|m| m.normal_texture.is_some());
+        // The coordinates the normal texture reads.
+        let normal_uvs = match normal_mapped.map(|m| m.uv_channel(4)) {
+            Some(0) => uvs.as_ref(),
+            Some(c) => channels.get(c).and_then(Option::as_ref),
+            None => None,
+        };
+        let tangents = match (normal_uvs, &normals) {
+            (Some(uvs), Some(normals)) => {
                 let corners = Corners { verts: &verts, normals, uvs, count, corner };
                 Some(self.tangents(prim, world, &corners, &element))
             }
@@ -850,6 +860,12 @@ impl Loader<'_> {
         }
         if let Some(tangents) = tangents {
             self.mesh.push_tangents(tangents, count);
+        }
+        for (c, values) in channels.iter().enumerate().skip(1) {
+            if let Some(values) = values {
+                let corners = (0..count).map(corner).map(|t| t.map(|i| values[i as usize])).collect();
+                self.mesh.push_uv_channel(c, corners, count);
+            }
         }
         Ok(())
     }
