@@ -1433,3 +1433,20 @@ fn render_refuses_an_image_that_decodes_to_other_texels() {
     fails_saying(dir.path(), &["render", "leaf.oct", "-o", "leaf.png"], "decodes to other texels than at bake");
     assert!(!dir.path().join("leaf.png").exists());
 }
+
+/// `bake --raw-texels` stores the leaf's textures as texels rather than PNGs: a larger
+/// file that renders to the same PNG bytes.
+#[test]
+fn raw_texels_render_as_the_encoded_images_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let leaf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/textured/leaf.gltf");
+    ok(dir.path(), &["bake", leaf.to_str().unwrap(), "-o", "kept.oct"]);
+    ok(dir.path(), &["bake", leaf.to_str().unwrap(), "-o", "raw.oct", "--raw-texels"]);
+    let size = |f: &str| std::fs::metadata(dir.path().join(f)).unwrap().len();
+    assert!(size("raw.oct") > 3 * size("kept.oct"), "{} against {}", size("raw.oct"), size("kept.oct"));
+    assert!(ok(dir.path(), &["inspect", "raw.oct"]).contains("alpha down to 0.00, stored as texels"));
+    for f in ["kept", "raw"] {
+        ok(dir.path(), &["render", &format!("{f}.oct"), "-o", &format!("{f}.png"), "--width", "160"]);
+    }
+    assert!(std::fs::read(dir.path().join("kept.png")).unwrap() == std::fs::read(dir.path().join("raw.png")).unwrap());
+}

@@ -21,8 +21,9 @@ pub struct HitSurface {
     /// The file's vertex normals interpolated at the hit and normalised, on the
     /// geometric normal's side; the geometric normal where the file has none.
     pub shading_normal: Vec3,
-    /// Texture coordinates at the hit (with the material's texture transform applied
-    /// at bake), where the file has them.
+    /// Texture coordinates at the hit in the first channel, the ones the material's
+    /// first texture slot reads (with its texture transform applied at bake), where
+    /// the file has them ([`octrace_format::SceneView::uv_at_in`] gives the others).
     pub uv: Option<[f32; 2]>,
     /// The input triangle ([`Hit::triangle`]): the index every other call takes.
     pub triangle: u32,

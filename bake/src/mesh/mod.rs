@@ -148,6 +148,22 @@ impl Mesh {
         self.tangents.resize(self.triangles.len(), [[0.0; 4]; 3]);
     }
 
+    /// Has the bake store every texture's texels rather than its encoded image: a larger
+    /// file (DamagedHelmet: 85.8 MB rather than 5.5 MB) whose first render decodes
+    /// nothing (0.16 s less on two cores for DamagedHelmet's five 2048² JPEGs).
+    ///
+    /// # Example
+    /// ```
+    /// let mut mesh = octrace_bake::procedural::shaded_torus(8, 4);
+    /// assert!(mesh.textures.iter().any(|t| t.encoded.is_some()));
+    /// mesh.store_texels();
+    /// assert!(mesh.textures.iter().all(|t| t.encoded.is_none()) && mesh.images.is_empty());
+    /// ```
+    pub fn store_texels(&mut self) {
+        self.textures.iter_mut().for_each(|t| t.encoded = None);
+        self.images = Vec::new();
+    }
+
     /// The texture coordinates in channel `channel` (1 or more) of the triangles
     /// pushed last, `count` of them: the first that has them gives the earlier
     /// triangles zeros.

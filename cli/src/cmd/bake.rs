@@ -64,6 +64,11 @@ pub(crate) struct Args {
     /// Accepted for older scripts: bakes are reproducible by default now.
     #[arg(long, hide = true, conflicts_with = "record_time")]
     pub reproducible: bool,
+    /// Store textures as texels rather than as their PNG or JPEG images: a larger file
+    /// (DamagedHelmet: 85.8 MB rather than 5.5 MB) whose renders decode nothing
+    /// first (DamagedHelmet's five 2048² JPEGs: 0.16 s on two cores).
+    #[arg(long)]
+    pub raw_texels: bool,
     /// Write the file zstd-compressed (name it .oct.zst): smaller on disk, read into
     /// memory when opened instead of memory-mapped.
     #[arg(long)]
@@ -93,7 +98,10 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         max_triangles: args.max_triangles,
         ..LoadOptions::default()
     };
-    let mesh = Mesh::load_with(&args.input, &options)?;
+    let mut mesh = Mesh::load_with(&args.input, &options)?;
+    if args.raw_texels {
+        mesh.store_texels();
+    }
     let sources: Vec<&Path> = mesh.sources.iter().map(PathBuf::as_path).collect();
     crate::output::refuse_overwriting(&args.output, "-o", &sources)?;
     for w in &mesh.warnings {
