@@ -207,9 +207,8 @@ impl Material {
         self.uv_channels.get(slot).map_or(0, |&c| c as usize)
     }
 
-    /// The textures the material reads (base colour, emissive, metallic-roughness,
-    /// occlusion, normal), those it has.
-    pub fn textures(&self) -> impl Iterator<Item = u32> {
+    /// The texture of each slot, in the order of [`Material::TEXTURE_SLOTS`].
+    pub fn slot_textures(&self) -> [Option<u32>; 5] {
         [
             self.base_color_texture,
             self.emissive_texture,
@@ -217,8 +216,12 @@ impl Material {
             self.occlusion_texture,
             self.normal_texture,
         ]
-        .into_iter()
-        .flatten()
+    }
+
+    /// The textures the material reads (base colour, emissive, metallic-roughness,
+    /// occlusion, normal), those it has.
+    pub fn textures(&self) -> impl Iterator<Item = u32> {
+        self.slot_textures().into_iter().flatten()
     }
 
     /// Whether the material emits light.
@@ -546,7 +549,7 @@ impl Shading {
         let mut decoded_end = (words / TEXEL_WORDS) as u64;
         for t in &self.textures {
             let sides = 1..=MAX_TEXTURE_SIDE;
-            if let Some(e) = &t.encoded {
+            if t.encoded.is_some() {
                 if !sides.contains(&t.width) || !sides.contains(&t.height) || u64::from(t.first) != decoded_end {
                     return Err(crate::Error::corrupt(format!(
                         "texture '{}' ({} x {}, encoded) is empty, larger than {MAX_TEXTURE_SIDE} a side, or its \
@@ -562,32 +565,9 @@ impl Shading {
                         crate::image::MAX_SCENE_TEXELS
                     )));
                 }
-                let image = texels.images();
-                let bytes = e.offset.checked_add(e.bytes).and_then(|end| image.get(e.offset as usize..end as usize));
-                let Some(bytes) = bytes else {
-                    return Err(crate::Error::corrupt(format!(
-                        "texture '{}': its image ({} bytes from {}) runs past the {} bytes of images",
-                        t.name,
-                        e.bytes,
-                        e.offset,
-                        image.len()
-                    )));
-                };
                 // The header only: the pixels are decoded when first read.
-                let found = crate::image::dimensions(bytes)
+                t.encoded_image(texels.images())
                     .map_err(|why| crate::Error::corrupt(format!("texture '{}': {why}", t.name)))?;
-                if found != (e.kind, t.width, t.height) {
-                    return Err(crate::Error::corrupt(format!(
-                        "texture '{}': its image is a {} of {} x {}, its record says a {} of {} x {}",
-                        t.name,
-                        found.0.name(),
-                        found.1,
-                        found.2,
-                        e.kind.name(),
-                        t.width,
-                        t.height
-                    )));
-                }
             }
             // Saturating: a hostile size must be refused, not overflow (found by fuzzing).
             let end = (t.first as u64 + t.width as u64 * t.height as u64).saturating_mul(TEXEL_WORDS as u64);

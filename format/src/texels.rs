@@ -201,26 +201,9 @@ fn decode(stored: &[u32], images: &[u8], textures: &[Texture]) -> Decoded {
 /// One texture's image decoded, checked against its record.
 fn decode_one(t: &Texture, images: &[u8]) -> Result<Vec<u32>, String> {
     let e = t.encoded.as_ref().ok_or("not encoded")?;
-    let bytes = usize::try_from(e.offset)
-        .ok()
-        .zip(usize::try_from(e.bytes).ok())
-        .and_then(|(at, n)| images.get(at..at.checked_add(n)?))
-        .ok_or_else(|| {
-            format!("its image ({} bytes from {}) runs past the {} bytes of images", e.bytes, e.offset, images.len())
-        })?;
-    let expected = (t.width as usize).saturating_mul(t.height as usize);
-    let rgba = crate::image::decode(bytes, expected)?;
-    if (rgba.width, rgba.height) != (t.width, t.height) || crate::image::kind(bytes) != Some(e.kind) {
-        return Err(format!(
-            "its {} image is {} x {}, its record says a {} of {} x {}",
-            crate::image::kind(bytes).map_or("unknown", |k| k.name()),
-            rgba.width,
-            rgba.height,
-            e.kind.name(),
-            t.width,
-            t.height
-        ));
-    }
+    let bytes = t.encoded_image(images)?;
+    let rgba = crate::image::decode(bytes, (t.width as usize).saturating_mul(t.height as usize))?;
+    t.same_image(e.kind, rgba.width, rgba.height)?;
     let words: Vec<u32> = rgba.pixels.into_iter().map(u32::from_le_bytes).collect();
     let hash = texels_hash(&words);
     if hash != e.texels_hash {

@@ -191,8 +191,7 @@ impl<'a> SceneView<'a> {
     /// there, channel by channel, in that order; the factor alone when it has neither.
     pub fn base_color_at(&self, material: &crate::Material, index: StoredIndex, u: f32, v: f32) -> [f32; 4] {
         let mut color = material.base_color;
-        if let Some(texture) = material.base_color_texture.and_then(|t| self.shading.textures.get(t as usize)) {
-            let texel = texture.sample(self.texels.get(), self.uv_at_in(index, material.uv_channel(0), u, v));
+        if let Some(texel) = self.texture_at(material, 0, index, u, v) {
             color = [0, 1, 2, 3].map(|c| color[c] * texel[c]);
         }
         if let Some(vertex) = self.color_at(index, u, v) {
@@ -232,8 +231,8 @@ impl<'a> SceneView<'a> {
         }
     }
 
-    /// The sample of `material`'s texture in slot `slot` ([`crate::Material::TEXTURE_SLOTS`]:
-    /// 1 emissive, 2 metallic-roughness, 3 occlusion) at barycentrics `(u, v)` of stored
+    /// The sample of `material`'s texture in slot `slot` ([`crate::Material::TEXTURE_SLOTS`]'s
+    /// order) at barycentrics `(u, v)` of stored
     /// triangle `index`, in the slot's channel; `None` for no texture (or one past the
     /// scene's).
     fn texture_at(
@@ -244,12 +243,7 @@ impl<'a> SceneView<'a> {
         u: f32,
         v: f32,
     ) -> Option<[f32; 4]> {
-        let texture = match slot {
-            1 => material.emissive_texture,
-            2 => material.metallic_roughness_texture,
-            _ => material.occlusion_texture,
-        };
-        let texture = self.shading.textures.get(texture? as usize)?;
+        let texture = self.shading.textures.get(material.slot_textures()[slot]? as usize)?;
         Some(texture.sample(self.texels.get(), self.uv_at_in(index, material.uv_channel(slot), u, v)))
     }
 

@@ -143,9 +143,7 @@ impl Mesh {
     /// The tangents of the triangles pushed last, `count` of them: the first that
     /// has them gives the earlier triangles zeros (none).
     pub(crate) fn push_tangents(&mut self, tangents: Vec<[[f32; 4]; 3]>, count: usize) {
-        self.tangents.resize(self.triangles.len() - count, [[0.0; 4]; 3]);
-        self.tangents.extend(tangents);
-        self.tangents.resize(self.triangles.len(), [[0.0; 4]; 3]);
+        push_last(&mut self.tangents, self.triangles.len(), tangents, count, [[0.0; 4]; 3]);
     }
 
     /// Has the bake store every texture's texels rather than its encoded image: a larger
@@ -171,11 +169,7 @@ impl Mesh {
         if self.more_uvs.len() < channel {
             self.more_uvs.resize(channel, Vec::new());
         }
-        let n = self.triangles.len();
-        let values = &mut self.more_uvs[channel - 1];
-        values.resize(n - count, [[0.0; 2]; 3]);
-        values.extend(uvs);
-        values.resize(n, [[0.0; 2]; 3]);
+        push_last(&mut self.more_uvs[channel - 1], self.triangles.len(), uvs, count, [[0.0; 2]; 3]);
     }
 
     /// The texture coordinates of triangle `t`'s corners in `channel`, when the mesh
@@ -255,6 +249,15 @@ impl Mesh {
         }
         Ok(())
     }
+}
+
+/// A per-triangle attribute given for the last `count` of `n` triangles: the
+/// triangles before them that have none get `none`, as do those of the `count` that
+/// `values` leaves out.
+fn push_last<T: Copy>(array: &mut Vec<T>, n: usize, values: Vec<T>, count: usize, none: T) {
+    array.resize(n - count, none);
+    array.extend(values);
+    array.resize(n, none);
 }
 
 /// The unit normal of a triangle's plane (counter-clockwise winding), or zero for a

@@ -303,14 +303,8 @@ pub(crate) fn surface(e: &octrace_format::topology::EdgeCensus) -> String {
 fn texture_uses(materials: &[octrace_format::Material], index: u32) -> String {
     let mut uses = Vec::new();
     for m in materials {
-        let slots = [
-            ("base colour", m.base_color_texture),
-            ("emissive", m.emissive_texture),
-            ("metallic-roughness", m.metallic_roughness_texture),
-            ("occlusion", m.occlusion_texture),
-            ("normal", m.normal_texture),
-        ];
-        uses.extend(slots.iter().filter(|(_, t)| *t == Some(index)).map(|(slot, _)| format!("{slot} of '{}'", m.name)));
+        let slots = octrace_format::Material::TEXTURE_SLOTS.into_iter().zip(m.slot_textures());
+        uses.extend(slots.filter(|(_, t)| *t == Some(index)).map(|(slot, _)| format!("{slot} of '{}'", m.name)));
     }
     match uses.len() {
         0 => String::new(),

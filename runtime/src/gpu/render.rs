@@ -2,6 +2,7 @@
 //! (`render.wgsl`), specialised per effect set with override constants.
 
 use glam::Vec3;
+use octrace_format::layout::{TRIANGLE_FLOATS, UV_FLOATS};
 use octrace_format::{AlphaMode, Effect, Filter, LightKind, Material, Wrap};
 use rayon::prelude::*;
 
@@ -320,7 +321,7 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool
     params.has_normals = u32::from(!view.normals.is_empty());
     f(&mut words, view.normals);
     params.o_uvs = words.len() as u32;
-    params.uv_channel_words = (view.triangles.len() / 9 * 6) as u32;
+    params.uv_channel_words = (view.triangles.len() / TRIANGLE_FLOATS * UV_FLOATS) as u32;
     params.has_uvs = u32::from(!view.uvs.is_empty());
     f(&mut words, view.uvs);
     params.o_tangents = words.len() as u32;
@@ -409,7 +410,8 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
         bits(texture(m.normal_texture)),
         m.normal_scale,
     ]);
-    // The texture-coordinate channel of each slot, three bits each.
+    // The texture-coordinate channel of each slot, three bits each (UV_CHANNELS_WORD
+    // in render.wgsl).
     let channels = m.uv_channels.iter().enumerate().fold(0u32, |w, (k, &c)| w | u32::from(c.min(7)) << (3 * k));
     record[51] = bits(channels);
     record

@@ -54,7 +54,8 @@ struct RenderParams {
     has_colors: u32,
     // octrace_format::linear16: the 16-bit linear value of each 8-bit sRGB value.
     o_srgb: u32,
-    // Tangents (absent when has_tangents is 0): twelve words a triangle, x y z w a corner.
+    // Tangents (absent when has_tangents is 0): six words a triangle, two a corner
+    // (octrace_format::layout::decode_tangent).
     o_tangents: u32,
     has_tangents: u32,
     // Words a texture-coordinate channel takes (six a triangle), channel after channel.
@@ -221,6 +222,8 @@ fn next_down(x: f32) -> f32 {
 
 // The word of a material record that holds its emissive texture (`material_record`).
 const EMISSIVE_TEXTURE_WORD: u32 = 43u;
+// The word of a material record that packs its slots' texture-coordinate channels.
+const UV_CHANNELS_WORD: u32 = 51u;
 
 // The record of `prim`'s material (the plain one for a triangle without).
 fn material_at(prim: u32) -> u32 {
@@ -266,7 +269,7 @@ fn material(prim: u32) -> Material {
     m.occlusion = 1.0;
     m.normal_texture = shade[at + 49u];
     m.normal_scale = sf(at + 50u);
-    m.uv_channels = shade[at + 51u];
+    m.uv_channels = shade[at + UV_CHANNELS_WORD];
     return m;
 }
 
@@ -822,9 +825,11 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
             y = div3(a + b + c, 3.0);
         }
         // The emission where the point is, through the material's emissive texture.
-        let emissive_texture = shade[material_at(prim) + EMISSIVE_TEXTURE_WORD];
+        let record = material_at(prim);
+        let emissive_texture = shade[record + EMISSIVE_TEXTURE_WORD];
         if emissive_texture != 0u {
-            let channel = (shade[material_at(prim) + 51u] >> 3u) & 7u;
+            // The emissive slot's channel (`channel_of` for slot 1).
+            let channel = (shade[record + UV_CHANNELS_WORD] >> 3u) & 7u;
             emitted = emitted * sample(emissive_texture - 1u, uv_at(prim, channel, wb, wc)).xyz;
         }
         let to = y - p;
