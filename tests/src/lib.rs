@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests: the bunny the repository carries, baked
 //! once per test binary.
 
+pub mod gltf;
+
 use std::path::PathBuf;
 use std::sync::OnceLock;
 

@@ -18,8 +18,9 @@ use crate::error::{Error, Result};
 /// depth-first order, then their primitives in order), so a hit can name it; with the
 /// materials, lights and cameras the file describes.
 ///
-/// The per-triangle attributes (`material_ids`, `normals`, `uvs`, `colors`) are either
-/// empty or one entry per triangle.
+/// The per-triangle attributes (`material_ids`, `normals`, `uvs`, each of `more_uvs`,
+/// `colors`, `tangents`) are either empty or one entry per triangle: [`Mesh::push`] and
+/// its siblings keep them so.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     /// The triangles' vertices, world space.
@@ -104,24 +105,10 @@ impl Mesh {
 
     /// Appends a triangle with its attributes, keeping every attribute array either
     /// empty or one entry a triangle: the first triangle that has normals (or texture
-    /// coordinates) gives the earlier ones face normals (or zeros).
+    /// coordinates) gives the earlier ones face normals (or zeros), and a triangle
+    /// without an attribute the others have gets what [`Mesh::pad_attributes`] gives.
     pub fn push(&mut self, triangle: [[f32; 3]; 3], normals: Option<[[f32; 3]; 3]>, uvs: Option<[[f32; 2]; 3]>) {
-        let before = self.triangles.len();
-        self.triangles.push(triangle);
-        if normals.is_some() || !self.normals.is_empty() {
-            while self.normals.len() < before {
-                let t = self.triangles[self.normals.len()];
-                self.normals.push([face_normal(&t); 3]);
-            }
-            self.normals.push(normals.unwrap_or([face_normal(&triangle); 3]));
-        }
-        if uvs.is_some() || !self.uvs.is_empty() {
-            self.uvs.resize(before, [[0.0; 2]; 3]);
-            self.uvs.push(uvs.unwrap_or([[0.0; 2]; 3]));
-        }
-        if !self.colors.is_empty() {
-            self.colors.push([[u16::MAX; 4]; 3]);
-        }
+        self.push_colored(triangle, normals, uvs, None);
     }
 
     /// [`Mesh::push`], then the triangle's vertex colours: the first triangle that has
@@ -133,17 +120,59 @@ impl Mesh {
         uvs: Option<[[f32; 2]; 3]>,
         colors: Option<[[u16; 4]; 3]>,
     ) {
-        self.push(triangle, normals, uvs);
-        if let Some(c) = colors {
-            self.colors.resize(self.triangles.len() - 1, [[u16::MAX; 4]; 3]);
-            self.colors.push(c);
+        self.triangles.push(triangle);
+        let n = self.triangles.len();
+        if let Some(normals) = normals {
+            let triangles = &self.triangles;
+            set_last(&mut self.normals, n, [normals], |t| [face_normal(&triangles[t]); 3]);
         }
+        if let Some(uvs) = uvs {
+            set_last(&mut self.uvs, n, [uvs], |_| NO_UVS);
+        }
+        if let Some(colors) = colors {
+            set_last(&mut self.colors, n, [colors], |_| WHITE);
+        }
+        self.pad_attributes();
     }
 
-    /// The tangents of the triangles pushed last, `count` of them: the first that
-    /// has them gives the earlier triangles zeros (none).
-    pub(crate) fn push_tangents(&mut self, tangents: Vec<[[f32; 4]; 3]>, count: usize) {
-        push_last(&mut self.tangents, self.triangles.len(), tangents, count, [[0.0; 4]; 3]);
+    /// Sets the tangents of the triangles pushed last, `count` of them (those
+    /// `tangents` leaves out get none): the first that has them gives the earlier
+    /// triangles zeros (none).
+    ///
+    /// # Panics
+    /// If `count` is more than the triangles pushed.
+    ///
+    /// # Example
+    /// ```
+    /// let mut mesh = octrace_bake::Mesh::default();
+    /// mesh.push([[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], None, None);
+    /// mesh.push([[0.0; 3], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], None, None);
+    /// mesh.push_tangents(vec![[[1.0, 0.0, 0.0, 1.0]; 3]], 1);
+    /// mesh.push([[0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], None, None);
+    /// assert_eq!(mesh.tangents, [[[0.0; 4]; 3], [[1.0, 0.0, 0.0, 1.0]; 3], [[0.0; 4]; 3]]);
+    /// ```
+    pub fn push_tangents(&mut self, tangents: Vec<[[f32; 4]; 3]>, count: usize) {
+        let n = self.triangles.len();
+        self.tangents.truncate(n - count);
+        set_last(&mut self.tangents, n, tangents, |_| NO_TANGENTS);
+        self.pad_attributes();
+    }
+
+    /// Gives every per-triangle attribute array that has entries one entry a triangle,
+    /// what a triangle without the attribute gets: its face normal, zero texture
+    /// coordinates (in every channel), white, no tangent (the renderer then takes the
+    /// triangle's own). The one place the arrays are padded: a part without an
+    /// attribute may come before or after the parts with it, in any order.
+    pub fn pad_attributes(&mut self) {
+        let n = self.triangles.len();
+        let triangles = &self.triangles;
+        pad(&mut self.normals, n, |t| [face_normal(&triangles[t]); 3]);
+        pad(&mut self.uvs, n, |_| NO_UVS);
+        for channel in &mut self.more_uvs {
+            pad(channel, n, |_| NO_UVS);
+        }
+        pad(&mut self.colors, n, |_| WHITE);
+        pad(&mut self.tangents, n, |_| NO_TANGENTS);
     }
 
     /// Has the bake store every texture's texels rather than its encoded image: a larger
@@ -162,14 +191,21 @@ impl Mesh {
         self.images = Vec::new();
     }
 
-    /// The texture coordinates in channel `channel` (1 or more) of the triangles
+    /// Sets the texture coordinates in channel `channel` (1 or more) of the triangles
     /// pushed last, `count` of them: the first that has them gives the earlier
     /// triangles zeros.
-    pub(crate) fn push_uv_channel(&mut self, channel: usize, uvs: Vec<[[f32; 2]; 3]>, count: usize) {
+    ///
+    /// # Panics
+    /// If `channel` is 0 or `count` is more than the triangles pushed.
+    pub fn push_uv_channel(&mut self, channel: usize, uvs: Vec<[[f32; 2]; 3]>, count: usize) {
         if self.more_uvs.len() < channel {
             self.more_uvs.resize(channel, Vec::new());
         }
-        push_last(&mut self.more_uvs[channel - 1], self.triangles.len(), uvs, count, [[0.0; 2]; 3]);
+        let n = self.triangles.len();
+        let array = &mut self.more_uvs[channel - 1];
+        array.truncate(n - count);
+        set_last(array, n, uvs, |_| NO_UVS);
+        self.pad_attributes();
     }
 
     /// The texture coordinates of triangle `t`'s corners in `channel`, when the mesh
@@ -236,8 +272,15 @@ impl Mesh {
             }
         }
         let max = octrace_format::layout::MAX_UV_CHANNELS;
-        if self.more_uvs.len() >= max || self.more_uvs.iter().any(|c| !c.is_empty() && c.len() != n) {
-            return Err(bad("uv channels", self.more_uvs.len() + 1));
+        if self.more_uvs.len() >= max {
+            return Err(Error::Parse {
+                path: path.into(),
+                element: "texture-coordinate channels".into(),
+                message: format!("{} channels, at most {max}", self.more_uvs.len() + 1),
+            });
+        }
+        if let Some((c, channel)) = self.more_uvs.iter().enumerate().find(|(_, c)| !c.is_empty() && c.len() != n) {
+            return Err(bad(&format!("texture coordinates of channel {}", c + 1), channel.len()));
         }
         if let Some(&m) = self.material_ids.iter().find(|&&m| m as usize >= self.materials.len()) {
             return Err(Error::IndexOutOfRange {
@@ -251,13 +294,35 @@ impl Mesh {
     }
 }
 
-/// A per-triangle attribute given for the last `count` of `n` triangles: the
-/// triangles before them that have none get `none`, as do those of the `count` that
-/// `values` leaves out.
-fn push_last<T: Copy>(array: &mut Vec<T>, n: usize, values: Vec<T>, count: usize, none: T) {
-    array.resize(n - count, none);
-    array.extend(values);
-    array.resize(n, none);
+/// Texture coordinates of a triangle without them.
+const NO_UVS: [[f32; 2]; 3] = [[0.0; 2]; 3];
+/// Vertex colours of a triangle without them.
+const WHITE: [[u16; 4]; 3] = [[u16::MAX; 4]; 3];
+/// Tangents of a triangle without them.
+const NO_TANGENTS: [[f32; 4]; 3] = [[0.0; 4]; 3];
+
+/// Appends `values`, the attribute of the last triangles up to `n`, to `array`: the
+/// triangles before them that it lacks get `none(t)`, as do any of them that `values`
+/// leaves out.
+fn set_last<T>(array: &mut Vec<T>, n: usize, values: impl IntoIterator<Item = T>, none: impl Fn(usize) -> T) {
+    let values = values.into_iter();
+    let first = n - values.size_hint().0.min(n);
+    while array.len() < first {
+        array.push(none(array.len()));
+    }
+    array.extend(values.take(n - array.len()));
+    while array.len() < n {
+        array.push(none(array.len()));
+    }
+}
+
+/// Pads `array`, when it has entries, to `n`, triangle `t` getting `none(t)`.
+fn pad<T>(array: &mut Vec<T>, n: usize, none: impl Fn(usize) -> T) {
+    if !array.is_empty() {
+        while array.len() < n {
+            array.push(none(array.len()));
+        }
+    }
 }
 
 /// The unit normal of a triangle's plane (counter-clockwise winding), or zero for a

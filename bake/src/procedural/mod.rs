@@ -149,8 +149,8 @@ pub fn shaded_torus(rings: u32, sides: u32) -> Mesh {
         out.material_ids.push(0);
         // Along the first edge (where u grows), every other triangle's sign reversed.
         let e = glam::Vec3::from(t[1]) - glam::Vec3::from(t[0]);
-        let w = if out.tangents.len().is_multiple_of(2) { 1.0 } else { -1.0 };
-        out.tangents.push([[e.x, e.y, e.z, w]; 3]);
+        let w = if out.triangles.len().is_multiple_of(2) { -1.0 } else { 1.0 };
+        out.push_tangents(vec![[[e.x, e.y, e.z, w]; 3]], 1);
     }
     out
 }

@@ -1,5 +1,6 @@
 //! octrace's integration tests, one module per area.
 
+mod attributes;
 mod budgets;
 mod bunny;
 mod crossings;

@@ -183,7 +183,33 @@ impl Materials<'_> {
                 message: format!("value {bad} is not a finite number"),
             });
         }
+        self.transmission_left_out(m, &out, mesh);
         Ok((out, maps))
+    }
+
+    /// Warns, naming the material, of what its `KHR_materials_transmission` asks that
+    /// the renderer does not simulate: a `transmissionTexture` (the factor is taken
+    /// everywhere) and rough transmission (rendered as smooth glass, one refracted
+    /// ray).
+    fn transmission_left_out(&self, m: &gltf::Material<'_>, out: &Material, mesh: &mut Mesh) {
+        let Some(transmission) = m.transmission() else { return };
+        let material = format!("{}: material '{}'", self.path.display(), out.name);
+        if transmission.transmission_texture().is_some() {
+            mesh.warnings.push(format!(
+                "{material}: KHR_materials_transmission's transmissionTexture is ignored: its transmission factor \
+                 {} is taken everywhere",
+                out.transmission
+            ));
+        }
+        let rough = out.roughness > 0.0 || pbr_has_texture(m);
+        if out.transmission > 0.0 && rough {
+            mesh.warnings.push(format!(
+                "{material}: rough transmission (roughness {}{}) is rendered as smooth glass: one refracted ray, \
+                 no blur",
+                out.roughness,
+                if pbr_has_texture(m) { " times its metallic-roughness texture" } else { "" }
+            ));
+        }
     }
 
     /// The index in `mesh.textures` of `texture`'s image with its sampler, loading it
@@ -286,9 +312,9 @@ impl Materials<'_> {
                     .map(<[u8]>::to_vec)
                     .ok_or_else(|| format!("buffer view {} runs past buffer {}", view.index(), view.buffer().index()))
             }
-            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => super::data_uri(uri),
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => super::buffers::data_uri(uri),
             gltf::image::Source::Uri { uri, .. } => {
-                let target = super::uri_path(uri)?;
+                let target = super::buffers::uri_path(uri)?;
                 let file = refs::resolve(self.base, Path::new(&target), self.options.references)?;
                 let bytes =
                     octrace_format::read_regular_file(&file, self.options.max_file_bytes).map_err(|e| e.to_string())?;
@@ -297,4 +323,9 @@ impl Materials<'_> {
             }
         }
     }
+}
+
+/// Whether a material has a metallic-roughness texture (its roughness varies).
+fn pbr_has_texture(m: &gltf::Material<'_>) -> bool {
+    m.pbr_metallic_roughness().metallic_roughness_texture().is_some()
 }

@@ -1,0 +1,291 @@
+//! The default scene's node placements: how many times each node is placed (counted
+//! before the walk), then the walk itself, which places meshes, lights and cameras.
+
+use glam::{DMat4, DVec3};
+
+use octrace_format::{Camera, Light, LightKind};
+
+use super::{to_f32, Loader};
+use crate::error::{thousands, Error, Result};
+
+/// Why a scene's placements were not counted.
+pub(super) enum Placements {
+    /// The hierarchy has a cycle through this node.
+    Cycle(usize),
+    /// The placements passed the budget at this node, having reached `total`.
+    Over { node: usize, total: u64 },
+}
+
+/// How many times the scene places each node (a child listed twice, or under two
+/// parents, is placed once for each listing, its children with it), counted over the
+/// hierarchy's edges before it is walked: a small file whose nodes share children may
+/// ask for 2^60 placements.
+pub(super) fn placements(
+    document: &gltf::Document,
+    scene: &gltf::Scene<'_>,
+    limit: u64,
+) -> std::result::Result<Vec<u64>, Placements> {
+    let n = document.nodes().len();
+    let children: Vec<Vec<usize>> = document.nodes().map(|node| node.children().map(|c| c.index()).collect()).collect();
+    // Depth first from the scene's roots: the nodes reached in post-order, a cycle
+    // refused as it is met (a child already on the path).
+    let (new, open, done) = (0u8, 1u8, 2u8);
+    let mut state = vec![new; n];
+    let mut order = Vec::with_capacity(n);
+    for root in scene.nodes().map(|r| r.index()) {
+        if state[root] != new {
+            continue;
+        }
+        state[root] = open;
+        let mut path = vec![(root, 0usize)];
+        while let Some(&(node, next)) = path.last() {
+            match children[node].get(next) {
+                Some(&child) => {
+                    if let Some(top) = path.last_mut() {
+                        top.1 += 1;
+                    }
+                    if state[child] == open {
+                        return Err(Placements::Cycle(child));
+                    }
+                    if state[child] == new {
+                        state[child] = open;
+                        path.push((child, 0));
+                    }
+                }
+                None => {
+                    state[node] = done;
+                    order.push(node);
+                    path.pop();
+                }
+            }
+        }
+    }
+    // Parents before children (the reverse post-order): each node's count is whole
+    // when it is reached.
+    let mut count = vec![0u64; n];
+    for root in scene.nodes() {
+        count[root.index()] += 1;
+    }
+    let mut total = 0u64;
+    for &node in order.iter().rev() {
+        let c = count[node];
+        total = total.saturating_add(c);
+        if total > limit {
+            return Err(Placements::Over { node, total });
+        }
+        for &child in &children[node] {
+            count[child] = count[child].saturating_add(c);
+        }
+    }
+    Ok(count)
+}
+
+/// The triangles a primitive makes, from its accessors' counts (a list's indices or
+/// positions over 3; a strip's or fan's less 2; other modes none).
+fn primitive_triangles(p: &gltf::Primitive<'_>) -> u64 {
+    use gltf::mesh::Mode;
+    let vertices = p.indices().or_else(|| p.get(&gltf::Semantic::Positions)).map_or(0, |a| a.count() as u64);
+    match p.mode() {
+        Mode::Triangles => vertices / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => vertices.saturating_sub(2),
+        _ => 0,
+    }
+}
+
+/// The triangles the placed meshes make.
+pub(super) fn instanced_triangles(document: &gltf::Document, placed: &[u64]) -> u64 {
+    let per_mesh: Vec<u64> = document
+        .meshes()
+        .map(|m| m.primitives().map(|p| primitive_triangles(&p)).fold(0u64, u64::saturating_add))
+        .collect();
+    document
+        .nodes()
+        .filter_map(|node| Some(placed[node.index()].saturating_mul(per_mesh[node.mesh()?.index()])))
+        .fold(0, u64::saturating_add)
+}
+
+/// Geometry stored at least this many times over (placements of a mesh, meshes that
+/// share accessors) is named in a warning at bake, when the copies add at least
+/// [`REPEATED_MIN_TRIANGLES`].
+pub(super) const REPEATED_FACTOR: u64 = 2;
+/// Triangles the copies must add for the warning (about 0.4 MB of baked file): a few
+/// repeated triangles cost nothing worth a word.
+pub(super) const REPEATED_MIN_TRIANGLES: u64 = 4096;
+
+/// A warning when the scene's placements store its distinct geometry
+/// [`REPEATED_FACTOR`] times over or more (and [`REPEATED_MIN_TRIANGLES`] more): each placement of a mesh (and each mesh
+/// that shares another's accessors) is baked whole, one triangle each time. Names the
+/// geometry repeated most, by the triangles its copies add.
+pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Option<String> {
+    use std::collections::BTreeMap;
+    // A primitive's geometry: its positions, indices and mode. Per geometry: its
+    // triangles, the times it is placed, the first mesh that has it, the meshes that do.
+    let mut geometry: BTreeMap<(Option<usize>, Option<usize>, u32), (u64, u64, usize, Vec<usize>)> = BTreeMap::new();
+    for node in document.nodes() {
+        let (Some(mesh), times) = (node.mesh(), placed[node.index()]) else { continue };
+        for p in mesh.primitives() {
+            let key = (
+                p.get(&gltf::Semantic::Positions).map(|a| a.index()),
+                p.indices().map(|a| a.index()),
+                p.mode().as_gl_enum(),
+            );
+            let entry = geometry.entry(key).or_insert((primitive_triangles(&p), 0, mesh.index(), Vec::new()));
+            entry.1 = entry.1.saturating_add(times);
+            if times > 0 && !entry.3.contains(&mesh.index()) {
+                entry.3.push(mesh.index());
+            }
+        }
+    }
+    let distinct: u64 = geometry.values().filter(|g| g.1 > 0).map(|g| g.0).sum();
+    let stored = geometry.values().map(|g| g.0.saturating_mul(g.1)).fold(0u64, u64::saturating_add);
+    if distinct == 0 || stored < distinct.saturating_mul(REPEATED_FACTOR) || stored - distinct < REPEATED_MIN_TRIANGLES
+    {
+        return None;
+    }
+    let mut worst: Vec<_> = geometry.values().filter(|g| g.1 > 1).collect();
+    worst.sort_by_key(|g| std::cmp::Reverse(g.0.saturating_mul(g.1 - 1)));
+    let named: Vec<String> = worst
+        .iter()
+        .take(3)
+        .map(|&&(triangles, times, first, ref meshes)| {
+            let mesh = document.meshes().nth(first);
+            let name = mesh.and_then(|m| m.name()).map(|n| format!(" '{n}'")).unwrap_or_default();
+            let shared = match meshes.len() {
+                0 | 1 => String::new(),
+                n => format!(" (and {} other meshes with the same accessors)", n - 1),
+            };
+            format!("mesh {first}{name}{shared}: {} triangles placed {} times", thousands(triangles), thousands(times))
+        })
+        .collect();
+    Some(format!(
+        "the scene stores its {} triangles of distinct geometry as {} ({:.1}x): each placement is baked whole \
+         (instances, which would store a mesh once, are not baked yet); repeated most: {}",
+        thousands(distinct),
+        thousands(stored),
+        stored as f64 / distinct as f64,
+        named.join("; ")
+    ))
+}
+
+/// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
+const MAX_NODE_DEPTH: usize = 256;
+
+impl Loader<'_> {
+    pub(super) fn node(&mut self, node: &gltf::Node<'_>, parent: DMat4, depth: usize) -> Result<()> {
+        if depth > MAX_NODE_DEPTH {
+            return Err(Error::Parse {
+                path: self.path.into(),
+                element: format!("node {}", node.index()),
+                message: format!("node hierarchy deeper than {MAX_NODE_DEPTH}"),
+            });
+        }
+        let local = node.transform().matrix().map(|c| c.map(f64::from));
+        let world = parent * DMat4::from_cols_array_2d(&local);
+        if let Some(light) = node.light() {
+            self.light(&light, &world, node.index())?;
+        }
+        if let Some(camera) = node.camera() {
+            self.camera(&camera, &world, node.index());
+        }
+        if let Some(mesh) = node.mesh() {
+            for prim in mesh.primitives() {
+                let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
+                self.primitive(&prim, &world, element)?;
+                let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
+                let source = octrace_format::PartSource::Gltf {
+                    node: node.index() as u32,
+                    mesh: mesh.index() as u32,
+                    primitive: prim.index() as u32,
+                };
+                self.mesh.end_part(source, || {
+                    format!(
+                        "node {}{}, mesh {}{}, primitive {}",
+                        node.index(),
+                        quoted(node.name()),
+                        mesh.index(),
+                        quoted(mesh.name()),
+                        prim.index()
+                    )
+                });
+            }
+        }
+        for child in node.children() {
+            self.node(&child, world, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    /// A `KHR_lights_punctual` light placed by `world`: at its origin, shining along
+    /// its `-z` axis.
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light<'_>, world: &DMat4, node: usize) -> Result<()> {
+        use gltf::khr_lights_punctual::Kind;
+        let name = light.name().map_or_else(|| format!("light {}", light.index()), str::to_string);
+        let (kind, inner, outer) = match light.kind() {
+            Kind::Point => (LightKind::Point, 0.0, 0.0),
+            Kind::Directional => (LightKind::Directional, 0.0, 0.0),
+            Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                let outer = outer_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2);
+                (LightKind::Spot, inner_cone_angle.clamp(0.0, outer), outer)
+            }
+        };
+        let out = Light {
+            kind,
+            color: light.color().map(|c| c.clamp(0.0, 1.0)),
+            intensity: light.intensity().max(0.0),
+            position: to_f32(world.transform_point3(DVec3::ZERO)),
+            direction: to_f32(world.transform_vector3(DVec3::NEG_Z).normalize_or_zero()),
+            range: light.range().filter(|r| *r > 0.0).unwrap_or(f32::INFINITY),
+            inner_cone: inner,
+            outer_cone: outer,
+            name,
+        };
+        let numbers = out.color.iter().chain(&out.position).chain(&out.direction).chain([&out.intensity]);
+        if numbers.into_iter().any(|v| !v.is_finite()) || out.range.is_nan() || out.direction == [0.0; 3] {
+            return Err(Error::Parse {
+                path: self.path.into(),
+                element: format!("node {node}, light '{}'", out.name),
+                message: "a value is not finite, or the node's transform collapses the light's direction".into(),
+            });
+        }
+        self.mesh.lights.push(out);
+        Ok(())
+    }
+
+    /// A camera placed by `world` (glTF cameras look along `-z`, up `+y`), perspective
+    /// or orthographic (its `ymag` the half height of view, `xmag / ymag` the aspect);
+    /// a degenerate transform or view is skipped with a warning.
+    fn camera(&mut self, camera: &gltf::Camera<'_>, world: &DMat4, node: usize) {
+        let name = camera.name().map_or_else(|| format!("camera {}", camera.index()), str::to_string);
+        let (yfov, aspect, orthographic) = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => (p.yfov(), p.aspect_ratio(), None),
+            // yfov is unused by an orthographic camera; it holds a valid angle.
+            gltf::camera::Projection::Orthographic(o) => {
+                (std::f32::consts::FRAC_PI_4, Some(o.xmag().abs() / o.ymag().abs()), Some(o.ymag().abs()))
+            }
+        };
+        let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
+        let up = world.transform_vector3(DVec3::Y);
+        let up = (up - forward * up.dot(forward)).normalize_or_zero();
+        let out = Camera {
+            position: to_f32(world.transform_point3(DVec3::ZERO)),
+            forward: to_f32(forward),
+            up: to_f32(up),
+            yfov,
+            aspect,
+            orthographic,
+            name,
+        };
+        let finite = out.position.iter().chain([&out.yfov]).chain(out.aspect.as_ref()).all(|v| v.is_finite());
+        let fov_ok = out.yfov > 0.0 && out.yfov < std::f32::consts::PI && out.aspect.is_none_or(|a| a > 0.0);
+        let ortho_ok = out.orthographic.is_none_or(|h| h.is_finite() && h > 0.0);
+        if !finite || !fov_ok || !ortho_ok || forward == DVec3::ZERO || up == DVec3::ZERO {
+            self.mesh.warnings.push(format!(
+                "{}: node {node}: camera '{}' skipped (degenerate transform or field of view)",
+                self.path.display(),
+                out.name
+            ));
+            return;
+        }
+        self.mesh.cameras.push(out);
+    }
+}
