@@ -8,7 +8,7 @@ use glam::DVec3;
 use octrace_format::{Effect, Shading};
 use octrace_runtime::gpu::GpuRenderer;
 use octrace_runtime::raysets::{Camera, Frame};
-use octrace_runtime::render::effects::{render_effects, EffectSet, RayCounts, RayKind, RenderOptions};
+use octrace_runtime::render::effects::{render_effects, EffectSet, Environment, RayCounts, RayKind, RenderOptions};
 use octrace_runtime::render::{render, RenderMode};
 use octrace_runtime::Scene;
 
@@ -21,7 +21,11 @@ shadows, soft shadows, reflection, refraction, alpha. Turn some off with --effec
 
   octrace render scene.oct -o fast.png --effects -soft-shadows,-reflection --stats
 
-A scene without lights is lit by a headlight at the camera, without shadow rays.
+A scene without lights is lit by a headlight at the camera, without shadow rays. A
+scene lit only by emissive surfaces also gets a neutral environment (uniform, radiance
+0.5), as glTF viewers light it; --environment none renders direct light only, and
+--environment 0.8 gives any scene a uniform environment of that radiance instead of
+the headlight.
 --stats prints the rays traced per kind (primary, shadow, soft_shadow, reflection,
 refraction, alpha); --json prints the same as JSON.
 
@@ -64,6 +68,11 @@ pub(crate) struct Args {
     /// Shadow rays towards area lights per shading point (soft shadows), 1 to 4096.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub soft_samples: u32,
+    /// Light from all around: `auto` (a neutral environment of radiance 0.5 for scenes
+    /// lit only by emissive surfaces), `none` (direct light only), or a radiance such as
+    /// `0.8` (a uniform environment for any scene, instead of the headlight).
+    #[arg(long, default_value = "auto", value_parser = parse_environment)]
+    pub environment: Environment,
     /// Secondary rays (reflection, refraction, alpha) a path may take, at most 31.
     #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=31))]
     pub max_depth: u32,
@@ -85,6 +94,17 @@ pub(crate) enum Mode {
     Shaded,
     Normals,
     Cells,
+}
+
+fn parse_environment(s: &str) -> Result<Environment, String> {
+    match s {
+        "auto" => Ok(Environment::Auto),
+        "none" => Ok(Environment::Off),
+        _ => match s.parse::<f32>() {
+            Ok(x) if x.is_finite() && x >= 0.0 => Ok(Environment::Uniform(x)),
+            _ => Err(format!("expected auto, none or a radiance (a number, 0 or more), got '{s}'")),
+        },
+    }
 }
 
 fn parse_vec3(s: &str) -> Result<DVec3, String> {
@@ -168,7 +188,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     for n in &notes {
         eprintln!("effects: {n}");
     }
-    let options = RenderOptions { effects, max_depth: args.max_depth, soft_samples: args.soft_samples.max(1) };
+    let options = RenderOptions {
+        effects,
+        max_depth: args.max_depth,
+        soft_samples: args.soft_samples.max(1),
+        environment: args.environment,
+    };
     let gpu = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;

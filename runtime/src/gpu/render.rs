@@ -60,7 +60,9 @@ pub(super) struct RenderParams {
     has_tangents: u32,
     /// Words a texture-coordinate channel takes (six a triangle).
     uv_channel_words: u32,
-    pad: u32,
+    /// The environment's radiance (`Environment`), read where the `ENVIRONMENT`
+    /// constant is set.
+    environment: f32,
 }
 
 #[cfg(test)]
@@ -138,12 +140,17 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let chunk_bytes = tracer.scene_buffers.first().map_or(0, wgpu::Buffer::size);
         super::check_bindings(&limits, chunks, (storage + 3, buffers + 4), scene_bytes, chunk_bytes)?;
         let texels = tracer.scene().view().texels.check().map_err(|e| GpuError::Scene(e.to_string()))?;
-        let (words, mut params, headlight) = shading_words(tracer.scene(), texels);
+        let (words, mut params, lit) = shading_words(tracer.scene(), texels);
+        let (headlight, environment) = options.environment.resolve(lit.lights, lit.untextured, lit.need_headlight);
+        params.environment = environment.unwrap_or(0.0);
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
-                "{} MB of shading data (materials, lights, material ids, normals); one binding holds {} MB",
+                "{} MB of shading data, {} MB of them the texels of {} textures (the rest materials, lights, \
+                 material ids, normals, texture coordinates); one binding holds {} MB",
                 4 * words.len() / 1_000_000,
+                4 * texels.len() / 1_000_000,
+                tracer.scene().shading().textures.len(),
                 limit / 1_000_000
             )));
         }
@@ -159,7 +166,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             bind_group_layouts: &[Some(&tracer.layout), Some(&render_layout)],
             immediate_size: 0,
         });
-        let mut constants = overrides(options.effects, headlight);
+        let mut constants = overrides(options.effects, headlight, environment.is_some());
         constants.push(("FANS", tracer.fans_constant()));
         let pipeline =
             tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
@@ -260,7 +267,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
 }
 
 /// The pipeline constants for `effects` (`SHADOWS`, ... in render.wgsl).
-fn overrides(effects: EffectSet, headlight: bool) -> Vec<(&'static str, f64)> {
+fn overrides(effects: EffectSet, headlight: bool, environment: bool) -> Vec<(&'static str, f64)> {
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
     let mut constants: Vec<(&'static str, f64)> = [
         ("SHADOWS", Effect::Shadows),
@@ -273,12 +280,21 @@ fn overrides(effects: EffectSet, headlight: bool) -> Vec<(&'static str, f64)> {
     .map(|(name, e)| (name, flag(effects.contains(e))))
     .collect();
     constants.push(("HEADLIGHT", flag(headlight)));
+    constants.push(("ENVIRONMENT", flag(environment)));
     constants
 }
 
+/// What decides how a scene is lit besides its lights and emitters
+/// ([`Environment::resolve`](crate::render::effects::Environment)'s inputs).
+struct SceneLighting {
+    lights: usize,
+    untextured: bool,
+    need_headlight: bool,
+}
+
 /// The words of the kernel's `shade` binding, the parameters that locate them, and
-/// whether the scene is lit by the headlight.
-fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool) {
+/// what decides whether the headlight or the environment lights the scene.
+fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, SceneLighting) {
     let view = scene.view();
     let shading = view.shading;
     let mut words: Vec<u32> = Vec::new();
@@ -351,8 +367,12 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, bool
     if words.is_empty() {
         words.push(0);
     }
-    let headlight = emitters.need_headlight(&shading.lights);
-    (words, params, headlight)
+    let lit = SceneLighting {
+        lights: shading.lights.len(),
+        untextured: emitters.untextured(),
+        need_headlight: emitters.need_headlight(&shading.lights),
+    };
+    (words, params, lit)
 }
 
 /// A material's record: the values shading derives from it, computed here by the

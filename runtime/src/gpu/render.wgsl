@@ -20,6 +20,8 @@ override REFRACTION: bool = true;
 override ALPHA: bool = true;
 // No light and no emitter: a headlight at the camera, no shadow rays.
 override HEADLIGHT: bool = false;
+// A uniform environment of radiance rp.environment (effects.rs, `Environment`).
+override ENVIRONMENT: bool = false;
 
 struct RenderParams {
     // xyz: the eye (unused: the primary rays come in `pixel_io`).
@@ -60,7 +62,8 @@ struct RenderParams {
     has_tangents: u32,
     // Words a texture-coordinate channel takes (six a triangle), channel after channel.
     uv_channel_words: u32,
-    pad: u32,
+    // The environment's radiance, each channel (read when ENVIRONMENT).
+    environment: f32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
@@ -495,7 +498,7 @@ fn spawn_origin(sp: SpawnPoint, d: vec3<f32>) -> vec3<f32> {
     return o;
 }
 
-// runtime/src/render/lighting.rs, uniform2: Wellons' lowbias32.
+// runtime/src/render/lighting.rs, hash32: Wellons' lowbias32.
 fn hash32(x0: u32) -> u32 {
     var x = x0;
     x ^= x >> 16u;
@@ -505,10 +508,13 @@ fn hash32(x0: u32) -> u32 {
     return x ^ (x >> 16u);
 }
 
-fn uniform2(pixel: u32, depth: u32, sample: u32) -> vec2<f32> {
-    let a = hash32(sample + hash32(depth + hash32(pixel)));
+// lighting::stratified2: point k of the Kronecker sequence (lighting::KRONECKER's
+// steps), rotated per pixel and depth.
+fn stratified2(pixel: u32, depth: u32, k: u32) -> vec2<f32> {
+    let a = hash32(depth + hash32(pixel));
     let b = hash32(a);
-    return vec2<f32>(f32(a >> 8u), f32(b >> 8u)) * (1.0 / 16777216.0);
+    let x = vec2<u32>(a + k * 0xc13fa9a9u, b + k * 0x91e10da6u);
+    return vec2<f32>(f32(x.x >> 8u), f32(x.y >> 8u)) * (1.0 / 16777216.0);
 }
 
 // lighting::power: x^e for the highlight, with lighting.rs's operations in its order
@@ -781,9 +787,8 @@ fn punctual(s: Surface, i: u32, p: vec3<f32>) {
     light(s, to_light, 1.0, colour * falloff, SHADOW);
 }
 
-// Emitters::pick: the emitter whose running area passes u * total.
-fn pick_emitter(u: f32) -> u32 {
-    let target_area = u * rp.emitter_area;
+// Emitters::pick: the emitter whose running area passes target_area (u * total).
+fn pick_emitter(target_area: f32) -> u32 {
     var lo = 0u;
     var hi = rp.emitter_count;
     while lo < hi && tick() {
@@ -805,7 +810,19 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
     }
     let scale = div(rp.emitter_area, f32(samples));
     for (var k = 0u; k < samples && tick(); k++) {
-        let e = pick_emitter(uniform2(pixel, depth, 2u * k).x);
+        let point = stratified2(pixel, depth, k);
+        let target_area = point.x * rp.emitter_area;
+        let e = pick_emitter(target_area);
+        // Where the point falls along the emitter (Emitters::pick's `within`).
+        var lo_area = 0.0;
+        if e > 0u {
+            lo_area = sf(rp.o_emitters + 4u * (e - 1u) + 3u);
+        }
+        let hi_area = sf(rp.o_emitters + 4u * e + 3u);
+        var within = 0.5;
+        if hi_area > lo_area {
+            within = clamp(div(target_area - lo_area, hi_area - lo_area), 0.0, 1.0);
+        }
         var emitted = sv3(rp.o_emitters + 4u * e);
         let prim = shade[rp.o_emitters + 4u * rp.emitter_count + e];
         let a = vertex(prim, 0u);
@@ -816,11 +833,14 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
         var wb = 1.0 / 3.0;
         var wc = 1.0 / 3.0;
         if SOFT_SHADOWS {
-            let uv = uniform2(pixel, depth, 2u * k + 1u);
-            let r = root(uv.x);
-            wb = r * (1.0 - uv.y);
-            wc = r * uv.y;
-            y = a * (1.0 - r) + b * wb + c * wc;
+            // (within, across), folded into the triangle past its diagonal.
+            wb = within;
+            wc = point.y;
+            if wb + wc > 1.0 {
+                wb = 1.0 - within;
+                wc = 1.0 - point.y;
+            }
+            y = a * (1.0 - wb - wc) + b * wb + c * wc;
         } else {
             y = div3(a + b + c, 3.0);
         }
@@ -889,6 +909,10 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     s.transmits = REFRACTION && s.m.transmission > 0.0;
     add_light(s.weight * s.m.emissive);
     let p = s.sp.point;
+    if ENVIRONMENT {
+        let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
+        add_light(s.weight * kd * (rp.environment * s.m.occlusion));
+    }
     if HEADLIGHT {
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
         add_light(s.weight * kd * (HEADLIGHT_AMBIENT * s.m.occlusion + HEADLIGHT_DIRECT * abs(dot3(s.n, s.v))));
@@ -949,7 +973,12 @@ fn render_pixel(pixel: u32, o: vec3<f32>, d: vec3<f32>) {
         counts[task.kind] += 1u;
         let hit = trace(task.o, task.d, 0.0, inf(), false);
         if hit.triangle == MISS {
-            add_light(task.weight * BACKGROUND);
+            // Context::background: the environment, else the background.
+            var background = BACKGROUND;
+            if ENVIRONMENT {
+                background = vec3<f32>(rp.environment);
+            }
+            add_light(task.weight * background);
         } else {
             shade_hit(task, hit, pixel, &sp);
         }

@@ -146,12 +146,59 @@ pub struct RenderOptions {
     /// Shadow rays towards area lights per shading point (per pixel for the surfaces
     /// the camera sees).
     pub soft_samples: u32,
+    /// The light that comes from all around ([`Environment`]).
+    pub environment: Environment,
 }
 
 impl RenderOptions {
-    /// Every effect the scene calls for, depth 6, 16 soft-shadow samples.
+    /// Every effect the scene calls for, depth 6, 16 soft-shadow samples, the
+    /// environment [`Environment::Auto`] decides.
     pub fn for_scene(shading: &Shading) -> RenderOptions {
-        RenderOptions { effects: EffectSet::of(shading), max_depth: 6, soft_samples: 16 }
+        RenderOptions {
+            effects: EffectSet::of(shading),
+            max_depth: 6,
+            soft_samples: 16,
+            environment: Environment::Auto,
+        }
+    }
+}
+
+/// Light from all around the scene: a uniform, neutral sky of a given radiance, which
+/// every surface receives times its diffuse albedo and its occlusion texture (no
+/// shadow rays: an ambient term, as glTF viewers' image-based light looks on a diffuse
+/// surface), and which rays that leave the scene see.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Environment {
+    /// [`DEFAULT_ENVIRONMENT`] for scenes lit only by emissive surfaces (no punctual
+    /// light; an emitter whose emission does not come through a texture), which glTF
+    /// viewers light with their neutral environment: without it the surfaces that face
+    /// away from the emitters are black. Scenes with punctual lights get none (their
+    /// lights are what their authors set), scenes without lights the headlight.
+    #[default]
+    Auto,
+    /// None: direct light only (the lights, the emitters, or the headlight), rays that
+    /// leave the scene see the dark background.
+    Off,
+    /// A uniform environment of this radiance (each channel), for any scene; the
+    /// headlight is then off.
+    Uniform(f32),
+}
+
+/// The radiance of the neutral environment [`Environment::Auto`] gives.
+pub const DEFAULT_ENVIRONMENT: f32 = 0.5;
+
+impl Environment {
+    /// What lights the scene besides its lights and emitters: whether the headlight
+    /// does, and the environment's radiance, if any. `need_headlight`: the scene has no
+    /// punctual light and no emitter but those whose emission comes through a texture
+    /// ([`Emitters::need_headlight`]). The CPU renderer and the GPU kernel both ask this.
+    pub(crate) fn resolve(self, lights: usize, emitters_untextured: bool, need_headlight: bool) -> (bool, Option<f32>) {
+        let environment = match self {
+            Environment::Off => None,
+            Environment::Uniform(radiance) => Some(radiance.max(0.0)),
+            Environment::Auto => (lights == 0 && emitters_untextured).then_some(DEFAULT_ENVIRONMENT),
+        };
+        (need_headlight && environment.is_none(), environment)
     }
 }
 
@@ -229,6 +276,8 @@ struct Context<'a> {
     options: RenderOptions,
     emitters: Emitters,
     headlight: bool,
+    /// The environment's radiance ([`Environment`]), if any.
+    environment: Option<f32>,
 }
 
 /// Colour of rays that leave the scene.
@@ -359,8 +408,17 @@ pub(crate) fn render_pixels(
 impl<'a> Context<'a> {
     fn new(view: SceneView<'a>, camera: &'a Camera, options: &RenderOptions) -> Context<'a> {
         let emitters = Emitters::of(&view);
-        let headlight = emitters.need_headlight(&view.shading.lights);
-        Context { view, camera, options: *options, emitters, headlight }
+        let (headlight, environment) = options.environment.resolve(
+            view.shading.lights.len(),
+            emitters.untextured(),
+            emitters.need_headlight(&view.shading.lights),
+        );
+        Context { view, camera, options: *options, emitters, headlight, environment }
+    }
+
+    /// What a ray that leaves the scene sees: the environment, else the background.
+    fn background(&self) -> Vec3 {
+        self.environment.map_or(BACKGROUND, Vec3::splat)
     }
 
     fn has(&self, effect: Effect) -> bool {
@@ -392,7 +450,7 @@ impl<'a> Context<'a> {
             for (task, hit) in wave.iter().zip(hits) {
                 let sum = &mut out[(task.pixel - first) as usize];
                 match hit {
-                    None => sum.add(task.weight * BACKGROUND),
+                    None => sum.add(task.weight * self.background()),
                     Some(hit) => self.shade(task, &hit, sum, &mut next, &mut shadows),
                 }
                 // Shadow rays in chunks, whatever the number of lights: a tile's memory
@@ -518,6 +576,12 @@ impl<'a> Context<'a> {
         let v = -dir;
         let transmits = self.has(Effect::Refraction) && m.transmission > 0.0;
         sum.add(weight * Vec3::from(m.emissive));
+        if let Some(environment) = self.environment {
+            // The environment, all around: an ambient term, darkened by the occlusion
+            // texture as the headlight's is.
+            let occlusion = self.view.occlusion_at(m, hit.prim, hit.u, hit.v);
+            sum.add(weight * lighting::albedo(m, transmits) * (environment * occlusion));
+        }
         if self.headlight {
             let (ambient, direct) = HEADLIGHT;
             // The occlusion texture darkens the ambient part, the light from all around.
@@ -558,22 +622,19 @@ impl<'a> Context<'a> {
     }
 
     /// Light from emissive triangles: `soft_samples` points spread over them by area
-    /// with soft shadows, else the centre of one (hard shadows).
+    /// with soft shadows (stratified: [`lighting::stratified2`]), else the centre of
+    /// one (hard shadows).
     fn sample_area_lights(&self, task: &Task, p: Vec3, light: &mut impl FnMut(Vec3, f32, Vec3, RayKind)) {
         let soft = self.has(Effect::SoftShadows);
         let samples = if soft { self.options.soft_samples.max(1) } else { 1 };
         let scale = self.emitters.area() / samples as f32;
         for s in 0..samples {
-            let (pick, _) = lighting::uniform2(task.pixel, task.depth, 2 * s);
-            let (prim, emitted) = self.emitters.pick(pick);
+            let [along, across] = lighting::stratified2(task.pixel, task.depth, s);
+            let (prim, emitted, within) = self.emitters.pick(along);
             let tri = self.view.triangle(StoredIndex(prim));
             let [a, b, c] = tri.map(Vec3::from);
-            let (y, [bu, bv]) = if soft {
-                let (u, v) = lighting::uniform2(task.pixel, task.depth, 2 * s + 1);
-                lighting::point_on(&tri, u, v)
-            } else {
-                ((a + b + c) / 3.0, [1.0 / 3.0; 2])
-            };
+            let (y, [bu, bv]) =
+                if soft { lighting::point_on(&tri, within, across) } else { ((a + b + c) / 3.0, [1.0 / 3.0; 2]) };
             // The emission where the point is, through the material's emissive texture.
             let m = self.material(StoredIndex(prim));
             let emitted = if m.emissive_texture.is_some() {

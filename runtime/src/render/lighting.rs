@@ -232,6 +232,11 @@ impl Emitters {
         lights.is_empty() && !self.untextured
     }
 
+    /// Whether some emitter's emission does not come through a texture.
+    pub(crate) fn untextured(&self) -> bool {
+        self.untextured
+    }
+
     /// Whether the scene has area lights.
     pub(crate) fn is_empty(&self) -> bool {
         self.triangles.is_empty()
@@ -243,11 +248,16 @@ impl Emitters {
     }
 
     /// The emitter that `u` in `[0, 1)` falls on when the emitters are laid end to
-    /// end by area: its triangle and radiance.
-    pub(crate) fn pick(&self, u: f32) -> (u32, Vec3) {
+    /// end by area: its triangle and radiance, and where `u` falls within it, in
+    /// `[0, 1]` (so one number both picks the emitter and places the point along it,
+    /// and points evenly spread in `u` stay evenly spread over the emitters' area).
+    pub(crate) fn pick(&self, u: f32) -> (u32, Vec3, f32) {
         let target = u * self.area();
         let i = self.cumulative.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
-        self.triangles[i]
+        let (lo, hi) = (if i == 0 { 0.0 } else { self.cumulative[i - 1] }, self.cumulative[i]);
+        let within = if hi > lo { ((target - lo) / (hi - lo)).clamp(0.0, 1.0) } else { 0.5 };
+        let (prim, emitted) = self.triangles[i];
+        (prim, emitted, within)
     }
 
     /// Each emitter's triangle, radiance and running area sum, in pick order.
@@ -264,22 +274,47 @@ pub(crate) fn area(t: &[[f32; 3]; 3]) -> f32 {
 }
 
 /// A point of triangle `t`, uniform in area, from two uniform numbers, and its
-/// barycentrics (the weights of the second and third corners).
+/// barycentrics (the weights of the second and third corners): `(u, v)` themselves,
+/// folded into the triangle where `u + v > 1` (the unit square's other half, turned
+/// about its centre). The map keeps small squares compact (where a square root's would
+/// stretch them into thin wedges from the first corner), so evenly spread numbers give
+/// evenly spread points.
 pub(crate) fn point_on(t: &[[f32; 3]; 3], u: f32, v: f32) -> (Vec3, [f32; 2]) {
     let [a, b, c] = t.map(Vec3::from);
-    let s = u.sqrt();
-    let (wb, wc) = (s * (1.0 - v), s * v);
-    (a * (1.0 - s) + b * wb + c * wc, [wb, wc])
+    let (wb, wc) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+    (a * (1.0 - wb - wc) + b * wb + c * wc, [wb, wc])
 }
 
-/// Uniform numbers in `[0, 1)` that depend only on their inputs, so an image does not
-/// depend on the thread count or the order pixels are done in. 32-bit integer hashing
-/// only (Wellons' `lowbias32`), so the GPU kernel draws the same numbers.
+/// Independent uniform numbers in `[0, 1)` that depend only on their inputs (Wellons'
+/// `lowbias32`): what the area lights were sampled with before `stratified2`, kept to
+/// measure it against.
+#[cfg(test)]
 pub(crate) fn uniform2(pixel: u32, depth: u32, sample: u32) -> (f32, f32) {
     let a = hash32(sample.wrapping_add(hash32(depth.wrapping_add(hash32(pixel)))));
     let b = hash32(a);
     let unit = |bits: u32| (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
     (unit(a), unit(b))
+}
+
+/// The additive steps of the two-dimensional Kronecker sequence [`stratified2`]
+/// walks: `1 / p` and `1 / p^2`, `p` the plastic number (the root of `x^3 = x + 1`:
+/// Roberts' R2 sequence), in 32-bit fixed point. The GPU kernel has the same words.
+pub(crate) const KRONECKER: [u32; 2] = [0xc13f_a9a9, 0x91e1_0da6];
+
+/// Point `k` of a sequence of points in `[0, 1)^2` that fills the square evenly for
+/// every count of points (a Kronecker sequence, rotated by an offset hashed from the
+/// pixel and the depth, Cranley and Patterson's randomisation): the area lights'
+/// samples, the first number placing the point along the emitters laid end to end by
+/// area ([`Emitters::pick`]), the second across. Where the light varies smoothly its
+/// error falls nearly as `1/n` rather than independent numbers' `1/sqrt(n)` (BENCHMARKS,
+/// "Environment and area-light samples"). 32-bit integer additions only, so the GPU
+/// kernel draws the same points.
+pub(crate) fn stratified2(pixel: u32, depth: u32, k: u32) -> [f32; 2] {
+    let a = hash32(depth.wrapping_add(hash32(pixel)));
+    let b = hash32(a);
+    let unit = |bits: u32| (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+    let [ka, kb] = KRONECKER;
+    [unit(a.wrapping_add(k.wrapping_mul(ka))), unit(b.wrapping_add(k.wrapping_mul(kb)))]
 }
 
 /// Chris Wellons' `lowbias32` integer hash.
@@ -294,6 +329,56 @@ fn hash32(mut x: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The area lights' stratified samples estimate what an emitter sends with less
+    /// noise than independent numbers: a unit square emitter (two triangles) one unit
+    /// above a point facing it, 16 samples a pixel, over 2,000 pixels; the error's root
+    /// mean square against the exact irradiance is under 3/4 of independent samples'
+    /// (measured: 0.6 of it).
+    #[test]
+    fn stratified_samples_are_less_noisy_than_independent_ones() {
+        let tris = [
+            [[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.0]],
+            [[-0.5, -0.5, 1.0], [0.5, 0.5, 1.0], [-0.5, 0.5, 1.0]],
+        ];
+        // What one sample brings to the origin, facing +z: cos cos / d^2, times the
+        // area (1) over the samples; `pick` chooses the triangle as `Emitters::pick`
+        // does, and where within it.
+        let sample = |pick: f32, u: f32, v: f32| {
+            let t = &tris[usize::from(pick >= 0.5)];
+            let (y, _) = point_on(t, u, v);
+            (y.z * y.z / y.length_squared().powi(2)) as f64
+        };
+        // The exact irradiance of a square of side 1 at distance 1, centred above:
+        // 4 atan(a / sqrt(1 + a^2)) a / sqrt(1 + a^2), a = 1/2 (Howell's C-11), over pi,
+        // times pi for cos-weighted radiance 1.
+        let a: f64 = 0.5;
+        let exact = 4.0 * a / (1.0 + a * a).sqrt() * (a / (1.0 + a * a).sqrt()).atan();
+        let n = 16;
+        let (mut stratified, mut independent) = (0.0f64, 0.0f64);
+        for pixel in 0..2000 {
+            let s: f64 = (0..n)
+                .map(|k| {
+                    let [pick, v] = stratified2(pixel, 0, k);
+                    sample(pick, (2.0 * pick).fract(), v)
+                })
+                .sum::<f64>()
+                / n as f64;
+            let i: f64 = (0..n)
+                .map(|k| {
+                    let (pick, _) = uniform2(pixel, 0, 2 * k);
+                    let (u, v) = uniform2(pixel, 0, 2 * k + 1);
+                    sample(pick, u, v)
+                })
+                .sum::<f64>()
+                / n as f64;
+            stratified += (s - exact).powi(2);
+            independent += (i - exact).powi(2);
+        }
+        let (stratified, independent) = ((stratified / 2000.0).sqrt(), (independent / 2000.0).sqrt());
+        eprintln!("exact {exact}: rms error stratified {stratified:e}, independent {independent:e}");
+        assert!(stratified < 0.75 * independent, "stratified {stratified:e}, independent {independent:e}");
+    }
 
     /// `power` against `f64`'s `powf` over the cosines and exponents highlights use:
     /// within its documented bound; exact at 1 and for `e = 1`; zero for no cosine

@@ -1,6 +1,6 @@
 //! The GPU tracer (wgpu, Vulkan) gives the CPU's answers, ray for ray.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use octrace_runtime::gpu::{GpuOptions, GpuTracer};
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::ZERO_T_SPACINGS;
@@ -732,5 +732,29 @@ fn fans_trace_on_the_gpu_as_on_the_cpu_and_test_few_triangles() {
                 assert!(gpu_tests * 5 < all_tests, "{label}: {gpu_tests} of {all_tests}");
             }
         }
+    }
+}
+
+/// The environment on the GPU (issue 45, item 2): a scene lit only by an emissive
+/// panel, with the neutral environment (auto) and without it, and a headlight scene
+/// given a uniform one: the CPU's rays of every kind (soft shadows sampled at the same
+/// stratified points) and its image.
+#[test]
+fn the_environment_renders_on_the_gpu_as_on_the_cpu() {
+    use octrace_runtime::render::effects::{Environment, RayKind, RenderOptions};
+    let test = "the_environment_renders_on_the_gpu_as_on_the_cpu";
+    let Some(ctx) = gpu(test) else { return };
+    let cases = [
+        ("emitters only, auto", crate::environment::lit_from_above(), Environment::Auto),
+        ("emitters only, off", crate::environment::lit_from_above(), Environment::Off),
+        ("headlight scene, uniform", crate::effects::base_scene(|_| {}), Environment::Uniform(0.8)),
+    ];
+    for (name, mesh, environment) in cases {
+        let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+        let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+        let options = RenderOptions { environment, soft_samples: 4, ..RenderOptions::for_scene(scene.shading()) };
+        let camera = raysets::Camera::look_at(DVec3::new(0.0, 3.0, 5.0), DVec3::new(0.0, 0.5, 0.0), 50.0, 64, 64);
+        let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
+        assert_eq!(counts.get(RayKind::SoftShadow) > 0, name.starts_with("emitters"), "{name}: {counts:?}");
     }
 }

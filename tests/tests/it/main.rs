@@ -5,6 +5,7 @@ mod budgets;
 mod bunny;
 mod crossings;
 mod effects;
+mod environment;
 mod format;
 mod gltf_lenient;
 mod gpu;
