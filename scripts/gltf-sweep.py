@@ -137,11 +137,20 @@ REQUIRED = re.compile(r"requires extension '([^']+)'")
 MISSING = re.compile(r"not read: No such file or directory")
 
 
+def input_bytes(path):
+    """The input's size: a GLB's file; a .gltf's folder (its buffers and images beside it,
+    as the samples lay them out: one variant a folder)."""
+    if path.lower().endswith(".glb"):
+        return os.path.getsize(path)
+    folder = os.path.dirname(path)
+    return sum(os.path.getsize(os.path.join(folder, n)) for n in os.listdir(folder) if os.path.isfile(os.path.join(folder, n)))
+
+
 def sweep_file(path, args, out_dir, index):
     """Bake, inspect and render one file: a row of the table."""
     base = os.path.join(out_dir, "%03d" % index)
     baked, image = base + ".oct", base + ".png"
-    row = {"file": os.path.relpath(path, args.folder), "input_bytes": os.path.getsize(path)}
+    row = {"file": os.path.relpath(path, args.folder), "input_bytes": input_bytes(path)}
     status, seconds, peak, err = run_measured([args.octrace, "bake", path, "-o", baked], args.timeout, args.memory)
     row.update(bake=status, bake_s=round(seconds, 3), bake_mib=round(peak, 1))
     row["warnings"] = [l[len("warning: ") :] for l in err.splitlines() if l.startswith("warning: ")]

@@ -2,14 +2,18 @@
 """Measures a render's noise: the root mean square difference, in 8-bit levels, between
 renders at a few soft-shadow sample counts and a reference of many samples.
 
-    scripts/render-noise.py SCENE.oct [--octrace BIN ...] [--samples 4,16,64]
+    scripts/render-noise.py SCENE [--octrace BIN ...] [--samples 4,16,64]
                             [--reference 1024] [--width 256] [--reference-octrace BIN]
                             [-- RENDER OPTIONS]
 
-Each --octrace (repeatable) renders SCENE at each sample count; all are compared with
+SCENE is a baked .oct, or a mesh each build bakes itself (so builds of different
+format versions can be compared). Each --octrace (repeatable) renders it at each
+sample count; all are compared with
 one reference rendered by --reference-octrace (default: the first --octrace), so two
 builds' samplers can be measured against the same image (an unbiased sampler converges
-to it). Options after `--` go to every render (e.g. --environment none).
+to it). Options after `--` go to every render; a build given as "BIN OPTIONS" adds its
+own (e.g. --octrace "target/release/octrace --environment none" beside an older
+build that has no --environment).
 
 Only the Python standard library is used.
 """
@@ -31,8 +35,22 @@ def load_png_module():
     return module
 
 
-def render(octrace, scene, samples, width, extra, out):
-    cmd = [octrace, "render", scene, "-o", out, "--width", str(width), "--soft-samples", str(samples)] + extra
+def baked(octrace, scene, work):
+    """SCENE itself when it is a baked file, else SCENE baked by this build (builds of
+    other format versions each read their own)."""
+    if scene.endswith(".oct"):
+        return scene
+    out = os.path.join(work, "%x.oct" % abs(hash(octrace)))
+    if not os.path.exists(out):
+        subprocess.run([octrace, "bake", scene, "-o", out], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return out
+
+
+def render(build, scene, samples, width, extra, out):
+    # A build is a binary, optionally followed by options of its own for `render`.
+    octrace, *own = build.split()
+    scene = baked(octrace, scene, os.path.dirname(out))
+    cmd = [octrace, "render", scene, "-o", out, "--width", str(width), "--soft-samples", str(samples)] + own + extra
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 

@@ -82,7 +82,7 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "range": l.range.is_finite().then_some(l.range),
             })).collect::<Vec<_>>(),
             "cameras": v.shading.cameras.iter().enumerate().map(|(i, c)| json!({
-                "index": i, "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
+                "index": c.number(i), "gltf_camera": c.gltf_camera, "placement": i, "name": c.name, "position": c.position, "forward": c.forward, "up": c.up,
                 "projection": if c.orthographic.is_some() { "orthographic" } else { "perspective" },
                 "yfov": c.orthographic.is_none().then_some(c.yfov), "aspect": c.aspect,
                 "orthographic_height": c.orthographic.map(|h| 2.0 * h),

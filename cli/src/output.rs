@@ -126,17 +126,55 @@ pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
 /// Writes a command's data to `path` as `octrace_format::write_atomically` does (a
 /// symbolic link is written through, a FIFO or device written into, a regular file
 /// replaced whole), or to standard output for `-`.
+///
+/// Data that does not all reach standard output is an error (exit 1): a closed
+/// standard output (which Rust's `stdout` would let the writes pass into silently), a
+/// pipe its reader closed early (not the broken pipe that text output treats as
+/// success: the data is the command's result), a full disk.
 pub(crate) fn write_data(path: &std::path::Path, parts: &[&[u8]]) -> anyhow::Result<()> {
     use std::io::Write as _;
     if is_stdout(path) {
+        let total: usize = parts.iter().map(|p| p.len()).sum();
+        anyhow::ensure!(
+            stdout_is_open(),
+            "standard output is closed: the {} bytes of -o - were not written",
+            thousands(total as u64)
+        );
         let mut out = std::io::stdout().lock();
-        for part in parts {
+        let mut written = 0usize;
+        let result = parts.iter().try_for_each(|part| {
             out.write_all(part)?;
-        }
-        out.flush()?;
+            written += part.len();
+            Ok(())
+        });
+        // The error's text only: a broken pipe here is a failure, not the quiet end
+        // `main` gives text output whose reader stopped reading.
+        result.and_then(|()| out.flush()).map_err(|e: std::io::Error| {
+            anyhow::anyhow!(
+                "writing -o - to standard output failed after {} of {} bytes: {e}",
+                thousands(written as u64),
+                thousands(total as u64)
+            )
+        })?;
         return Ok(());
     }
     Ok(octrace_format::write_atomically(path, parts)?)
+}
+
+/// Whether standard output was open when the process started. Rust's runtime opens
+/// `/dev/null` read-write on a standard descriptor that is closed at start (so that no
+/// file the program opens lands there), and writes to it then vanish: this looks for
+/// that descriptor (a shell's `> /dev/null` opens it write-only, and stays a success).
+/// True where the system does not say (no `/proc`).
+fn stdout_is_open() -> bool {
+    let Ok(target) = std::fs::read_link("/proc/self/fd/1") else { return true };
+    if target != std::path::Path::new("/dev/null") {
+        return true;
+    }
+    let Ok(info) = std::fs::read_to_string("/proc/self/fdinfo/1") else { return true };
+    let flags = info.lines().find_map(|l| l.strip_prefix("flags:")).and_then(|f| u32::from_str_radix(f.trim(), 8).ok());
+    // O_ACCMODE: 2 is O_RDWR.
+    flags.is_none_or(|f| f & 3 != 2)
 }
 
 /// Refuses an output that is one of the command's inputs (the same file, through

@@ -25,7 +25,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 8.0, 0.0 MB
+cube.oct: octrace scene, format 9.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
@@ -1449,4 +1449,80 @@ fn raw_texels_render_as_the_encoded_images_do() {
         ok(dir.path(), &["render", &format!("{f}.oct"), "-o", &format!("{f}.png"), "--width", "160"]);
     }
     assert!(std::fs::read(dir.path().join("kept.png")).unwrap() == std::fs::read(dir.path().join("raw.png")).unwrap());
+}
+
+/// Data written to `-` that does not all arrive is an error, not success (issue 46,
+/// item 7): with standard output closed every `-o -` command said "wrote ... to -"
+/// and exited 0; a reader that closes the pipe early likewise. Text output whose
+/// reader stops (`inspect | head`) stays a quiet success.
+#[cfg(unix)]
+#[test]
+fn data_that_does_not_reach_a_closed_stdout_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    ok(d, &["rays", "cube.oct", "-o", "rays.bin", "--set", "primary"]);
+    let bin = env!("CARGO_BIN_EXE_octrace");
+    let commands = [
+        "bake cube.obj -o -",
+        "render cube.oct -o - --width 16",
+        "rays cube.oct -o -",
+        "trace cube.oct --rays rays.bin --out -",
+        "trace cube.oct --rays rays.bin --all-hits --out -",
+        "trace cube.oct --rays rays.bin --counts --out -",
+        "trace cube.oct --rays rays.bin --length-inside --out -",
+    ];
+    for command in commands {
+        // Standard output closed (`>&-`).
+        let closed =
+            Command::new("sh").arg("-c").arg(format!("'{bin}' {command} >&-")).current_dir(d).output().unwrap();
+        let stderr = String::from_utf8_lossy(&closed.stderr);
+        assert_eq!(closed.status.code(), Some(1), "{command}: {stderr}");
+        assert!(stderr.contains("standard output is closed") && !stderr.contains("wrote"), "{command}: {stderr}");
+        // A reader that takes one byte and closes the pipe (the outputs of megabytes:
+        // a small one fits in the pipe before the reader closes it).
+        if command.starts_with("bake") || command.starts_with("render") {
+            continue;
+        }
+        let early = Command::new("bash")
+            .arg("-c")
+            .arg(format!("set -o pipefail; '{bin}' {command} | head -c 1 > /dev/null"))
+            .current_dir(d)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&early.stderr);
+        assert_eq!(early.status.code(), Some(1), "{command}: {stderr}");
+        assert!(stderr.contains("writing -o - to standard output failed after"), "{command}: {stderr}");
+    }
+    // Text: a reader that stops early is not a failure.
+    let text = Command::new("bash")
+        .arg("-c")
+        .arg(format!("set -o pipefail; '{bin}' inspect cube.oct | head -c 1 > /dev/null"))
+        .current_dir(d)
+        .status()
+        .unwrap();
+    assert!(text.success());
+}
+
+/// `render --camera N` takes glTF's camera index, and a number the scene does not place
+/// is refused naming the cameras it has, by number (issue 45, item 5).
+#[test]
+fn render_takes_gltf_camera_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gltf =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/extensions.gltf")).unwrap();
+    // The file's one camera becomes camera 2 (two others before it, not placed).
+    let cameras = r#""cameras":[{"name":"a","type":"perspective","perspective":{"yfov":0.5,"znear":0.1}},{"name":"b","type":"perspective","perspective":{"yfov":0.5,"znear":0.1}},{"name":"cam""#;
+    let moved = gltf.replace(r#""camera":0,"#, r#""camera":2,"#).replace(r#""cameras":[{"name":"cam""#, cameras);
+    assert_ne!(moved, gltf);
+    std::fs::write(d.join("ext.gltf"), moved).unwrap();
+    ok(d, &["bake", "ext.gltf", "-o", "ext.oct"]);
+    assert!(ok(d, &["inspect", "ext.oct"]).contains("2: 'cam', perspective"));
+    ok(d, &["render", "ext.oct", "-o", "c.png", "--width", "24", "--camera", "2"]);
+    let out = octrace(d, &["render", "ext.oct", "-o", "c.png", "--width", "24", "--camera", "0"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--camera 0: the scene places no camera 0 (its cameras: 2 'cam')"), "{stderr}");
 }

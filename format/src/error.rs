@@ -128,6 +128,9 @@ pub(crate) fn write_failure(path: &std::path::Path, e: &std::io::Error) -> Strin
         Some(d) if !d.as_os_str().is_empty() => d.display().to_string(),
         _ => ".".into(),
     };
+    if path.as_os_str().is_empty() {
+        return "the name is empty: give a file's name (folder/scene.oct)".into();
+    }
     if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
         return "the name ends in '/', a folder's: give the file's name (folder/scene.oct)".into();
     }
@@ -137,6 +140,9 @@ pub(crate) fn write_failure(path: &std::path::Path, e: &std::io::Error) -> Strin
         ErrorKind::FileTooLarge => "the file is larger than this process may write (see `ulimit -f`)".into(),
         ErrorKind::PermissionDenied => format!("permission denied in {dir}"),
         ErrorKind::ReadOnlyFilesystem => format!("{dir} is on a read-only file system"),
+        ErrorKind::NotFound if std::path::Path::new(&dir).is_dir() => {
+            format!("{dir} takes no new files (a virtual file system such as /proc or /sys): write elsewhere")
+        }
         ErrorKind::NotFound => format!("the directory {dir} does not exist"),
         ErrorKind::NotADirectory => format!("{dir} is not a directory"),
         // The raw OS error without the temporary file's path that tempfile adds.
@@ -175,5 +181,13 @@ mod tests {
         }
         let msg = Error::write(path, std::io::Error::from_raw_os_error(28)).to_string();
         assert!(msg.contains("no space left on the device"), "{msg}");
+        // An empty name, and a folder that exists but takes no files (issue 46, item 9:
+        // they were "the directory . does not exist" and "the directory /proc/self does
+        // not exist").
+        let not_found = || std::io::Error::from(ErrorKind::NotFound);
+        let msg = Error::write(std::path::Path::new(""), not_found()).to_string();
+        assert!(msg.contains("the name is empty"), "{msg}");
+        let msg = Error::write(std::path::Path::new("/proc/self/mem"), not_found()).to_string();
+        assert!(msg.contains("/proc/self takes no new files"), "{msg}");
     }
 }

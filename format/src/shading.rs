@@ -91,10 +91,19 @@ pub struct Material {
     /// `KHR_texture_transform` (the `uvs` section holds a scene's channels one after
     /// the other); 0 for every slot that reads what the first does.
     pub uv_channels: [u8; 5],
+    /// Whether the surface is seen from behind (glTF `doubleSided`; MTL and materials
+    /// made in code: true). A single-sided surface's back, where a view meets the
+    /// triangle against its winding (its corners clockwise as seen), is not seen by
+    /// camera rays (nor the rays that continue them through cut-outs), and a surface
+    /// whose back a light sees casts no shadow from it: the renderer passes through, as
+    /// glTF's back-face culling asks. Reflection and refraction rays see both sides.
+    pub double_sided: bool,
 }
 
 impl Default for Material {
-    /// glTF's default material: white, fully metallic, fully rough, opaque.
+    /// glTF's default material: white, fully metallic, fully rough, opaque; but seen
+    /// from both sides (glTF's `doubleSided` is false by default: the glTF loader says
+    /// so for each material, its default one included).
     fn default() -> Self {
         Material {
             name: "default".into(),
@@ -117,6 +126,7 @@ impl Default for Material {
             normal_texture: None,
             normal_scale: 1.0,
             uv_channels: [0; 5],
+            double_sided: true,
         }
     }
 }
@@ -310,6 +320,33 @@ pub struct Camera {
     /// parallel, along `forward`, from a `2 ymag` high rectangle (`yfov` is then
     /// unused); `None` for a perspective camera.
     pub orthographic: Option<f32>,
+    /// The glTF camera this places (its index in the file's `cameras`), what `render
+    /// --camera` takes; `None` for a camera made in code.
+    pub gltf_camera: Option<u32>,
+}
+
+impl Camera {
+    /// The number users call the camera by (`render --camera N`, `inspect`): its glTF
+    /// camera index, or else its `position` in [`Shading::cameras`].
+    ///
+    /// # Example
+    /// ```
+    /// let camera = octrace_format::Camera {
+    ///     name: "top".into(),
+    ///     position: [0.0, 5.0, 0.0],
+    ///     forward: [0.0, -1.0, 0.0],
+    ///     up: [0.0, 0.0, -1.0],
+    ///     yfov: 0.8,
+    ///     aspect: None,
+    ///     orthographic: None,
+    ///     gltf_camera: Some(13),
+    /// };
+    /// assert_eq!(camera.number(0), 13);
+    /// assert_eq!(octrace_format::Camera { gltf_camera: None, ..camera }.number(0), 0);
+    /// ```
+    pub fn number(&self, position: usize) -> u32 {
+        self.gltf_camera.unwrap_or(position as u32)
+    }
 }
 
 /// A part of the input mesh: a glTF primitive of a node, or an OBJ object or group.

@@ -24,7 +24,7 @@ impl GltfBuffer {
     fn view(&mut self, bytes: &[u8]) -> usize {
         self.views.push(format!(r#"{{"buffer":0,"byteOffset":{},"byteLength":{}}}"#, self.bytes.len(), bytes.len()));
         self.bytes.extend_from_slice(bytes);
-        while self.bytes.len() % 4 != 0 {
+        while !self.bytes.len().is_multiple_of(4) {
             self.bytes.push(0);
         }
         self.views.len() - 1

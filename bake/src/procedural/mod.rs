@@ -313,6 +313,7 @@ pub fn effects_scene() -> Mesh {
             yfov: 0.7,
             aspect: Some(4.0 / 3.0),
             orthographic: None,
+            gltf_camera: None,
         }],
         ..Mesh::default()
     };

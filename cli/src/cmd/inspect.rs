@@ -242,7 +242,7 @@ impl<'a> Report<'a> {
                 Some(h) => format!("orthographic, {:.3} high", 2.0 * h),
                 None => format!("perspective, yfov {:.1} degrees", c.yfov.to_degrees()),
             };
-            text.push_str(&format!("\n{label:<18} {i}: '{}', {projection}", c.name));
+            text.push_str(&format!("\n{label:<18} {}: '{}', {projection}", c.number(i), c.name));
         }
         for (i, t) in sh.textures.iter().enumerate() {
             let label = if i == 0 { "textures" } else { "" };

@@ -8,7 +8,9 @@ use glam::DVec3;
 use octrace_format::{Effect, Shading};
 use octrace_runtime::gpu::GpuRenderer;
 use octrace_runtime::raysets::{Camera, Frame};
-use octrace_runtime::render::effects::{render_effects, EffectSet, Environment, RayCounts, RayKind, RenderOptions};
+use octrace_runtime::render::effects::{
+    render_effects, EffectSet, Environment, RayCounts, RayKind, RenderOptions, Sky,
+};
 use octrace_runtime::render::{render, RenderMode};
 use octrace_runtime::Scene;
 
@@ -22,10 +24,10 @@ shadows, soft shadows, reflection, refraction, alpha. Turn some off with --effec
   octrace render scene.oct -o fast.png --effects -soft-shadows,-reflection --stats
 
 A scene without lights is lit by a headlight at the camera, without shadow rays. A
-scene lit only by emissive surfaces also gets a neutral environment (uniform, radiance
-0.5), as glTF viewers light it; --environment none renders direct light only, and
---environment 0.8 gives any scene a uniform environment of that radiance instead of
-the headlight.
+scene lit only by emissive surfaces also gets a neutral sky (radiance 0.75 above, 0.5
+at the horizon, 0.25 below), as glTF viewers light it; --environment none renders
+direct light only, --environment sky gives any scene that sky instead of the
+headlight, --environment 0.8 a uniform one of that radiance.
 --stats prints the rays traced per kind (primary, shadow, soft_shadow, reflection,
 refraction, alpha); --json prints the same as JSON.
 
@@ -54,7 +56,9 @@ pub(crate) struct Args {
     /// Vertical field of view in degrees (default 45, or the scene camera's).
     #[arg(long)]
     pub fov: Option<f64>,
-    /// Render through the scene's camera with this index (see `octrace inspect --json`).
+    /// Render through the scene's camera with this number: a glTF file's camera index
+    /// (its `cameras[N]`, placed by the first node that does), as `octrace inspect` lists
+    /// them.
     #[arg(long, conflicts_with_all = ["eye", "target"])]
     pub camera: Option<usize>,
     /// shaded: materials, lights and effects; normals: normals as colours;
@@ -68,9 +72,10 @@ pub(crate) struct Args {
     /// Shadow rays towards area lights per shading point (soft shadows), 1 to 4096.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub soft_samples: u32,
-    /// Light from all around: `auto` (a neutral environment of radiance 0.5 for scenes
-    /// lit only by emissive surfaces), `none` (direct light only), or a radiance such as
-    /// `0.8` (a uniform environment for any scene, instead of the headlight).
+    /// Light from all around: `auto` (a neutral sky for scenes lit only by emissive
+    /// surfaces: radiance 0.75 above, 0.5 at the horizon, 0.25 below), `none` (direct
+    /// light only), `sky` (that sky for any scene, instead of the headlight), or a
+    /// radiance such as `0.8` (a uniform sky for any scene).
     #[arg(long, default_value = "auto", value_parser = parse_environment)]
     pub environment: Environment,
     /// Secondary rays (reflection, refraction, alpha) a path may take, at most 31.
@@ -100,9 +105,10 @@ fn parse_environment(s: &str) -> Result<Environment, String> {
     match s {
         "auto" => Ok(Environment::Auto),
         "none" => Ok(Environment::Off),
+        "sky" => Ok(Environment::Sky(Sky::NEUTRAL)),
         _ => match s.parse::<f32>() {
-            Ok(x) if x.is_finite() && x >= 0.0 => Ok(Environment::Uniform(x)),
-            _ => Err(format!("expected auto, none or a radiance (a number, 0 or more), got '{s}'")),
+            Ok(x) if x.is_finite() && x >= 0.0 => Ok(Environment::Sky(Sky::uniform(x))),
+            _ => Err(format!("expected auto, none, sky or a radiance (a number, 0 or more), got '{s}'")),
         },
     }
 }
@@ -344,9 +350,14 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
     let cameras = &scene.shading().cameras;
     let from_file = match args.camera {
-        Some(i) => Some(cameras.get(i).ok_or_else(|| {
-            anyhow::anyhow!("--camera {i}: the scene has {}", crate::output::counted(cameras.len() as u64, "camera"))
-        })?),
+        Some(n) => Some(
+            cameras.iter().enumerate().find(|(i, c)| c.number(*i) as usize == n).map(|(_, c)| c).ok_or_else(|| {
+                let placed: Vec<String> =
+                    cameras.iter().enumerate().map(|(i, c)| format!("{} '{}'", c.number(i), c.name)).collect();
+                let placed = if placed.is_empty() { "none".to_string() } else { placed.join(", ") };
+                anyhow::anyhow!("--camera {n}: the scene places no camera {n} (its cameras: {placed})")
+            })?,
+        ),
         None if args.eye.is_none() && args.target.is_none() => cameras.first(),
         None => None,
     };

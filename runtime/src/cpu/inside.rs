@@ -487,6 +487,11 @@ fn vote_direction(i: usize) -> [f32; 3] {
 /// The length of `ray`'s `[tmin, tmax]` inside, from its crossings from `tmin` to
 /// infinity (a point is inside where the crossings after it are odd).
 pub(crate) fn length_from(ray: &Ray, crossings: &[Crossing]) -> f32 {
+    // A ray that can hit nothing (a NaN interval, ...) is a defined miss: no length,
+    // as it has no crossings (the crossings to infinity were found without its tmax).
+    if !ray.is_traceable() {
+        return 0.0;
+    }
     let mut inside = crossings.len() % 2 == 1;
     let (mut t, mut length) = (ray.tmin as f64, 0.0f64);
     for c in crossings {

@@ -47,7 +47,8 @@ pub(super) struct RenderParams {
     has_material_ids: u32,
     has_normals: u32,
     plain_material: u32,
-    emitter_area: f32,
+    /// The emitters' total power (`Emitters::total`).
+    emitter_power: f32,
     o_uvs: u32,
     has_uvs: u32,
     o_textures: u32,
@@ -60,21 +61,26 @@ pub(super) struct RenderParams {
     has_tangents: u32,
     /// Words a texture-coordinate channel takes (six a triangle).
     uv_channel_words: u32,
-    /// The environment's radiance (`Environment`), read where the `ENVIRONMENT`
-    /// constant is set.
+    /// The environment's sky (`Sky`: radiance and gradient), read where the
+    /// `ENVIRONMENT` constant is set.
     environment: f32,
+    environment_gradient: f32,
+    /// `lighting::grid_side` of `soft_samples`.
+    soft_grid: u32,
+    pad: [u32; 2],
 }
 
 #[cfg(test)]
 impl RenderParams {
     /// Members of the WGSL struct and the Rust fields' offsets, for the layout test.
-    pub(super) const OFFSETS: [(&'static str, usize); 6] = [
+    pub(super) const OFFSETS: [(&'static str, usize); 7] = [
         ("eye", std::mem::offset_of!(RenderParams, eye)),
         ("width", std::mem::offset_of!(RenderParams, width)),
         ("o_materials", std::mem::offset_of!(RenderParams, o_materials)),
         ("plain_material", std::mem::offset_of!(RenderParams, plain_material)),
-        ("emitter_area", std::mem::offset_of!(RenderParams, emitter_area)),
+        ("emitter_power", std::mem::offset_of!(RenderParams, emitter_power)),
         ("o_tangents", std::mem::offset_of!(RenderParams, o_tangents)),
+        ("environment_gradient", std::mem::offset_of!(RenderParams, environment_gradient)),
     ];
 }
 
@@ -142,7 +148,9 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let texels = tracer.scene().view().texels.check().map_err(|e| GpuError::Scene(e.to_string()))?;
         let (words, mut params, lit) = shading_words(tracer.scene(), texels);
         let (headlight, environment) = options.environment.resolve(lit.lights, lit.untextured, lit.need_headlight);
-        params.environment = environment.unwrap_or(0.0);
+        if let Some(sky) = environment {
+            (params.environment, params.environment_gradient) = (sky.radiance, sky.gradient);
+        }
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if 4 * words.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
@@ -156,6 +164,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         }
         params.max_depth = options.max_depth;
         params.soft_samples = options.soft_samples.max(1);
+        params.soft_grid = crate::render::lighting::grid_side(params.soft_samples);
         let shade = tracer.buffer("octrace shading", 4 * words.len() as u64, U::STORAGE | U::COPY_DST);
         tracer.queue.write_buffer(&shade, 0, bytemuck::cast_slice(&words));
 
@@ -167,6 +176,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             immediate_size: 0,
         });
         let mut constants = overrides(options.effects, headlight, environment.is_some());
+        constants.push(("CULLING", if crate::render::effects::culls(tracer.scene().shading()) { 1.0 } else { 0.0 }));
         constants.push(("FANS", tracer.fans_constant()));
         let pipeline =
             tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
@@ -329,7 +339,7 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, Scen
     }
     words.extend(emitters.iter().map(|(prim, _, _)| prim));
     params.emitter_count = emitters.iter().count() as u32;
-    params.emitter_area = emitters.area();
+    params.emitter_power = emitters.total();
     params.o_material_ids = words.len() as u32;
     params.has_material_ids = u32::from(!view.material_ids.is_empty());
     words.extend_from_slice(view.material_ids);
@@ -434,6 +444,8 @@ fn material_record(m: &Material, textures: usize) -> [f32; MATERIAL_WORDS] {
     // in render.wgsl).
     let channels = m.uv_channels.iter().enumerate().fold(0u32, |w, (k, &c)| w | u32::from(c.min(7)) << (3 * k));
     record[51] = bits(channels);
+    // SINGLE_SIDED_WORD in render.wgsl (the base colour's fourth word, unused).
+    record[19] = bits(u32::from(!m.double_sided));
     record
 }
 

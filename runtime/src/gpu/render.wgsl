@@ -22,6 +22,9 @@ override ALPHA: bool = true;
 override HEADLIGHT: bool = false;
 // A uniform environment of radiance rp.environment (effects.rs, `Environment`).
 override ENVIRONMENT: bool = false;
+// Some material is single-sided: camera and shadow rays pass the backs of its
+// surfaces (effects.rs, `culls`).
+override CULLING: bool = false;
 
 struct RenderParams {
     // xyz: the eye (unused: the primary rays come in `pixel_io`).
@@ -44,7 +47,8 @@ struct RenderParams {
     has_normals: u32,
     // The material of triangles without one (the last record).
     plain_material: u32,
-    emitter_area: f32,
+    // The emitters' total power (Emitters::total).
+    emitter_power: f32,
     // Texture coordinates (absent when has_uvs is 0), texture records (8 words each:
     // width, height, first texel, wrap u, wrap v, filter) and texels.
     o_uvs: u32,
@@ -62,13 +66,19 @@ struct RenderParams {
     has_tangents: u32,
     // Words a texture-coordinate channel takes (six a triangle), channel after channel.
     uv_channel_words: u32,
-    // The environment's radiance, each channel (read when ENVIRONMENT).
+    // The environment's sky (effects.rs, `Sky`), read when ENVIRONMENT: its radiance
+    // at the horizon and its gradient.
     environment: f32,
+    environment_gradient: f32,
+    // lighting::grid_side(soft_samples).
+    soft_grid: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
 // Materials (52 words each, see `material_record` in render.rs), lights (16 words),
-// emitters (4 words: radiance rgb, running area), emitter triangles (1 word), material
+// emitters (4 words: radiance rgb, running power), emitter triangles (1 word), material
 // ids and normals (the file's sections, as they are).
 @group(1) @binding(1) var<storage, read> shade: array<u32>;
 // Eight words a pixel. In: the direction of its primary ray (words 0-2, f32 bits) and
@@ -227,6 +237,10 @@ fn next_down(x: f32) -> f32 {
 const EMISSIVE_TEXTURE_WORD: u32 = 43u;
 // The word of a material record that packs its slots' texture-coordinate channels.
 const UV_CHANNELS_WORD: u32 = 51u;
+// The word of a material record that is 1 for a single-sided material.
+const SINGLE_SIDED_WORD: u32 = 19u;
+// Context's MAX_CULLED_LAYERS.
+const MAX_CULLED_LAYERS: u32 = 16u;
 
 // The record of `prim`'s material (the plain one for a triangle without).
 fn material_at(prim: u32) -> u32 {
@@ -235,6 +249,13 @@ fn material_at(prim: u32) -> u32 {
         id = min(shade[rp.o_material_ids + prim], rp.plain_material);
     }
     return rp.o_materials + 52u * id;
+}
+
+// Context::culled: whether `hit` is on the back of a single-sided surface, seen
+// along `d`.
+fn culled(hit: HitOut, d: vec3<f32>) -> bool {
+    return CULLING && shade[material_at(hit.prim) + SINGLE_SIDED_WORD] != 0u
+        && dot3(spawn_point(hit.prim, hit).normal, d) > 0.0;
 }
 
 fn material(prim: u32) -> Material {
@@ -508,13 +529,17 @@ fn hash32(x0: u32) -> u32 {
     return x ^ (x >> 16u);
 }
 
-// lighting::stratified2: point k of the Kronecker sequence (lighting::KRONECKER's
-// steps), rotated per pixel and depth.
-fn stratified2(pixel: u32, depth: u32, k: u32) -> vec2<f32> {
-    let a = hash32(depth + hash32(pixel));
+// lighting::stratified2: point k of n, one in each cell of a side x side grid (or
+// each of n slices of the first number when side is 0), jittered by the hash.
+fn stratified2(pixel: u32, depth: u32, k: u32, n: u32, side: u32) -> vec2<f32> {
+    let a = hash32(k + hash32(depth + hash32(pixel)));
     let b = hash32(a);
-    let x = vec2<u32>(a + k * 0xc13fa9a9u, b + k * 0x91e10da6u);
-    return vec2<f32>(f32(x.x >> 8u), f32(x.y >> 8u)) * (1.0 / 16777216.0);
+    let ja = f32(a >> 8u) * (1.0 / 16777216.0);
+    let jb = f32(b >> 8u) * (1.0 / 16777216.0);
+    if side > 0u {
+        return vec2<f32>(div(f32(k % side) + ja, f32(side)), div(f32(k / side) + jb, f32(side)));
+    }
+    return vec2<f32>(div(f32(k) + ja, f32(max(n, 1u))), jb);
 }
 
 // lighting::power: x^e for the highlight, with lighting.rs's operations in its order
@@ -599,7 +624,7 @@ fn reflectance(m: Material, transmits: bool, n: vec3<f32>, v: vec3<f32>, l: vec3
 // when something does, and with alpha or refraction what the surfaces it crosses let
 // through, dimmed surface by surface as Context::trace_shadows does.
 fn shadowed(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32, value0: vec3<f32>) -> vec3<f32> {
-    if !(ALPHA || REFRACTION) {
+    if !(ALPHA || REFRACTION || CULLING) {
         counts[kind] += 1u;
         let blocked = trace(o0, d, 0.0, tmax0, true).triangle != MISS;
         return select(value0, vec3<f32>(0.0), blocked);
@@ -613,16 +638,21 @@ fn shadowed(o0: vec3<f32>, d: vec3<f32>, tmax0: f32, kind: u32, value0: vec3<f32
         if hit.triangle == MISS {
             return value;
         }
-        let m = surface(hit);
-        var coverage = 1.0;
-        if ALPHA {
-            coverage = m.coverage;
+        // A single-sided surface whose back the light sees casts no shadow (seen
+        // from the light, the ray runs the other way).
+        var passes = vec3<f32>(1.0);
+        if !culled(hit, -d) {
+            let m = surface(hit);
+            var coverage = 1.0;
+            if ALPHA {
+                coverage = m.coverage;
+            }
+            var transmitted = vec3<f32>(0.0);
+            if REFRACTION {
+                transmitted = m.shadow_pass;
+            }
+            passes = vec3<f32>(1.0 - coverage) + coverage * transmitted;
         }
-        var transmitted = vec3<f32>(0.0);
-        if REFRACTION {
-            transmitted = m.shadow_pass;
-        }
-        let passes = vec3<f32>(1.0 - coverage) + coverage * transmitted;
         if !(max3(passes) > 0.0) || layers >= MAX_SHADOW_LAYERS {
             return vec3<f32>(0.0);
         }
@@ -787,7 +817,7 @@ fn punctual(s: Surface, i: u32, p: vec3<f32>) {
     light(s, to_light, 1.0, colour * falloff, SHADOW);
 }
 
-// Emitters::pick: the emitter whose running area passes target_area (u * total).
+// Emitters::pick: the emitter whose running power passes target_area (u * total).
 fn pick_emitter(target_area: f32) -> u32 {
     var lo = 0u;
     var hi = rp.emitter_count;
@@ -805,13 +835,15 @@ fn pick_emitter(target_area: f32) -> u32 {
 // Context::sample_area_lights.
 fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
     var samples = 1u;
+    var grid = 1u;
     if SOFT_SHADOWS {
         samples = max(rp.soft_samples, 1u);
+        grid = rp.soft_grid;
     }
-    let scale = div(rp.emitter_area, f32(samples));
+    let scale = div(rp.emitter_power, f32(samples));
     for (var k = 0u; k < samples && tick(); k++) {
-        let point = stratified2(pixel, depth, k);
-        let target_area = point.x * rp.emitter_area;
+        let point = stratified2(pixel, depth, k, samples, grid);
+        let target_area = point.x * rp.emitter_power;
         let e = pick_emitter(target_area);
         // Where the point falls along the emitter (Emitters::pick's `within`).
         var lo_area = 0.0;
@@ -824,6 +856,8 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
             within = clamp(div(target_area - lo_area, hi_area - lo_area), 0.0, 1.0);
         }
         var emitted = sv3(rp.o_emitters + 4u * e);
+        // The sample's weight (lighting::strength: the factor's largest channel).
+        let weight = div(scale, max(max(emitted.x, emitted.y), emitted.z));
         let prim = shade[rp.o_emitters + 4u * rp.emitter_count + e];
         let a = vertex(prim, 0u);
         let b = vertex(prim, 1u);
@@ -857,7 +891,7 @@ fn area_lights(s: Surface, pixel: u32, depth: u32, p: vec3<f32>) {
         let cos_y = div(abs(dot3(face_normal(a, b, c), to)), root(d2));
         if d2 > 0.0 && cos_y > 0.0 {
             let kind = select(SHADOW, SOFT_SHADOW, SOFT_SHADOWS);
-            light(s, to, AREA_SHADOW_END, emitted * div(cos_y * scale, d2), kind);
+            light(s, to, AREA_SHADOW_END, emitted * div(cos_y * weight, d2), kind);
         }
     }
 }
@@ -910,8 +944,10 @@ fn shade_hit(task: Task, hit: HitOut, pixel: u32, sp: ptr<function, u32>) {
     add_light(s.weight * s.m.emissive);
     let p = s.sp.point;
     if ENVIRONMENT {
+        // Sky::received for the shading normal.
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
-        add_light(s.weight * kd * (rp.environment * s.m.occlusion));
+        let received = rp.environment * (1.0 + rp.environment_gradient * (2.0 / 3.0) * s.n.y);
+        add_light(s.weight * kd * (received * s.m.occlusion));
     }
     if HEADLIGHT {
         let kd = select(s.m.albedo, s.m.albedo_transmits, s.transmits);
@@ -971,12 +1007,25 @@ fn render_pixel(pixel: u32, o: vec3<f32>, d: vec3<f32>) {
         sp -= 1u;
         let task = stack[sp];
         counts[task.kind] += 1u;
-        let hit = trace(task.o, task.d, 0.0, inf(), false);
+        var hit = trace(task.o, task.d, 0.0, inf(), false);
+        // Context::pass_back_faces: camera rays (and the alpha rays continuing them)
+        // go on past the backs of single-sided surfaces, the same ray.
+        if CULLING && (task.kind == PRIMARY || task.kind == ALPHA_RAY) {
+            var layers = 0u;
+            while hit.triangle != MISS && culled(hit, task.d) && tick() {
+                if layers == MAX_CULLED_LAYERS {
+                    hit.triangle = MISS;
+                    break;
+                }
+                layers += 1u;
+                hit = trace(spawn_origin(spawn_point(hit.prim, hit), task.d), task.d, 0.0, inf(), false);
+            }
+        }
         if hit.triangle == MISS {
             // Context::background: the environment, else the background.
             var background = BACKGROUND;
             if ENVIRONMENT {
-                background = vec3<f32>(rp.environment);
+                background = vec3<f32>(rp.environment * (1.0 + rp.environment_gradient * unit(task.d).y));
             }
             add_light(task.weight * background);
         } else {

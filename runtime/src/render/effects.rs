@@ -163,42 +163,76 @@ impl RenderOptions {
     }
 }
 
-/// Light from all around the scene: a uniform, neutral sky of a given radiance, which
-/// every surface receives times its diffuse albedo and its occlusion texture (no
-/// shadow rays: an ambient term, as glTF viewers' image-based light looks on a diffuse
-/// surface), and which rays that leave the scene see.
+/// Light from all around the scene: a sky ([`Sky`]) that every surface receives times
+/// its diffuse albedo and its occlusion texture (no shadow rays: an ambient term, as
+/// glTF viewers' image-based light looks on a diffuse surface), and which rays that
+/// leave the scene see.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum Environment {
-    /// [`DEFAULT_ENVIRONMENT`] for scenes lit only by emissive surfaces (no punctual
-    /// light; an emitter whose emission does not come through a texture), which glTF
-    /// viewers light with their neutral environment: without it the surfaces that face
-    /// away from the emitters are black. Scenes with punctual lights get none (their
-    /// lights are what their authors set), scenes without lights the headlight.
+    /// [`Sky::NEUTRAL`] for scenes lit only by emissive surfaces (no punctual light; an
+    /// emitter whose emission does not come through a texture), which glTF viewers
+    /// light with their neutral environment: without it the surfaces that face away
+    /// from the emitters are black. Scenes with punctual lights get none (their lights
+    /// are what their authors set), scenes without lights the headlight.
     #[default]
     Auto,
     /// None: direct light only (the lights, the emitters, or the headlight), rays that
     /// leave the scene see the dark background.
     Off,
-    /// A uniform environment of this radiance (each channel), for any scene; the
-    /// headlight is then off.
-    Uniform(f32),
+    /// This sky, for any scene; the headlight is then off.
+    Sky(Sky),
 }
 
-/// The radiance of the neutral environment [`Environment::Auto`] gives.
-pub const DEFAULT_ENVIRONMENT: f32 = 0.5;
+/// A sky whose radiance along a unit direction `d` is `radiance (1 + gradient d.y)`:
+/// brighter above than below (glTF's up is `+y`), uniform for a gradient of 0. A diffuse
+/// surface of unit normal `n` receives `radiance (1 + 2/3 gradient n.y)` from it (times
+/// pi: the cosine-weighted integral of a radiance linear in the direction), exactly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sky {
+    /// The radiance at the horizon, each channel; at least 0.
+    pub radiance: f32,
+    /// How much brighter the zenith is (and darker the nadir), in `[0, 1]`.
+    pub gradient: f32,
+}
+
+impl Sky {
+    /// The neutral sky [`Environment::Auto`] gives: radiance 0.75 above, 0.5 at the
+    /// horizon, 0.25 below, so that a metal shows it where a uniform sky would make it
+    /// look like the background.
+    pub const NEUTRAL: Sky = Sky { radiance: 0.5, gradient: 0.5 };
+
+    /// A uniform sky of `radiance`.
+    pub fn uniform(radiance: f32) -> Sky {
+        Sky { radiance, gradient: 0.0 }
+    }
+
+    /// The radiance seen along unit direction `d`.
+    pub(crate) fn seen(&self, d: Vec3) -> f32 {
+        self.radiance * (1.0 + self.gradient * d.y)
+    }
+
+    /// What a diffuse surface of unit normal `n` receives, over pi.
+    pub(crate) fn received(&self, n: Vec3) -> f32 {
+        self.radiance * (1.0 + self.gradient * (2.0 / 3.0) * n.y)
+    }
+}
 
 impl Environment {
     /// What lights the scene besides its lights and emitters: whether the headlight
-    /// does, and the environment's radiance, if any. `need_headlight`: the scene has no
-    /// punctual light and no emitter but those whose emission comes through a texture
-    /// ([`Emitters::need_headlight`]). The CPU renderer and the GPU kernel both ask this.
-    pub(crate) fn resolve(self, lights: usize, emitters_untextured: bool, need_headlight: bool) -> (bool, Option<f32>) {
-        let environment = match self {
+    /// does, and the sky, if any (its values made valid). `need_headlight`: the scene
+    /// has no punctual light and no emitter but those whose emission comes through a
+    /// texture ([`Emitters::need_headlight`]). The CPU renderer and the GPU kernel both
+    /// ask this.
+    pub(crate) fn resolve(self, lights: usize, emitters_untextured: bool, need_headlight: bool) -> (bool, Option<Sky>) {
+        let sky = match self {
             Environment::Off => None,
-            Environment::Uniform(radiance) => Some(radiance.max(0.0)),
-            Environment::Auto => (lights == 0 && emitters_untextured).then_some(DEFAULT_ENVIRONMENT),
+            Environment::Sky(sky) => Some(Sky {
+                radiance: if sky.radiance.is_finite() { sky.radiance.max(0.0) } else { 0.0 },
+                gradient: if sky.gradient.is_finite() { sky.gradient.clamp(0.0, 1.0) } else { 0.0 },
+            }),
+            Environment::Auto => (lights == 0 && emitters_untextured).then_some(Sky::NEUTRAL),
         };
-        (need_headlight && environment.is_none(), environment)
+        (need_headlight && sky.is_none(), sky)
     }
 }
 
@@ -276,8 +310,11 @@ struct Context<'a> {
     options: RenderOptions,
     emitters: Emitters,
     headlight: bool,
-    /// The environment's radiance ([`Environment`]), if any.
-    environment: Option<f32>,
+    /// The environment's sky ([`Environment`]), if any.
+    environment: Option<Sky>,
+    /// Whether some material is single-sided ([`Material::double_sided`]): camera and
+    /// shadow rays then pass through the backs of such surfaces.
+    culling: bool,
 }
 
 /// Colour of rays that leave the scene.
@@ -293,6 +330,17 @@ const SHADOW_CHUNK: usize = 4096;
 
 /// Alpha layers a shadow ray may pass through before it counts as blocked.
 const MAX_SHADOW_LAYERS: u32 = 16;
+
+/// Backs of single-sided surfaces a camera ray may pass through before it counts as
+/// seeing nothing.
+const MAX_CULLED_LAYERS: u32 = 16;
+
+/// Whether a scene's renders pass through the backs of some surfaces: it has a
+/// single-sided material. The CPU renderer and the GPU kernel (its `CULLING` constant)
+/// both ask this.
+pub(crate) fn culls(shading: &Shading) -> bool {
+    shading.materials.iter().any(|m| !m.double_sided)
+}
 
 /// A ray of a wave and what it carries to its pixel.
 struct Task {
@@ -413,12 +461,51 @@ impl<'a> Context<'a> {
             emitters.untextured(),
             emitters.need_headlight(&view.shading.lights),
         );
-        Context { view, camera, options: *options, emitters, headlight, environment }
+        let culling = culls(view.shading);
+        Context { view, camera, options: *options, emitters, headlight, environment, culling }
     }
 
-    /// What a ray that leaves the scene sees: the environment, else the background.
-    fn background(&self) -> Vec3 {
-        self.environment.map_or(BACKGROUND, Vec3::splat)
+    /// Whether `hit` is on the back of a single-sided surface, seen along `dir`: the
+    /// view meets the triangle against its winding (the geometric normal, from the
+    /// stored corners, along `dir`). A camera ray looks along its direction; a shadow
+    /// ray is the light's view the other way.
+    fn culled(&self, hit: &Hit, dir: Vec3) -> bool {
+        self.culling
+            && !self.material(hit.prim).double_sided
+            && SpawnPoint::new(&self.view.triangle(hit.prim), hit).normal().dot(dir) > 0.0
+    }
+
+    /// Carries camera rays (and the alpha rays that continue them) past the backs of
+    /// single-sided surfaces: each such hit is traced again from beyond it, the same
+    /// ray (not counted again), up to [`MAX_CULLED_LAYERS`] times, after which the ray
+    /// sees nothing.
+    fn pass_back_faces(&self, tracer: &Tracer<'_>, wave: &[Task], hits: &mut [Option<Hit>]) {
+        if !self.culling {
+            return;
+        }
+        for (task, hit) in wave.iter().zip(hits.iter_mut()) {
+            if !matches!(task.kind, RayKind::Primary | RayKind::Alpha) {
+                continue;
+            }
+            let mut layers = 0;
+            while let Some(h) = *hit {
+                if !self.culled(&h, task.ray.dir) {
+                    break;
+                }
+                if layers == MAX_CULLED_LAYERS {
+                    *hit = None;
+                    break;
+                }
+                layers += 1;
+                let at = SpawnPoint::new(&self.view.triangle(h.prim), &h);
+                *hit = tracer.intersect(&at.ray(task.ray.dir, f32::INFINITY));
+            }
+        }
+    }
+
+    /// What a ray along `dir` that leaves the scene sees: the sky, else the background.
+    fn background(&self, dir: Vec3) -> Vec3 {
+        self.environment.map_or(BACKGROUND, |sky| Vec3::splat(sky.seen(dir.normalize())))
     }
 
     fn has(&self, effect: Effect) -> bool {
@@ -445,12 +532,13 @@ impl<'a> Context<'a> {
                 counts.add(t.kind, 1);
             }
             let rays: Vec<Ray> = wave.iter().map(|t| t.ray).collect();
-            let hits = intersect(tracer, &rays);
+            let mut hits = intersect(tracer, &rays);
+            self.pass_back_faces(tracer, &wave, &mut hits);
             let (mut next, mut shadows) = (Vec::new(), Vec::new());
             for (task, hit) in wave.iter().zip(hits) {
                 let sum = &mut out[(task.pixel - first) as usize];
                 match hit {
-                    None => sum.add(task.weight * self.background()),
+                    None => sum.add(task.weight * self.background(task.ray.dir)),
                     Some(hit) => self.shade(task, &hit, sum, &mut next, &mut shadows),
                 }
                 // Shadow rays in chunks, whatever the number of lights: a tile's memory
@@ -482,7 +570,7 @@ impl<'a> Context<'a> {
                 counts.add(s.kind, 1);
             }
             let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
-            if !self.has(Effect::Alpha) && !self.has(Effect::Refraction) {
+            if !self.has(Effect::Alpha) && !self.has(Effect::Refraction) && !self.culling {
                 let mut blocked = vec![false; rays.len()];
                 tracer.occluded_batch(&rays, &mut blocked);
                 for (s, blocked) in shadows.iter().zip(blocked) {
@@ -498,7 +586,10 @@ impl<'a> Context<'a> {
                     out[(s.pixel - first) as usize].add(s.value);
                     continue;
                 };
-                let pass = self.shadow_pass(&self.surface(&hit));
+                // A single-sided surface whose back the light sees casts no shadow
+                // (seen from the light, the ray runs the other way).
+                let pass =
+                    if self.culled(&hit, -s.ray.dir) { Vec3::ONE } else { self.shadow_pass(&self.surface(&hit)) };
                 if pass.max_element() > 0.0 && s.layers < MAX_SHADOW_LAYERS {
                     let tri = self.view.triangle(hit.prim);
                     let ray = spawn(&tri, &hit, s.ray.dir, s.ray.tmax - hit.t);
@@ -576,11 +667,11 @@ impl<'a> Context<'a> {
         let v = -dir;
         let transmits = self.has(Effect::Refraction) && m.transmission > 0.0;
         sum.add(weight * Vec3::from(m.emissive));
-        if let Some(environment) = self.environment {
-            // The environment, all around: an ambient term, darkened by the occlusion
-            // texture as the headlight's is.
+        if let Some(sky) = self.environment {
+            // The sky, all around: an ambient term for the shading normal, darkened by
+            // the occlusion texture as the headlight's is.
             let occlusion = self.view.occlusion_at(m, hit.prim, hit.u, hit.v);
-            sum.add(weight * lighting::albedo(m, transmits) * (environment * occlusion));
+            sum.add(weight * lighting::albedo(m, transmits) * (sky.received(n) * occlusion));
         }
         if self.headlight {
             let (ambient, direct) = HEADLIGHT;
@@ -621,16 +712,20 @@ impl<'a> Context<'a> {
         }
     }
 
-    /// Light from emissive triangles: `soft_samples` points spread over them by area
+    /// Light from emissive triangles: `soft_samples` points spread over them by power
     /// with soft shadows (stratified: [`lighting::stratified2`]), else the centre of
     /// one (hard shadows).
     fn sample_area_lights(&self, task: &Task, p: Vec3, light: &mut impl FnMut(Vec3, f32, Vec3, RayKind)) {
         let soft = self.has(Effect::SoftShadows);
         let samples = if soft { self.options.soft_samples.max(1) } else { 1 };
-        let scale = self.emitters.area() / samples as f32;
+        let scale = self.emitters.total() / samples as f32;
+        let grid = lighting::grid_side(samples);
         for s in 0..samples {
-            let [along, across] = lighting::stratified2(task.pixel, task.depth, s);
+            let [along, across] = lighting::stratified2(task.pixel, task.depth, s, samples, grid);
             let (prim, emitted, within) = self.emitters.pick(along);
+            // The sample's weight: the total power over the samples and this emitter's
+            // strength (its area is in the density too).
+            let weight = scale / lighting::strength(emitted);
             let tri = self.view.triangle(StoredIndex(prim));
             let [a, b, c] = tri.map(Vec3::from);
             let (y, [bu, bv]) =
@@ -647,7 +742,7 @@ impl<'a> Context<'a> {
             let cos_y = face_normal(&tri).dot(to).abs() / d2.sqrt();
             if d2 > 0.0 && cos_y > 0.0 {
                 let kind = if soft { RayKind::SoftShadow } else { RayKind::Shadow };
-                light(to, AREA_SHADOW_END, emitted * (cos_y * scale / d2), kind);
+                light(to, AREA_SHADOW_END, emitted * (cos_y * weight / d2), kind);
             }
         }
     }

@@ -4,9 +4,7 @@
 //! environment.
 
 use octrace_bake::Mesh;
-use octrace_runtime::render::effects::{
-    render_effects, Environment, Radiance, RayKind, RenderOptions, DEFAULT_ENVIRONMENT,
-};
+use octrace_runtime::render::effects::{render_effects, Environment, Radiance, RayKind, RenderOptions, Sky};
 use octrace_runtime::Scene;
 
 use crate::effects::{add, base_scene, camera, diffuse, floor, point_light, scene_of};
@@ -37,9 +35,9 @@ fn render(scene: &Scene, environment: Environment) -> (Radiance, octrace_runtime
     render_effects(scene, &cam, &options, &|_| {})
 }
 
-/// By default a scene lit only by emitters gets the neutral environment: a surface the
-/// emitters do not light shows its albedo times the environment's radiance (not black),
-/// and a ray that leaves the scene sees the environment. `Environment::Off` gives the
+/// By default a scene lit only by emitters gets the neutral sky: a surface the emitters
+/// do not light shows its albedo times what the sky gives it (not black), and a ray
+/// that leaves the scene sees the sky. `Environment::Off` gives the
 /// strict direct light of before (black there, the dark background).
 #[test]
 fn a_scene_lit_only_by_emitters_gets_a_neutral_environment() {
@@ -47,11 +45,15 @@ fn a_scene_lit_only_by_emitters_gets_a_neutral_environment() {
     let (auto, counts) = render(&scene, Environment::Auto);
     let (off, _) = render(&scene, Environment::Off);
     assert!(counts.get(RayKind::SoftShadow) == 0 && counts.get(RayKind::Shadow) == 0, "{counts:?}");
-    let floor = 0.7 * DEFAULT_ENVIRONMENT;
+    // The floor faces up: it receives the sky's radiance times 1 + 2/3 of its gradient.
+    let Sky { radiance, gradient } = Sky::NEUTRAL;
+    let floor = 0.7 * radiance * (1.0 + gradient * 2.0 / 3.0);
     let (centre, corner) = ((16, 16), (0, 0));
     let close = |a: glam::Vec3, b: f32| (a - glam::Vec3::splat(b)).abs().max_element() < 1e-6;
     assert!(close(auto.at(centre.0, centre.1), floor), "{}", auto.at(16, 16));
-    assert!(close(auto.at(corner.0, corner.1), DEFAULT_ENVIRONMENT), "{}", auto.at(0, 0));
+    // A ray that leaves the scene looking down sees the sky below the horizon.
+    let below = auto.at(corner.0, corner.1).x;
+    assert!(below > radiance * (1.0 - gradient) && below < radiance, "{below}");
     assert_eq!(off.at(centre.0, centre.1), glam::Vec3::ZERO);
     assert!(off.at(corner.0, corner.1).max_element() < 0.11, "{}", off.at(0, 0));
     let black = |r: &Radiance| r.pixels.iter().filter(|p| p.max_element() == 0.0).count();
@@ -69,7 +71,7 @@ fn lit_scenes_and_headlight_scenes_keep_their_light_unless_asked() {
     let (auto, _) = render(&headlit, Environment::Auto);
     assert_eq!(auto, render(&headlit, Environment::Off).0);
     // The floor beside the sphere: the environment times the albedo, no headlight.
-    let (uniform, counts) = render(&headlit, Environment::Uniform(0.8));
+    let (uniform, counts) = render(&headlit, Environment::Sky(Sky::uniform(0.8)));
     assert_eq!(counts.total(), counts.get(RayKind::Primary));
     assert!((uniform.at(2, 16).x - 0.7 * 0.8).abs() < 1e-6, "{}", uniform.at(2, 16));
 }

@@ -741,13 +741,14 @@ fn fans_trace_on_the_gpu_as_on_the_cpu_and_test_few_triangles() {
 /// stratified points) and its image.
 #[test]
 fn the_environment_renders_on_the_gpu_as_on_the_cpu() {
-    use octrace_runtime::render::effects::{Environment, RayKind, RenderOptions};
+    use octrace_runtime::render::effects::{Environment, RayKind, RenderOptions, Sky};
     let test = "the_environment_renders_on_the_gpu_as_on_the_cpu";
     let Some(ctx) = gpu(test) else { return };
     let cases = [
         ("emitters only, auto", crate::environment::lit_from_above(), Environment::Auto),
         ("emitters only, off", crate::environment::lit_from_above(), Environment::Off),
-        ("headlight scene, uniform", crate::effects::base_scene(|_| {}), Environment::Uniform(0.8)),
+        ("headlight scene, uniform", crate::effects::base_scene(|_| {}), Environment::Sky(Sky::uniform(0.8))),
+        ("headlight scene, sky", crate::effects::base_scene(|_| {}), Environment::Sky(Sky::NEUTRAL)),
     ];
     for (name, mesh, environment) in cases {
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
@@ -757,4 +758,42 @@ fn the_environment_renders_on_the_gpu_as_on_the_cpu() {
         let counts = renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
         assert_eq!(counts.get(RayKind::SoftShadow) > 0, name.starts_with("emitters"), "{name}: {counts:?}");
     }
+}
+
+/// Single-sided materials on the GPU (issue 45, item 3): camera rays through a quad's
+/// back to what lies beyond it, and shadows cast only where the light sees a
+/// surface's front: the CPU's rays of every kind and its image.
+#[test]
+fn single_sided_surfaces_render_on_the_gpu_as_on_the_cpu() {
+    use crate::effects::{add, diffuse, floor, point_light};
+    use octrace_runtime::render::effects::RenderOptions;
+    let test = "single_sided_surfaces_render_on_the_gpu_as_on_the_cpu";
+    let Some(ctx) = gpu(test) else { return };
+    let mut mesh = octrace_bake::Mesh::default();
+    add(&mut mesh, floor(3.0, 0.0), diffuse("floor", 0.7));
+    let one_side = |name: &str| octrace_format::Material { double_sided: false, ..diffuse(name, 0.5) };
+    // A blocker whose front the light sees, one whose back it sees.
+    let mut away = floor(0.4, 1.0);
+    for t in &mut away.triangles {
+        t.swap(1, 2);
+    }
+    let mut towards = floor(0.4, 1.2);
+    for t in &mut towards.triangles {
+        for v in t.iter_mut() {
+            v[0] += 1.5;
+        }
+    }
+    add(&mut mesh, away, one_side("away"));
+    add(&mut mesh, towards, one_side("towards"));
+    // A wall facing away from the camera, single-sided: it sees through it.
+    let wall = octrace_bake::Mesh::from_triangles(vec![
+        [[-1.0, 0.0, 1.5], [-1.0, 1.5, 1.5], [1.0, 1.5, 1.5]],
+        [[-1.0, 0.0, 1.5], [1.0, 1.5, 1.5], [1.0, 0.0, 1.5]],
+    ]);
+    add(&mut mesh, wall, one_side("wall"));
+    mesh.lights.push(point_light([0.3, 4.0, 0.2], 25.0));
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let camera = raysets::Camera::look_at(DVec3::new(0.5, 3.0, 5.0), DVec3::new(0.5, 0.3, 0.0), 50.0, 64, 64);
+    renders_as_on_the_cpu("single-sided", ctx, &tracer, &camera, &RenderOptions::for_scene(scene.shading()));
 }

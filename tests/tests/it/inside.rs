@@ -189,6 +189,15 @@ fn lengths_inside_closed_meshes() {
     ];
     let lengths = scene.length_inside_batch(&rays).unwrap();
     assert_eq!(lengths, [2.0, 1.0, 2.0, 3.0, 0.5, 0.0]);
+    // A ray that can hit nothing has no length, as it has no crossings (issue 46, item
+    // 9: a NaN tmax gave 0 crossings and a positive length).
+    let untraceable = [
+        Ray::segment(Vec3::new(0.2, 0.1, 1.0), Vec3::Z, 0.0, f32::NAN),
+        Ray::segment(Vec3::new(0.2, 0.1, 1.0), Vec3::Z, 2.0, 1.0),
+        Ray::new(Vec3::new(0.2, 0.1, 1.0), Vec3::ZERO),
+    ];
+    assert_eq!(scene.length_inside_batch(&untraceable).unwrap(), [0.0; 3]);
+    assert!(scene.count_crossings_batch(&untraceable).iter().all(|c| c.total == 0));
     let ball =
         Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 48, 64), &BuildParams::auto()).unwrap()).unwrap();
     let mut rng = SplitMix(1);

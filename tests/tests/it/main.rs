@@ -1,6 +1,7 @@
 //! octrace's integration tests, one module per area.
 
 mod attributes;
+mod back_faces;
 mod budgets;
 mod bunny;
 mod crossings;

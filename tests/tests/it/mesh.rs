@@ -363,9 +363,9 @@ fn gltf_samples_load_with_their_materials() {
     let v = gltf("BoxVertexColors.gltf");
     assert_eq!((v.materials[0].metallic, v.materials[0].roughness), (0.1, 0.99));
     assert_eq!(v.uvs.len(), 12);
-    // No material: glTF's default one is supplied.
+    // No material: glTF's default one is supplied, single-sided as glTF's is.
     let t = gltf("AnimatedTriangle.gltf");
-    assert_eq!(t.materials, vec![octrace_format::Material::default()]);
+    assert_eq!(t.materials, vec![octrace_format::Material { double_sided: false, ..Default::default() }]);
     assert_eq!(t.material_ids, vec![0]);
     // None of them has lights, emitters, mirrors, glass or alpha: no effects.
     for mesh in [b, v, t] {

@@ -168,6 +168,7 @@ impl Materials<'_> {
             normal_texture,
             normal_scale: normal.as_ref().map_or(1.0, |n| n.scale()),
             uv_channels,
+            double_sided: m.double_sided(),
             name,
         };
         let numbers = out.base_color.iter().chain(&out.emissive).chain([

@@ -106,7 +106,9 @@ impl Loader<'_> {
         match prim.material().index() {
             Some(i) if i < self.mesh.materials.len() => i as u32,
             _ => *self.default_material.get_or_insert_with(|| {
-                self.mesh.materials.push(Material::default());
+                // glTF's default material is single-sided, as every material is unless
+                // it says otherwise.
+                self.mesh.materials.push(Material { double_sided: false, ..Material::default() });
                 self.mesh.materials.len() as u32 - 1
             }),
         }
@@ -174,7 +176,7 @@ impl Loader<'_> {
         let n = indices.as_ref().map_or(verts.len(), Vec::len);
         // Corner indices of triangle k, in the file's winding (no list of them is
         // made: a big primitive's would be as large as its indices).
-        let (count, corner): (usize, &dyn Fn(usize) -> [u32; 3]) = match mode {
+        let (count, in_file): (usize, &dyn Fn(usize) -> [u32; 3]) = match mode {
             Mode::Triangles => (n / 3, &|k| [index(3 * k), index(3 * k + 1), index(3 * k + 2)]),
             // Every other strip triangle swaps its first two corners to keep the winding.
             Mode::TriangleStrip => (n.saturating_sub(2), &|k| {
@@ -187,6 +189,20 @@ impl Loader<'_> {
             }),
             _ => (n.saturating_sub(2), &|k| [index(0), index(k + 1), index(k + 2)]),
         };
+        // A node whose transform mirrors (a negative determinant) turns the file's
+        // counter-clockwise front faces clockwise in the world, where glTF keeps them
+        // the front: the last two corners swap, so that the stored winding says the
+        // front (for single-sided materials, and closed meshes' outward orientation).
+        let mirrored = glam::DMat3::from_mat4(*world).determinant() < 0.0;
+        let swapped = |k: usize| {
+            let [a, b, c] = in_file(k);
+            if mirrored {
+                [a, c, b]
+            } else {
+                [a, b, c]
+            }
+        };
+        let corner: &dyn Fn(usize) -> [u32; 3] = &swapped;
         let normals = self.normals(prim, world, verts.len(), &element);
         // A channel for each distinct set and transform the material's textures read.
         let maps = prim.material().index().and_then(|i| self.uv_maps.get(i)).cloned();

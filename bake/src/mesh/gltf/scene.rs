@@ -118,9 +118,7 @@ pub(super) const REPEATED_MIN_TRIANGLES: u64 = 4096;
 /// geometry repeated most, by the triangles its copies add.
 pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Option<String> {
     use std::collections::BTreeMap;
-    // A primitive's geometry: its positions, indices and mode. Per geometry: its
-    // triangles, the times it is placed, the first mesh that has it, the meshes that do.
-    let mut geometry: BTreeMap<(Option<usize>, Option<usize>, u32), (u64, u64, usize, Vec<usize>)> = BTreeMap::new();
+    let mut geometry: BTreeMap<GeometryKey, Geometry> = BTreeMap::new();
     for node in document.nodes() {
         let (Some(mesh), times) = (node.mesh(), placed[node.index()]) else { continue };
         for p in mesh.primitives() {
@@ -129,32 +127,42 @@ pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Op
                 p.indices().map(|a| a.index()),
                 p.mode().as_gl_enum(),
             );
-            let entry = geometry.entry(key).or_insert((primitive_triangles(&p), 0, mesh.index(), Vec::new()));
-            entry.1 = entry.1.saturating_add(times);
-            if times > 0 && !entry.3.contains(&mesh.index()) {
-                entry.3.push(mesh.index());
+            let g = geometry.entry(key).or_insert(Geometry {
+                triangles: primitive_triangles(&p),
+                placed: 0,
+                first_mesh: mesh.index(),
+                meshes: Vec::new(),
+            });
+            g.placed = g.placed.saturating_add(times);
+            if times > 0 && !g.meshes.contains(&mesh.index()) {
+                g.meshes.push(mesh.index());
             }
         }
     }
-    let distinct: u64 = geometry.values().filter(|g| g.1 > 0).map(|g| g.0).sum();
-    let stored = geometry.values().map(|g| g.0.saturating_mul(g.1)).fold(0u64, u64::saturating_add);
+    let distinct: u64 = geometry.values().filter(|g| g.placed > 0).map(|g| g.triangles).sum();
+    let stored = geometry.values().map(|g| g.triangles.saturating_mul(g.placed)).fold(0u64, u64::saturating_add);
     if distinct == 0 || stored < distinct.saturating_mul(REPEATED_FACTOR) || stored - distinct < REPEATED_MIN_TRIANGLES
     {
         return None;
     }
-    let mut worst: Vec<_> = geometry.values().filter(|g| g.1 > 1).collect();
-    worst.sort_by_key(|g| std::cmp::Reverse(g.0.saturating_mul(g.1 - 1)));
+    let mut worst: Vec<&Geometry> = geometry.values().filter(|g| g.placed > 1).collect();
+    worst.sort_by_key(|g| std::cmp::Reverse(g.triangles.saturating_mul(g.placed - 1)));
     let named: Vec<String> = worst
         .iter()
         .take(3)
-        .map(|&&(triangles, times, first, ref meshes)| {
-            let mesh = document.meshes().nth(first);
+        .map(|g| {
+            let mesh = document.meshes().nth(g.first_mesh);
             let name = mesh.and_then(|m| m.name()).map(|n| format!(" '{n}'")).unwrap_or_default();
-            let shared = match meshes.len() {
+            let shared = match g.meshes.len() {
                 0 | 1 => String::new(),
                 n => format!(" (and {} other meshes with the same accessors)", n - 1),
             };
-            format!("mesh {first}{name}{shared}: {} triangles placed {} times", thousands(triangles), thousands(times))
+            format!(
+                "mesh {}{name}{shared}: {} triangles placed {} times",
+                g.first_mesh,
+                thousands(g.triangles),
+                thousands(g.placed)
+            )
         })
         .collect();
     Some(format!(
@@ -165,6 +173,21 @@ pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Op
         stored as f64 / distinct as f64,
         named.join("; ")
     ))
+}
+
+/// A primitive's geometry: its positions' and indices' accessors and its mode.
+type GeometryKey = (Option<usize>, Option<usize>, u32);
+
+/// One geometry of the scene, and where it is placed.
+struct Geometry {
+    /// Its triangles.
+    triangles: u64,
+    /// The times the scene places it (each node of each mesh that has it).
+    placed: u64,
+    /// The first mesh that has it.
+    first_mesh: usize,
+    /// The meshes that have it and are placed.
+    meshes: Vec<usize>,
 }
 
 /// Node hierarchies deeper than this are refused (a cycle, or a hostile file).
@@ -273,6 +296,7 @@ impl Loader<'_> {
             yfov,
             aspect,
             orthographic,
+            gltf_camera: Some(camera.index() as u32),
             name,
         };
         let finite = out.position.iter().chain([&out.yfov]).chain(out.aspect.as_ref()).all(|v| v.is_finite());
