@@ -17,8 +17,9 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
-    /// The file's extension is none of `.obj`, `.gltf`, `.glb` (optionally `.zst`).
-    #[error("{path}: unknown mesh format (expected .obj, .gltf or .glb, optionally .zst)")]
+    /// The file's extension is none of `.obj`, `.gltf`, `.glb` (optionally `.zst`); the
+    /// message says when it is a folder or a baked scene.
+    #[error("{}: {}", .path.display(), not_a_mesh(.path))]
     UnknownFormat {
         /// The file.
         path: PathBuf,
@@ -193,6 +194,20 @@ pub enum Error {
 
 /// The bake crate's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Why a path is not a mesh the loader reads: a folder, a baked scene, or another
+/// extension.
+fn not_a_mesh(path: &std::path::Path) -> &'static str {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if path.is_dir() {
+        "a folder, not a mesh: give one mesh file (.obj, .gltf or .glb, optionally .zst)"
+    } else if name.ends_with(".oct") || name.ends_with(".oct.zst") {
+        "a baked scene already: bake reads meshes (.obj, .gltf or .glb, optionally .zst); inspect or render the .oct \
+         itself"
+    } else {
+        "unknown mesh format (expected .obj, .gltf or .glb, optionally .zst)"
+    }
+}
 
 /// A count with thousands separators: `1,234,567`.
 pub(crate) fn thousands(n: u64) -> String {

@@ -1526,3 +1526,26 @@ fn render_takes_gltf_camera_numbers() {
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("--camera 0: the scene places no camera 0 (its cameras: 2 'cam')"), "{stderr}");
 }
+
+/// `bake` given a folder or a baked scene says which (issue 50, item 7: both were
+/// "unknown mesh format").
+#[test]
+fn bake_names_a_folder_and_a_baked_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    std::fs::create_dir(d.join("meshes")).unwrap();
+    std::fs::create_dir(d.join("meshes.obj")).unwrap();
+    for (input, says) in [
+        ("meshes", "meshes: a folder, not a mesh"),
+        ("meshes.obj", "meshes.obj: a folder, not a mesh"),
+        ("cube.oct", "cube.oct: a baked scene already: bake reads meshes"),
+        ("notes.txt", "notes.txt: unknown mesh format"),
+    ] {
+        let out = octrace(d, &["bake", input, "-o", "out.oct"]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{input}: {stderr}");
+        assert!(stderr.contains(says), "{input}: {stderr}");
+    }
+}

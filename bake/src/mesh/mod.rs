@@ -391,7 +391,11 @@ impl Mesh {
     /// As [`Mesh::load`].
     pub fn load_with(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Mesh> {
         let path = path.as_ref();
-        let (format, zst) = MeshFormat::from_path(path).ok_or_else(|| Error::UnknownFormat { path: path.into() })?;
+        let not_a_mesh = || Error::UnknownFormat { path: path.into() };
+        if path.is_dir() {
+            return Err(not_a_mesh());
+        }
+        let (format, zst) = MeshFormat::from_path(path).ok_or_else(not_a_mesh)?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
         let raw = octrace_format::read_regular_file(path, options.max_file_bytes).map_err(unreadable)?;
         let bytes = if zst { decompress(&raw, options.max_file_bytes).map_err(unreadable)? } else { raw };
