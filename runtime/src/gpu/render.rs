@@ -146,8 +146,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let chunk_bytes = tracer.scene_buffers.first().map_or(0, wgpu::Buffer::size);
         super::check_bindings(&limits, chunks, (storage + 3, buffers + 4), scene_bytes, chunk_bytes)?;
         let texels = tracer.scene().view().texels.check().map_err(|e| GpuError::Scene(e.to_string()))?;
-        let (words, mut params, lit) = shading_words(tracer.scene(), texels);
-        let (headlight, environment) = options.environment.resolve(lit.lights, lit.untextured, lit.need_headlight);
+        let (words, mut params, emitters) = shading_words(tracer.scene(), texels);
+        let (headlight, environment) = options.environment.resolve(&tracer.scene().shading().lights, &emitters);
         if let Some(sky) = environment {
             (params.environment, params.environment_gradient) = (sky.radiance, sky.gradient);
         }
@@ -294,17 +294,10 @@ fn overrides(effects: EffectSet, headlight: bool, environment: bool) -> Vec<(&'s
     constants
 }
 
-/// What decides how a scene is lit besides its lights and emitters
-/// ([`Environment::resolve`](crate::render::effects::Environment)'s inputs).
-struct SceneLighting {
-    lights: usize,
-    untextured: bool,
-    need_headlight: bool,
-}
-
 /// The words of the kernel's `shade` binding, the parameters that locate them, and
-/// what decides whether the headlight or the environment lights the scene.
-fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, SceneLighting) {
+/// the scene's emitters (which, with its lights, decide whether the headlight or the
+/// environment lights it).
+fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, Emitters) {
     let view = scene.view();
     let shading = view.shading;
     let mut words: Vec<u32> = Vec::new();
@@ -377,12 +370,7 @@ fn shading_words(scene: &Scene, texels: &[u32]) -> (Vec<u32>, RenderParams, Scen
     if words.is_empty() {
         words.push(0);
     }
-    let lit = SceneLighting {
-        lights: shading.lights.len(),
-        untextured: emitters.untextured(),
-        need_headlight: emitters.need_headlight(&shading.lights),
-    };
-    (words, params, lit)
+    (words, params, emitters)
 }
 
 /// A material's record: the values shading derives from it, computed here by the

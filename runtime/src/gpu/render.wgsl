@@ -255,7 +255,7 @@ fn material_at(prim: u32) -> u32 {
 // along `d`.
 fn culled(hit: HitOut, d: vec3<f32>) -> bool {
     return CULLING && shade[material_at(hit.prim) + SINGLE_SIDED_WORD] != 0u
-        && dot3(spawn_point(hit.prim, hit).normal, d) > 0.0;
+        && dot3(face_normal(vertex(hit.prim, 0u), vertex(hit.prim, 1u), vertex(hit.prim, 2u)), d) > 0.0;
 }
 
 fn material(prim: u32) -> Material {

@@ -11,7 +11,7 @@ use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::Vec3;
-use octrace_format::{Effect, Material, SceneView, Shading, StoredIndex, VISIBLE_WEIGHT};
+use octrace_format::{Effect, Light, Material, SceneView, Shading, StoredIndex, VISIBLE_WEIGHT};
 use rayon::prelude::*;
 
 use super::lighting::{self, Emitters, PLAIN};
@@ -218,21 +218,19 @@ impl Sky {
 }
 
 impl Environment {
-    /// What lights the scene besides its lights and emitters: whether the headlight
-    /// does, and the sky, if any (its values made valid). `need_headlight`: the scene
-    /// has no punctual light and no emitter but those whose emission comes through a
-    /// texture ([`Emitters::need_headlight`]). The CPU renderer and the GPU kernel both
-    /// ask this.
-    pub(crate) fn resolve(self, lights: usize, emitters_untextured: bool, need_headlight: bool) -> (bool, Option<Sky>) {
+    /// What lights the scene besides its `lights` and `emitters`: whether the headlight
+    /// does ([`Emitters::need_headlight`], when no sky does), and the sky, if any (its
+    /// values made valid). The CPU renderer and the GPU kernel both ask this.
+    pub(crate) fn resolve(self, lights: &[Light], emitters: &Emitters) -> (bool, Option<Sky>) {
         let sky = match self {
             Environment::Off => None,
             Environment::Sky(sky) => Some(Sky {
                 radiance: if sky.radiance.is_finite() { sky.radiance.max(0.0) } else { 0.0 },
                 gradient: if sky.gradient.is_finite() { sky.gradient.clamp(0.0, 1.0) } else { 0.0 },
             }),
-            Environment::Auto => (lights == 0 && emitters_untextured).then_some(Sky::NEUTRAL),
+            Environment::Auto => (lights.is_empty() && emitters.untextured()).then_some(Sky::NEUTRAL),
         };
-        (need_headlight && sky.is_none(), sky)
+        (emitters.need_headlight(lights) && sky.is_none(), sky)
     }
 }
 
@@ -456,11 +454,7 @@ pub(crate) fn render_pixels(
 impl<'a> Context<'a> {
     fn new(view: SceneView<'a>, camera: &'a Camera, options: &RenderOptions) -> Context<'a> {
         let emitters = Emitters::of(&view);
-        let (headlight, environment) = options.environment.resolve(
-            view.shading.lights.len(),
-            emitters.untextured(),
-            emitters.need_headlight(&view.shading.lights),
-        );
+        let (headlight, environment) = options.environment.resolve(&view.shading.lights, &emitters);
         let culling = culls(view.shading);
         Context { view, camera, options: *options, emitters, headlight, environment, culling }
     }
@@ -472,7 +466,7 @@ impl<'a> Context<'a> {
     fn culled(&self, hit: &Hit, dir: Vec3) -> bool {
         self.culling
             && !self.material(hit.prim).double_sided
-            && SpawnPoint::new(&self.view.triangle(hit.prim), hit).normal().dot(dir) > 0.0
+            && face_normal(&self.view.triangle(hit.prim)).dot(dir) > 0.0
     }
 
     /// Carries camera rays (and the alpha rays that continue them) past the backs of
