@@ -17,6 +17,8 @@
 #       OUT is set, else BUNDLE/gpu-check.json). Exits 1 if a test fails or an answer
 #       differs. Without a GPU it runs against Mesa's lavapipe: the rehearsal.
 #       --quick: the bunny, two ray sets and small renders (the script's own test);
+#       --large: the dragon's primary set also as one 16M-ray batch (transfers of large
+#       batches) and the kernel at workgroups of 32, 128 and 256 (occupancy);
 #       --octrace: the CLI to run (default BUNDLE/bin/octrace, else target/release);
 #       --timeout S: seconds a step may take before it counts as failed (default 300;
 #       the tests get four times that): a hung kernel fails the check, never hangs it.
@@ -34,6 +36,7 @@ bundle=.gpu-check
 json=""
 step_timeout=300
 quick=0
+large=0
 tests=1
 bench=1
 octrace=""
@@ -42,6 +45,7 @@ while [ $# -gt 0 ]; do
         --bundle) bundle="$2"; shift 2 ;;
         --json) json="$2"; shift 2 ;;
         --quick) quick=1; shift ;;
+        --large) large=1; shift ;;
         --no-tests) tests=0; shift ;;
         --no-bench) bench=0; shift ;;
         --octrace) octrace="$2"; shift 2 ;;
@@ -207,6 +211,23 @@ run() {
         compare_trace "$s" "$crossing_set" "every hit" --all-hits
     done
 
+    if [ "$large" -eq 1 ] && [ -e "$work/dragon.oct" ]; then
+        echo "== bench --gpu: the dragon's primary set as a 16M-ray batch"
+        if timeout "$step_timeout" "$octrace" bench "$work/dragon.oct" --set primary --gpu --gpu-repeat 16 --no-peer --no-queries --json --runs 5 >"$work/bench-dragon16.json" 2>"$work/bench-dragon16.err"; then
+            record "bench dragon16" "ok" "$work/bench-dragon16.json"
+        else
+            record "bench dragon16" "failed" "$(tail -n 3 "$work/bench-dragon16.err" | tr '\n' ' ')"
+        fi
+        for wg in 32 128 256; do
+            echo "== bench --gpu: the dragon's primary set, workgroups of $wg"
+            if OCTRACE_GPU_WORKGROUP=$wg timeout "$step_timeout" "$octrace" bench "$work/dragon.oct" --set primary --gpu --no-peer --no-queries --json --runs 5 >"$work/bench-dragonwg$wg.json" 2>"$work/bench-dragonwg$wg.err"; then
+                record "bench dragonwg$wg" "ok" "$work/bench-dragonwg$wg.json"
+            else
+                record "bench dragonwg$wg" "failed" "$(tail -n 3 "$work/bench-dragonwg$wg.err" | tr '\n' ' ')"
+            fi
+        done
+    fi
+
     echo "== renders: CPU = GPU"
     local effects_width=256 textured_width=512
     if [ "$quick" -eq 1 ]; then effects_width=32; textured_width=32; fi
@@ -348,11 +369,20 @@ for name, result, detail in records:
             c = cpu.get(s["set"], {})
             cpu_rate = f"{med(c.get('mrays_all_threads'))} Mrays/s ({b.get('threads')} threads)"
             rows.append((f"bench {scene} {s['set']}", f"{med(s.get('mrays_kernel_device'))}",
-                         f"kernel Mrays/s on the GPU's clock; host clock {med(s['mrays_kernel'])}, with transfers "
-                         f"{med(s['mrays_end_to_end'])} (up {med(s.get('upload_ms'))} + down "
-                         f"{med(s.get('download_ms'))} ms); first call {s['first_call_s'] * 1e3:.0f} ms; "
+                         f"kernel Mrays/s on the GPU's clock; with transfers {med(s['mrays_end_to_end'])} (full records), "
+                         f"{med(s.get('mrays_compact'))} (compact); transfers alone {med(s.get('transfers_ms'))} ms, "
+                         f"memcpy of the same bytes {med(s.get('memcpy_ms'))} ms; up {med(s.get('upload_ms'))} + down "
+                         f"{med(s.get('download_ms'))} ms; {s['rays']:,} rays; first call {s['first_call_s'] * 1e3:.0f} ms; "
                          f"CPU {cpu_rate}; {s['differ_from_cpu']} rays differ"))
             checks.append({"name": f"bench {scene} {s['set']}", "ok": s["differ_from_cpu"] == 0, **s})
+        cam = g.get("camera")
+        if cam:
+            med = lambda v: f"{v['median']:.1f}" if v else "-"
+            rows.append((f"bench {scene} camera", med(cam.get("mrays_kernel_device")),
+                         f"camera rays made on the GPU, kernel Mrays/s on the GPU's clock; whole calls "
+                         f"{med(cam['mrays_nearest'])} (distance and triangle back), {med(cam['mrays_distance'])} "
+                         f"(distance); {cam['rays']:,} rays; {cam['differ_from_cpu']} pixels differ"))
+            checks.append({"name": f"bench {scene} camera", "ok": cam["differ_from_cpu"] == 0, **cam})
         continue
     rows.append((name, result, detail))
     checks.append({"name": name, "ok": result in ("ok", "same", "missing"), "result": result, "detail": detail})

@@ -1388,7 +1388,8 @@ fn the_gpu_check_fails_when_a_gpu_answer_differs() {
 
 /// `bench --gpu` compares the GPU's nearest hits with the CPU's bit for bit where the
 /// kernel computes as the CPU does (f64 on the adapter), times the kernel on the GPU's
-/// clock where it has timestamps and the first call apart; `rays --set shadow` writes
+/// clock where it has timestamps and the first call apart, the transfers beside a memcpy,
+/// compact records and camera rays made on the device; `rays --set shadow` writes
 /// the shadow set `bench` traces.
 #[test]
 fn bench_on_the_gpu_compares_bits_and_times_the_kernel_apart() {
@@ -1407,7 +1408,15 @@ fn bench_on_the_gpu_compares_bits_and_times_the_kernel_apart() {
         assert!(s["mrays_kernel"]["median"].as_f64().unwrap() > 0.0, "{s}");
         assert!(s["upload_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
         assert!(s["download_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
+        assert!(s["mrays_compact"]["median"].as_f64().unwrap() > 0.0, "{s}");
+        // The transfers alone, beside a memcpy of the same bytes.
+        assert!(s["transfers_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
+        assert!(s["memcpy_ms"]["median"].as_f64().unwrap() > 0.0, "{s}");
     }
+    // Camera rays made on the device answer as the host's rays do.
+    assert_eq!(gpu["camera"]["differ_from_cpu"], 0, "{gpu}");
+    assert_eq!(gpu["camera"]["rays"], 1 << 20, "{gpu}");
+    assert!(gpu["buffers_created"].as_u64().unwrap() > 0, "{gpu}");
     ok(d, &["rays", "cube.oct", "--set", "shadow", "-o", "shadow.bin"]);
     let shadow = json["sets"].as_array().unwrap().iter().find(|s| s["set"] == "shadow").unwrap();
     assert_eq!(shadow["rays"].as_u64(), Some(std::fs::metadata(d.join("shadow.bin")).unwrap().len() / 32));

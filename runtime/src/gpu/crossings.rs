@@ -9,7 +9,8 @@
 //! budget, and rays with more crossings than one binding holds, are walked again on
 //! the CPU, from the same scene.
 
-use super::{GpuError, GpuResult, GpuTracer, HitOut, Ray, OVER_BUDGET, RAYS_PER_DISPATCH};
+use super::stream::{Kernel, Source};
+use super::{Answers, GpuError, GpuResult, GpuTracer, HitOut, Ray, OVER_BUDGET, RAYS_PER_DISPATCH};
 use crate::cpu::{BatchCrossings, Crossing, CrossingCount, Solid};
 
 /// Bytes of one record (a ray's crossing, or its count) in the hits binding.
@@ -45,7 +46,8 @@ impl GpuTracer<'_> {
 
     /// The counting kernel's answers; `None` for a walk that ran out of loop budget.
     fn kernel_counts(&self, rays: &[Ray]) -> GpuResult<Vec<Option<CrossingCount>>> {
-        let (out, _) = self.run_kernel(rays, &self.crossing_kernels()?[0])?;
+        let mut out = vec![HitOut::default(); rays.len()];
+        self.stream(Source::Rays(rays), Kernel::Counts, Answers::Full(&mut out), false)?;
         Ok(out
             .iter()
             .map(|h| (h.steps != OVER_BUDGET).then_some(CrossingCount { total: h.triangle, entries: h.leaf }))
@@ -168,7 +170,7 @@ impl GpuTracer<'_> {
     }
 
     /// The counting and listing kernels, built on first use.
-    fn crossing_kernels(&self) -> GpuResult<&[wgpu::ComputePipeline; 2]> {
+    pub(super) fn crossing_kernels(&self) -> GpuResult<&[wgpu::ComputePipeline; 2]> {
         self.crossing_kernels
             .get_or_init(|| {
                 let source = self.source();

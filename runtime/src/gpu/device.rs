@@ -2,8 +2,6 @@
 //! put on shader invocations and the budget the kernels keep under it, GPU timestamps,
 //! and reading buffers back.
 
-use std::time::Duration;
-
 use super::{GpuError, GpuResult};
 
 /// A Vulkan device and its queue.
@@ -25,6 +23,20 @@ impl GpuContext {
     /// [`GpuError::NoAdapter`] without a Vulkan driver; [`GpuError::Device`] if the
     /// adapter refuses the device.
     pub fn new() -> GpuResult<GpuContext> {
+        Self::open(true)
+    }
+
+    /// [`GpuContext::new`], with the batch path staging rays and answers through copies
+    /// even where the device's memory is the host's (as it must on a discrete GPU):
+    /// to compare the two paths on one machine.
+    ///
+    /// # Errors
+    /// As [`GpuContext::new`].
+    pub fn new_staged() -> GpuResult<GpuContext> {
+        Self::open(false)
+    }
+
+    fn open(map_storage: bool) -> GpuResult<GpuContext> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::VULKAN;
         let instance = wgpu::Instance::new(desc);
@@ -46,7 +58,19 @@ impl GpuContext {
         };
         // 64-bit floats for the exact paths; kernels compiled here (`spirv`); timestamps to
         // time kernels on the device.
-        let wanted = wgpu::Features::SHADER_F64 | wgpu::Features::PASSTHROUGH_SHADERS | wgpu::Features::TIMESTAMP_QUERY;
+        let mut wanted =
+            wgpu::Features::SHADER_F64 | wgpu::Features::PASSTHROUGH_SHADERS | wgpu::Features::TIMESTAMP_QUERY;
+        // Where the device's memory is the host's, rays are written into and answers
+        // read from the kernel's own buffers (no staging copies: `stream`).
+        let info = adapter.get_info();
+        // `OCTRACE_GPU_MAPPED=1` asks it of any adapter (a discrete GPU's kernel then reads
+        // the rays and writes the answers across the bus: to measure).
+        let forced = std::env::var("OCTRACE_GPU_MAPPED").is_ok_and(|v| v == "1");
+        if map_storage
+            && (forced || matches!(info.device_type, wgpu::DeviceType::Cpu | wgpu::DeviceType::IntegratedGpu))
+        {
+            wanted |= wgpu::Features::MAPPABLE_PRIMARY_BUFFERS;
+        }
         let required_features = adapter.features() & wanted;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("octrace"),
@@ -55,7 +79,7 @@ impl GpuContext {
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(GpuContext { device, queue, info: adapter.get_info() })
+        Ok(GpuContext { device, queue, info })
     }
 
     /// One line about the adapter: name, driver, type.
@@ -209,53 +233,10 @@ pub(super) fn dispatch_once(
     queue.submit([encoder.finish()]);
 }
 
-/// Two timestamps around each compute pass, where the device has timestamp queries.
-#[derive(Debug)]
-pub(super) struct Stopwatch {
-    queries: wgpu::QuerySet,
-    resolve: wgpu::Buffer,
-    /// Nanoseconds a timestamp tick.
-    period: f64,
-}
-
-impl Stopwatch {
-    pub(super) fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Option<Stopwatch> {
-        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
-            return None;
-        }
-        let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("octrace kernel time"),
-            ty: wgpu::QueryType::Timestamp,
-            count: 2,
-        });
-        let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("octrace kernel time"),
-            size: 16,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        Some(Stopwatch { queries, resolve, period: f64::from(queue.get_timestamp_period()) })
-    }
-
-    /// The pass's timestamp writes.
-    pub(super) fn writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
-        wgpu::ComputePassTimestampWrites {
-            query_set: &self.queries,
-            beginning_of_pass_write_index: Some(0),
-            end_of_pass_write_index: Some(1),
-        }
-    }
-
-    /// Resolves the pass's timestamps (after the pass, in the same encoder).
-    pub(super) fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.resolve_query_set(&self.queries, 0..2, &self.resolve, 0);
-    }
-
-    /// The time between the pass's two timestamps (once its work is done).
-    pub(super) fn elapsed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<Duration> {
-        let ticks = read_buffer::<u64>(device, queue, &self.resolve, 16)?;
-        Ok(Duration::from_nanos((ticks[1].saturating_sub(ticks[0]) as f64 * self.period) as u64))
-    }
+/// Nanoseconds a timestamp tick, where the device has timestamp queries (the batch
+/// path times each chunk's pass: `stream`).
+pub(super) fn timestamp_period(device: &wgpu::Device, queue: &wgpu::Queue) -> Option<f64> {
+    device.features().contains(wgpu::Features::TIMESTAMP_QUERY).then(|| f64::from(queue.get_timestamp_period()))
 }
 
 /// Waits for the device's work.

@@ -34,16 +34,22 @@ mod device;
 mod render;
 mod source;
 mod spirv;
+mod stream;
 
 use std::time::{Duration, Instant};
 
 pub use buffers::MAX_SCENE_BINDINGS;
 pub use device::{lockstep_lanes, loop_cap, GpuContext};
 pub use render::{GpuRenderer, MAX_GPU_DEPTH};
+pub use stream::{Answers, GpuCamera, GpuNearest, HitRecord};
+/// The wgpu this crate is built with, for applications that share their device with a
+/// tracer ([`GpuTracer::encode_trace`]).
+pub use wgpu;
 
 use buffers::{bind_group_layout, check_bindings, offsets_of, upload, TRACE_ARRAYS, TRACE_EXTRA_BINDINGS};
-use device::{dispatch_once, read_buffer, read_buffer_append, wait, Budget, Stopwatch};
+use device::{dispatch_once, read_buffer, timestamp_period, Budget};
 use source::shader_source;
+use stream::{Kernel, Pipelining, Source, Streams};
 
 use crate::ray::{Hit, Ray};
 use crate::Scene;
@@ -72,6 +78,9 @@ pub enum GpuError {
     /// The scene's data cannot be used (a texture's image that does not decode).
     #[error("{0}")]
     Scene(String),
+    /// Answers or buffers that do not fit the rays given.
+    #[error("{0}")]
+    Mismatch(String),
 }
 
 /// The GPU result type.
@@ -84,6 +93,11 @@ pub struct GpuOptions {
     /// scene's words are split across as many bindings as this takes; smaller values
     /// exercise the split on scenes that would fit one.
     pub max_binding_bytes: Option<u64>,
+    /// Rays a chunk of a batch (default 2^18; rounded up to a multiple of 64). Chunks
+    /// are uploaded, traced and read back in turn, overlapping one another.
+    pub chunk_rays: Option<usize>,
+    /// Chunks in flight at once (default 3, at most 8).
+    pub in_flight: Option<usize>,
 }
 
 /// The kernel's uniform block (`Params` in trace.wgsl).
@@ -107,19 +121,41 @@ struct Params {
     box_hi: [f32; 4],
 }
 
-/// The kernel's output record (`HitOut` in trace.wgsl).
+/// The kernel's whole answer for a ray ([`HitRecord::Full`]; `HitOut` in trace.wgsl).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct HitOut {
-    t: f32,
-    triangle: u32,
-    u: f32,
-    v: f32,
-    leaf: u32,
-    prim: u32,
-    steps: u32,
-    flags: u32,
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuHit {
+    /// Distance along the ray.
+    pub t: f32,
+    /// The triangle's input id; `u32::MAX` on a miss.
+    pub triangle: u32,
+    /// Barycentric coordinates of the hit.
+    pub u: f32,
+    /// See `u`.
+    pub v: f32,
+    /// The leaf the hit was found in.
+    pub leaf: u32,
+    /// The triangle's stored index.
+    pub prim: u32,
+    /// Leaves visited.
+    pub steps: u32,
+    /// Bit 0: the step bound stopped the walk; bits 1..32: triangle tests run.
+    pub flags: u32,
 }
+
+impl GpuHit {
+    /// The hit, or `None` on a miss.
+    pub fn hit(&self) -> Option<Hit> {
+        to_hit(self)
+    }
+
+    /// What the walk did.
+    pub fn stats(&self) -> WalkStats {
+        WalkStats { leaves: self.steps, triangle_tests: self.flags >> 1, stopped_at_bound: self.flags & 1 != 0 }
+    }
+}
+
+type HitOut = GpuHit;
 
 /// Rays a dispatch takes at most (and at most 65,535 workgroups of [`Budget::workgroup`]).
 const RAYS_PER_DISPATCH: usize = 1 << 21;
@@ -135,8 +171,6 @@ pub struct GpuTracer<'s> {
     budget: Budget,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    nearest: wgpu::ComputePipeline,
-    any: wgpu::ComputePipeline,
     /// How kernels are compiled on this device, the layout the crossing kernels are
     /// made with on first use (`crossings`), and those kernels: counts, lists.
     compiler: spirv::Compiler,
@@ -145,27 +179,35 @@ pub struct GpuTracer<'s> {
     layout: wgpu::BindGroupLayout,
     scene_buffers: Vec<wgpu::Buffer>,
     params: Params,
+    /// The batch path's buffers (`stream`), its chunks, and its kernels by (any hit,
+    /// record, camera).
+    streams: std::sync::Mutex<Streams>,
+    pipelining: Pipelining,
+    pipelines: std::sync::Mutex<std::collections::HashMap<(bool, HitRecord, bool), wgpu::ComputePipeline>>,
     chunk_words: u64,
     /// Whether the scene has fans (the kernels' `FANS` constant).
     fans: bool,
     f64_edges: bool,
-    stopwatch: Option<Stopwatch>,
+    /// Nanoseconds a timestamp tick, where the device times passes.
+    timestamps: Option<f64>,
     compile: Duration,
 }
 
 /// Timings of one batch, for benchmarks.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuTimings {
-    /// Uploading the rays.
+    /// Uploading the rays: writing them into mapped memory.
     pub upload: Duration,
-    /// The kernel, as the host sees it: from submitting its dispatches to their end
-    /// (the submission's and the wait's latency included).
+    /// Waiting for the device: its copies and kernels, as the host sees them, less
+    /// what overlapped with the host's own copies (`upload`, `download`).
     pub kernel: Duration,
     /// The kernel on the device: from the first to the last timestamp of each dispatch
     /// (`None` where the adapter has no timestamp queries).
     pub kernel_device: Option<Duration>,
-    /// Reading the hits back.
+    /// Reading the hits back: copying them out of mapped memory into the caller's.
     pub download: Duration,
+    /// The whole call, from its start to the last answer in place.
+    pub total: Duration,
 }
 
 impl<'s> GpuTracer<'s> {
@@ -236,6 +278,21 @@ impl<'s> GpuTracer<'s> {
             )
         };
         let (nearest, any) = (pipeline(false)?, pipeline(true)?);
+        let mut pipelines = std::collections::HashMap::new();
+        pipelines.insert((false, HitRecord::Full, false), nearest);
+        pipelines.insert((true, HitRecord::Full, false), any);
+        // `OCTRACE_GPU_CHUNK` and `OCTRACE_GPU_IN_FLIGHT` set the defaults, to measure a
+        // GPU (answers do not depend on them).
+        let knob = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<usize>().ok());
+        let pipelining = Pipelining {
+            chunk: (options.chunk_rays.or_else(|| knob("OCTRACE_GPU_CHUNK")))
+                .unwrap_or(stream::DEFAULT_CHUNK)
+                .clamp(1, 1 << 24)
+                .next_multiple_of(64),
+            in_flight: (options.in_flight.or_else(|| knob("OCTRACE_GPU_IN_FLIGHT")))
+                .unwrap_or(stream::DEFAULT_IN_FLIGHT)
+                .clamp(1, 8),
+        };
         let compile = compiling.elapsed();
         let b = view.bounds;
         let (root_lo, root_hi) = crate::cpu::root_corners(&view);
@@ -273,8 +330,6 @@ impl<'s> GpuTracer<'s> {
             budget,
             device: device.clone(),
             queue: queue.clone(),
-            nearest,
-            any,
             compile,
             compiler,
             pipeline_layout,
@@ -282,10 +337,13 @@ impl<'s> GpuTracer<'s> {
             layout,
             scene_buffers,
             params,
+            streams: Default::default(),
+            pipelining,
+            pipelines: std::sync::Mutex::new(pipelines),
             chunk_words,
             fans,
             f64_edges,
-            stopwatch: Stopwatch::new(device, queue),
+            timestamps: timestamp_period(device, queue),
         })
     }
 
@@ -321,12 +379,15 @@ impl<'s> GpuTracer<'s> {
         Ok(self.run(rays, false)?.0.iter().map(to_hit).collect())
     }
 
-    /// Whether each ray hits anything in `[tmin, tmax]`, in ray order.
+    /// Whether each ray hits anything in `[tmin, tmax]`, in ray order (the GPU sends
+    /// one bit a ray back).
     ///
     /// # Errors
     /// As [`GpuTracer::intersect`].
     pub fn occluded(&self, rays: &[Ray]) -> GpuResult<Vec<bool>> {
-        Ok(self.run(rays, true)?.0.iter().map(|h| h.triangle != u32::MAX).collect())
+        let mut words = vec![0u32; rays.len().div_ceil(32)];
+        self.trace_into(rays, true, Answers::Occluded(&mut words))?;
+        Ok((0..rays.len()).map(|i| words[i / 32] >> (i % 32) & 1 != 0).collect())
     }
 
     /// [`GpuTracer::intersect`] with what each walk did (leaves visited, triangle tests,
@@ -335,12 +396,7 @@ impl<'s> GpuTracer<'s> {
     /// # Errors
     /// As [`GpuTracer::intersect`].
     pub fn intersect_with_stats(&self, rays: &[Ray]) -> GpuResult<Vec<(Option<Hit>, WalkStats)>> {
-        let stats = |h: &HitOut| WalkStats {
-            leaves: h.steps,
-            triangle_tests: h.flags >> 1,
-            stopped_at_bound: h.flags & 1 != 0,
-        };
-        Ok(self.run(rays, false)?.0.iter().map(|h| (to_hit(h), stats(h))).collect())
+        Ok(self.run(rays, false)?.0.iter().map(|h| (to_hit(h), h.stats())).collect())
     }
 
     /// [`GpuTracer::intersect`] (or, with `any`, the occluder of each ray) with the
@@ -351,6 +407,176 @@ impl<'s> GpuTracer<'s> {
     pub fn trace_timed(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<Option<Hit>>, GpuTimings)> {
         let (out, timings) = self.run(rays, any)?;
         Ok((out.iter().map(to_hit).collect(), timings))
+    }
+
+    /// Traces `rays` into the caller's `answers` (one record a ray, or one word for 32
+    /// rays of [`Answers::Occluded`]), as compact as the record asked: the nearest hit,
+    /// or with `any` any hit (occlusion bits always ask any hit). The batch is cut
+    /// into chunks whose upload, kernel and read-back overlap ([`GpuOptions`]), through
+    /// buffers kept from call to call; answers land straight in `answers`.
+    ///
+    /// # Errors
+    /// [`GpuError::Mismatch`] if `answers` does not hold one record a ray;
+    /// [`GpuError::Device`] as [`GpuTracer::intersect`].
+    ///
+    /// # Example
+    /// ```no_run
+    /// use octrace_runtime::gpu::{Answers, GpuContext, GpuNearest, GpuTracer};
+    /// use octrace_runtime::{Ray, Scene};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// let scene = Scene::open("bunny.oct")?;
+    /// let gpu = GpuContext::new()?;
+    /// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+    /// let rays = vec![Ray::new(glam::Vec3::new(0.0, 0.1, 1.0), glam::Vec3::NEG_Z); 1 << 20];
+    /// // 8 bytes a ray come back: distance and triangle.
+    /// let mut nearest = vec![GpuNearest::default(); rays.len()];
+    /// let timings = tracer.trace_into(&rays, false, Answers::Nearest(&mut nearest))?;
+    /// println!("{:?} in {:?}", nearest[0], timings.total);
+    /// # Ok(()) }
+    /// ```
+    pub fn trace_into(&self, rays: &[Ray], any: bool, answers: Answers<'_>) -> GpuResult<GpuTimings> {
+        self.stream(Source::Rays(rays), Kernel::Trace { any }, answers, false)
+    }
+
+    /// Traces the rays of `camera`, made on the device (no rays cross the bus), row by
+    /// row into `answers`: the answers of [`GpuTracer::trace_into`] for
+    /// [`GpuCamera::rays`], bit for bit.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::trace_into`].
+    ///
+    /// # Example
+    /// ```no_run
+    /// use octrace_runtime::gpu::{Answers, GpuCamera, GpuContext, GpuTracer};
+    /// use octrace_runtime::Scene;
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// let scene = Scene::open("bunny.oct")?;
+    /// let gpu = GpuContext::new()?;
+    /// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+    /// let k = [[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]];
+    /// let mut e = [[0.0; 4]; 4];
+    /// (e[0][0], e[1][1], e[2][2], e[3][3], e[2][3]) = (1.0, -1.0, -1.0, 1.0, 1.0);
+    /// let camera = GpuCamera::pinhole(k, e, 640, 480)?;
+    /// let mut depth = vec![0.0f32; camera.len()];
+    /// tracer.trace_camera_into(&camera, false, Answers::Distance(&mut depth))?;
+    /// # Ok(()) }
+    /// ```
+    pub fn trace_camera_into(&self, camera: &GpuCamera, any: bool, answers: Answers<'_>) -> GpuResult<GpuTimings> {
+        self.stream(Source::Camera(camera), Kernel::Trace { any }, answers, false)
+    }
+
+    /// The transfers of [`GpuTracer::trace_into`] alone, for benchmarks: the same
+    /// chunks go up and come back, no kernel runs, and what
+    /// `answers` holds afterwards is unspecified.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::trace_into`].
+    pub fn time_transfers(&self, rays: &[Ray], answers: Answers<'_>) -> GpuResult<GpuTimings> {
+        self.stream(Source::Rays(rays), Kernel::Trace { any: false }, answers, true)
+    }
+
+    /// Buffers the batch path has made since the tracer was made: its chunks' buffers
+    /// are kept and reused, made again only when a batch needs larger ones.
+    pub fn buffers_created(&self) -> u64 {
+        self.streams.lock().unwrap_or_else(|e| e.into_inner()).created()
+    }
+
+    /// Encodes into `encoder` the tracing of `count` rays that are already on this
+    /// tracer's device, in `rays` (32 bytes a ray, as [`Ray`]: origin, tmin, direction,
+    /// tmax), writing `record`s into `answers` (made with `STORAGE`): for wgpu
+    /// applications that make rays and use answers on the GPU, sharing the device and
+    /// queue the tracer was made with, so nothing crosses the bus. Occlusion bits are
+    /// followed by as many words of bits marking walks that ran out of the adapter's
+    /// loop budget; compact records mark them with a NaN distance, full records with
+    /// `steps == u32::MAX`. Only an adapter with a loop cap ([`GpuTracer::loop_cap`]:
+    /// lavapipe, never hardware) has such walks.
+    ///
+    /// # Errors
+    /// [`GpuError::Mismatch`] if a buffer is too small or not a storage buffer, or
+    /// `count` is more than one dispatch takes ([`GpuTracer::max_rays_per_encode`]).
+    pub fn encode_trace(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        rays: &wgpu::Buffer,
+        answers: &wgpu::Buffer,
+        count: u32,
+        any: bool,
+        record: HitRecord,
+    ) -> GpuResult<()> {
+        let need = (32 * u64::from(count), record.bytes(u64::from(count)));
+        if rays.size() < need.0 || answers.size() < need.1 {
+            return Err(GpuError::Mismatch(format!(
+                "{count} rays need {} bytes of rays and {} of {record:?} answers; the buffers have {} and {}",
+                need.0,
+                need.1,
+                rays.size(),
+                answers.size()
+            )));
+        }
+        if !rays.usage().contains(wgpu::BufferUsages::STORAGE) || !answers.usage().contains(wgpu::BufferUsages::STORAGE)
+        {
+            return Err(GpuError::Mismatch("the rays and answers must be storage buffers".into()));
+        }
+        if u64::from(count) > self.max_rays_per_encode() {
+            return Err(GpuError::Mismatch(format!(
+                "{count} rays in one encode; at most {}",
+                self.max_rays_per_encode()
+            )));
+        }
+        if record == HitRecord::Occluded && !self.budget.workgroup.is_multiple_of(32) {
+            return Err(GpuError::Unsupported("occlusion bits on an adapter whose workgroups are one lane".into()));
+        }
+        if count == 0 {
+            return Ok(());
+        }
+        let pipeline = self.pipeline(any || record == HitRecord::Occluded, record, false)?;
+        let params = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("octrace params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: true,
+        });
+        {
+            let mut view = params.slice(..).get_mapped_range_mut().map_err(|e| GpuError::Device(e.to_string()))?;
+            view.copy_from_slice(bytemuck::bytes_of(&Params { ray_count: count, ..self.params }));
+        }
+        params.unmap();
+        let group = self.bind_group(&params, rays, answers);
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("octrace trace"), timestamp_writes: None });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(count.div_ceil(self.budget.workgroup), 1, 1);
+        Ok(())
+    }
+
+    /// Rays one [`GpuTracer::encode_trace`] takes at most.
+    pub fn max_rays_per_encode(&self) -> u64 {
+        u64::from(self.budget.per_dispatch(RAYS_PER_DISPATCH as u32))
+    }
+
+    /// The tracing kernel for (any hit, record, rays from a camera), made on first use.
+    fn pipeline(&self, any: bool, record: HitRecord, camera: bool) -> GpuResult<wgpu::ComputePipeline> {
+        let mut made = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = made.get(&(any, record, camera)) {
+            return Ok(p.clone());
+        }
+        let flag = |b: bool| if b { 1.0 } else { 0.0 };
+        let p = self.compiler.pipeline(
+            &self.device,
+            &self.pipeline_layout,
+            &self.source(),
+            "main",
+            &[
+                ("ANY_HIT", flag(any)),
+                ("FANS", self.fans_constant()),
+                ("RECORD", record.code()),
+                ("CAMERA", flag(camera)),
+            ],
+            "octrace trace",
+        )?;
+        made.insert((any, record, camera), p.clone());
+        Ok(p)
     }
 
     /// How long making the tracing kernels took (WGSL to the driver's pipelines; a
@@ -376,7 +602,7 @@ impl<'s> GpuTracer<'s> {
 
     /// Whether kernels are timed on the device ([`GpuTimings::kernel_device`]).
     pub fn has_timestamps(&self) -> bool {
-        self.stopwatch.is_some()
+        self.timestamps.is_some()
     }
 
     /// Under a loop cap, the loop iterations each invocation may run before its ray or
@@ -400,77 +626,10 @@ impl<'s> GpuTracer<'s> {
         self.budget
     }
 
-    /// Runs the kernel over `rays` in dispatches of at most [`RAYS_PER_DISPATCH`]; the
-    /// walks that ran out of loop budget are traced again on the CPU.
+    /// The whole records of `rays` (walks out of loop budget traced on the CPU).
     fn run(&self, rays: &[Ray], any: bool) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
-        let (mut out, timings) = self.run_kernel(rays, if any { &self.any } else { &self.nearest })?;
-        let tracer = self.scene.tracer();
-        for (h, r) in out.iter_mut().zip(rays).filter(|(h, _)| h.steps == OVER_BUDGET) {
-            *h = if any {
-                from_hit(tracer.occluder(r), WalkStats::default())
-            } else {
-                let (hit, stats) = tracer.intersect_with_stats(r);
-                from_hit(hit, stats)
-            };
-        }
-        Ok((out, timings))
-    }
-
-    /// The answers of `pipeline` (one record a ray) for `rays`, and the time each part
-    /// took.
-    fn run_kernel(&self, rays: &[Ray], pipeline: &wgpu::ComputePipeline) -> GpuResult<(Vec<HitOut>, GpuTimings)> {
-        let mut out = Vec::with_capacity(rays.len());
-        let mut timings = GpuTimings::default();
-        if rays.is_empty() {
-            return Ok((out, timings));
-        }
-        let per_dispatch = self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as usize;
-        let batch = rays.len().min(per_dispatch);
-        let ray_bytes = (batch * std::mem::size_of::<Ray>()) as u64;
-        let hit_bytes = (batch * std::mem::size_of::<HitOut>()) as u64;
-        use wgpu::BufferUsages as U;
-        let ray_buffer = self.buffer("octrace rays", ray_bytes, U::STORAGE | U::COPY_DST);
-        let hit_buffer = self.buffer("octrace hits", hit_bytes, U::STORAGE | U::COPY_SRC);
-        let readback = self.buffer("octrace readback", hit_bytes, U::MAP_READ | U::COPY_DST);
-        let params_buffer =
-            self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
-        let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
-        for part in rays.chunks(per_dispatch) {
-            let t = Instant::now();
-            let params = Params { ray_count: part.len() as u32, ..self.params };
-            self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-            self.queue.write_buffer(&ray_buffer, 0, bytemuck::cast_slice(part));
-            self.queue.submit([]);
-            self.wait()?;
-            timings.upload += t.elapsed();
-
-            let t = Instant::now();
-            let mut encoder = self.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("octrace trace"),
-                    timestamp_writes: self.stopwatch.as_ref().map(Stopwatch::writes),
-                });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups((part.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
-            }
-            if let Some(s) = &self.stopwatch {
-                s.resolve(&mut encoder);
-            }
-            self.queue.submit([encoder.finish()]);
-            self.wait()?;
-            timings.kernel += t.elapsed();
-            if let Some(s) = &self.stopwatch {
-                let device = s.elapsed(&self.device, &self.queue)?;
-                timings.kernel_device = Some(timings.kernel_device.unwrap_or_default() + device);
-            }
-
-            let t = Instant::now();
-            let bytes = (part.len() * std::mem::size_of::<HitOut>()) as u64;
-            read_buffer_append(&self.device, &self.queue, &hit_buffer, &readback, bytes, &mut out)?;
-            timings.download += t.elapsed();
-        }
+        let mut out = vec![HitOut::default(); rays.len()];
+        let timings = self.stream(Source::Rays(rays), Kernel::Trace { any }, Answers::Full(&mut out), false)?;
         Ok((out, timings))
     }
 
@@ -530,10 +689,6 @@ impl<'s> GpuTracer<'s> {
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
         read_buffer(&self.device, &self.queue, buffer, bytes)
     }
-
-    fn wait(&self) -> GpuResult<()> {
-        wait(&self.device)
-    }
 }
 
 fn to_hit(h: &HitOut) -> Option<Hit> {
@@ -587,6 +742,13 @@ mod tests {
                 }
                 // And as the device gets them where it takes SPIR-V (`spirv`).
                 spirv::compile(&trace, "main", &[("ANY_HIT", 1.0)], true).unwrap();
+                // Every record, rays read or made from a camera.
+                for record in [HitRecord::Full, HitRecord::Nearest, HitRecord::Distance, HitRecord::Occluded] {
+                    for camera in [0.0, 1.0] {
+                        let constants = [("RECORD", record.code()), ("CAMERA", camera), ("ANY_HIT", 1.0)];
+                        spirv::compile(&trace, "main", &constants, true).unwrap();
+                    }
+                }
                 spirv::compile(&render::render_source(&trace, 6), "render", &[("SHADOWS", 0.0)], false).unwrap();
             }
         }

@@ -18,6 +18,14 @@ override FANS: bool = false;
 // `triangle` the crossings, `leaf` those arriving on a front); 2: every crossing, as
 // records of their own (`cross`), at offsets the host puts after the rays.
 override MODE: u32 = 0u;
+// How MODE 0 writes a ray's answer (gpu::HitRecord): 0 the whole record (`HitOut`, 8
+// words); 1 distance and triangle (2 words); 2 distance (1 word); in 1 and 2 a miss is
+// distance +inf and triangle 0xFFFFFFFF, a walk out of loop budget distance
+// OVER_BUDGET_T (a NaN). 3: occlusion, one bit a ray, 32 rays a word, then as many words
+// of over-budget bits (needs WORKGROUP_SIZE a multiple of 32).
+override RECORD: u32 = 0u;
+// Rays made here from a pinhole camera (`camera_ray`) rather than read from `rays`.
+override CAMERA: bool = false;
 
 struct Params {
     ray_count: u32,
@@ -69,8 +77,113 @@ struct HitOut {
 
 @group(0) @binding(0) var<uniform> params: Params;
 // Two vec4s a ray: (ox, oy, oz, tmin), (dx, dy, dz, tmax): the 32-byte RAYS.bin record.
+// With CAMERA, the camera's four vec4s (`camera_ray`).
 @group(0) @binding(1) var<storage, read> rays: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> hits: array<HitOut>;
+// The answers, as RECORD says (MODE 1 and 2: `HitOut`s, `put_hit`).
+@group(0) @binding(2) var<storage, read_write> hits: array<u32>;
+
+// A HitOut's eight words at record `i`.
+fn put_hit(i: u32, h: HitOut) {
+    let b = 8u * i;
+    hits[b] = bitcast<u32>(h.t);
+    hits[b + 1u] = h.triangle;
+    hits[b + 2u] = bitcast<u32>(h.u);
+    hits[b + 3u] = bitcast<u32>(h.v);
+    hits[b + 4u] = h.leaf;
+    hits[b + 5u] = h.prim;
+    hits[b + 6u] = h.steps;
+    hits[b + 7u] = h.flags;
+}
+
+// The HitOut at record `i`.
+fn get_hit(i: u32) -> HitOut {
+    let b = 8u * i;
+    var h: HitOut;
+    h.t = bitcast<f32>(hits[b]);
+    h.triangle = hits[b + 1u];
+    h.u = bitcast<f32>(hits[b + 2u]);
+    h.v = bitcast<f32>(hits[b + 3u]);
+    h.leaf = hits[b + 4u];
+    h.prim = hits[b + 5u];
+    h.steps = hits[b + 6u];
+    h.flags = hits[b + 7u];
+    return h;
+}
+
+// Ray `i`'s two vec4s: read, or with CAMERA made from the camera in rays[0..4]:
+// (origin, tmin), (d0, tmax), (dx, width), (dy, first pixel), the last two words' bits
+// integers. Pixel p = first + i is column p % width, row p / width; its direction is
+// (dx (column + 1/2) + dy (row + 1/2)) + d0, each operation rounded to f32 (no fused
+// multiply-adds: the host's gpu::GpuCamera::ray is the same arithmetic).
+fn ray_at(i: u32) -> array<vec4<f32>, 2> {
+    if CAMERA {
+        let c1 = rays[1];
+        let c2 = rays[2];
+        let c3 = rays[3];
+        let p = bitcast<u32>(c3.w) + i;
+        let width = bitcast<u32>(c2.w);
+        let x = f32(p % width) + 0.5;
+        let y = f32(p / width) + 0.5;
+        let d = c2.xyz * x + c3.xyz * y + c1.xyz;
+        return array<vec4<f32>, 2>(rays[0], vec4<f32>(d, c1.w));
+    }
+    return array<vec4<f32>, 2>(rays[2u * i], rays[2u * i + 1u]);
+}
+
+// Record 1 and 2's distance for a walk that ran out of loop budget (a NaN).
+const OVER_BUDGET_T: u32 = 0x7FC0B0D6u;
+
+// MODE 0's answer for ray `i`, as RECORD says.
+fn put_record(i: u32, h: HitOut) {
+    if RECORD == 0u {
+        put_hit(i, h);
+        return;
+    }
+    var t = bitcast<u32>(h.t);
+    if h.triangle == 0xFFFFFFFFu {
+        t = 0x7F800000u;
+    }
+    if h.steps == OVER_BUDGET {
+        t = OVER_BUDGET_T;
+    }
+    if RECORD == 1u {
+        hits[2u * i] = t;
+        hits[2u * i + 1u] = h.triangle;
+    } else {
+        hits[i] = t;
+    }
+}
+
+// RECORD 3's lanes: bit 0 occluded, bit 1 over budget.
+var<workgroup> lane_bits: array<u32, WORKGROUP_SIZE>;
+
+// RECORD 3: whether ray `i` is occluded, one bit a ray; the workgroup's first lanes
+// pack 32 lanes' bits a word (a workgroup's rays start at a multiple of 32).
+fn occlusion_bits(i: u32, lane: u32) {
+    var b = 0u;
+    if i < params.ray_count {
+        let r = ray_at(i);
+        let out = trace(r[0].xyz, r[1].xyz, r[0].w, r[1].w, true);
+        b = select(0u, 1u, out.triangle != 0xFFFFFFFFu) | select(0u, 2u, over_budget);
+    }
+    lane_bits[lane] = b;
+    workgroupBarrier();
+    if lane < WORKGROUP_SIZE / 32u {
+        var hit = 0u;
+        var over = 0u;
+        for (var k = 0u; k < 32u; k++) {
+            let v = lane_bits[32u * lane + k];
+            hit |= (v & 1u) << k;
+            over |= (v >> 1u) << k;
+        }
+        let words = (params.ray_count + 31u) / 32u;
+        let word = (i - lane) / 32u + lane;
+        if word < words {
+            hits[word] = hit;
+            hits[words + word] = over;
+        }
+    }
+}
 
 //GENERATED//
 
@@ -887,14 +1000,14 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
                     if k == leaf_start || !tick() {
                         break;
                     }
-                    let prev = hits[base + k - 1u];
+                    let prev = get_hit(base + k - 1u);
                     if prev.steps < key || (prev.steps == key && prev.triangle < c.triangle) {
                         break;
                     }
-                    hits[base + k] = prev;
+                    put_hit(base + k, prev);
                     k -= 1u;
                 }
-                hits[base + k] = c;
+                put_hit(base + k, c);
             }
             total += 1u;
             entries += select(0u, 1u, front);
@@ -909,20 +1022,25 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = gid.x;
+    if MODE == 0u && RECORD == 3u {
+        occlusion_bits(i, lane);
+        return;
+    }
     if i >= params.ray_count {
         return;
     }
-    let r0 = rays[2u * i];
-    let r1 = rays[2u * i + 1u];
+    let r = ray_at(i);
+    let r0 = r[0];
+    let r1 = r[1];
     if MODE == 0u {
         var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
         // A walk that ran out of loop budget: the host traces it again on the CPU.
         if over_budget {
             out.steps = OVER_BUDGET;
         }
-        hits[i] = out;
+        put_record(i, out);
         return;
     }
     if MODE == 1u {
@@ -931,7 +1049,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         out.triangle = c.x;
         out.leaf = c.y;
         out.steps = select(c.z, OVER_BUDGET, over_budget);
-        hits[i] = out;
+        put_hit(i, out);
         return;
     }
     // MODE 2: ray i's records start at offsets[i] (u32s after the rays, four a vec4).
@@ -940,7 +1058,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let capacity = ray_offset(n, i + 1u) - base;
     cross(r0.xyz, r1.xyz, r0.w, r1.w, base, capacity);
     if over_budget && capacity > 0u {
-        hits[base].flags = OVER_BUDGET;
+        hits[8u * base + 7u] = OVER_BUDGET;
     }
 }
 

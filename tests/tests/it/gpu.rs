@@ -133,7 +133,7 @@ fn a_scene_split_across_bindings_gives_the_same_answers() {
     let Some(gpu) = gpu("a_scene_split_across_bindings_gives_the_same_answers") else { return };
     let scene = bunny_scene();
     let whole = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
-    let options = GpuOptions { max_binding_bytes: Some(1 << 20) };
+    let options = GpuOptions { max_binding_bytes: Some(1 << 20), ..GpuOptions::default() };
     let split = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options).unwrap();
     assert_eq!(whole.scene_bindings(), 1);
     assert!(split.scene_bindings() >= 4, "{} bindings", split.scene_bindings());
@@ -162,7 +162,7 @@ fn a_scene_needing_too_many_bindings_is_a_clear_error() {
     let words = scene.view().section_words()[..7].iter().map(|a| a.len() as u64).sum::<u64>();
     // Chunks of a power of two words: the largest size giving more chunks than allowed.
     let chunk = |n: u64| 4 << (words / n).max(1).ilog2();
-    let options = GpuOptions { max_binding_bytes: Some(chunk(allowed + 1)) };
+    let options = GpuOptions { max_binding_bytes: Some(chunk(allowed + 1)), ..GpuOptions::default() };
     match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) {
         Err(GpuError::TooLarge(why)) => assert!(why.contains("storage buffers"), "{why}"),
         other => panic!("{} words in chunks of {} bytes: {other:?}", words, chunk(allowed + 1)),
@@ -172,7 +172,7 @@ fn a_scene_needing_too_many_bindings_is_a_clear_error() {
     let buffers = u64::from(limits.max_buffers_and_acceleration_structures_per_shader_stage);
     let mut refused_render = 0;
     for shift in 12..24 {
-        let options = GpuOptions { max_binding_bytes: Some(1 << shift) };
+        let options = GpuOptions { max_binding_bytes: Some(1 << shift), ..GpuOptions::default() };
         let Ok(tracer) = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) else { continue };
         let chunks = tracer.scene_bindings() as u64;
         assert!(chunks <= allowed, "{chunks} bindings made, {allowed} allowed");

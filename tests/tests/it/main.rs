@@ -11,6 +11,7 @@ mod format;
 mod gltf_lenient;
 mod gpu;
 mod gpu_crossings;
+mod gpu_stream;
 mod hard_cases;
 mod hostile;
 mod images;

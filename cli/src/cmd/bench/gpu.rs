@@ -1,7 +1,7 @@
 //! The GPU figures of `bench --gpu`.
 use std::time::{Duration, Instant};
 
-use octrace_runtime::gpu::{GpuContext, GpuTracer};
+use octrace_runtime::gpu::{Answers, GpuCamera, GpuContext, GpuHit, GpuNearest, GpuTracer};
 use octrace_runtime::{Hit, Ray, Scene};
 use serde_json::json;
 
@@ -13,12 +13,21 @@ pub(super) struct GpuSet {
     rays: usize,
     /// The kernel on the device (timestamp queries), where the adapter has them.
     kernel_device: Option<Spread>,
-    /// The kernel as the host sees it (submitted to finished).
+    /// Waiting for the device, as the host sees it (copies and kernels less what
+    /// overlapped with the host's copies).
     kernel: Spread,
+    /// Whole calls with full records (32 bytes a ray back).
     end_to_end: Spread,
-    /// Milliseconds uploading the rays and reading the hits back.
+    /// Whole calls with the record the query needs: distance and triangle (8 bytes)
+    /// for nearest hits, one bit for occlusion.
+    compact: Spread,
+    /// Milliseconds writing the rays into mapped memory and copying the answers out.
     upload_ms: Spread,
     download_ms: Spread,
+    /// Milliseconds of a call's transfers alone (the kernel over no rays), full
+    /// records, and of a `memcpy` of the same bytes (rays and answers) on the host.
+    transfers_ms: Spread,
+    memcpy_ms: Spread,
     /// The set's first, untimed call (the driver may compile at its first dispatch).
     first_call: Duration,
     hits: usize,
@@ -26,7 +35,19 @@ pub(super) struct GpuSet {
     /// Rays whose answer differs from the CPU's: in any bit of (triangle, t, u, v)
     /// where the kernel computes as the CPU does (f64 on the adapter, the watertight
     /// test), else by another distance (1e-5 t; another triangle at the same distance
-    /// counts as the same answer).
+    /// counts as the same answer); compact records the same way, distance and triangle.
+    differ: usize,
+}
+
+/// Camera rays made on the device (the primary set's view, unnormalized directions).
+pub(super) struct GpuCameraFigures {
+    rays: usize,
+    /// Mrays/s of whole calls, distance and triangle back.
+    nearest: Spread,
+    /// Mrays/s of whole calls, distance back.
+    distance: Spread,
+    kernel_device: Option<Spread>,
+    /// Pixels whose answer differs from the CPU's for the same rays made on the host.
     differ: usize,
 }
 
@@ -43,80 +64,186 @@ pub(super) struct GpuReport {
     compile: Duration,
     loop_cap: Option<u32>,
     lane_budget: Option<u32>,
+    /// Times each set was repeated in one batch.
+    repeat: usize,
+    buffers: u64,
     sets: Vec<GpuSet>,
+    camera: Option<GpuCameraFigures>,
+}
+
+/// A `memcpy` of `bytes` into a buffer already touched: the host's speed for the
+/// transfers' bytes.
+fn memcpy_ms(src: &[u8], dst: &mut [u8]) -> f64 {
+    let t = Instant::now();
+    dst.copy_from_slice(src);
+    std::hint::black_box(&dst);
+    t.elapsed().as_secs_f64() * 1e3
 }
 
 /// Times each set on the GPU and compares its answers with the CPU's (`cpu`, the
-/// sets' CPU results, in the same order).
+/// sets' CPU results, in the same order); each set repeated `repeat` times in a batch.
 pub(super) fn measure(
     scene: &Scene,
     sets: &[(&'static str, Vec<Ray>, bool)],
     cpu: &[super::SetResult],
     runs: usize,
     watertight: bool,
+    repeat: usize,
+    frame: &octrace_runtime::raysets::Frame,
 ) -> anyhow::Result<GpuReport> {
     let gpu = GpuContext::new()?;
     let t = Instant::now();
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
     let setup = t.elapsed();
+    let bitwise = watertight && tracer.uses_f64();
     let mut out = Vec::new();
-    for ((name, rays, occlusion), cpu) in sets.iter().zip(cpu) {
-        let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+    for ((name, set, occlusion), cpu) in sets.iter().zip(cpu) {
+        let rays: Vec<Ray> =
+            if repeat > 1 { set.iter().copied().cycle().take(set.len() * repeat).collect() } else { set.clone() };
+        let n = rays.len();
+        let mrays = |d: Duration| n as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+        let mut full = vec![GpuHit::default(); n];
+        let mut nearest = vec![GpuNearest::default(); n];
+        let mut bits = vec![0u32; n.div_ceil(32)];
         let t = Instant::now();
-        tracer.trace_timed(rays, *occlusion)?;
+        tracer.trace_into(&rays, *occlusion, Answers::Full(&mut full))?;
         let first_call = t.elapsed();
-        let (mut device, mut kernel, mut total, mut hits) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let (mut up, mut down) = (Vec::new(), Vec::new());
+        let compact_call = |nearest: &mut [GpuNearest], bits: &mut [u32]| {
+            if *occlusion {
+                tracer.trace_into(&rays, true, Answers::Occluded(bits))
+            } else {
+                tracer.trace_into(&rays, false, Answers::Nearest(nearest))
+            }
+        };
+        compact_call(&mut nearest, &mut bits)?;
+        let (ray_bytes, answer_bytes): (&[u8], usize) = (bytemuck::cast_slice(&rays), n * 32);
+        let mut scratch = vec![1u8; ray_bytes.len() + answer_bytes];
+        let answer_source = vec![2u8; answer_bytes];
+        let (mut device, mut kernel, mut total, mut compact) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut up, mut down, mut transfers, mut memcpy) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for _ in 0..runs {
-            let (h, timings) = tracer.trace_timed(rays, *occlusion)?;
+            let timings = tracer.trace_into(&rays, *occlusion, Answers::Full(&mut full))?;
             device.extend(timings.kernel_device.map(mrays));
             kernel.push(mrays(timings.kernel));
-            total.push(mrays(timings.upload + timings.kernel + timings.download));
+            total.push(mrays(timings.total));
             up.push(timings.upload.as_secs_f64() * 1e3);
             down.push(timings.download.as_secs_f64() * 1e3);
-            hits = h;
+            compact.push(mrays(compact_call(&mut nearest, &mut bits)?.total));
+            transfers.push(tracer.time_transfers(&rays, Answers::Full(&mut full))?.total.as_secs_f64() * 1e3);
+            let (a, b) = scratch.split_at_mut(ray_bytes.len());
+            memcpy.push(memcpy_ms(ray_bytes, a) + memcpy_ms(&answer_source, b));
         }
-        let differ = if *occlusion {
-            cpu.occluded.iter().zip(&hits).filter(|(c, g)| **c != g.is_some()).count()
-        } else {
-            let bitwise = watertight && tracer.uses_f64();
-            cpu.nearest
-                .iter()
-                .zip(&hits)
-                .filter(|(c, g)| if bitwise { bits(c) != bits(g) } else { !same(c, g) })
-                .count()
-        };
-        let (found, sum_t) = super::hit_sums(&hits);
+        // The answers of the last timed run, checked (time_transfers left `full` as
+        // it liked: traced again).
+        tracer.trace_into(&rays, *occlusion, Answers::Full(&mut full))?;
+        let m = set.len();
+        let differ = (0..n)
+            .filter(|&i| {
+                let (g, c) = (full[i].hit(), i % m);
+                if *occlusion {
+                    cpu.occluded[c] != g.is_some() || cpu.occluded[c] != (bits[i / 32] >> (i % 32) & 1 != 0)
+                } else {
+                    let same_full =
+                        if bitwise { bits_of(&cpu.nearest[c]) == bits_of(&g) } else { same(&cpu.nearest[c], &g) };
+                    let compact = (nearest[i].triangle != u32::MAX).then_some((nearest[i].triangle, nearest[i].t));
+                    let same_compact = match (cpu.nearest[c].map(|h| (h.triangle, h.t)), compact) {
+                        (None, None) => true,
+                        (Some(a), Some(b)) if bitwise => a.0 == b.0 && a.1.to_bits() == b.1.to_bits(),
+                        (Some(a), Some(b)) => a.0 == b.0 || (a.1 - b.1).abs() <= 1e-5 * a.1.abs(),
+                        _ => false,
+                    };
+                    !same_full || !same_compact
+                }
+            })
+            .count();
+        let hits_found: Vec<Option<Hit>> = full[..m].iter().map(GpuHit::hit).collect();
+        let (found, sum_t) = super::hit_sums(&hits_found);
         out.push(GpuSet {
             name,
-            rays: rays.len(),
+            rays: n,
             kernel_device: (!device.is_empty()).then(|| Spread::of(device)),
             kernel: Spread::of(kernel),
             end_to_end: Spread::of(total),
+            compact: Spread::of(compact),
             upload_ms: Spread::of(up),
             download_ms: Spread::of(down),
+            transfers_ms: Spread::of(transfers),
+            memcpy_ms: Spread::of(memcpy),
             first_call,
             hits: found,
             sum_t: if *occlusion { 0.0 } else { sum_t },
             differ,
         });
     }
+    let camera = camera_figures(scene, &tracer, frame, runs, repeat)?;
     Ok(GpuReport {
         adapter: gpu.describe(),
         exact_edges: tracer.uses_f64(),
-        bitwise: watertight && tracer.uses_f64(),
+        bitwise,
         unfused: tracer.unfused(),
         subnormals: tracer.keeps_subnormals(),
         setup,
         compile: tracer.compile_time(),
         loop_cap: tracer.loop_cap(),
         lane_budget: tracer.lane_budget(),
+        repeat,
+        buffers: tracer.buffers_created(),
         sets: out,
+        camera: Some(camera),
+    })
+}
+
+/// The primary set's view made on the device (`repeat` times the pixels: a taller
+/// image), traced to distance and triangle, and to distance alone.
+fn camera_figures(
+    scene: &Scene,
+    tracer: &GpuTracer<'_>,
+    frame: &octrace_runtime::raysets::Frame,
+    runs: usize,
+    repeat: usize,
+) -> anyhow::Result<GpuCameraFigures> {
+    let standard = octrace_runtime::raysets::Camera::standard(frame);
+    let mut camera = GpuCamera::from_camera(&standard)?;
+    // A taller image of the same view for larger batches (rows past the frame miss).
+    camera.height *= repeat as u32;
+    let n = camera.len();
+    let mrays = |d: Duration| n as f64 / d.as_secs_f64().max(1e-9) / 1e6;
+    let mut nearest = vec![GpuNearest::default(); n];
+    let mut distance = vec![0f32; n];
+    tracer.trace_camera_into(&camera, false, Answers::Nearest(&mut nearest))?;
+    tracer.trace_camera_into(&camera, false, Answers::Distance(&mut distance))?;
+    let (mut a, mut b, mut device) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let t = tracer.trace_camera_into(&camera, false, Answers::Nearest(&mut nearest))?;
+        a.push(mrays(t.total));
+        device.extend(t.kernel_device.map(mrays));
+        b.push(mrays(tracer.trace_camera_into(&camera, false, Answers::Distance(&mut distance))?.total));
+    }
+    // The CPU's answers for the same rays made on the host (the first frame's rows).
+    let m = (standard.width * standard.height) as usize;
+    let rays: Vec<Ray> = (0..m).map(|i| camera.ray_at(i)).collect();
+    let cpu = scene.intersect_batch(&rays);
+    let differ = cpu
+        .iter()
+        .enumerate()
+        .filter(|(i, c)| {
+            let (t, triangle) = c.map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.triangle));
+            nearest[*i].triangle != triangle
+                || nearest[*i].t.to_bits() != t.to_bits()
+                || distance[*i].to_bits() != t.to_bits()
+        })
+        .count();
+    Ok(GpuCameraFigures {
+        rays: n,
+        nearest: Spread::of(a),
+        distance: Spread::of(b),
+        kernel_device: (!device.is_empty()).then(|| Spread::of(device)),
+        differ,
     })
 }
 
 /// A hit's bits: (triangle, t, u, v).
-fn bits(h: &&Option<Hit>) -> Option<[u32; 4]> {
+fn bits_of(h: &Option<Hit>) -> Option<[u32; 4]> {
     h.map(|h| [h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()])
 }
 
@@ -152,26 +279,52 @@ impl GpuReport {
                 }
             ),
             format!(
-                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>15} {:>11}  checksum",
-                "set", "rays", "kernel Mrays/s (GPU)", "kernel (host)", "with transfers", "up + down ms", "first call"
+                "{:<11} {:>10} {:>22} {:>22} {:>22} {:>22} {:>13} {:>19} {:>11}  checksum",
+                "set",
+                "rays",
+                "kernel Mrays/s (GPU)",
+                "waiting (host)",
+                "full records",
+                "compact records",
+                "up + down ms",
+                "transfers / memcpy",
+                "first call"
             ),
         ];
         for s in &self.sets {
             let check = super::checksum(s.name, s.hits, s.sum_t);
             lines.push(format!(
-                "{:<11} {:>9} {:>22} {:>22} {:>22} {:>15} {:>8.1} ms  {}; {} rays differ from the CPU{}",
+                "{:<11} {:>10} {:>22} {:>22} {:>22} {:>22} {:>13} {:>19} {:>8.1} ms  {}; {} rays differ from the CPU{}",
                 s.name,
                 thousands(s.rays as u64),
                 s.kernel_device.as_ref().map_or("no timestamps".to_string(), fmt),
                 fmt(&s.kernel),
                 fmt(&s.end_to_end),
+                fmt(&s.compact),
                 format!("{:.1} + {:.1}", s.upload_ms.median, s.download_ms.median),
+                format!("{:.1} / {:.1} ms", s.transfers_ms.median, s.memcpy_ms.median),
                 ms(s.first_call),
                 check,
                 s.differ,
                 if self.bitwise || s.name == "shadow" { "" } else { " (by distance)" }
             ));
         }
+        if let Some(c) = &self.camera {
+            lines.push(format!(
+                "camera rays made on the GPU (the primary view{}): {} rays, {} Mrays/s with distance and \
+                 triangle back, {} with distance back, kernel {} (GPU clock); {} pixels differ from the CPU",
+                if self.repeat > 1 { format!(", {} times as tall", self.repeat) } else { String::new() },
+                thousands(c.rays as u64),
+                fmt(&c.nearest),
+                fmt(&c.distance),
+                c.kernel_device.as_ref().map_or("untimed".to_string(), fmt),
+                c.differ
+            ));
+        }
+        lines.push(format!(
+            "(full records: 32 bytes a ray back; compact: 8 for nearest hits, a bit for occlusion; {} buffers made)",
+            self.buffers
+        ));
         lines.join("\n")
     }
 
@@ -186,9 +339,16 @@ impl GpuReport {
             "compile_s": self.compile.as_secs_f64(),
             "loop_cap": self.loop_cap,
             "lane_budget": self.lane_budget,
+            "repeat": self.repeat,
+            "buffers_created": self.buffers,
+            "camera": self.camera.as_ref().map(|c| json!({
+                "rays": c.rays, "mrays_nearest": c.nearest, "mrays_distance": c.distance,
+                "mrays_kernel_device": c.kernel_device, "differ_from_cpu": c.differ,
+            })),
             "sets": self.sets.iter().map(|s| json!({
                 "set": s.name, "rays": s.rays, "mrays_kernel_device": s.kernel_device,
                 "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
+                "mrays_compact": s.compact, "transfers_ms": s.transfers_ms, "memcpy_ms": s.memcpy_ms,
                 "upload_ms": s.upload_ms, "download_ms": s.download_ms,
                 "first_call_s": s.first_call.as_secs_f64(),
                 "hits": s.hits, "sum_t": s.sum_t, "differ_from_cpu": s.differ,

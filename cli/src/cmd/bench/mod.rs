@@ -51,6 +51,10 @@ pub(crate) struct Args {
     /// ray's answer is the CPU's.
     #[arg(long)]
     pub gpu: bool,
+    /// With --gpu: trace each set this many times over in one batch (16 makes the
+    /// primary set a 16M-ray batch), to measure the transfers of large batches.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub gpu_repeat: u32,
     /// Skip the ordered queries (every hit, counts, inside/outside of points, lengths
     /// inside), which run with the incoherent set.
     #[arg(long)]
@@ -224,7 +228,15 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         results.push(r);
     }
     let gpu = if args.gpu {
-        Some(gpu::measure(&loaded.scene, &sets, &results, args.runs, !args.moller_trumbore)?)
+        Some(gpu::measure(
+            &loaded.scene,
+            &sets,
+            &results,
+            args.runs,
+            !args.moller_trumbore,
+            args.gpu_repeat as usize,
+            &frame,
+        )?)
     } else {
         None
     };
