@@ -93,10 +93,11 @@ pub struct GpuOptions {
     /// scene's words are split across as many bindings as this takes; smaller values
     /// exercise the split on scenes that would fit one.
     pub max_binding_bytes: Option<u64>,
-    /// Rays a chunk of a batch (default 2^18; rounded up to a multiple of 64). Chunks
-    /// are uploaded, traced and read back in turn, overlapping one another.
+    /// Rays a chunk of a batch (default 2^21, the most a dispatch takes; rounded up to
+    /// a multiple of 64). Chunks are uploaded, traced and read back in turn,
+    /// overlapping one another.
     pub chunk_rays: Option<usize>,
-    /// Chunks in flight at once (default 3, at most 8).
+    /// Chunks in flight at once (default 2, at most 8).
     pub in_flight: Option<usize>,
 }
 
@@ -259,28 +260,12 @@ impl<'s> GpuTracer<'s> {
         let budget = Budget::for_cap(cap, lanes);
         let compiler = spirv::Compiler::for_device(device, queue)?;
         let compiling = Instant::now();
-        let source = shader_source(scene_buffers.len(), chunk_words, f64_edges, budget);
         let layout = bind_group_layout(device, chunks as usize);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("octrace trace"),
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |any: bool| {
-            let label = if any { "octrace occluded" } else { "octrace intersect" };
-            compiler.pipeline(
-                device,
-                &pipeline_layout,
-                &source,
-                "main",
-                &[("ANY_HIT", if any { 1.0 } else { 0.0 }), ("FANS", if fans { 1.0 } else { 0.0 })],
-                label,
-            )
-        };
-        let (nearest, any) = (pipeline(false)?, pipeline(true)?);
-        let mut pipelines = std::collections::HashMap::new();
-        pipelines.insert((false, HitRecord::Full, false), nearest);
-        pipelines.insert((true, HitRecord::Full, false), any);
         // `OCTRACE_GPU_CHUNK` and `OCTRACE_GPU_IN_FLIGHT` set the defaults, to measure a
         // GPU (answers do not depend on them).
         let knob = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<usize>().ok());
@@ -293,7 +278,6 @@ impl<'s> GpuTracer<'s> {
                 .unwrap_or(stream::DEFAULT_IN_FLIGHT)
                 .clamp(1, 8),
         };
-        let compile = compiling.elapsed();
         let b = view.bounds;
         let (root_lo, root_hi) = crate::cpu::root_corners(&view);
         // As the CPU tracer: a depth beyond the format's (a hostile file on the trusted
@@ -324,13 +308,13 @@ impl<'s> GpuTracer<'s> {
             box_lo: [lo[0], lo[1], lo[2], rule.root as f32],
             box_hi: [hi[0], hi[1], hi[2], rule.reach as f32],
         };
-        Ok(GpuTracer {
+        let mut tracer = GpuTracer {
             scene,
             cap,
             budget,
             device: device.clone(),
             queue: queue.clone(),
-            compile,
+            compile: Duration::ZERO,
             compiler,
             pipeline_layout,
             crossing_kernels: std::sync::OnceLock::new(),
@@ -339,12 +323,17 @@ impl<'s> GpuTracer<'s> {
             params,
             streams: Default::default(),
             pipelining,
-            pipelines: std::sync::Mutex::new(pipelines),
+            pipelines: Default::default(),
             chunk_words,
             fans,
             f64_edges,
             timestamps: timestamp_period(device, queue),
-        })
+        };
+        // The nearest-hit and any-hit kernels, made now (the others on first use).
+        tracer.pipeline(false, HitRecord::Full, false)?;
+        tracer.pipeline(true, HitRecord::Full, false)?;
+        tracer.compile = compiling.elapsed();
+        Ok(tracer)
     }
 
     /// How many storage bindings the scene's words take (1 unless the scene is larger
@@ -562,6 +551,7 @@ impl<'s> GpuTracer<'s> {
             return Ok(p.clone());
         }
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
+        let label = if any { "octrace any hit" } else { "octrace nearest hit" };
         let p = self.compiler.pipeline(
             &self.device,
             &self.pipeline_layout,
@@ -573,7 +563,7 @@ impl<'s> GpuTracer<'s> {
                 ("RECORD", record.code()),
                 ("CAMERA", flag(camera)),
             ],
-            "octrace trace",
+            label,
         )?;
         made.insert((any, record, camera), p.clone());
         Ok(p)

@@ -361,13 +361,24 @@ struct Slot {
     pending: Option<Pending>,
 }
 
+impl Slot {
+    /// The buffer the host reads answers from, and where in it: (that buffer, the
+    /// answers' offset, the timestamps' offset, the end of the range to map) for
+    /// `out_bytes` of answers. Read-back memory holds the timestamps first; the hits
+    /// buffer, read straight, holds them in its last 16 bytes.
+    fn read_layout(&self, out_bytes: u64) -> (&wgpu::Buffer, u64, u64, u64) {
+        match &self.readback {
+            Some(readback) => (readback, 16, 0, 16 + out_bytes),
+            None => (&self.hits, 0, self.hits.size() - 16, self.hits.size()),
+        }
+    }
+}
+
 #[derive(Debug)]
 struct Pending {
     submission: wgpu::SubmissionIndex,
     start: usize,
     count: usize,
-    /// The end of the read-back buffer's mapped range.
-    map_end: u64,
     /// Whether the chunk's pass was timed (the timestamps come back with its answers).
     timed: bool,
     readable: mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
@@ -431,9 +442,7 @@ fn mapped(device: &wgpu::Device, receive: &mpsc::Receiver<Result<(), wgpu::Buffe
     loop {
         match receive.try_recv() {
             Ok(r) => return r.map_err(map_error),
-            Err(mpsc::TryRecvError::Empty) => {
-                device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None }).map_err(map_error)?;
-            }
+            Err(mpsc::TryRecvError::Empty) => super::device::wait(device)?,
             Err(mpsc::TryRecvError::Disconnected) => return Err(GpuError::Device("a buffer map was dropped".into())),
         }
     }
@@ -483,7 +492,7 @@ impl GpuTracer<'_> {
         let mut streams = self.streams.lock().unwrap_or_else(|e| e.into_inner());
         let result = (|| {
             let slots = plan.in_flight.min(chunks);
-            self.prepare_slots(&mut streams, slots, chunk.min(n) as u64)?;
+            self.prepare_slots(&mut streams, slots, chunk.min(n) as u64);
             let Streams { slots: slot_list, .. } = &mut *streams;
             for k in 0..chunks {
                 let start = k * chunk;
@@ -513,7 +522,7 @@ impl GpuTracer<'_> {
 
     /// `slots` slots of at least `rays` rays each (grown to the next power of two, so
     /// that growing batches make buffers a few times, not every call).
-    fn prepare_slots(&self, streams: &mut Streams, slots: usize, rays: u64) -> GpuResult<()> {
+    fn prepare_slots(&self, streams: &mut Streams, slots: usize, rays: u64) {
         let capacity = rays.next_power_of_two().max(1024).min(self.pipelining.chunk as u64).max(rays);
         streams.slots.retain(|s| s.capacity >= rays);
         while streams.slots.len() < slots {
@@ -521,7 +530,6 @@ impl GpuTracer<'_> {
             streams.created += made;
             streams.slots.push(slot);
         }
-        Ok(())
     }
 
     /// A slot for `capacity` rays, and how many buffers it took.
@@ -626,28 +634,22 @@ impl GpuTracer<'_> {
             encoder.copy_buffer_to_buffer(upload, 0, &slot.rays, 0, bytes.len() as u64);
         }
         if !skip_kernel {
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("octrace trace"),
-                    timestamp_writes: slot.queries.as_ref().map(|(q, _)| wgpu::ComputePassTimestampWrites {
-                        query_set: q,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }),
-                });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &slot.group, &[]);
-                pass.dispatch_workgroups((count as u32).div_ceil(self.budget.workgroup), 1, 1);
-            }
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("octrace trace"),
+                timestamp_writes: slot.queries.as_ref().map(|(q, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: q,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &slot.group, &[]);
+            pass.dispatch_workgroups((count as u32).div_ceil(self.budget.workgroup), 1, 1);
         }
-        let readable = slot.readback.as_ref().unwrap_or(&slot.hits);
-        let (stamps_at, map_end) = match &slot.readback {
-            Some(readback) => {
-                encoder.copy_buffer_to_buffer(&slot.hits, 0, readback, 16, out_bytes);
-                (0, 16 + out_bytes)
-            }
-            None => (slot.hits.size() - 16, slot.hits.size()),
-        };
+        let (readable, records_at, stamps_at, map_end) = slot.read_layout(out_bytes);
+        if let Some(readback) = &slot.readback {
+            encoder.copy_buffer_to_buffer(&slot.hits, 0, readback, records_at, out_bytes);
+        }
         if let (Some((queries, resolve)), false) = (&slot.queries, skip_kernel) {
             encoder.resolve_query_set(queries, 0..2, resolve, 0);
             encoder.copy_buffer_to_buffer(resolve, 0, readable, stamps_at, 16);
@@ -656,7 +658,7 @@ impl GpuTracer<'_> {
         let readable = map(readable, 0..map_end, wgpu::MapMode::Read);
         slot.writable = MapState::Pending(map(written, 0..written.size(), wgpu::MapMode::Write));
         let timed = slot.queries.is_some() && !skip_kernel;
-        slot.pending = Some(Pending { submission, start, count, map_end, timed, readable });
+        slot.pending = Some(Pending { submission, start, count, timed, readable });
         Ok(())
     }
 
@@ -680,17 +682,13 @@ impl GpuTracer<'_> {
 
         let t = Instant::now();
         let record = answers.record();
-        let readable = slot.readback.as_ref().unwrap_or(&slot.hits);
-        let (records_at, stamps_at) = if slot.readback.is_some() { (16, 0) } else { (0, slot.hits.size() - 16) };
         let out_bytes = record.answer_bytes(p.count as u64) as usize;
+        let (readable, records_at, stamps_at, map_end) = slot.read_layout(record.bytes(p.count as u64));
         // Where the chunk's answers go (a chunk starts at a multiple of 32 rays).
-        let first = match record {
-            HitRecord::Occluded => record.answer_bytes(p.start as u64) as usize,
-            other => other.bytes(p.start as u64) as usize,
-        };
+        let first = record.answer_bytes(p.start as u64) as usize;
         let mut over = Vec::new();
         {
-            let view = readable.slice(..p.map_end).get_mapped_range().map_err(map_error)?;
+            let view = readable.slice(..map_end).get_mapped_range().map_err(map_error)?;
             let records = &view[records_at as usize..];
             copy_from_mapped(&mut answers.bytes_mut()[first..first + out_bytes], &records[..out_bytes]);
             if p.timed {

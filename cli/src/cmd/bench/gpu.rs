@@ -68,7 +68,7 @@ pub(super) struct GpuReport {
     repeat: usize,
     buffers: u64,
     sets: Vec<GpuSet>,
-    camera: Option<GpuCameraFigures>,
+    camera: GpuCameraFigures,
 }
 
 /// A `memcpy` of `bytes` into a buffer already touched: the host's speed for the
@@ -143,15 +143,13 @@ pub(super) fn measure(
                 if *occlusion {
                     cpu.occluded[c] != g.is_some() || cpu.occluded[c] != (bits[i / 32] >> (i % 32) & 1 != 0)
                 } else {
-                    let same_full =
-                        if bitwise { bits_of(&cpu.nearest[c]) == bits_of(&g) } else { same(&cpu.nearest[c], &g) };
-                    let compact = (nearest[i].triangle != u32::MAX).then_some((nearest[i].triangle, nearest[i].t));
-                    let same_compact = match (cpu.nearest[c].map(|h| (h.triangle, h.t)), compact) {
-                        (None, None) => true,
-                        (Some(a), Some(b)) if bitwise => a.0 == b.0 && a.1.to_bits() == b.1.to_bits(),
-                        (Some(a), Some(b)) => a.0 == b.0 || (a.1 - b.1).abs() <= 1e-5 * a.1.abs(),
-                        _ => false,
+                    let same_full = if bitwise {
+                        bits_of(&cpu.nearest[c]) == bits_of(&g)
+                    } else {
+                        same(nearest_of(&cpu.nearest[c]), nearest_of(&g), false)
                     };
+                    let compact = (nearest[i].triangle != u32::MAX).then_some((nearest[i].triangle, nearest[i].t));
+                    let same_compact = same(nearest_of(&cpu.nearest[c]), compact, bitwise);
                     !same_full || !same_compact
                 }
             })
@@ -189,7 +187,7 @@ pub(super) fn measure(
         repeat,
         buffers: tracer.buffers_created(),
         sets: out,
-        camera: Some(camera),
+        camera,
     })
 }
 
@@ -247,11 +245,18 @@ fn bits_of(h: &Option<Hit>) -> Option<[u32; 4]> {
     h.map(|h| [h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()])
 }
 
-/// The same answer: both miss, or hits at the same distance (1e-5 relative).
-fn same(a: &Option<Hit>, b: &Option<Hit>) -> bool {
+/// A hit's triangle and distance, what compact records keep.
+fn nearest_of(h: &Option<Hit>) -> Option<(u32, f32)> {
+    h.map(|h| (h.triangle, h.t))
+}
+
+/// The same answer: both miss, or hits on the same triangle or at the same distance
+/// (1e-5 relative); with `bitwise`, the same triangle and distance bits.
+fn same(a: Option<(u32, f32)>, b: Option<(u32, f32)>, bitwise: bool) -> bool {
     match (a, b) {
         (None, None) => true,
-        (Some(a), Some(b)) => a.triangle == b.triangle || (a.t - b.t).abs() <= 1e-5 * a.t.abs(),
+        (Some(a), Some(b)) if bitwise => a.0 == b.0 && a.1.to_bits() == b.1.to_bits(),
+        (Some(a), Some(b)) => a.0 == b.0 || (a.1 - b.1).abs() <= 1e-5 * a.1.abs(),
         _ => false,
     }
 }
@@ -309,18 +314,17 @@ impl GpuReport {
                 if self.bitwise || s.name == "shadow" { "" } else { " (by distance)" }
             ));
         }
-        if let Some(c) = &self.camera {
-            lines.push(format!(
-                "camera rays made on the GPU (the primary view{}): {} rays, {} Mrays/s with distance and \
-                 triangle back, {} with distance back, kernel {} (GPU clock); {} pixels differ from the CPU",
-                if self.repeat > 1 { format!(", {} times as tall", self.repeat) } else { String::new() },
-                thousands(c.rays as u64),
-                fmt(&c.nearest),
-                fmt(&c.distance),
-                c.kernel_device.as_ref().map_or("untimed".to_string(), fmt),
-                c.differ
-            ));
-        }
+        let c = &self.camera;
+        lines.push(format!(
+            "camera rays made on the GPU (the primary view{}): {} rays, {} Mrays/s with distance and \
+             triangle back, {} with distance back, kernel {} (GPU clock); {} pixels differ from the CPU",
+            if self.repeat > 1 { format!(", {} times as tall", self.repeat) } else { String::new() },
+            thousands(c.rays as u64),
+            fmt(&c.nearest),
+            fmt(&c.distance),
+            c.kernel_device.as_ref().map_or("untimed".to_string(), fmt),
+            c.differ
+        ));
         lines.push(format!(
             "(full records: 32 bytes a ray back; compact: 8 for nearest hits, a bit for occlusion; {} buffers made)",
             self.buffers
@@ -341,10 +345,11 @@ impl GpuReport {
             "lane_budget": self.lane_budget,
             "repeat": self.repeat,
             "buffers_created": self.buffers,
-            "camera": self.camera.as_ref().map(|c| json!({
-                "rays": c.rays, "mrays_nearest": c.nearest, "mrays_distance": c.distance,
-                "mrays_kernel_device": c.kernel_device, "differ_from_cpu": c.differ,
-            })),
+            "camera": json!({
+                "rays": self.camera.rays, "mrays_nearest": self.camera.nearest,
+                "mrays_distance": self.camera.distance, "mrays_kernel_device": self.camera.kernel_device,
+                "differ_from_cpu": self.camera.differ,
+            }),
             "sets": self.sets.iter().map(|s| json!({
                 "set": s.name, "rays": s.rays, "mrays_kernel_device": s.kernel_device,
                 "mrays_kernel": s.kernel, "mrays_end_to_end": s.end_to_end,
