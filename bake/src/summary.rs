@@ -41,7 +41,7 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
         "overfull_leaves": { "leaves": s.overfull_leaves, "references": s.overfull_references },
         "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
         "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
-        "surface": surface_json(&v.stats.edges),
+        "surface": surface_json(&v.count_edges()),
         "bytes": {
             "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
             "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
@@ -58,10 +58,10 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "metallic_roughness_texture": m.metallic_roughness_texture,
                 "occlusion_texture": m.occlusion_texture, "occlusion_strength": m.occlusion_strength,
             })).collect::<Vec<_>>(),
-            "parts": v.shading.parts.iter().map(|p| {
+            "parts": v.shading.parts.iter().zip(v.count_part_edges()).map(|(p, edges)| {
                 let mut part = json!({
                     "name": p.name, "first_triangle": p.first, "triangles": p.count,
-                    "surface": surface_json(&p.edges),
+                    "surface": surface_json(&edges),
                 });
                 part.as_object_mut().expect("an object").extend(source_json(&p.source));
                 part

@@ -1441,6 +1441,38 @@ fn render_refuses_an_image_that_decodes_to_other_texels() {
     fails_saying(dir.path(), &["render", "leaf.oct", "-o", "leaf.png"], &format!("texture '{name}'"));
     fails_saying(dir.path(), &["render", "leaf.oct", "-o", "leaf.png"], "decodes to other texels than at bake");
     assert!(!dir.path().join("leaf.png").exists());
+    // `verify` decodes the images too (issue 46: it passed files `render` refuses).
+    fails_saying(dir.path(), &["verify", "leaf.oct", "--rays", "10"], &format!("texture '{name}'"));
+}
+
+/// The surface's edge census is counted from the triangles, not read from the file
+/// (issue 46): an open mesh whose stored census says closed (its checksums made
+/// again, as a writer of the format would) is still open to `inspect`.
+#[test]
+fn inspect_counts_the_edges_rather_than_trusting_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The cube without its +x face (and its degenerate triangle): a square hole.
+    let open: String =
+        CUBE_OBJ.lines().filter(|l| !l.starts_with("f 2 ") && !l.starts_with("f 1 2 2")).collect::<Vec<_>>().join("\n");
+    std::fs::write(d.join("open.obj"), open).unwrap();
+    let mesh = octrace_bake::Mesh::load(d.join("open.obj")).unwrap();
+    let mut scene = octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap();
+    assert_eq!(scene.stats.edges.boundary, 4);
+    scene.stats.edges.boundary = 0;
+    scene.write(d.join("lying.oct"), 0).unwrap();
+    let text = ok(d, &["inspect", "lying.oct"]);
+    assert!(text.contains("surface            open: 4 boundary edges"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "lying.oct", "--json"])).unwrap();
+    assert_eq!(json["surface"]["closed"], false);
+    assert_eq!(json["surface"]["boundary_edges"], 4);
+    std::fs::write(d.join("p.bin"), point_bytes(0.5)).unwrap();
+    fails_saying(d, &["contains", "lying.oct", "--points", "p.bin", "-o", "in.bin"], "not closed");
+}
+
+/// One point `(x, x, x)` as a point file's 12 bytes.
+fn point_bytes(x: f32) -> Vec<u8> {
+    [x, x, x].iter().flat_map(|c| c.to_le_bytes()).collect()
 }
 
 /// `bake --raw-texels` stores the leaf's textures as texels rather than PNGs: a larger

@@ -73,13 +73,19 @@ pub const PIXELS_SLACK: usize = 1 << 22;
 /// # Errors
 /// A message for an image of another format, a malformed one, or one larger than
 /// [`MAX_TEXTURE_SIDE`] on a side or than the limits.
+///
+/// A decoder that panics on a malformed image (the `png` crate did on an animated PNG
+/// whose first frame is smaller than the image) is a malformed image too: its panic
+/// becomes this error, and the caller goes on.
 pub fn decode(bytes: &[u8], max_pixels: usize) -> Result<Rgba8, String> {
     let limit = max_pixels.min(bytes.len().saturating_mul(PIXELS_PER_ENCODED_BYTE).saturating_add(PIXELS_SLACK));
-    match kind(bytes) {
+    let kind = kind(bytes);
+    std::panic::catch_unwind(|| match kind {
         Some(ImageKind::Png) => png(bytes, limit),
         Some(ImageKind::Jpeg) => jpeg(bytes, limit),
         None => Err("neither a PNG nor a JPEG image".into()),
-    }
+    })
+    .unwrap_or_else(|_| Err(format!("malformed {} (its decoder gave up)", kind.map_or("image", |k| k.name()))))
 }
 
 fn check_size(width: usize, height: usize, limit: usize) -> Result<(), String> {
@@ -104,6 +110,14 @@ fn png(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     check_size(width, height, limit)?;
     let mut buffer = vec![0; reader.output_buffer_size()];
     let frame = reader.next_frame(&mut buffer).map_err(|e| format!("PNG: {e}"))?;
+    // An animated PNG's first frame, when it is the image, is the image's size (APNG:
+    // the default image's fcTL must match IHDR).
+    if (frame.width as usize, frame.height as usize) != (width, height) {
+        return Err(format!(
+            "PNG: an animated PNG whose first frame ({} x {}) is not the whole image ({width} x {height})",
+            frame.width, frame.height
+        ));
+    }
     let data = &buffer[..frame.buffer_size()];
     let channels = match frame.color_type {
         png::ColorType::Grayscale => 1,
@@ -161,4 +175,28 @@ fn jpeg(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     }
     let pixels = data.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
     Ok(Rgba8 { width: width as u32, height: height as u32, pixels })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 130 bytes: IHDR 64 x 64, acTL, an fcTL of 8 x 8 for the default image, IDAT of
+    /// 8 x 8 pixels (the audit's APNG, rebuilt). Decoding it panicked.
+    const APNG: &str = "89504e470d0a1a0a0000000d4948445200000040000000400802000000250be689000000086163544c\
+        0000000100000000b42de9a00000001a6663544c0000000000000008000000080000000000000000000100010000fe1b5583\
+        0000000f49444154789c6368c001188696040082f360019cee0f240000000049454e44ae426082";
+
+    fn bytes(hex: &str) -> Vec<u8> {
+        let hex: Vec<u8> = hex.bytes().filter(u8::is_ascii_hexdigit).collect();
+        hex.chunks(2).map(|c| u8::from_str_radix(std::str::from_utf8(c).unwrap(), 16).unwrap()).collect()
+    }
+
+    #[test]
+    fn an_animated_png_whose_first_frame_is_smaller_is_an_error() {
+        let apng = bytes(APNG);
+        assert_eq!(apng.len(), 130);
+        let why = decode(&apng, 1 << 20).unwrap_err();
+        assert!(why.contains("first frame (8 x 8) is not the whole image (64 x 64)"), "{why}");
+    }
 }

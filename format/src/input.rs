@@ -58,6 +58,53 @@ pub fn read_regular_file(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
     Ok(out)
 }
 
+/// Reads a whole regular file of fixed-size records ([`open_regular_file`]'s rules)
+/// straight into a vector of them: at most `max` records, whole ones, in one
+/// allocation the size of the file made fallibly (a file larger than the memory this
+/// process may have is an error naming its size, never an abort).
+///
+/// # Errors
+/// As [`open_regular_file`]; [`std::io::ErrorKind::InvalidInput`] for a file over the
+/// limit, changed while it is read, or not a whole number of records (naming `what`,
+/// the record in words, and its size); [`std::io::ErrorKind::OutOfMemory`] where the
+/// allocator refuses.
+///
+/// # Example
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("points.bin");
+/// std::fs::write(&path, bytemuck::cast_slice::<f32, u8>(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])).unwrap();
+/// let points: Vec<[f32; 3]> = octrace_format::read_records(&path, 10, "point").unwrap();
+/// assert_eq!(points, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+/// assert!(octrace_format::read_records::<[f32; 4]>(&path, 10, "ray").is_err()); // 24 bytes
+/// ```
+pub fn read_records<T: bytemuck::Pod>(path: &Path, max: u64, what: &str) -> std::io::Result<Vec<T>> {
+    let size = std::mem::size_of::<T>() as u64;
+    let mut file = open_regular_file(path)?;
+    let len = file.metadata()?.len();
+    if len > max.saturating_mul(size) {
+        return Err(invalid(format!("{len} bytes, more than the limit of {max} {what}s ({} bytes)", max * size)));
+    }
+    if len % size != 0 {
+        return Err(invalid(format!("{len} bytes is not a whole number of {size}-byte {what}s")));
+    }
+    let n = (len / size) as usize;
+    let mut out: Vec<T> = crate::memory::try_vec_zeroed(n).map_err(|_| {
+        std::io::Error::new(
+            std::io::ErrorKind::OutOfMemory,
+            format!("its {n} {what}s need {len} bytes, more than this process could allocate"),
+        )
+    })?;
+    file.read_exact(bytemuck::cast_slice_mut(&mut out)).map_err(|e| match e.kind() {
+        std::io::ErrorKind::UnexpectedEof => invalid("shrank while it was read".into()),
+        _ => e,
+    })?;
+    if file.read(&mut [0u8; 1])? != 0 {
+        return Err(invalid("grew while it was read".into()));
+    }
+    Ok(out)
+}
+
 fn invalid(message: String) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
 }

@@ -31,6 +31,7 @@ mod header;
 pub mod image;
 mod input;
 pub mod layout;
+pub mod memory;
 mod scene;
 mod shading;
 pub mod stats;
@@ -47,7 +48,7 @@ pub use header::{
     Header, Section, ARCHIVE_ALIGN, FIXED_HEADER_LEN, HEADER_LEN, MAGIC, RKYV_SETTINGS, SECTION_COUNT, SECTION_NAMES,
     VERSION,
 };
-pub use input::{open_regular_file, read_regular_file, same_file};
+pub use input::{open_regular_file, read_records, read_regular_file, same_file};
 pub use layout::NodeRef;
 pub use scene::{BakeParams, BakeStats, BakedScene, Bounds};
 pub use shading::{

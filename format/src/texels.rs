@@ -171,7 +171,11 @@ fn decode(stored: &[u32], images: &[u8], textures: &[Texture]) -> Decoded {
                     loop {
                         let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         let Some(t) = encoded.get(i) else { break done };
-                        done.push((i, decode_one(t, images)));
+                        // A panic decoding one image is that image's error; the worker
+                        // keeps what it decoded and goes on.
+                        let one = std::panic::catch_unwind(|| decode_one(t, images))
+                            .unwrap_or_else(|_| Err("its decoder gave up (a malformed image)".into()));
+                        done.push((i, one));
                     }
                 })
             })

@@ -302,6 +302,38 @@ impl<'a> SceneView<'a> {
         self.triangles.chunks_exact(TRIANGLE_FLOATS).map(corners)
     }
 
+    /// The edge census of the stored triangles, counted from them (not read from
+    /// [`crate::BakeStats::edges`], which a damaged file could get wrong while its
+    /// checksums hold); `degenerate` is the file's count (degenerate triangles are not
+    /// stored).
+    pub fn count_edges(&self) -> crate::topology::EdgeCensus {
+        let triangles: Vec<[[f32; 3]; 3]> = self.stored_triangles().collect();
+        crate::topology::EdgeCensus {
+            degenerate: self.stats.edges.degenerate,
+            ..crate::topology::EdgeCensus::of(&triangles)
+        }
+    }
+
+    /// Each part's edge census ([`SceneView::count_edges`], over the stored triangles
+    /// whose input ids lie in the part), in the order of [`crate::Shading::parts`].
+    pub fn count_part_edges(&self) -> Vec<crate::topology::EdgeCensus> {
+        let parts = &self.shading.parts;
+        let mut of_part: Vec<Vec<[[f32; 3]; 3]>> = vec![Vec::new(); parts.len()];
+        for (triangle, &id) in self.stored_triangles().zip(self.triangle_ids) {
+            if let Some(i) = self.shading.part_index_of(id) {
+                of_part[i as usize].push(triangle);
+            }
+        }
+        of_part
+            .iter()
+            .zip(parts.iter())
+            .map(|(t, p)| crate::topology::EdgeCensus {
+                degenerate: p.edges.degenerate,
+                ..crate::topology::EdgeCensus::of(t)
+            })
+            .collect()
+    }
+
     /// The three vertices of stored triangle `index`.
     pub fn triangle(&self, index: StoredIndex) -> [[f32; 3]; 3] {
         corners(&self.triangles[index.0 as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS])

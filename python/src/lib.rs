@@ -6,7 +6,6 @@
 //! the docstrings below and the type stubs in `octrace.pyi`. Every query releases the
 //! GIL and runs on all cores unless `nthreads` says otherwise.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
@@ -16,7 +15,7 @@ use octrace_runtime::cpu::CrossingCount;
 use octrace_runtime::glam::{DVec3, Vec3};
 use octrace_runtime::Ray;
 use pyo3::create_exception;
-use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use rayon::prelude::*;
@@ -68,6 +67,9 @@ fn format_error(e: octrace_format::Error) -> PyErr {
 fn runtime_error(e: octrace_runtime::Error) -> PyErr {
     match e {
         octrace_runtime::Error::Format(e) => format_error(e),
+        e @ (octrace_runtime::Error::Alloc(_) | octrace_runtime::Error::Budget { .. }) => {
+            PyMemoryError::new_err(e.to_string())
+        }
         e @ octrace_runtime::Error::NotClosed { .. } => NotClosedError::new_err(e.to_string()),
         e => PyOSError::new_err(e.to_string()),
     }
@@ -93,8 +95,13 @@ fn bake_error(e: octrace_bake::Error) -> PyErr {
     }
 }
 
-/// Runs `work` on `nthreads` threads (0: all cores, rayon's global pool). Pools are
-/// made once per count and kept.
+/// Thread pools kept for reuse, the most recently used first: a pool past these is
+/// dropped (its threads end once its calls are done), so that a program trying every
+/// `nthreads` holds at most this many pools, not one a count.
+const POOLS_KEPT: usize = 4;
+
+/// Runs `work` on `nthreads` threads (0: all cores, rayon's global pool). The last
+/// [`POOLS_KEPT`] counts' pools are kept for the next calls.
 fn on_threads<R: Send>(nthreads: usize, work: impl FnOnce() -> R + Send) -> PyResult<R> {
     if nthreads == 0 {
         return Ok(work());
@@ -102,23 +109,39 @@ fn on_threads<R: Send>(nthreads: usize, work: impl FnOnce() -> R + Send) -> PyRe
     if nthreads > MAX_THREADS {
         return Err(PyValueError::new_err(format!("nthreads: {nthreads} is more than {MAX_THREADS}")));
     }
-    static POOLS: Mutex<Option<HashMap<usize, Arc<rayon::ThreadPool>>>> = Mutex::new(None);
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
     let pool = {
         let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
-        let pools = pools.get_or_insert_with(HashMap::new);
-        match pools.get(&nthreads) {
-            Some(pool) => pool.clone(),
-            None => {
-                let pool = rayon::ThreadPoolBuilder::new()
+        let pool = match pools.iter().position(|(n, _)| *n == nthreads) {
+            Some(i) => pools.remove(i).1,
+            None => Arc::new(
+                rayon::ThreadPoolBuilder::new()
                     .num_threads(nthreads)
                     .thread_name(|i| format!("octrace-{i}"))
                     .build()
-                    .map_err(|e| PyOSError::new_err(format!("cannot start {nthreads} threads: {e}")))?;
-                pools.entry(nthreads).or_insert(Arc::new(pool)).clone()
-            }
-        }
+                    .map_err(|e| PyOSError::new_err(format!("cannot start {nthreads} threads: {e}")))?,
+            ),
+        };
+        pools.insert(0, (nthreads, pool.clone()));
+        pools.truncate(POOLS_KEPT);
+        pool
     };
     Ok(pool.install(work))
+}
+
+/// `n` default values, or `MemoryError` naming `what` and the bytes where the
+/// allocator refuses (an input's size decides `n`: never an abort).
+fn zeros<T: Clone + Default>(n: usize, what: &'static str) -> PyResult<Vec<T>> {
+    octrace_format::memory::try_vec(n, what).map_err(memory_error)
+}
+
+/// An empty vector with room for `n` values, or `MemoryError` ([`zeros`]).
+fn room<T>(n: usize, what: &'static str) -> PyResult<Vec<T>> {
+    octrace_format::memory::try_with_capacity(n, what).map_err(memory_error)
+}
+
+fn memory_error(e: octrace_format::memory::AllocError) -> PyErr {
+    PyMemoryError::new_err(e.to_string())
 }
 
 /// A contiguous float32 array of shape `(..., k)` read in place: `what` names it in
@@ -225,7 +248,9 @@ fn refuse_nan_rays(values: &[f32]) -> PyResult<()> {
 /// Every ray of `values` at once (for the calls whose answers are not one a ray).
 fn to_rays(values: &[f32], tmin: f32, tmax: f32) -> PyResult<Vec<Ray>> {
     refuse_nan_rays(values)?;
-    Ok(values.par_chunks_exact(6).map(|r| ray_of(r, tmin, tmax)).collect())
+    let mut rays = room(values.len() / 6, "rays")?;
+    rays.par_extend(values.par_chunks_exact(6).map(|r| ray_of(r, tmin, tmax)));
+    Ok(rays)
 }
 
 /// Points `[x, y, z]`; a NaN is an error naming the point.
@@ -234,7 +259,9 @@ fn to_points(values: &[f32]) -> PyResult<Vec<[f32; 3]>> {
         let p = &values[3 * i..3 * i + 3];
         return Err(PyValueError::new_err(format!("query_points: point {i} has a NaN: {p:?}")));
     }
-    Ok(values.par_chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())
+    let mut points = room(values.len() / 3, "query points")?;
+    points.par_extend(values.par_chunks_exact(3).map(|p| [p[0], p[1], p[2]]));
+    Ok(points)
 }
 
 /// A hit's `geometry_ids` entry: its part's index, 0 in a mesh without parts.
@@ -328,7 +355,7 @@ fn mesh_of_arrays(vertices: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>) -> 
     }
     let vertices = v.values();
     let n = v.count() as i64;
-    let mut out = Vec::with_capacity(t.shape()[0]);
+    let mut out = room(t.shape()[0], "triangles")?;
     for (i, tri) in t.as_slice().expect("contiguous").chunks_exact(3).enumerate() {
         let mut corners = [[0f32; 3]; 3];
         for (c, &index) in corners.iter_mut().zip(tri) {
@@ -630,10 +657,11 @@ impl Scene {
     }
 
     /// Whether the mesh is closed (every edge used by an even number of triangles):
-    /// ``compute_occupancy``, ``contains`` and ``length_inside`` need it.
+    /// ``compute_occupancy``, ``contains`` and ``length_inside`` need it. Counted from
+    /// the triangles on first use, not read from the file.
     #[getter]
     fn is_closed(&self) -> bool {
-        self.inner.view().stats.edges.is_closed()
+        self.inner.edges().is_closed()
     }
 
     /// What ``octrace inspect --json`` prints, as a dict: triangles, leaves, depths,
@@ -680,8 +708,9 @@ impl Scene {
         let (t, geometry, primitive, uvs, normals) = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let tracer = self.inner.tracer();
-                let (mut t, mut geometry, mut primitive) = (vec![0f32; n], vec![0u32; n], vec![0u32; n]);
-                let (mut uvs, mut normals) = (vec![0f32; 2 * n], vec![0f32; 3 * n]);
+                let (mut t, mut geometry, mut primitive) =
+                    (zeros(n, "t_hit")?, zeros(n, "geometry_ids")?, zeros(n, "primitive_ids")?);
+                let (mut uvs, mut normals) = (zeros(2 * n, "primitive_uvs")?, zeros(3 * n, "primitive_normals")?);
                 let view = self.inner.view();
                 let shading = self.inner.shading();
                 let mut hits = vec![None; PIECE.min(n)];
@@ -739,7 +768,7 @@ impl Scene {
         let occluded = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let tracer = self.inner.tracer();
-                let mut occluded = vec![false; n];
+                let mut occluded = zeros(n, "occlusions")?;
                 each_piece(values, tnear, tfar, |first, rays| {
                     tracer.par_occluded_batch(rays, &mut occluded[first..first + rays.len()])
                 })?;
@@ -760,7 +789,7 @@ impl Scene {
         let counts = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let tracer = self.inner.tracer();
-                let mut counts = vec![0i32; n];
+                let mut counts = zeros(n, "intersection counts")?;
                 let mut piece = vec![CrossingCount::default(); PIECE.min(n)];
                 each_piece(values, 0.0, f32::INFINITY, |first, rays| {
                     let piece = &mut piece[..rays.len()];
@@ -789,20 +818,30 @@ impl Scene {
     ///
     /// Args:
     ///     max_hits: keep at most this many crossings a ray (its first ones).
-    #[pyo3(signature = (rays, nthreads=0, *, max_hits=None))]
+    ///     max_memory: the most bytes the lists may take while they are found (20 a
+    ///         crossing; the arrays returned take 25 a crossing more). Default: a
+    ///         quarter of the memory this process may use (physical memory, or
+    ///         ``ulimit -v`` where lower).
+    ///
+    /// Raises:
+    ///     MemoryError: the lists pass ``max_memory``, or memory cannot be had; the
+    ///         message says how much they took (pass ``max_hits``, or fewer rays).
+    #[pyo3(signature = (rays, nthreads=0, *, max_hits=None, max_memory=None))]
     fn list_intersections<'py>(
         &self,
         rays: &Bound<'py, PyAny>,
         nthreads: usize,
         max_hits: Option<usize>,
+        max_memory: Option<u64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let py = rays.py();
         let input = Floats::new(rays, "rays", 6)?;
         let values = input.values();
+        let budget = max_memory.unwrap_or_else(|| octrace_format::memory::share(4));
         let lists = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let rays = to_rays(values, 0.0, f32::INFINITY)?;
-                Ok(self.inner.crossings_batch(&rays, max_hits.unwrap_or(usize::MAX)))
+                self.inner.crossings_batch_within(&rays, max_hits.unwrap_or(usize::MAX), budget).map_err(runtime_error)
             })?
         })?;
         let k = lists.crossings.len();
@@ -812,21 +851,35 @@ impl Scene {
             )));
         }
         let shading = self.inner.shading();
-        let splits: Vec<u32> = lists.splits.iter().map(|&s| s as u32).collect();
-        let mut ray_ids = Vec::with_capacity(k);
-        for (i, w) in lists.splits.windows(2).enumerate() {
-            ray_ids.extend(std::iter::repeat_n(i as u32, w[1] - w[0]));
-        }
         let c = &lists.crossings;
-        let geometry: Vec<u32> = c.iter().map(|c| geometry_id(shading, c.triangle)).collect();
+        let filled = |what: &'static str, n: usize, values: &mut dyn Iterator<Item = u32>| -> PyResult<Vec<u32>> {
+            let mut out = room(n, what)?;
+            out.extend(values);
+            Ok(out)
+        };
+        let splits = filled("ray_splits", lists.splits.len(), &mut lists.splits.iter().map(|&s| s as u32))?;
+        let ray_ids = filled(
+            "ray_ids",
+            k,
+            &mut lists.splits.windows(2).enumerate().flat_map(|(i, w)| std::iter::repeat_n(i as u32, w[1] - w[0])),
+        )?;
+        let geometry = filled("geometry_ids", k, &mut c.iter().map(|c| geometry_id(shading, c.triangle)))?;
+        let primitive = filled("primitive_ids", k, &mut c.iter().map(|c| c.triangle))?;
+        let mut uvs = room(2 * k, "primitive_uvs")?;
+        uvs.extend(c.iter().flat_map(|c| [c.u, c.v]));
+        let mut t = room(k, "t_hit")?;
+        t.extend(c.iter().map(|c| c.t));
+        let mut enters = room(k, "enters")?;
+        enters.extend(c.iter().map(|c| c.enters));
+        drop(lists);
         let d = PyDict::new(py);
         d.set_item("ray_splits", PyArray1::from_vec(py, splits))?;
         d.set_item("ray_ids", PyArray1::from_vec(py, ray_ids))?;
         d.set_item("geometry_ids", PyArray1::from_vec(py, geometry))?;
-        d.set_item("primitive_ids", PyArray1::from_iter(py, c.iter().map(|c| c.triangle)))?;
-        d.set_item("primitive_uvs", array(py, c.iter().flat_map(|c| [c.u, c.v]).collect(), vec![k, 2])?)?;
-        d.set_item("t_hit", PyArray1::from_iter(py, c.iter().map(|c| c.t)))?;
-        d.set_item("enters", PyArray1::from_iter(py, c.iter().map(|c| c.enters)))?;
+        d.set_item("primitive_ids", PyArray1::from_vec(py, primitive))?;
+        d.set_item("primitive_uvs", array(py, uvs, vec![k, 2])?)?;
+        d.set_item("t_hit", PyArray1::from_vec(py, t))?;
+        d.set_item("enters", PyArray1::from_vec(py, enters))?;
         Ok(d)
     }
 
@@ -910,7 +963,7 @@ impl Scene {
             v.stats.input_triangles,
             v.leaf_count(),
             self.inner.shading().parts.len(),
-            if v.stats.edges.is_closed() { ", closed" } else { "" }
+            if self.inner.edges().is_closed() { ", closed" } else { "" }
         )
     }
 }
@@ -1041,7 +1094,7 @@ fn pinhole<'py>(
         (origin, axes, [k[0], k[4], k[2], k[5]])
     };
     let [fx, fy, cx, cy] = k;
-    let mut out = Vec::with_capacity(width * height * 6);
+    let mut out = room(width * height * 6, "rays")?;
     for row in 0..height {
         for col in 0..width {
             let px = (col as f64 + 0.5 - cx) / fx;

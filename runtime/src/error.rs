@@ -20,6 +20,21 @@ pub enum Error {
         /// Distinct edges.
         edges: u64,
     },
+    /// Memory an input sized could not be allocated (the allocator refused).
+    #[error(transparent)]
+    Alloc(#[from] octrace_format::memory::AllocError),
+    /// A query's answers would pass their memory budget; nothing was returned.
+    #[error("the {what} take at least {needed} bytes, past the budget of {limit} bytes: {advice}")]
+    Budget {
+        /// What the memory is for (a plural: "crossings").
+        what: &'static str,
+        /// Bytes reached when the query stopped (a lower bound of what it needs).
+        needed: u64,
+        /// The budget.
+        limit: u64,
+        /// How to get the answers within it.
+        advice: &'static str,
+    },
     /// An image could not be written.
     #[error("{path}: cannot write image: {message}")]
     Image {

@@ -135,6 +135,12 @@ pub(crate) struct Builder<'a> {
     pub growth: Growth,
 }
 
+/// A thread's tally of leaves and references reaches the shared [`Growth`] at least
+/// this often (4,096 leaves are 426 KB of tree, 65,536 references 256 KB): a budget is
+/// passed by at most this much a thread before the build stops.
+const FLUSH_LEAVES: i64 = 4096;
+const FLUSH_REFS: i64 = 65536;
+
 /// Above this many triangles, a node's children are built in parallel.
 const PARALLEL_GRAIN: usize = 2048;
 
@@ -169,6 +175,12 @@ impl Builder<'_> {
         }
         if cell.0 >= self.max_depth || tris.len() <= self.leaf_size {
             *grown = (grown.0 + 1, grown.1 + tris.len() as i64);
+            // A subtree built on one thread (a small mesh's whole tree) reports as it
+            // grows, not only when it is done, so that the budget stops it in time.
+            if grown.0 >= FLUSH_LEAVES || grown.1 >= FLUSH_REFS {
+                self.growth.add(grown.0, grown.1);
+                *grown = (0, 0);
+            }
             return Node::Leaf(tris);
         }
         let parts = self.split_uncounted(cell, &tris);

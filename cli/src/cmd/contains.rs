@@ -71,16 +71,9 @@ const MAX_POINTS: u64 = 1 << 32;
 
 /// Reads a point file: 12 bytes a point, every coordinate finite.
 fn read_points(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
-    let bytes = octrace_format::read_regular_file(path, 12 * MAX_POINTS)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    anyhow::ensure!(!bytes.is_empty(), "{}: empty file, no points", path.display());
-    anyhow::ensure!(
-        bytes.len() % 12 == 0,
-        "{}: {} bytes is not a whole number of 12-byte points (f32 x y z)",
-        path.display(),
-        bytes.len()
-    );
-    let points: Vec<[f32; 3]> = bytemuck::pod_collect_to_vec(&bytes);
+    let points: Vec<[f32; 3]> = octrace_format::read_records(path, MAX_POINTS, "point")
+        .with_context(|| format!("cannot read {} (f32 x y z points)", path.display()))?;
+    anyhow::ensure!(!points.is_empty(), "{}: empty file, no points", path.display());
     if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         anyhow::bail!("{}: point {i} is not finite: {:?}", path.display(), points[i]);
     }

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use octrace_format::stats::SceneStatistics;
+use octrace_format::topology::EdgeCensus;
 use octrace_format::SceneView;
 
 use crate::output::{counted, mb, thousands};
@@ -37,6 +38,10 @@ pub(crate) struct Report<'a> {
     fans: octrace_runtime::cpu::FanSummary,
     header: octrace_format::Header,
     file_bytes: u64,
+    /// The surface's and each part's edge census, counted from the triangles (the
+    /// file's stored census is not trusted: `SceneView::count_edges`).
+    edges: EdgeCensus,
+    part_edges: Vec<EdgeCensus>,
 }
 
 impl<'a> Report<'a> {
@@ -47,6 +52,8 @@ impl<'a> Report<'a> {
             view: view.clone(),
             header: *header,
             file_bytes,
+            edges: view.count_edges(),
+            part_edges: view.count_part_edges(),
         })
     }
 
@@ -178,7 +185,7 @@ impl<'a> Report<'a> {
                 "bounds             mesh {:?} .. {:?}; root cube at {:?}, edge {}",
                 v.bounds.mesh_lo, v.bounds.mesh_hi, v.bounds.root_lo, v.bounds.root_size
             ),
-            format!("surface            {}", surface(&v.stats.edges)),
+            format!("surface            {}", surface(&self.edges)),
             self.scene_data(),
         ];
         let mut text = lines.join("\n");
@@ -186,8 +193,10 @@ impl<'a> Report<'a> {
         // scene, or the other way round), when there are several.
         let parts = &v.shading.parts;
         if parts.len() > 1 {
-            let differing = parts.iter().enumerate().filter(|(_, p)| p.edges.is_closed() != v.stats.edges.is_closed());
-            for (shown, (i, p)) in differing.enumerate() {
+            let closed = self.edges.is_closed();
+            let differing =
+                parts.iter().zip(&self.part_edges).enumerate().filter(|(_, (_, e))| e.is_closed() != closed);
+            for (shown, (i, (p, edges))) in differing.enumerate() {
                 if shown == 8 {
                     text.push_str(&format!("\n{:<18} ... (`--json` lists every part)", ""));
                     break;
@@ -197,7 +206,7 @@ impl<'a> Report<'a> {
                     "\n{:<18} part {i}, {}, triangles {first}..{end}: {}",
                     "",
                     p.name,
-                    surface(&p.edges)
+                    surface(edges)
                 ));
             }
         }

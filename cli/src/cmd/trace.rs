@@ -54,6 +54,13 @@ pub(crate) struct Args {
     /// With --all-hits, keep at most K crossings a ray (its first K).
     #[arg(long, value_name = "K", requires = "all_hits")]
     pub max_hits: Option<u32>,
+    /// With --all-hits, the most memory the lists may take (20 bytes a crossing; the
+    /// peak is about twice this while they are written out): past it the command
+    /// stops with an error, writing nothing. Suffixes K, M, G, T (powers of 1024).
+    /// Default: a quarter of the memory this process may use (physical memory, or
+    /// `ulimit -v` where lower).
+    #[arg(long, value_name = "BYTES", value_parser = crate::output::parse_bytes, requires = "all_hits")]
+    pub max_memory: Option<u64>,
     /// Write how many times each ray crosses the scene, and how many of those enter.
     #[arg(long, group = "mode")]
     pub counts: bool,
@@ -84,15 +91,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.rays])?;
     let to_stdout = crate::output::is_stdout(&args.out);
     let scene = crate::open::open_scene(&args.scene)?;
-    let bytes = octrace_format::read_regular_file(&args.rays, 32 * MAX_RAYS)
+    let rays: Vec<Ray> = octrace_format::read_records(&args.rays, MAX_RAYS, "ray")
         .with_context(|| format!("cannot read {}", args.rays.display()))?;
-    anyhow::ensure!(
-        bytes.len() % 32 == 0,
-        "{}: {} bytes is not a whole number of 32-byte rays",
-        args.rays.display(),
-        bytes.len()
-    );
-    let rays: Vec<Ray> = bytemuck::pod_collect_to_vec(&bytes);
     if args.all_hits || args.counts || args.length_inside {
         return crate::cmd::trace_crossings::run(&args, &scene, &rays, to_stdout);
     }

@@ -3,7 +3,9 @@
 
 use std::time::Instant;
 
-use octrace_runtime::cpu::{BatchCrossings, CrossingCount};
+use anyhow::Context;
+
+use octrace_runtime::cpu::CrossingCount;
 use octrace_runtime::{Ray, Scene};
 use serde_json::json;
 
@@ -18,28 +20,29 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
         gpu.as_ref().map(|g| octrace_runtime::gpu::GpuTracer::new(&g.device, &g.queue, scene)).transpose()?;
     let (mode, seconds, summary) = if args.all_hits {
         let limit = args.max_hits.map_or(usize::MAX, |k| k as usize);
+        let budget = args.max_memory.unwrap_or_else(|| octrace_format::memory::share(4));
+        let advice = "pass --max-hits, fewer rays, or a larger --max-memory";
         let (all, seconds) = match &gpu_tracer {
             Some(g) => {
                 let t = Instant::now();
-                let all = truncated(g.crossings(rays)?, limit);
+                let all = g.crossings_within(rays, limit, budget).context(advice)?;
                 (all, t.elapsed().as_secs_f64())
             }
             None => crate::with_threads(args.threads, || {
                 let t = Instant::now();
-                let all = scene.crossings_batch(rays, limit);
-                (all, t.elapsed().as_secs_f64())
-            })?,
+                let all = scene.crossings_batch_within(rays, limit, budget).context(advice)?;
+                anyhow::Ok((all, t.elapsed().as_secs_f64()))
+            })??,
         };
-        let mut out = Vec::with_capacity(8 * all.splits.len() + 20 * all.crossings.len());
-        for &s in &all.splits {
-            out.extend_from_slice(&(s as u64).to_le_bytes());
-        }
-        for c in &all.crossings {
-            for word in [c.t.to_bits(), c.triangle, c.u.to_bits(), c.v.to_bits(), c.enters as u32] {
-                out.extend_from_slice(&word.to_le_bytes());
-            }
-        }
-        crate::output::write_data(&args.out, &[&out])?;
+        // Little-endian words, written as they lie in memory.
+        let offsets: Vec<u64> = all.splits.iter().map(|&s| (s as u64).to_le()).collect();
+        let mut records: Vec<[u32; 5]> = octrace_format::memory::try_with_capacity(all.crossings.len(), "crossings")?;
+        records.extend(
+            all.crossings
+                .iter()
+                .map(|c| [c.t.to_bits(), c.triangle, c.u.to_bits(), c.v.to_bits(), c.enters as u32].map(u32::to_le)),
+        );
+        crate::output::write_data(&args.out, &[bytemuck::cast_slice(&offsets), bytemuck::cast_slice(&records)])?;
         // A ray cut short: it has K crossings and more lie beyond (a count says).
         let cut = match args.max_hits {
             Some(k) => {
@@ -122,18 +125,4 @@ pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> 
         crate::report!(to_stdout, "{} rays, {text}, {rate:.2} Mrays/s ({mode}, {on})", thousands(rays.len() as u64),);
     }
     Ok(())
-}
-
-/// `all` with each ray's list cut to its first `limit` (the GPU lists them whole).
-fn truncated(all: BatchCrossings, limit: usize) -> BatchCrossings {
-    if limit == usize::MAX {
-        return all;
-    }
-    let mut out = BatchCrossings { splits: vec![0], crossings: Vec::new() };
-    for i in 0..all.splits.len() - 1 {
-        let list = all.of(i);
-        out.crossings.extend_from_slice(&list[..list.len().min(limit)]);
-        out.splits.push(out.crossings.len());
-    }
-    out
 }

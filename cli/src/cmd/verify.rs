@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
+
 use glam::Vec3;
 use octrace_bake::hard_rays::{grid_rays, GridPlanes};
 use octrace_bake::procedural::SplitMix;
@@ -12,8 +14,9 @@ use serde_json::json;
 
 use crate::output::thousands;
 
-/// Check a baked file: every invariant of the format (a validated open), then the
-/// octree tracer against the f64 brute-force oracle: random rays, half from inside the
+/// Check a baked file: every invariant of the format (a validated open; each encoded
+/// texture image decoded and checked against the bake's texels, as `render` does),
+/// then the octree tracer against the f64 brute-force oracle: random rays, half from inside the
 /// scene's box and half from outside aimed into it, and rays on the octree's own planes
 /// (in cell planes with +0.0 and -0.0 components, along cell edges, from and through
 /// cell corners, aimed at the mesh's vertices). Each mismatch is printed with its ray
@@ -52,6 +55,8 @@ struct Tally {
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let scene = crate::open::open_scene(&args.scene)?;
+    // The images `render` would decode: one that it would refuse fails here too.
+    scene.decode_textures().with_context(|| format!("{}: a texture image", crate::show(&args.scene)))?;
     let view = scene.view();
     let oracle = Reference::from_view(&view);
     let (lo, hi) = (Vec3::from(view.bounds.mesh_lo), Vec3::from(view.bounds.mesh_hi));

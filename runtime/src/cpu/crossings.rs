@@ -24,7 +24,7 @@ use super::walk::RayWalk;
 use crate::ray::Ray;
 
 /// One crossing of a ray with a triangle ([`Tracer::crossings`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Crossing {
     /// Distance along the ray, in units of its direction (as [`crate::Hit::t`]).
     pub t: f32,
@@ -341,6 +341,75 @@ impl Tracer<'_> {
         out
     }
 
+    /// [`Tracer::par_crossings_batch`] within a memory budget: the lists may take at
+    /// most `max_bytes` ([`CROSSING_BYTES`] a crossing; the whole call's peak is about
+    /// twice that, while the threads' lists are joined). A batch whose lists pass it
+    /// stops there (each thread finishes at most the chunk of rays it walks) and
+    /// answers [`Error::Budget`](crate::Error::Budget), with nothing returned; memory
+    /// the allocator refuses is [`Error::Alloc`](crate::Error::Alloc), never an abort.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::{cpu::CROSSING_BYTES, Error, Ray, Scene};
+    /// let scene = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let rays = vec![Ray::new([-3.0, 0.1, 0.2].into(), [1.0, 0.0, 0.0].into()); 100]; // 2 crossings each
+    /// let all = scene.tracer().par_crossings_batch_within(&rays, usize::MAX, 200 * CROSSING_BYTES)?;
+    /// assert_eq!(all.crossings.len(), 200);
+    /// let refused = scene.tracer().par_crossings_batch_within(&rays, usize::MAX, 199 * CROSSING_BYTES);
+    /// assert!(matches!(refused, Err(Error::Budget { what: "crossings", .. })));
+    /// // The first crossing of each ray fits.
+    /// let first = scene.tracer().par_crossings_batch_within(&rays, 1, 100 * CROSSING_BYTES)?;
+    /// assert_eq!(first.crossings.len(), 100);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn par_crossings_batch_within(
+        &self,
+        rays: &[Ray],
+        limit: usize,
+        max_bytes: u64,
+    ) -> crate::Result<BatchCrossings> {
+        use rayon::prelude::*;
+        use std::sync::atomic::Ordering::Relaxed;
+        use std::sync::atomic::{AtomicBool, AtomicUsize};
+        let budget = Budget {
+            most: usize::try_from(max_bytes / CROSSING_BYTES).unwrap_or(usize::MAX),
+            listed: AtomicUsize::new(0),
+            passed: AtomicBool::new(false),
+        };
+        let parts: Vec<BatchCrossings> = rays
+            .par_chunks(CHUNK)
+            .map(|c| {
+                if budget.passed.load(Relaxed) {
+                    return BatchCrossings::default();
+                }
+                let mut sink = Flat { budget: Some(&budget), ..Flat::new(c.len()) };
+                self.crossings_into_sink(c, limit, &mut sink);
+                sink.finish()
+            })
+            .collect();
+        if budget.passed.load(Relaxed) {
+            return Err(crate::Error::Budget {
+                what: "crossings",
+                needed: budget.listed.load(Relaxed) as u64 * CROSSING_BYTES,
+                limit: max_bytes,
+                advice: "keep fewer a ray (max_hits, --max-hits), trace fewer rays a call, or raise the budget",
+            });
+        }
+        let total = parts.iter().map(|p| p.crossings.len()).sum();
+        let mut out = BatchCrossings {
+            splits: octrace_format::memory::try_with_capacity(rays.len() + 1, "crossing splits")?,
+            crossings: octrace_format::memory::try_with_capacity(total, "crossings")?,
+        };
+        out.splits.push(0);
+        for p in parts {
+            let base = out.crossings.len();
+            out.splits.extend(p.splits[1..].iter().map(|s| s + base));
+            out.crossings.extend(p.crossings);
+        }
+        Ok(out)
+    }
+
     /// The crossing count of each ray of a batch ([`Tracer::count_crossings`]), on this
     /// thread.
     pub fn count_crossings_batch(&self, rays: &[Ray], out: &mut [CrossingCount]) {
@@ -425,25 +494,46 @@ pub(crate) trait CrossingSink {
     fn ray(&mut self, index: usize, crossings: &[Crossing]);
 }
 
+/// Bytes a listed crossing takes in a [`BatchCrossings`]: the unit of
+/// [`Tracer::par_crossings_batch_within`]'s budget.
+pub const CROSSING_BYTES: u64 = std::mem::size_of::<Crossing>() as u64;
+
+/// Crossings every thread of a batch may list together, and how many they have.
+struct Budget {
+    most: usize,
+    listed: std::sync::atomic::AtomicUsize,
+    /// Set once `listed` passes `most`: lists stop being kept.
+    passed: std::sync::atomic::AtomicBool,
+}
+
 /// Lists in one flat array, in ray order (rays finish out of order in the lanes: each
 /// list is kept where it arrived, and placed once all have).
 #[derive(Default)]
-struct Flat {
+struct Flat<'a> {
     /// Each ray's count and where its list arrived in `arrived`.
     placed: Vec<(usize, usize)>,
     arrived: Vec<Crossing>,
+    /// The batch's budget, shared by its threads, if it has one.
+    budget: Option<&'a Budget>,
 }
 
-impl CrossingSink for Flat {
+impl CrossingSink for Flat<'_> {
     fn ray(&mut self, index: usize, crossings: &[Crossing]) {
+        use std::sync::atomic::Ordering::Relaxed;
+        if let Some(b) = self.budget {
+            if b.passed.load(Relaxed) || b.listed.fetch_add(crossings.len(), Relaxed) + crossings.len() > b.most {
+                b.passed.store(true, Relaxed);
+                return;
+            }
+        }
         self.placed[index] = (crossings.len(), self.arrived.len());
         self.arrived.extend_from_slice(crossings);
     }
 }
 
-impl Flat {
-    fn new(rays: usize) -> Flat {
-        Flat { placed: vec![(0, 0); rays], arrived: Vec::new() }
+impl Flat<'_> {
+    fn new(rays: usize) -> Flat<'static> {
+        Flat { placed: vec![(0, 0); rays], arrived: Vec::new(), budget: None }
     }
 
     fn finish(self) -> BatchCrossings {

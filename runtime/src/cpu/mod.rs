@@ -27,7 +27,7 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
-pub use crossings::{BatchCrossings, Crossing, CrossingCount};
+pub use crossings::{BatchCrossings, Crossing, CrossingCount, CROSSING_BYTES};
 pub use fans::{FanIndex, FanSummary, MIN_REFERENCES as FAN_MIN_REFERENCES, MIN_TRIANGLES as FAN_MIN_TRIANGLES};
 pub use inside::{Solid, COUNT_DIRECTION};
 pub use locate::LocateGrid;

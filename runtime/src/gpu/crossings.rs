@@ -61,20 +61,46 @@ impl GpuTracer<'_> {
     /// # Errors
     /// As [`GpuTracer::count_crossings`].
     pub fn crossings(&self, rays: &[Ray]) -> GpuResult<BatchCrossings> {
+        self.crossings_within(rays, usize::MAX, u64::MAX)
+    }
+
+    /// The first `limit` crossings of each ray, in order along it, in one flat list
+    /// with per-ray splits, taking at most `max_bytes`
+    /// ([`crate::cpu::CROSSING_BYTES`] a crossing):
+    /// [`crate::Tracer::par_crossings_batch_within`], ray for ray, bit for bit. The
+    /// counts come first, so a batch past the budget is refused before its lists are
+    /// made, and the kernel writes only the first `limit` of a ray.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::count_crossings`]; [`GpuError::Memory`] with
+    /// [`crate::Error::Budget`] past the budget, [`crate::Error::Alloc`] where the
+    /// allocator refuses the lists.
+    pub fn crossings_within(&self, rays: &[Ray], limit: usize, max_bytes: u64) -> GpuResult<BatchCrossings> {
+        use crate::cpu::CROSSING_BYTES;
+        use octrace_format::memory::try_vec;
         // A walk the counting kernel could not finish is listed on the CPU once, and
         // its list gives its count.
         let tracer = self.scene.tracer();
         let gpu_counts = self.kernel_counts(rays)?;
         let cpu_lists: Vec<Option<Vec<Crossing>>> =
-            gpu_counts.iter().zip(rays).map(|(c, r)| c.is_none().then(|| tracer.all_crossings(r))).collect();
-        let total =
-            |i: usize| gpu_counts[i].map_or_else(|| cpu_lists[i].as_ref().map_or(0, Vec::len), |c| c.total as usize);
-        let mut splits = Vec::with_capacity(rays.len() + 1);
-        splits.push(0usize);
+            gpu_counts.iter().zip(rays).map(|(c, r)| c.is_none().then(|| tracer.first_crossings(r, limit))).collect();
+        let total = |i: usize| {
+            gpu_counts[i].map_or_else(|| cpu_lists[i].as_ref().map_or(0, Vec::len), |c| (c.total as usize).min(limit))
+        };
+        let mut splits = try_vec(rays.len() + 1, "crossing splits").map_err(|e| GpuError::Memory(e.into()))?;
         for i in 0..rays.len() {
-            splits.push(splits[i] + total(i));
+            splits[i + 1] = splits[i] + total(i);
         }
-        let mut crossings = vec![Crossing { t: 0.0, triangle: 0, u: 0.0, v: 0.0, enters: false }; splits[rays.len()]];
+        let needed = splits[rays.len()] as u64 * CROSSING_BYTES;
+        if needed > max_bytes {
+            return Err(GpuError::Memory(crate::Error::Budget {
+                what: "crossings",
+                needed,
+                limit: max_bytes,
+                advice: "keep fewer a ray (max_hits, --max-hits), trace fewer rays a call, or raise the budget",
+            }));
+        }
+        let mut crossings = try_vec(splits[rays.len()], "crossings").map_err(|e| GpuError::Memory(e.into()))?;
         // Dispatches of at most `per_dispatch` rays whose rays and offsets fit one
         // binding, and whose records fit another; a ray whose records alone do not, or
         // that the CPU listed already, is given no room (`capacity` 0).
@@ -115,7 +141,7 @@ impl GpuTracer<'_> {
                     continue;
                 }
                 if b - a != dest.len() || out[a].flags == OVER_BUDGET {
-                    dest.copy_from_slice(&tracer.all_crossings(&rays[i]));
+                    dest.copy_from_slice(&tracer.first_crossings(&rays[i], limit));
                     continue;
                 }
                 for (c, h) in dest.iter_mut().zip(&out[a..b]) {

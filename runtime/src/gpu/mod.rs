@@ -81,6 +81,10 @@ pub enum GpuError {
     /// Answers or buffers that do not fit the rays given.
     #[error("{0}")]
     Mismatch(String),
+    /// Answers past their memory budget ([`crate::Error::Budget`]) or memory the
+    /// allocator refused ([`crate::Error::Alloc`]).
+    #[error(transparent)]
+    Memory(crate::Error),
 }
 
 /// The GPU result type.

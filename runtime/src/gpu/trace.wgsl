@@ -979,7 +979,7 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
                 continue;
             }
             let front = arrives_on_front(wk.d, at);
-            if MODE == 2u && total < capacity {
+            if MODE == 2u && leaf_start < capacity {
                 var c: HitOut;
                 c.t = h.x;
                 if moved {
@@ -994,7 +994,11 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
                 // round together), as f32::total_cmp orders it.
                 c.steps = order_key(h.x);
                 c.flags = 0u;
-                var k = total;
+                // Insertion into the leaf's sorted run, [leaf_start, min(total,
+                // capacity)): in a full list (a ray cut at its first `capacity`) a
+                // crossing after the last kept is dropped, one before it pushes the
+                // last out.
+                var k = min(total, capacity);
                 let key = c.steps;
                 loop {
                     if k == leaf_start || !tick() {
@@ -1004,17 +1008,22 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
                     if prev.steps < key || (prev.steps == key && prev.triangle < c.triangle) {
                         break;
                     }
-                    put_hit(base + k, prev);
+                    if k < capacity {
+                        put_hit(base + k, prev);
+                    }
                     k -= 1u;
                 }
-                put_hit(base + k, c);
+                if k < capacity {
+                    put_hit(base + k, c);
+                }
             }
             total += 1u;
             entries += select(0u, 1u, front);
         }
         lo = hi;
         first = false;
-        if last || !follow(&wk, l, ncount) {
+        // A list full after a leaf is done: the next leaves' crossings lie beyond.
+        if last || (MODE == 2u && total >= capacity) || !follow(&wk, l, ncount) {
             break;
         }
     }
