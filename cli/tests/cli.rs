@@ -1102,6 +1102,10 @@ fn contains_answers_points_and_refuses_bad_input() {
     let contains = |p: &'static str| ["contains", "cube.oct", "--points", p, "--out", "o.bin"];
     fails_saying(dir.path(), &contains("nan.bin"), "point 1 is not finite");
     fails_saying(dir.path(), &contains("empty.bin"), "empty file, no points");
+    // The count's limit in the same words from the parser and the command (issue 46).
+    let points = |n: &'static str| ["points", "cube.oct", "--count", n, "-o", "n.bin"];
+    fails_saying(dir.path(), &points("0"), "1 to the 134217728 (2^27)");
+    fails_saying(dir.path(), &points("300000000"), "more than the 134217728 (2^27)");
     fails_saying(dir.path(), &contains("odd.bin"), "13 bytes is not a whole number of 12-byte points");
     fails_saying(dir.path(), &contains("missing.bin"), "missing.bin");
 

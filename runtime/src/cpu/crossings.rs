@@ -226,8 +226,9 @@ impl Tracer<'_> {
             let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
             // A fan's leaf: the triangles its hierarchy picks (`fans.rs`), in the same order.
             let mut room = fans::candidates_room();
-            let refs =
-                self.fan_refs((box_index, offset, refs), || (!exact).then_some(&shear), &mut room).unwrap_or(refs);
+            let refs = self
+                .fan_refs((box_index, offset, refs), || (!exact).then_some(&shear), true, &mut room)
+                .unwrap_or(refs);
             buffer.0.clear();
             for &prim in refs {
                 let Some(tri) =

@@ -29,9 +29,15 @@
 //! ends (`2^-22` of their distance to the origin, a few times) and of the edge
 //! functions: an angle of about `2^-19 (|v - o|_1 + 3 r) / l` for spokes of length `l`
 //! and the longest `r`, which each node's test allows four times over
-//! ([`SLACK`]). A ray through `v'` itself (`n = 0`) keeps every triangle, as does one
-//! whose numbers overflow; more than [`MAX_CANDIDATES`] candidates test the whole
-//! leaf. Tests that do not run that arithmetic (Möller-Trumbore, `f64`, the exact
+//! ([`SLACK`]). A ray through `v'` itself (`n = 0`) meets every triangle of the fan
+//! there: the nearest-hit test (edges closed) accepts them all, and the nearest of
+//! their rounded distances, then the lowest input id, is the answer, so it tests the
+//! whole leaf (a 200,000-triangle disk: milliseconds a ray; rays that pass exactly
+//! through `v'` in `f32` are mostly axis-aligned ones through it). The crossing
+//! queries' test (edges owned) accepts only the triangles that own both edges at `v'`:
+//! those whose arc crosses the plane where the sheared `y` is 0, which the hierarchy
+//! finds as it finds any other plane's. A ray whose numbers overflow keeps every
+//! triangle; more than [`MAX_CANDIDATES`] candidates test the whole leaf. Tests that do not run that arithmetic (Möller-Trumbore, `f64`, the exact
 //! exit rule's) test every triangle.
 //!
 //! # When and what it costs
@@ -284,13 +290,16 @@ impl FanIndex {
 
     /// The references of the leaf (`refs` from `offset`, box index `box_index`, in
     /// `view`) that a ray with `shear` may hit, in the leaf's order, into `out`;
-    /// `None` when it has no fan or the ray must test them all (module docs).
+    /// `None` when it has no fan or the ray must test them all (module docs). `owned`:
+    /// the test is [`Shear::intersect_owned`] (the crossing queries'), whose edge rule
+    /// picks among a fan's triangles even for a ray through the shared vertex.
     #[inline(never)]
     pub(crate) fn candidates<'b>(
         &self,
         view: &SceneView<'_>,
         (box_index, offset, refs): (u32, u32, &[u32]),
         shear: &Shear,
+        owned: bool,
         out: &'b mut Candidates,
     ) -> Option<&'b [u32]> {
         let fan = self.fan_of(view, box_index, offset, refs.len() as u32)?;
@@ -304,10 +313,25 @@ impl FanIndex {
         let [sx, sy, _] = shear.scales();
         let (vx, vy) = (r[kx] - sx * r[kz], r[ky] - sy * r[kz]);
         let mut n = [0.0f32; 3];
-        n[kx] = -vy;
-        n[ky] = vx;
-        n[kz] = sx * vy - sy * vx;
-        let slack = (vx.abs() + vy.abs()) * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
+        let mut slack;
+        if vx == 0.0 && vy == 0.0 && owned {
+            // A ray through the shared vertex itself: both of a triangle's edges at
+            // `v'` have a zero function there, and the owned test accepts the
+            // triangle only if it owns both (`owns64`): its spokes' sheared ends lie on
+            // either side of the sheared x axis (one with y > 0, or y = 0 and x > 0; the
+            // other the reverse). So its arc crosses the plane through `v` where the
+            // sheared y is 0: `g(p) = p_ky - sy p_kz`, whose rounding in the test is
+            // that of a spoke's end alone, a fraction of what `slack` allows.
+            n[ky] = 1.0;
+            n[kz] = -sy;
+            slack = (1.0 + sy.abs()) * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
+        } else {
+            n[kx] = -vy;
+            n[ky] = vx;
+            n[kz] = sx * vy - sy * vx;
+            slack = (vx.abs() + vy.abs()) * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
+        }
+        slack = slack.max(0.0);
         if slack == 0.0 || !slack.is_finite() || !n.iter().all(|c| c.is_finite()) {
             return None;
         }
@@ -379,13 +403,14 @@ impl super::Tracer<'_> {
         &self,
         leaf: (u32, u32, &[u32]),
         shear: impl FnOnce() -> Option<&'s Shear>,
+        owned: bool,
         room: &'r mut Candidates,
     ) -> Option<&'r [u32]> {
         let index = self.fans?;
         if (leaf.2.len() as u32) < MIN_REFERENCES {
             return None;
         }
-        index.candidates(&self.view, leaf, shear()?, room)
+        index.candidates(&self.view, leaf, shear()?, owned, room)
     }
 }
 
@@ -647,6 +672,83 @@ mod tests {
             let (aimed, near) = (tests[1], tests[2]);
             assert!(aimed.1 >= 1500 * n / 2, "{name}: the centre's leaf was not crowded");
             assert!(near.0 * 5 < near.1 && aimed.0 * 5 / 4 < aimed.1, "{name}: {tests:?}");
+        }
+    }
+
+    /// Rays exactly through a fan's shared vertex (its sheared position 0 in `f32`:
+    /// directions whose dominant component is a power of two, from points at a power
+    /// of two times them) list the crossings of testing the whole leaf, bit for bit,
+    /// and the crossing test now tests a few of the fan's triangles, not all (issue 46:
+    /// a 200,000-triangle disk took 12 s for 1,000 such rays' counts).
+    #[test]
+    fn crossings_through_the_shared_vertex_test_few_triangles() {
+        use super::super::watertight::Shear;
+        use octrace_format::layout::LEAF_HEADER_WORDS;
+        for (name, height) in [("disk", 0.0f32), ("cone", 0.5)] {
+            let mesh = procedural::cone(2000, [0.0; 3], 1.0, height);
+            let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
+            let index = FanIndex::new(&scene.view());
+            let (with, without) = (scene.tracer(), scene.tracer().with_fans(None));
+            let view = scene.view();
+            // The crowded leaves: (box index, offset, references).
+            let mut crowded = Vec::new();
+            let mut a = 0usize;
+            while crowded.len() + 1 < view.leaf_count() && a + LEAF_HEADER_WORDS <= view.octree.len() {
+                let rec = &view.octree[a..a + LEAF_HEADER_WORDS];
+                if rec[0] >= super::MIN_REFERENCES {
+                    crowded.push((rec[2], rec[1], &view.tri_refs[rec[1] as usize..][..rec[0] as usize]));
+                }
+                a += LEAF_HEADER_WORDS + octrace_format::layout::total_links(rec[3]) as usize;
+                if crowded.len() > 64 {
+                    break;
+                }
+            }
+            assert!(!crowded.is_empty(), "{name}");
+            let (mut through, mut crossed, mut picked) = (0, 0, 0usize);
+            for i in -6i32..=6 {
+                for j in -6i32..=6 {
+                    for (axis, sign) in [(0, 1.0f32), (1, -1.0), (2, 1.0), (2, -1.0)] {
+                        let mut d = [i as f32, j as f32, i as f32];
+                        d[(axis + 1) % 3] = j as f32;
+                        d[axis] = 8.0 * sign;
+                        // From the apex, back a quarter of the direction (exact).
+                        let o = [-0.25 * d[0], height - 0.25 * d[1], -0.25 * d[2]];
+                        let ray = Ray::new(o.into(), d.into());
+                        let mut room = super::candidates_room();
+                        let shear = Shear::new(o, d);
+                        let (mut c1, mut c2) = (Vec::new(), Vec::new());
+                        with.crossings(&ray, |c| {
+                            c1.push(c);
+                            std::ops::ControlFlow::Continue(())
+                        });
+                        without.crossings(&ray, |c| {
+                            c2.push(c);
+                            std::ops::ControlFlow::Continue(())
+                        });
+                        assert_eq!(c1, c2, "{name}: {ray:?}");
+                        crossed += c1.len();
+                        // A ray in the disk's plane meets every arc there (and crosses
+                        // nothing): the whole leaf is tested, as the docs say.
+                        if height == 0.0 && d[1] == 0.0 {
+                            continue;
+                        }
+                        for &leaf in &crowded {
+                            // Nearest-hit's test (edges closed) still tests them all.
+                            assert!(index.candidates(&view, leaf, &shear, false, &mut room).is_none());
+                            let Some(few) = index.candidates(&view, leaf, &shear, true, &mut room) else {
+                                panic!("{name}: {ray:?} tests the whole leaf");
+                            };
+                            picked = picked.max(few.len());
+                            through += 1;
+                        }
+                    }
+                }
+            }
+            assert!(through >= 12 * 13 * 3, "{name}: {through}");
+            // Rays in the disk's plane cross nothing, the others once at the apex; rays
+            // that touch the cone's apex from outside cross it 0 or 2 times.
+            assert!(crossed >= 13 * 13, "{name}: {crossed} crossings");
+            assert!(picked <= 64, "{name}: up to {picked} candidates of {}", mesh.triangles.len());
         }
     }
 

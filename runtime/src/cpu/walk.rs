@@ -415,7 +415,7 @@ impl Tracer<'_> {
         // `test_refs` either way: a second copy inlined into the lanes' step cost
         // incoherent batches 10 %.)
         let mut room = fans::candidates_room();
-        let (refs, tested) = match self.fan_refs((box_index, offset, refs), || test.fan_shear(), &mut room) {
+        let (refs, tested) = match self.fan_refs((box_index, offset, refs), || test.fan_shear(), false, &mut room) {
             Some(picked) => (picked, picked.len() as u32),
             None => (refs, count),
         };

@@ -189,7 +189,7 @@ fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, (count, offset, box_in
     let v = t.view();
     let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
     let mut room = fans::candidates_room();
-    let refs = t.fan_refs((box_index, offset, refs), || Some(&w.shear), &mut room).unwrap_or(refs);
+    let refs = t.fan_refs((box_index, offset, refs), || Some(&w.shear), true, &mut room).unwrap_or(refs);
     let lo = l.lo;
     for chunk in refs.chunks(LANES) {
         let mut push = |prim: u32, (tt, u, vv): (f32, f32, f32), enters: bool| {
