@@ -39,27 +39,48 @@ pub struct EdgeCensus {
 
 impl EdgeCensus {
     /// Counts the edges of `triangles` (each three vertices).
+    ///
+    /// Vertices are numbered in the order of their coordinates' bits (one sort of the
+    /// corners as 128-bit integers), then edges sorted as pairs of numbers: two sorts
+    /// of integers, faster and smaller than one sort of the edges' coordinates (the
+    /// dragon's 871,000 triangles: 0.44 s and 73 MB before).
     pub fn of(triangles: &[[[f32; 3]; 3]]) -> EdgeCensus {
-        // Each edge once per triangle: its end points' keys (lower first) and whether
-        // the triangle runs it from the lower to the higher.
-        let key = |p: [f32; 3]| p.map(|c| if c == 0.0 { 0 } else { c.to_bits() });
-        let mut ends: Vec<([u32; 3], [u32; 3], bool)> = Vec::with_capacity(3 * triangles.len());
-        let mut degenerate = 0;
-        for t in triangles {
-            if is_degenerate(t) {
-                degenerate += 1;
-                continue;
-            }
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                let (ka, kb) = (key(a), key(b));
-                ends.push(if ka < kb { (ka, kb, true) } else { (kb, ka, false) });
+        // A corner: its vertex's coordinates' bits in the top 96 bits, its number
+        // below (16 bytes: sorted as one integer).
+        let key = |p: [f32; 3], corner: u32| {
+            let k = p.map(|c| if c == 0.0 { 0 } else { c.to_bits() });
+            (k[0] as u128) << 96 | (k[1] as u128) << 64 | (k[2] as u128) << 32 | corner as u128
+        };
+        let kept: Vec<u32> = (0..triangles.len() as u32).filter(|&t| !is_degenerate(&triangles[t as usize])).collect();
+        let degenerate = (triangles.len() - kept.len()) as u64;
+        // Each kept triangle's corners, numbered by their vertex's rank among the keys.
+        let mut corners: Vec<u128> = Vec::with_capacity(3 * kept.len());
+        for (k, &t) in kept.iter().enumerate() {
+            for (i, &p) in triangles[t as usize].iter().enumerate() {
+                corners.push(key(p, 3 * k as u32 + i as u32));
             }
         }
-        ends.sort_unstable();
+        corners.sort_unstable();
+        let mut vertex = vec![0u32; corners.len()];
+        for (rank, run) in corners.chunk_by(|x, y| x >> 32 == y >> 32).enumerate() {
+            for &c in run {
+                vertex[c as u32 as usize] = rank as u32;
+            }
+        }
+        drop(corners);
+        // Each edge once per triangle: its end points (lower first) and whether the
+        // triangle runs it from the lower to the higher.
+        let mut ends: Vec<(u64, bool)> = Vec::with_capacity(vertex.len());
+        for t in vertex.chunks_exact(3) {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                ends.push(if a < b { ((a as u64) << 32 | b as u64, true) } else { ((b as u64) << 32 | a as u64, false) });
+            }
+        }
+        ends.sort_unstable_by_key(|e| e.0);
         let mut census = EdgeCensus { degenerate, ..EdgeCensus::default() };
-        for run in ends.chunk_by(|x, y| (x.0, x.1) == (y.0, y.1)) {
+        for run in ends.chunk_by(|x, y| x.0 == y.0) {
             census.edges += 1;
-            let forward = run.iter().filter(|e| e.2).count();
+            let forward = run.iter().filter(|e| e.1).count();
             census.boundary += (run.len() % 2 == 1) as u64;
             census.non_manifold += (run.len() > 2) as u64;
             census.flipped += (run.len() == 2 && forward != 1) as u64;
@@ -107,4 +128,51 @@ pub fn is_degenerate(t: &[[f32; 3]; 3]) -> bool {
     let (e1, e2) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
     let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
     n == [0.0; 3]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The census as it was first written: one sort of the edges' coordinates.
+    fn by_coordinates(triangles: &[[[f32; 3]; 3]]) -> EdgeCensus {
+        let key = |p: [f32; 3]| p.map(|c| if c == 0.0 { 0 } else { c.to_bits() });
+        let mut ends: Vec<([u32; 3], [u32; 3], bool)> = Vec::new();
+        let mut degenerate = 0;
+        for t in triangles {
+            if is_degenerate(t) {
+                degenerate += 1;
+                continue;
+            }
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                let (ka, kb) = (key(a), key(b));
+                ends.push(if ka < kb { (ka, kb, true) } else { (kb, ka, false) });
+            }
+        }
+        ends.sort_unstable();
+        let mut census = EdgeCensus { degenerate, ..EdgeCensus::default() };
+        for run in ends.chunk_by(|x, y| (x.0, x.1) == (y.0, y.1)) {
+            census.edges += 1;
+            let forward = run.iter().filter(|e| e.2).count();
+            census.boundary += (run.len() % 2 == 1) as u64;
+            census.non_manifold += (run.len() > 2) as u64;
+            census.flipped += (run.len() == 2 && forward != 1) as u64;
+        }
+        census
+    }
+
+    proptest! {
+        /// Triangles over a few grid points (shared edges, flips, copies, degenerate
+        /// ones, -0.0 beside 0.0): the same census as sorting the coordinates.
+        #[test]
+        fn the_census_is_that_of_sorting_coordinates(
+            corners in prop::collection::vec((0u8..4, 0u8..3, 0u8..3), 3..300)
+        ) {
+            let point = |(x, y, z): (u8, u8, u8)| [x as f32 - 1.0, [-0.0, 0.0, 1.0][y as usize], z as f32 * 0.5];
+            let triangles: Vec<[[f32; 3]; 3]> =
+                corners.chunks_exact(3).map(|c| [point(c[0]), point(c[1]), point(c[2])]).collect();
+            prop_assert_eq!(EdgeCensus::of(&triangles), by_coordinates(&triangles));
+        }
+    }
 }

@@ -297,10 +297,12 @@ fn bake_within(
     })
     .concat();
     // Closed and consistently oriented, or not: each part, and the whole scene.
+    let edges = EdgeCensus::of(&mesh.triangles);
     let mut parts = mesh.parts.clone();
     for p in &mut parts {
         let range = p.first as usize..(p.first as usize + p.count as usize).min(mesh.triangles.len());
-        p.edges = EdgeCensus::of(&mesh.triangles[range]);
+        // A part that is the whole mesh (an OBJ without objects) has its census.
+        p.edges = if range == (0..mesh.triangles.len()) { edges } else { EdgeCensus::of(&mesh.triangles[range]) };
     }
     let (textures, texels, images) = mesh.texel_sections();
     let shading = octrace_format::Shading {
@@ -323,7 +325,7 @@ fn bake_within(
             input_triangles: mesh.triangles.len() as u64,
             degenerate_triangles: (mesh.triangles.len() - kept) as u64,
             leaves_before_balance,
-            edges: EdgeCensus::of(&mesh.triangles),
+            edges,
         },
         octree: arrays.octree,
         tri_refs: arrays.tri_refs,
