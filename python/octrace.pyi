@@ -33,7 +33,7 @@ def bake(
     margin: float = ...,
     threads: int = 0,
     allow_outside_references: bool = False,
-    max_memory: int = 2 << 30,
+    max_memory: Optional[int] = None,
     max_instances: int = ...,
     max_triangles: int = ...,
     compress: bool = False,
@@ -49,7 +49,7 @@ def bake_arrays(
     leaf_size: int = 16,
     margin: float = ...,
     threads: int = 0,
-    max_memory: int = 2 << 30,
+    max_memory: Optional[int] = None,
     compress: bool = False,
     level: int = 3,
 ) -> dict[str, Any]: ...
@@ -65,7 +65,7 @@ class Scene:
         leaf_size: int = 16,
         margin: float = ...,
         threads: int = 0,
-        max_memory: int = 2 << 30,
+        max_memory: Optional[int] = None,
     ) -> "Scene": ...
     @property
     def triangle_count(self) -> int: ...

@@ -139,7 +139,8 @@ pub enum Error {
     /// tree) or triangles that share cells (many coincident copies, fans) get here.
     #[error(
         "the octree being built reached {} bytes, past the bake's memory budget of {} (raise it with \
-         --max-memory or BuildParams::max_tree_bytes, or use a larger --leaf-size or a smaller --max-depth)",
+         --max-memory or BuildParams::max_tree_bytes, or use a larger --leaf-size or a smaller --max-depth; \
+         the default is 1 KiB a triangle, at least 2 GiB, at most a third of the memory the process may use)",
         thousands(*needed),
         thousands(*limit)
     )]

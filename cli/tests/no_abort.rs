@@ -87,6 +87,23 @@ fn the_bake_budget_stops_a_small_mesh_in_time() {
     assert!(!d.join("t.oct").exists());
 }
 
+/// The default budget follows the memory the process may use (issue 46, item 11): under
+/// a 2 GiB address-space cap, a third of it (715,827,882 bytes), where the fixed 2 GiB
+/// default let the tree grow into the cap and abort. `bake --help` says the rule.
+#[test]
+fn the_default_bake_budget_follows_the_memory_the_process_may_use() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("tetra.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+        .unwrap();
+    let args = ["bake", "tetra.obj", "-o", "t.oct", "--max-depth", "20", "--leaf-size", "1"];
+    let run = capped(d, &args, 2 << 30);
+    refused(&run, "past the bake's memory budget of 715,827,882", 1800 * MB);
+    assert!(run.stderr.contains("at most a third of the memory the process may use"), "{}", run.stderr);
+    let help = capped(d, &["bake", "--help"], u64::MAX);
+    assert!(help.stdout.contains("1 KiB a triangle, at least 2 GiB, at most a third"), "{}", help.stdout);
+}
+
 /// `quads` unit squares stacked along z (OBJ), and `rays` rays up through all of
 /// them (32-byte records).
 fn stack(d: &Path, quads: usize, rays: usize) {

@@ -73,7 +73,11 @@ impl EdgeCensus {
         let mut ends: Vec<(u64, bool)> = Vec::with_capacity(vertex.len());
         for t in vertex.chunks_exact(3) {
             for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                ends.push(if a < b { ((a as u64) << 32 | b as u64, true) } else { ((b as u64) << 32 | a as u64, false) });
+                ends.push(if a < b {
+                    ((a as u64) << 32 | b as u64, true)
+                } else {
+                    ((b as u64) << 32 | a as u64, false)
+                });
             }
         }
         ends.sort_unstable_by_key(|e| e.0);

@@ -319,7 +319,13 @@ struct BakeOptions {
 }
 
 impl BakeOptions {
-    fn new(max_depth: Option<u32>, leaf_size: u32, margin: f32, max_memory: u64, threads: usize) -> PyResult<Self> {
+    fn new(
+        max_depth: Option<u32>,
+        leaf_size: u32,
+        margin: f32,
+        max_memory: Option<u64>,
+        threads: usize,
+    ) -> PyResult<Self> {
         let params = BuildParams { max_depth, leaf_size: Some(leaf_size), margin, max_tree_bytes: max_memory };
         params.check().map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(BakeOptions { params, threads })
@@ -427,7 +433,9 @@ fn write_scene(
 ///     margin: cell enlargement, a fraction of the root edge (0 to 2**-10).
 ///     threads: threads to bake with (0: all cores); the file does not depend on it.
 ///     allow_outside_references: let the mesh read files outside its folder.
-///     max_memory: the octree's memory budget in bytes while it is built.
+///     max_memory: the octree's memory budget in bytes while it is built (default:
+///         1 KiB a triangle, at least 2 GiB, at most a third of the memory the process
+///         may use).
 ///     max_instances: the most node placements a glTF scene may make.
 ///     max_triangles: the most triangles the mesh may hold once instanced.
 ///     compress: write the file zstd-compressed, at ``level`` (1-22).
@@ -449,7 +457,7 @@ fn write_scene(
 #[pyfunction]
 #[pyo3(signature = (mesh, output, *, max_depth=None, leaf_size=octrace_bake::octree::DEFAULT_LEAF_SIZE,
     margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, allow_outside_references=false,
-    max_memory=2 << 30, max_instances=octrace_bake::DEFAULT_MAX_INSTANCES,
+    max_memory=None, max_instances=octrace_bake::DEFAULT_MAX_INSTANCES,
     max_triangles=octrace_bake::DEFAULT_MAX_TRIANGLES, compress=false, level=3, record_time=false))]
 #[allow(clippy::too_many_arguments)]
 fn bake<'py>(
@@ -461,7 +469,7 @@ fn bake<'py>(
     margin: f32,
     threads: usize,
     allow_outside_references: bool,
-    max_memory: u64,
+    max_memory: Option<u64>,
     max_instances: u64,
     max_triangles: u64,
     compress: bool,
@@ -517,7 +525,7 @@ fn bake<'py>(
 ///     octrace.bake_arrays(v, [[0, 1, 2]], "tri.oct")
 #[pyfunction]
 #[pyo3(signature = (vertices, triangles, output, *, max_depth=None, leaf_size=octrace_bake::octree::DEFAULT_LEAF_SIZE,
-    margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=2 << 30, compress=false, level=3))]
+    margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=None, compress=false, level=3))]
 #[allow(clippy::too_many_arguments)]
 fn bake_arrays<'py>(
     py: Python<'py>,
@@ -528,7 +536,7 @@ fn bake_arrays<'py>(
     leaf_size: u32,
     margin: f32,
     threads: usize,
-    max_memory: u64,
+    max_memory: Option<u64>,
     compress: bool,
     level: i32,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -595,7 +603,7 @@ impl Scene {
     ///     scene.cast_rays(np.array([[0.2, 0.2, 1, 0, 0, -1]], np.float32))["t_hit"]  # [1.]
     #[staticmethod]
     #[pyo3(signature = (vertices, triangles, *, max_depth=None, leaf_size=octrace_bake::octree::DEFAULT_LEAF_SIZE,
-        margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=2 << 30))]
+        margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         py: Python<'_>,
@@ -605,7 +613,7 @@ impl Scene {
         leaf_size: u32,
         margin: f32,
         threads: usize,
-        max_memory: u64,
+        max_memory: Option<u64>,
     ) -> PyResult<Scene> {
         let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, threads)?;
         let mesh = mesh_of_arrays(vertices, triangles)?;

@@ -11,8 +11,8 @@ mod params;
 mod tests;
 
 pub use params::{
-    BuildParams, ResolvedParams, AUTO_DEPTH_LIMIT, DEFAULT_LEAF_SIZE, DEFAULT_MARGIN, DEFAULT_MAX_TREE_BYTES,
-    MAX_MARGIN,
+    default_max_tree_bytes, BuildParams, ResolvedParams, AUTO_DEPTH_LIMIT, DEFAULT_LEAF_SIZE, DEFAULT_MARGIN,
+    DEFAULT_MAX_TREE_BYTES, DEFAULT_TREE_BYTES_PER_TRIANGLE, MAX_MARGIN,
 };
 
 use octrace_format::{BakeParams, BakeStats, BakedScene, Bounds};
@@ -223,7 +223,7 @@ pub fn bake_with_progress(
     params: &BuildParams,
     progress: &(dyn Fn(BakeStage) + Sync),
 ) -> Result<BakedScene> {
-    bake_within(mesh, params, progress, Limits { bytes: params.max_tree_bytes, ..Limits::FORMAT })
+    bake_within(mesh, params, progress, Limits { bytes: params.tree_budget(mesh), ..Limits::FORMAT })
 }
 
 /// [`bake_with_progress`] against `limits` (the format's, or lower ones in tests).
@@ -460,7 +460,7 @@ pub fn build_unbalanced(mesh: &Mesh, params: &BuildParams) -> Result<Unbalanced>
     let Prepared { ids, root_lo, root_size, resolved, .. } = prepare(mesh, params)?;
     let kept: Vec<[[f32; 3]; 3]> = ids.iter().map(|&i| mesh.triangles[i as usize]).collect();
     let builder =
-        builder(&kept, root_lo, root_size, &resolved, Limits { bytes: params.max_tree_bytes, ..Limits::FORMAT });
+        builder(&kept, root_lo, root_size, &resolved, Limits { bytes: params.tree_budget(mesh), ..Limits::FORMAT });
     let root = builder.build((0, [0; 3]), (0..kept.len() as u32).collect());
     if builder.growth.passed() {
         return Err(builder.growth.error());

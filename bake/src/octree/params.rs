@@ -49,15 +49,42 @@ pub struct BuildParams {
     pub margin: f32,
     /// The bake's memory budget: the bytes the tree may hold while it is built (4 a
     /// triangle reference, about 100 a leaf); the build stops with
-    /// [`Error::TreeBudget`](crate::Error::TreeBudget) as soon as it passes.
-    /// [`DEFAULT_MAX_TREE_BYTES`] by default. The bake's peak memory is about twice
-    /// this plus the mesh.
-    pub max_tree_bytes: u64,
+    /// [`Error::TreeBudget`](crate::Error::TreeBudget) as soon as it passes. `None`:
+    /// [`default_max_tree_bytes`] for the mesh's triangles. The bake's peak memory is
+    /// about twice this plus the mesh.
+    pub max_tree_bytes: Option<u64>,
 }
 
-/// The default [`BuildParams::max_tree_bytes`]: 2 GiB, 60 times what the dragon's
-/// default bake holds (34 MB: 1.86 million references, 253,436 leaves).
+/// The least default [`BuildParams::max_tree_bytes`]: 2 GiB, 60 times what the
+/// dragon's default bake holds (34 MB: 1.86 million references, 253,436 leaves),
+/// unless the machine has less ([`default_max_tree_bytes`]).
 pub const DEFAULT_MAX_TREE_BYTES: u64 = 2 << 30;
+
+/// Tree bytes the default budget allows a triangle: 1 KiB, 26 times the dragon's
+/// (39 bytes a triangle), so that a mesh large enough to need more than
+/// [`DEFAULT_MAX_TREE_BYTES`] gets it.
+pub const DEFAULT_TREE_BYTES_PER_TRIANGLE: u64 = 1024;
+
+/// The default memory budget of a bake of `triangles` triangles: 1 KiB a triangle
+/// ([`DEFAULT_TREE_BYTES_PER_TRIANGLE`]), at least [`DEFAULT_MAX_TREE_BYTES`], and at
+/// most a third of the memory this process may use
+/// ([`octrace_format::memory::usable_bytes`]: physical memory, or the address-space
+/// limit where lower), the bake's peak being about twice the tree plus the mesh. A
+/// budget stops hostile inputs (a few triangles that share cells at every depth),
+/// not the meshes the toolchain is for: on a 24 GB machine 55.8 million triangles get
+/// 7.8 GB.
+///
+/// # Example
+/// ```
+/// use octrace_bake::octree::{default_max_tree_bytes, DEFAULT_MAX_TREE_BYTES};
+/// let third = octrace_format::memory::usable_bytes() / 3;
+/// assert_eq!(default_max_tree_bytes(4), DEFAULT_MAX_TREE_BYTES.min(third));
+/// assert!(default_max_tree_bytes(100_000_000) <= third);
+/// ```
+pub fn default_max_tree_bytes(triangles: usize) -> u64 {
+    let third = octrace_format::memory::usable_bytes() / 3;
+    (triangles as u64).saturating_mul(DEFAULT_TREE_BYTES_PER_TRIANGLE).max(DEFAULT_MAX_TREE_BYTES).min(third)
+}
 
 /// Parameters with every automatic choice made.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,9 +130,15 @@ impl BuildParams {
         Ok(())
     }
 
+    /// The tree's budget for `mesh`: [`BuildParams::max_tree_bytes`], or the default
+    /// for its triangles ([`default_max_tree_bytes`]).
+    pub fn tree_budget(&self, mesh: &crate::Mesh) -> u64 {
+        self.max_tree_bytes.unwrap_or_else(|| default_max_tree_bytes(mesh.triangles.len()))
+    }
+
     /// Everything automatic, default margin.
     pub fn auto() -> Self {
-        BuildParams { max_depth: None, leaf_size: None, margin: DEFAULT_MARGIN, max_tree_bytes: DEFAULT_MAX_TREE_BYTES }
+        BuildParams { max_depth: None, leaf_size: None, margin: DEFAULT_MARGIN, max_tree_bytes: None }
     }
 
     /// Fixes the automatic choices for a mesh of `triangles` triangles.

@@ -46,9 +46,12 @@ pub(crate) struct Args {
     /// The bake's memory budget: the bytes the octree may hold while it is built (4 a
     /// triangle reference, about 100 a leaf; the bake's peak is about twice this plus
     /// the mesh). Suffixes K, M, G, T (powers of 1024). A bake that passes it stops
-    /// there with an error.
-    #[arg(long, value_name = "BYTES", default_value = "2G", value_parser = crate::output::parse_bytes)]
-    pub max_memory: u64,
+    /// there with an error. Default: 1 KiB a triangle, at least 2 GiB, at most a third
+    /// of the memory this process may use (physical memory, or `ulimit -v` where
+    /// lower): a 56-million-triangle mesh gets 7.8 GB on a 24 GB machine, a handful of
+    /// triangles that share cells at every depth stop at 2 GiB.
+    #[arg(long, value_name = "BYTES", value_parser = crate::output::parse_bytes)]
+    pub max_memory: Option<u64>,
     /// The most node placements a glTF scene may make (a node listed twice, or under
     /// two parents, is placed twice, and its children with it); counted before loading.
     #[arg(long, value_name = "N", default_value_t = octrace_bake::DEFAULT_MAX_INSTANCES)]

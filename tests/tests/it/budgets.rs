@@ -93,7 +93,7 @@ fn instanced_triangles_are_counted_before_loading() {
 fn the_bake_stops_at_its_memory_budget() {
     let one = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.25]];
     let mesh = Mesh::from_triangles(vec![one; 3000]);
-    let tight = BuildParams { max_tree_bytes: 256 << 10, ..BuildParams::auto() };
+    let tight = BuildParams { max_tree_bytes: Some(256 << 10), ..BuildParams::auto() };
     let Err(err) = bake(&mesh, &tight) else { panic!("the bake passed its budget") };
     assert!(matches!(err, Error::TreeBudget { limit, needed } if limit == 256 << 10 && needed > limit), "{err}");
     assert!(err.to_string().contains("--max-memory"), "{err}");
@@ -101,7 +101,8 @@ fn the_bake_stops_at_its_memory_budget() {
     assert_eq!(baked.triangle_ids.len(), 3000);
     // Options that multiply references: a leaf of one triangle at depth 12.
     let sphere = procedural::sphere([0.0; 3], 1.0, 64, 96);
-    let deep = BuildParams { max_depth: Some(12), leaf_size: Some(1), max_tree_bytes: 32 << 20, ..BuildParams::auto() };
+    let deep =
+        BuildParams { max_depth: Some(12), leaf_size: Some(1), max_tree_bytes: Some(32 << 20), ..BuildParams::auto() };
     assert!(matches!(bake(&sphere, &deep).err(), Some(Error::TreeBudget { .. })));
 }
 
