@@ -1,5 +1,7 @@
 //! The `octrace` binary, run in temporary directories.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -1190,24 +1192,9 @@ fn peak_memory(dir: &Path, args: &[&str]) -> Option<u64> {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("octrace runs");
-    let status = format!("/proc/{}/status", child.id());
-    let mut peak = None;
-    loop {
-        if let Ok(text) = std::fs::read_to_string(&status) {
-            let kb = text
-                .lines()
-                .find_map(|l| l.strip_prefix("VmHWM:"))
-                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok());
-            if let Some(kb) = kb {
-                peak = Some(peak.unwrap_or(0).max(kb * 1024));
-            }
-        }
-        if let Some(exit) = child.try_wait().unwrap() {
-            assert!(exit.success(), "octrace {args:?} failed");
-            return peak;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    let (exit, peak) = common::wait_with_peak(&mut child);
+    assert!(exit.success(), "octrace {args:?} failed");
+    peak
 }
 
 /// A valid scene of 5,000 point lights over one triangle: the render's memory stays

@@ -3,6 +3,8 @@
 //! `prlimit --as` sets), and must exit with an error code, not a signal, its peak
 //! resident memory (VmHWM, from /proc) within the budget it states.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Stdio};
 
@@ -35,23 +37,7 @@ fn capped(dir: &Path, args: &[&str], cap: u64) -> Capped {
     // SAFETY: the hook only calls setrlimit (above), which allocates nothing.
     unsafe { cmd.pre_exec(set) };
     let mut child = cmd.spawn().expect("octrace runs");
-    let status = format!("/proc/{}/status", child.id());
-    let mut peak = None;
-    let exit = loop {
-        if let Ok(text) = std::fs::read_to_string(&status) {
-            let kb = text
-                .lines()
-                .find_map(|l| l.strip_prefix("VmHWM:"))
-                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok());
-            if let Some(kb) = kb {
-                peak = Some(peak.unwrap_or(0).max(kb * 1024));
-            }
-        }
-        if let Some(exit) = child.try_wait().unwrap() {
-            break exit;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    };
+    let (exit, peak) = common::wait_with_peak(&mut child);
     let (mut stdout, mut stderr) = (String::new(), String::new());
     child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
     child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
