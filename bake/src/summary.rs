@@ -2,12 +2,13 @@
 //! the command line and for the language bindings, which hand it out as they are.
 
 use octrace_format::stats::SceneStatistics;
-use octrace_format::topology::EdgeCensus;
+use octrace_format::topology::{EdgeCensus, SurfaceCensus};
 use octrace_format::{Header, PartSource, SceneView, Wrap, HEADER_LEN};
 use serde_json::json;
 
 /// The scene's summary: the header, the tree's statistics (`stats`, from
-/// [`SceneStatistics::compute`]), the surface's topology, the scene data, the effects,
+/// [`SceneStatistics::compute`]), the surface's topology (`surface`, from
+/// [`SceneView::count_surface`]), the scene data, the effects,
 /// the bake's parameters, the bounds and the sections. `file_bytes` is the size on
 /// disk (smaller than `file_bytes` in the summary for a zstd-compressed file).
 ///
@@ -18,12 +19,18 @@ use serde_json::json;
 /// let baked = bake(&procedural::sphere([0.0; 3], 1.0, 8, 12), &BuildParams::auto())?;
 /// let file = SceneFile::from_bytes(&baked.to_file_bytes(0)?)?;
 /// let view = file.view();
-/// let json = summary::json(&view, &SceneStatistics::compute(&view)?, file.header(), 0);
+/// let json = summary::json(&view, &SceneStatistics::compute(&view)?, &view.count_surface(), file.header(), 0);
 /// assert_eq!(json["surface"]["closed"], true);
 /// assert_eq!(json["triangles"], view.triangle_count() as u64);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes: u64) -> serde_json::Value {
+pub fn json(
+    v: &SceneView<'_>,
+    s: &SceneStatistics,
+    surface: &SurfaceCensus,
+    header: &Header,
+    file_bytes: u64,
+) -> serde_json::Value {
     let b = &s.bytes;
     json!({
         "format_version": header.version.to_string(),
@@ -41,7 +48,7 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
         "overfull_leaves": { "leaves": s.overfull_leaves, "references": s.overfull_references },
         "neighbours_per_leaf_mean": s.neighbours_per_leaf_mean,
         "cube_map": { "level": v.params.cube_level, "resolution": v.cube_resolution() },
-        "surface": surface_json(&v.count_edges()),
+        "surface": surface_json(&surface.whole),
         "bytes": {
             "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
             "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
@@ -58,10 +65,10 @@ pub fn json(v: &SceneView<'_>, s: &SceneStatistics, header: &Header, file_bytes:
                 "metallic_roughness_texture": m.metallic_roughness_texture,
                 "occlusion_texture": m.occlusion_texture, "occlusion_strength": m.occlusion_strength,
             })).collect::<Vec<_>>(),
-            "parts": v.shading.parts.iter().zip(v.count_part_edges()).map(|(p, edges)| {
+            "parts": v.shading.parts.iter().zip(&surface.parts).map(|(p, edges)| {
                 let mut part = json!({
                     "name": p.name, "first_triangle": p.first, "triangles": p.count,
-                    "surface": surface_json(&edges),
+                    "surface": surface_json(edges),
                 });
                 part.as_object_mut().expect("an object").extend(source_json(&p.source));
                 part

@@ -56,6 +56,9 @@ fn refused(run: &Capped, says: &str, peak_under: u64) {
 
 const MB: u64 = 1 << 20;
 
+/// A tetrahedron (OBJ): four triangles that share cells at every depth along its edges.
+const TETRA_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
 /// A 4-triangle tetrahedron with `--max-depth 20 --leaf-size 1`: the triangles share
 /// cells at every depth along its edges, and the tree grows without end. Its build
 /// never hands a subtree to another thread, so before, the tree's tally reached the
@@ -64,8 +67,7 @@ const MB: u64 = 1 << 20;
 fn the_bake_budget_stops_a_small_mesh_in_time() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("tetra.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
-        .unwrap();
+    std::fs::write(d.join("tetra.obj"), TETRA_OBJ).unwrap();
     let args = ["bake", "tetra.obj", "-o", "t.oct", "--max-depth", "20", "--leaf-size", "1", "--max-memory", "256M"];
     let run = capped(d, &args, 2 << 30);
     // The bake's peak is about twice the tree's budget.
@@ -80,8 +82,7 @@ fn the_bake_budget_stops_a_small_mesh_in_time() {
 fn the_default_bake_budget_follows_the_memory_the_process_may_use() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("tetra.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
-        .unwrap();
+    std::fs::write(d.join("tetra.obj"), TETRA_OBJ).unwrap();
     let args = ["bake", "tetra.obj", "-o", "t.oct", "--max-depth", "20", "--leaf-size", "1"];
     let run = capped(d, &args, 2 << 30);
     refused(&run, "past the bake's memory budget of 715,827,882", 1800 * MB);

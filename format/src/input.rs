@@ -36,8 +36,9 @@ pub fn open_regular_file(path: &Path) -> std::io::Result<File> {
 /// it is read is refused too.
 ///
 /// # Errors
-/// As [`open_regular_file`], and [`std::io::ErrorKind::InvalidInput`] for a file over
-/// the limit.
+/// As [`open_regular_file`], [`std::io::ErrorKind::InvalidInput`] for a file over
+/// the limit, and [`std::io::ErrorKind::OutOfMemory`] where the allocator refuses its
+/// size (never an abort).
 ///
 /// # Example
 /// ```
@@ -50,7 +51,8 @@ pub fn read_regular_file(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
     if len > max {
         return Err(invalid(format!("{len} bytes, more than the limit of {max}")));
     }
-    let mut out = Vec::with_capacity(len as usize);
+    let mut out = crate::memory::try_with_capacity(len as usize, "bytes")
+        .map_err(|_| out_of_memory(format!("its {len} bytes are more than this process could allocate")))?;
     file.take(max + 1).read_to_end(&mut out)?;
     if out.len() as u64 > max {
         return Err(invalid(format!("grew past the limit of {max} bytes while read")));
@@ -90,10 +92,7 @@ pub fn read_records<T: bytemuck::Pod>(path: &Path, max: u64, what: &str) -> std:
     }
     let n = (len / size) as usize;
     let mut out: Vec<T> = crate::memory::try_vec_zeroed(n).map_err(|_| {
-        std::io::Error::new(
-            std::io::ErrorKind::OutOfMemory,
-            format!("its {n} {what}s need {len} bytes, more than this process could allocate"),
-        )
+        out_of_memory(format!("its {n} {what}s need {len} bytes, more than this process could allocate"))
     })?;
     file.read_exact(bytemuck::cast_slice_mut(&mut out)).map_err(|e| match e.kind() {
         std::io::ErrorKind::UnexpectedEof => invalid("shrank while it was read".into()),
@@ -103,6 +102,10 @@ pub fn read_records<T: bytemuck::Pod>(path: &Path, max: u64, what: &str) -> std:
         return Err(invalid("grew while it was read".into()));
     }
     Ok(out)
+}
+
+fn out_of_memory(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::OutOfMemory, message)
 }
 
 fn invalid(message: String) -> std::io::Error {

@@ -108,6 +108,16 @@ impl EdgeCensus {
     }
 }
 
+/// The edge census of a scene's whole surface and of each of its parts
+/// ([`crate::SceneView::count_surface`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SurfaceCensus {
+    /// The whole surface's.
+    pub whole: EdgeCensus,
+    /// Each part's, in the order of [`crate::Shading::parts`].
+    pub parts: Vec<EdgeCensus>,
+}
+
 /// The signed volume a mesh encloses, in `f64`: positive when a closed mesh's
 /// triangles are wound counter-clockwise seen from outside (their normals point out),
 /// negative when they point in.

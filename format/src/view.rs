@@ -314,9 +314,13 @@ impl<'a> SceneView<'a> {
         }
     }
 
-    /// Each part's edge census ([`SceneView::count_edges`], over the stored triangles
-    /// whose input ids lie in the part), in the order of [`crate::Shading::parts`].
-    pub fn count_part_edges(&self) -> Vec<crate::topology::EdgeCensus> {
+    /// The edge census of the whole surface ([`SceneView::count_edges`]) and of each
+    /// part (over the stored triangles whose input ids lie in it, in the order of
+    /// [`crate::Shading::parts`]; `degenerate` the file's). The whole is counted once:
+    /// a part that holds every stored triangle (an OBJ without objects) takes its
+    /// census.
+    pub fn count_surface(&self) -> crate::topology::SurfaceCensus {
+        let whole = self.count_edges();
         let parts = &self.shading.parts;
         let mut of_part: Vec<Vec<[[f32; 3]; 3]>> = vec![Vec::new(); parts.len()];
         for (triangle, &id) in self.stored_triangles().zip(self.triangle_ids) {
@@ -324,14 +328,15 @@ impl<'a> SceneView<'a> {
                 of_part[i as usize].push(triangle);
             }
         }
-        of_part
+        let parts = of_part
             .iter()
             .zip(parts.iter())
-            .map(|(t, p)| crate::topology::EdgeCensus {
-                degenerate: p.edges.degenerate,
-                ..crate::topology::EdgeCensus::of(t)
+            .map(|(t, p)| {
+                let counted = if t.len() == self.triangle_count() { whole } else { crate::topology::EdgeCensus::of(t) };
+                crate::topology::EdgeCensus { degenerate: p.edges.degenerate, ..counted }
             })
-            .collect()
+            .collect();
+        crate::topology::SurfaceCensus { whole, parts }
     }
 
     /// The three vertices of stored triangle `index`.

@@ -140,6 +140,13 @@ fn room<T>(n: usize, what: &'static str) -> PyResult<Vec<T>> {
     octrace_format::memory::try_with_capacity(n, what).map_err(memory_error)
 }
 
+/// `n` values from `values` in a vector allocated once, or `MemoryError` ([`zeros`]).
+fn collected<T>(n: usize, what: &'static str, values: impl Iterator<Item = T>) -> PyResult<Vec<T>> {
+    let mut out = room(n, what)?;
+    out.extend(values);
+    Ok(out)
+}
+
 fn memory_error(e: octrace_format::memory::AllocError) -> PyErr {
     PyMemoryError::new_err(e.to_string())
 }
@@ -683,7 +690,7 @@ impl Scene {
         } else {
             octrace_format::HEADER_LEN as u64 + file.header().payload_len
         };
-        let mut json = octrace_bake::summary::json(&view, &stats, file.header(), on_disk);
+        let mut json = octrace_bake::summary::json(&view, &stats, &view.count_surface(), file.header(), on_disk);
         let fans = octrace_runtime::cpu::FanIndex::survey(&view);
         json["fans"] = fans.named().iter().map(|&(k, v)| (k.to_string(), serde_json::Value::from(v))).collect();
         py.import("json")?.call_method1("loads", (json.to_string(),))
@@ -860,25 +867,17 @@ impl Scene {
         }
         let shading = self.inner.shading();
         let c = &lists.crossings;
-        let filled = |what: &'static str, n: usize, values: &mut dyn Iterator<Item = u32>| -> PyResult<Vec<u32>> {
-            let mut out = room(n, what)?;
-            out.extend(values);
-            Ok(out)
-        };
-        let splits = filled("ray_splits", lists.splits.len(), &mut lists.splits.iter().map(|&s| s as u32))?;
-        let ray_ids = filled(
-            "ray_ids",
+        let splits = collected(lists.splits.len(), "ray_splits", lists.splits.iter().map(|&s| s as u32))?;
+        let ray_ids = collected(
             k,
-            &mut lists.splits.windows(2).enumerate().flat_map(|(i, w)| std::iter::repeat_n(i as u32, w[1] - w[0])),
+            "ray_ids",
+            lists.splits.windows(2).enumerate().flat_map(|(i, w)| std::iter::repeat_n(i as u32, w[1] - w[0])),
         )?;
-        let geometry = filled("geometry_ids", k, &mut c.iter().map(|c| geometry_id(shading, c.triangle)))?;
-        let primitive = filled("primitive_ids", k, &mut c.iter().map(|c| c.triangle))?;
-        let mut uvs = room(2 * k, "primitive_uvs")?;
-        uvs.extend(c.iter().flat_map(|c| [c.u, c.v]));
-        let mut t = room(k, "t_hit")?;
-        t.extend(c.iter().map(|c| c.t));
-        let mut enters = room(k, "enters")?;
-        enters.extend(c.iter().map(|c| c.enters));
+        let geometry = collected(k, "geometry_ids", c.iter().map(|c| geometry_id(shading, c.triangle)))?;
+        let primitive = collected(k, "primitive_ids", c.iter().map(|c| c.triangle))?;
+        let uvs = collected(2 * k, "primitive_uvs", c.iter().flat_map(|c| [c.u, c.v]))?;
+        let t = collected(k, "t_hit", c.iter().map(|c| c.t))?;
+        let enters = collected(k, "enters", c.iter().map(|c| c.enters))?;
         drop(lists);
         let d = PyDict::new(py);
         d.set_item("ray_splits", PyArray1::from_vec(py, splits))?;

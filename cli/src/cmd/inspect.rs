@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use octrace_format::stats::SceneStatistics;
-use octrace_format::topology::EdgeCensus;
+use octrace_format::topology::SurfaceCensus;
 use octrace_format::SceneView;
 
 use crate::output::{counted, mb, thousands};
@@ -39,9 +39,8 @@ pub(crate) struct Report<'a> {
     header: octrace_format::Header,
     file_bytes: u64,
     /// The surface's and each part's edge census, counted from the triangles (the
-    /// file's stored census is not trusted: `SceneView::count_edges`).
-    edges: EdgeCensus,
-    part_edges: Vec<EdgeCensus>,
+    /// file's stored census is not trusted: `SceneView::count_surface`).
+    surface: SurfaceCensus,
 }
 
 impl<'a> Report<'a> {
@@ -52,8 +51,7 @@ impl<'a> Report<'a> {
             view: view.clone(),
             header: *header,
             file_bytes,
-            edges: view.count_edges(),
-            part_edges: view.count_part_edges(),
+            surface: view.count_surface(),
         })
     }
 
@@ -185,7 +183,7 @@ impl<'a> Report<'a> {
                 "bounds             mesh {:?} .. {:?}; root cube at {:?}, edge {}",
                 v.bounds.mesh_lo, v.bounds.mesh_hi, v.bounds.root_lo, v.bounds.root_size
             ),
-            format!("surface            {}", surface(&self.edges)),
+            format!("surface            {}", surface(&self.surface.whole)),
             self.scene_data(),
         ];
         let mut text = lines.join("\n");
@@ -193,9 +191,9 @@ impl<'a> Report<'a> {
         // scene, or the other way round), when there are several.
         let parts = &v.shading.parts;
         if parts.len() > 1 {
-            let closed = self.edges.is_closed();
+            let closed = self.surface.whole.is_closed();
             let differing =
-                parts.iter().zip(&self.part_edges).enumerate().filter(|(_, (_, e))| e.is_closed() != closed);
+                parts.iter().zip(&self.surface.parts).enumerate().filter(|(_, (_, e))| e.is_closed() != closed);
             for (shown, (i, (p, edges))) in differing.enumerate() {
                 if shown == 8 {
                     text.push_str(&format!("\n{:<18} ... (`--json` lists every part)", ""));
@@ -276,7 +274,8 @@ impl<'a> Report<'a> {
     }
 
     pub(crate) fn json(&self) -> serde_json::Value {
-        let mut json = octrace_bake::summary::json(&self.view, &self.stats, &self.header, self.file_bytes);
+        let mut json =
+            octrace_bake::summary::json(&self.view, &self.stats, &self.surface, &self.header, self.file_bytes);
         json["fans"] = self.fans.named().iter().map(|&(k, v)| (k.to_string(), serde_json::Value::from(v))).collect();
         json
     }

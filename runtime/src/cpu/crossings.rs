@@ -329,17 +329,8 @@ impl Tracer<'_> {
     pub fn par_crossings_batch(&self, rays: &[Ray], limit: usize) -> BatchCrossings {
         use rayon::prelude::*;
         let parts: Vec<BatchCrossings> = rays.par_chunks(CHUNK).map(|c| self.crossings_batch(c, limit)).collect();
-        let mut out = BatchCrossings {
-            splits: Vec::with_capacity(rays.len() + 1),
-            crossings: Vec::with_capacity(parts.iter().map(|p| p.crossings.len()).sum()),
-        };
-        out.splits.push(0);
-        for p in parts {
-            let base = out.crossings.len();
-            out.splits.extend(p.splits[1..].iter().map(|s| s + base));
-            out.crossings.extend(p.crossings);
-        }
-        out
+        let total = parts.iter().map(|p| p.crossings.len()).sum();
+        joined(parts, Vec::with_capacity(rays.len() + 1), Vec::with_capacity(total))
     }
 
     /// [`Tracer::par_crossings_batch`] within a memory budget: the lists may take at
@@ -390,25 +381,11 @@ impl Tracer<'_> {
             })
             .collect();
         if budget.passed.load(Relaxed) {
-            return Err(crate::Error::Budget {
-                what: "crossings",
-                needed: budget.listed.load(Relaxed) as u64 * CROSSING_BYTES,
-                limit: max_bytes,
-                advice: "keep fewer a ray (max_hits, --max-hits), trace fewer rays a call, or raise the budget",
-            });
+            return Err(over_budget(budget.listed.load(Relaxed) as u64 * CROSSING_BYTES, max_bytes));
         }
         let total = parts.iter().map(|p| p.crossings.len()).sum();
-        let mut out = BatchCrossings {
-            splits: octrace_format::memory::try_with_capacity(rays.len() + 1, "crossing splits")?,
-            crossings: octrace_format::memory::try_with_capacity(total, "crossings")?,
-        };
-        out.splits.push(0);
-        for p in parts {
-            let base = out.crossings.len();
-            out.splits.extend(p.splits[1..].iter().map(|s| s + base));
-            out.crossings.extend(p.crossings);
-        }
-        Ok(out)
+        let splits = octrace_format::memory::try_with_capacity(rays.len() + 1, "crossing splits")?;
+        Ok(joined(parts, splits, octrace_format::memory::try_with_capacity(total, "crossings")?))
     }
 
     /// The crossing count of each ray of a batch ([`Tracer::count_crossings`]), on this
@@ -493,6 +470,28 @@ impl Tracer<'_> {
 pub(crate) trait CrossingSink {
     /// Ray `index`'s crossings, in order.
     fn ray(&mut self, index: usize, crossings: &[Crossing]);
+}
+
+/// The chunks' lists `parts`, in order, joined into one list, in `splits` and
+/// `crossings` (empty, with room made for the rays' splits and every crossing).
+fn joined(parts: Vec<BatchCrossings>, mut splits: Vec<usize>, mut crossings: Vec<Crossing>) -> BatchCrossings {
+    splits.push(0);
+    for p in parts {
+        let base = crossings.len();
+        splits.extend(p.splits[1..].iter().map(|s| s + base));
+        crossings.extend(p.crossings);
+    }
+    BatchCrossings { splits, crossings }
+}
+
+/// A batch's lists past their budget: `needed` bytes at least, `limit` allowed.
+pub(crate) fn over_budget(needed: u64, limit: u64) -> crate::Error {
+    crate::Error::Budget {
+        what: "crossings",
+        needed,
+        limit,
+        advice: "keep fewer a ray (max_hits, --max-hits), trace fewer rays a call, or raise the budget",
+    }
 }
 
 /// Bytes a listed crossing takes in a [`BatchCrossings`]: the unit of

@@ -313,8 +313,8 @@ impl FanIndex {
         let [sx, sy, _] = shear.scales();
         let (vx, vy) = (r[kx] - sx * r[kz], r[ky] - sy * r[kz]);
         let mut n = [0.0f32; 3];
-        let mut slack;
-        if vx == 0.0 && vy == 0.0 && owned {
+        // `n`, and its size in the units of the angle `fan.slack` allows.
+        let scale = if vx == 0.0 && vy == 0.0 && owned {
             // A ray through the shared vertex itself: both of a triangle's edges at
             // `v'` have a zero function there, and the owned test accepts the
             // triangle only if it owns both (`owns64`): its spokes' sheared ends lie on
@@ -324,14 +324,14 @@ impl FanIndex {
             // that of a spoke's end alone, a fraction of what `slack` allows.
             n[ky] = 1.0;
             n[kz] = -sy;
-            slack = (1.0 + sy.abs()) * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
+            1.0 + sy.abs()
         } else {
             n[kx] = -vy;
             n[ky] = vx;
             n[kz] = sx * vy - sy * vx;
-            slack = (vx.abs() + vy.abs()) * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
-        }
-        slack = slack.max(0.0);
+            vx.abs() + vy.abs()
+        };
+        let slack = scale * (r[0].abs() + r[1].abs() + r[2].abs() + fan.reach) * fan.slack * 1.001;
         if slack == 0.0 || !slack.is_finite() || !n.iter().all(|c| c.is_finite()) {
             return None;
         }

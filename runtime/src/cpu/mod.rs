@@ -27,6 +27,8 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
+#[cfg(feature = "gpu")]
+pub(crate) use crossings::over_budget;
 pub use crossings::{BatchCrossings, Crossing, CrossingCount, CROSSING_BYTES};
 pub use fans::{FanIndex, FanSummary, MIN_REFERENCES as FAN_MIN_REFERENCES, MIN_TRIANGLES as FAN_MIN_TRIANGLES};
 pub use inside::{Solid, COUNT_DIRECTION};

@@ -93,12 +93,7 @@ impl GpuTracer<'_> {
         }
         let needed = splits[rays.len()] as u64 * CROSSING_BYTES;
         if needed > max_bytes {
-            return Err(GpuError::Memory(crate::Error::Budget {
-                what: "crossings",
-                needed,
-                limit: max_bytes,
-                advice: "keep fewer a ray (max_hits, --max-hits), trace fewer rays a call, or raise the budget",
-            }));
+            return Err(GpuError::Memory(crate::cpu::over_budget(needed, max_bytes)));
         }
         let mut crossings = try_vec(splits[rays.len()], "crossings").map_err(|e| GpuError::Memory(e.into()))?;
         // Dispatches of at most `per_dispatch` rays whose rays and offsets fit one
