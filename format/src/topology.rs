@@ -43,48 +43,51 @@ impl EdgeCensus {
     /// Vertices are numbered in the order of their coordinates' bits (one sort of the
     /// corners as 128-bit integers), then edges sorted as pairs of numbers: two sorts
     /// of integers, faster and smaller than one sort of the edges' coordinates (the
-    /// dragon's 871,000 triangles: 0.44 s and 73 MB before).
+    /// dragon's 871,000 triangles: 0.44 s and 73 MB before; now 0.19 s on two cores).
+    /// Both sorts, and the arrays they sort, are made on every core of the current
+    /// rayon pool.
     pub fn of(triangles: &[[[f32; 3]; 3]]) -> EdgeCensus {
+        use rayon::prelude::*;
         // A corner: its vertex's coordinates' bits in the top 96 bits, its number
         // below (16 bytes: sorted as one integer).
         let key = |p: [f32; 3], corner: u32| {
             let k = p.map(|c| if c == 0.0 { 0 } else { c.to_bits() });
             (k[0] as u128) << 96 | (k[1] as u128) << 64 | (k[2] as u128) << 32 | corner as u128
         };
-        let kept: Vec<u32> = (0..triangles.len() as u32).filter(|&t| !is_degenerate(&triangles[t as usize])).collect();
+        let kept: Vec<u32> =
+            (0..triangles.len() as u32).into_par_iter().filter(|&t| !is_degenerate(&triangles[t as usize])).collect();
         let degenerate = (triangles.len() - kept.len()) as u64;
         // Each kept triangle's corners, numbered by their vertex's rank among the keys.
-        let mut corners: Vec<u128> = Vec::with_capacity(3 * kept.len());
-        for (k, &t) in kept.iter().enumerate() {
-            for (i, &p) in triangles[t as usize].iter().enumerate() {
-                corners.push(key(p, 3 * k as u32 + i as u32));
+        let mut corners: Vec<u128> = vec![0; 3 * kept.len()];
+        corners.par_chunks_exact_mut(3).zip(&kept).enumerate().for_each(|(k, (out, &t))| {
+            for (i, (c, &p)) in out.iter_mut().zip(&triangles[t as usize]).enumerate() {
+                *c = key(p, 3 * k as u32 + i as u32);
             }
-        }
-        corners.sort_unstable();
+        });
+        drop(kept);
+        corners.par_sort_unstable();
         let mut vertex = vec![0u32; corners.len()];
-        for (rank, run) in corners.chunk_by(|x, y| x >> 32 == y >> 32).enumerate() {
+        for (number, run) in corners.chunk_by(|x, y| x >> 32 == y >> 32).enumerate() {
             for &c in run {
-                vertex[c as u32 as usize] = rank as u32;
+                vertex[c as u32 as usize] = number as u32;
             }
         }
         drop(corners);
-        // Each edge once per triangle: its end points (lower first) and whether the
-        // triangle runs it from the lower to the higher.
-        let mut ends: Vec<(u64, bool)> = Vec::with_capacity(vertex.len());
-        for t in vertex.chunks_exact(3) {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                ends.push(if a < b {
-                    ((a as u64) << 32 | b as u64, true)
-                } else {
-                    ((b as u64) << 32 | a as u64, false)
-                });
+        // Each edge once per triangle: its end points (lower first) and, in the lowest
+        // bit, whether the triangle runs it from the lower to the higher.
+        let mut ends: Vec<u128> = vec![0; vertex.len()];
+        ends.par_chunks_exact_mut(3).zip(vertex.par_chunks_exact(3)).for_each(|(out, t)| {
+            for (e, (a, b)) in out.iter_mut().zip([(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]) {
+                let (lo, hi) = (a.min(b) as u128, a.max(b) as u128);
+                *e = (lo << 32 | hi) << 1 | (a < b) as u128;
             }
-        }
-        ends.sort_unstable_by_key(|e| e.0);
+        });
+        drop(vertex);
+        ends.par_sort_unstable();
         let mut census = EdgeCensus { degenerate, ..EdgeCensus::default() };
-        for run in ends.chunk_by(|x, y| x.0 == y.0) {
+        for run in ends.chunk_by(|x, y| x >> 1 == y >> 1) {
             census.edges += 1;
-            let forward = run.iter().filter(|e| e.1).count();
+            let forward = run.iter().filter(|&&e| e & 1 == 1).count();
             census.boundary += (run.len() % 2 == 1) as u64;
             census.non_manifold += (run.len() > 2) as u64;
             census.flipped += (run.len() == 2 && forward != 1) as u64;
