@@ -397,10 +397,49 @@ impl Mesh {
         }
         let (format, zst) = MeshFormat::from_path(path).ok_or_else(not_a_mesh)?;
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
+        if format == MeshFormat::Obj {
+            // A plain OBJ (positions and triangles) is read a block at a time, never
+            // whole; any other is read again below, whole, for tobj.
+            if let Some(mesh) = Mesh::read_plain_obj(path, zst, options.max_file_bytes).map_err(unreadable)? {
+                return mesh.checked(path, options);
+            }
+        }
         let raw = octrace_format::read_regular_file(path, options.max_file_bytes).map_err(unreadable)?;
         let bytes = if zst { decompress(&raw, options.max_file_bytes).map_err(unreadable)? } else { raw };
         let base = path.parent().map(Path::to_path_buf);
         Mesh::from_bytes_with(&bytes, format, path, base.as_deref(), options)
+    }
+
+    /// A plain OBJ file's mesh, read (and decompressed) a block at a time under the
+    /// limits of [`Mesh::load_with`], or `None` for an OBJ that is not plain.
+    fn read_plain_obj(path: &Path, zst: bool, max: u64) -> std::io::Result<Option<Mesh>> {
+        let file = octrace_format::open_regular_file(path)?;
+        let len = file.metadata()?.len();
+        if len > max {
+            return Err(too_large(format!("{len} bytes, more than the limit of {max}")));
+        }
+        match zst {
+            true => obj_plain::read(Capped::zstd(zstd::stream::read::Decoder::new(file)?, len, max)),
+            false => obj_plain::read(Capped::file(file, max)),
+        }
+    }
+
+    /// The checks every loaded mesh passes: the triangle budget, and
+    /// [`Mesh::check_bakeable`].
+    fn checked(self, name: &Path, options: &LoadOptions) -> Result<Mesh> {
+        // glTF's triangles are counted before they are read; an OBJ's are bounded by
+        // its size, and counted here.
+        if self.triangles.len() as u64 > options.max_triangles {
+            return Err(Error::Budget {
+                path: name.into(),
+                what: "triangles".into(),
+                needed: self.triangles.len() as u64,
+                limit: options.max_triangles,
+                option: "--max-triangles, LoadOptions::max_triangles",
+            });
+        }
+        self.check_bakeable(name)?;
+        Ok(self)
     }
 
     /// Parses a mesh held in memory. `name` is used in error messages; `base` is the
@@ -428,19 +467,7 @@ impl Mesh {
             MeshFormat::Obj => obj::parse(bytes, name, base, options)?,
             MeshFormat::Gltf => gltf::parse(bytes, name, base, options)?,
         };
-        // glTF's triangles are counted before they are read; an OBJ's are bounded by
-        // its size, and counted here.
-        if mesh.triangles.len() as u64 > options.max_triangles {
-            return Err(Error::Budget {
-                path: name.into(),
-                what: "triangles".into(),
-                needed: mesh.triangles.len() as u64,
-                limit: options.max_triangles,
-                option: "--max-triangles, LoadOptions::max_triangles",
-            });
-        }
-        mesh.check_bakeable(name)?;
-        Ok(mesh)
+        mesh.checked(name, options)
     }
 }
 
@@ -461,18 +488,54 @@ pub const MAX_MESH_COMPRESSION_RATIO: u64 = 1024;
 /// times its size or past `max` bytes, whichever is less: it stops reading there.
 fn decompress(raw: &[u8], max: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
-    let limit = (raw.len() as u64).saturating_mul(MAX_MESH_COMPRESSION_RATIO).min(max);
     let mut out = Vec::new();
-    zstd::stream::read::Decoder::new(raw)?.take(limit + 1).read_to_end(&mut out)?;
-    if out.len() as u64 > limit {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "decompresses to more than {limit} bytes ({MAX_MESH_COMPRESSION_RATIO} times its size, at most {max})"
-            ),
-        ));
-    }
+    Capped::zstd(zstd::stream::read::Decoder::new(raw)?, raw.len() as u64, max).read_to_end(&mut out)?;
     Ok(out)
+}
+
+/// A reader that fails with `refusal` once more than `left` bytes come from `inner`:
+/// a mesh file that grows past its limit while it is read, or a compressed one that
+/// expands past it, is refused there, whatever reads it.
+struct Capped<R> {
+    inner: R,
+    /// Bytes still allowed.
+    left: u64,
+    refusal: String,
+}
+
+impl<R> Capped<R> {
+    /// A file of at most `max` bytes.
+    fn file(inner: R, max: u64) -> Capped<R> {
+        Capped { inner, left: max, refusal: format!("grew past the limit of {max} bytes while read") }
+    }
+
+    /// A zstd stream of `len` bytes, which may expand [`MAX_MESH_COMPRESSION_RATIO`]
+    /// times, to at most `max` bytes.
+    fn zstd(inner: R, len: u64, max: u64) -> Capped<R> {
+        let limit = len.saturating_mul(MAX_MESH_COMPRESSION_RATIO).min(max);
+        let refusal = format!(
+            "decompresses to more than {limit} bytes ({MAX_MESH_COMPRESSION_RATIO} times its size, at most {max})"
+        );
+        Capped { inner, left: limit, refusal }
+    }
+}
+
+impl<R: std::io::Read> std::io::Read for Capped<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // One byte past the limit is asked for, to tell a stream that ends there from
+        // one that goes on.
+        let room = buf.len().min(usize::try_from(self.left.saturating_add(1)).unwrap_or(usize::MAX));
+        let n = self.inner.read(&mut buf[..room])?;
+        if n as u64 > self.left {
+            return Err(too_large(self.refusal.clone()));
+        }
+        self.left -= n as u64;
+        Ok(n)
+    }
+}
+
+fn too_large(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
 }
 
 /// The cross product of a triangle's edges from its first vertex, in `f64`: products

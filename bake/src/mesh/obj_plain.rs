@@ -1,17 +1,24 @@
-//! OBJ files of positions and triangles only, parsed in parallel.
+//! OBJ files of positions and triangles only, read a block at a time and parsed in
+//! parallel.
 //!
 //! Scanned meshes are mostly `v x y z` and `f a b c` lines and comments. Such a file is
-//! cut into chunks at line ends and parsed on every core; any other statement, or
+//! read [`BLOCK_BYTES`] at a time (the whole text is never held: a 2.5 GB OBJ would
+//! otherwise be its own peak), each block cut into chunks at line ends and parsed on
+//! every core, its faces' indices resolved as they come. Any other statement, or
 //! anything unusual in these (a fourth coordinate, a polygon, `v/vt/vn` corners, an
 //! index out of range, a non-finite coordinate, bytes that are not UTF-8), and the
 //! whole file goes through tobj instead ([`super::obj`]), which makes the same mesh of
 //! a plain file (the tests compare them) and says what is wrong with the rest.
 
+use std::io::Read;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
 use super::Mesh;
+
+/// Bytes of text read and parsed at a time (a line longer than this is left to tobj).
+const BLOCK_BYTES: usize = 16 << 20;
 
 /// Chunks a core, so that uneven lines still balance.
 const CHUNKS_PER_THREAD: usize = 4;
@@ -28,52 +35,143 @@ struct Chunk {
     faces: Vec<([i64; 3], u32)>,
 }
 
-/// The mesh of a plain OBJ file, or `None` for any other (tobj then reads it).
+/// A plain file's positions and faces so far.
+#[derive(Default)]
+struct Plain {
+    positions: Vec<[f32; 3]>,
+    /// Each face's three position indices from the file's first, 0-based (relative
+    /// ones resolved as they are read); checked against every position at the end, as
+    /// tobj lets a face name a position that comes after it.
+    faces: Vec<[u32; 3]>,
+}
+
+/// The mesh of a plain OBJ file held in memory, or `None` for any other (tobj then
+/// reads it).
 pub(super) fn parse(bytes: &[u8]) -> Option<Mesh> {
-    let text = std::str::from_utf8(bytes).ok()?;
-    let pieces = (rayon::current_num_threads() * CHUNKS_PER_THREAD).max(1);
-    // The first chunk that is not plain stops the others: the file goes to tobj.
-    let refused = AtomicBool::new(false);
-    let chunks: Vec<Chunk> = split(text, pieces)
-        .par_iter()
-        .map(|t| {
-            let chunk = parse_chunk(t, &refused);
-            if chunk.is_none() {
-                refused.store(true, Ordering::Relaxed);
+    // Reading from memory fails only where memory does.
+    read(bytes).ok().flatten()
+}
+
+/// The mesh of a plain OBJ file read from `input` a block at a time, or `None` for
+/// any other (tobj then reads it).
+///
+/// # Errors
+/// `input`'s errors, and [`std::io::ErrorKind::OutOfMemory`] where the allocator refuses
+/// the positions, faces or triangles (never an abort).
+pub(super) fn read(input: impl Read) -> std::io::Result<Option<Mesh>> {
+    read_in_blocks(input, BLOCK_BYTES)
+}
+
+/// [`read`], `block_bytes` at a time.
+fn read_in_blocks(mut input: impl Read, block_bytes: usize) -> std::io::Result<Option<Mesh>> {
+    let mut plain = Plain::default();
+    let mut block = vec![0u8; block_bytes];
+    let mut filled = 0;
+    loop {
+        let last = loop {
+            match input.read(&mut block[filled..]) {
+                Ok(0) => break true,
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
             }
-            chunk
-        })
-        .collect::<Option<_>>()?;
-    // Positions stay in their chunks (no copy of them all): `starts[c]` is chunk `c`'s
-    // first position's index in the file.
-    let starts: Vec<usize> = std::iter::once(0)
-        .chain(chunks.iter().scan(0, |n, c| {
-            *n += c.positions.len();
-            Some(*n)
-        }))
-        .collect();
-    let position = |k: usize| {
-        // The last chunk starting at or before `k` holds it (an empty chunk never is
-        // that one: the next starts at the same index), or `k` is past every position.
-        let c = starts.partition_point(|&s| s <= k) - 1;
-        chunks.get(c)?.positions.get(k - starts[c]).copied()
-    };
-    let mut mesh = Mesh::default();
-    mesh.triangles.reserve(chunks.iter().map(|c| c.faces.len()).sum());
-    for (chunk, &before) in chunks.iter().zip(&starts) {
-        for &(face, local) in &chunk.faces {
-            let mut tri = [[0.0f32; 3]; 3];
-            for (corner, &i) in tri.iter_mut().zip(&face) {
-                // tobj's rule: `-k` is the k-th position before the face, `p` the p-th
-                // of the file (any, once the file is read).
-                let index = if i < 0 { before as i64 + local as i64 + i } else { i - 1 };
-                *corner = usize::try_from(index).ok().and_then(position)?;
+            if filled == block.len() {
+                break false;
             }
-            mesh.push(tri, None, None);
+        };
+        // Whole lines only: a line end is one byte in UTF-8, so each block of whole
+        // lines is UTF-8 exactly when the file is.
+        let cut = match last {
+            true => filled,
+            false => match block.iter().rposition(|&b| b == b'\n') {
+                Some(k) => k + 1,
+                None => return Ok(None),
+            },
+        };
+        let Ok(text) = std::str::from_utf8(&block[..cut]) else { return Ok(None) };
+        if !plain.add(text)? {
+            return Ok(None);
+        }
+        block.copy_within(cut..filled, 0);
+        filled -= cut;
+        if last {
+            return plain.mesh();
         }
     }
-    mesh.end_part(octrace_format::PartSource::Obj { object: 0 }, || "object 'unnamed_object'".to_string());
-    Some(mesh)
+}
+
+impl Plain {
+    /// Adds a block of whole lines: `false` where it is not plain.
+    fn add(&mut self, text: &str) -> std::io::Result<bool> {
+        let pieces = (rayon::current_num_threads() * CHUNKS_PER_THREAD).max(1);
+        // The first chunk that is not plain stops the others: the file goes to tobj.
+        let refused = AtomicBool::new(false);
+        let chunks: Option<Vec<Chunk>> = split(text, pieces)
+            .par_iter()
+            .map(|t| {
+                let chunk = parse_chunk(t, &refused);
+                if chunk.is_none() {
+                    refused.store(true, Ordering::Relaxed);
+                }
+                chunk
+            })
+            .collect();
+        let Some(chunks) = chunks else { return Ok(false) };
+        for chunk in chunks {
+            let no_room = |what: &str, n: usize| {
+                std::io::Error::new(
+                    std::io::ErrorKind::OutOfMemory,
+                    format!("its {n} {what} (so far) are more than this process could allocate"),
+                )
+            };
+            let n = self.faces.len() + chunk.faces.len();
+            self.faces.try_reserve(chunk.faces.len()).map_err(|_| no_room("faces", n))?;
+            let n = self.positions.len() + chunk.positions.len();
+            self.positions.try_reserve(chunk.positions.len()).map_err(|_| no_room("positions", n))?;
+            let before = self.positions.len() as i64;
+            for &(face, local) in &chunk.faces {
+                let mut resolved = [0u32; 3];
+                for (r, &i) in resolved.iter_mut().zip(&face) {
+                    // tobj's rule: `-k` is the k-th position before the face, `p` the
+                    // p-th of the file (any, once the file is read).
+                    let index = if i < 0 { before + local as i64 + i } else { i - 1 };
+                    let Ok(index) = u32::try_from(index) else { return Ok(false) };
+                    *r = index;
+                }
+                self.faces.push(resolved);
+            }
+            self.positions.extend_from_slice(&chunk.positions);
+        }
+        Ok(true)
+    }
+
+    /// The mesh, once every line is read: `None` where a face names a position the
+    /// file does not have.
+    fn mesh(self) -> std::io::Result<Option<Mesh>> {
+        let Plain { positions, faces } = self;
+        let mut triangles: Vec<[[f32; 3]; 3]> = octrace_format::memory::try_vec_zeroed(faces.len()).map_err(|_| {
+            std::io::Error::new(
+                std::io::ErrorKind::OutOfMemory,
+                format!("its {} triangles are more than this process could allocate", faces.len()),
+            )
+        })?;
+        let missing = AtomicBool::new(false);
+        triangles.par_iter_mut().zip(&faces).for_each(|(tri, face)| {
+            for (corner, &i) in tri.iter_mut().zip(face) {
+                match positions.get(i as usize) {
+                    Some(&p) => *corner = p,
+                    None => missing.store(true, Ordering::Relaxed),
+                }
+            }
+        });
+        if missing.into_inner() {
+            return Ok(None);
+        }
+        drop((positions, faces));
+        let mut mesh = Mesh::from_triangles(triangles);
+        mesh.end_part(octrace_format::PartSource::Obj { object: 0 }, || "object 'unnamed_object'".to_string());
+        Ok(Some(mesh))
+    }
 }
 
 /// `text` cut into about `pieces` parts, each ending at a line end (or the text's).
@@ -96,14 +194,17 @@ fn split(text: &str, pieces: usize) -> Vec<&str> {
 /// once another chunk has been `refused` (asked every [`REFUSED_EVERY`] lines).
 fn parse_chunk(text: &str, refused: &AtomicBool) -> Option<Chunk> {
     let mut chunk = Chunk::default();
-    for (n, line) in text.lines().enumerate() {
+    for (n, line) in text.split('\n').enumerate() {
         if n % REFUSED_EVERY == 0 && refused.load(Ordering::Relaxed) {
             return None;
         }
-        let mut words = line.split_whitespace();
+        let mut words = Words { line, at: 0 };
         match words.next() {
             None => {}
             Some(w) if w.starts_with('#') => {}
+            // Statements of ASCII alone: other whitespace (which tobj also splits at)
+            // is left to tobj.
+            Some(_) if !line.is_ascii() => return None,
             Some("v") => {
                 let mut p = [0.0f32; 3];
                 for c in &mut p {
@@ -117,12 +218,7 @@ fn parse_chunk(text: &str, refused: &AtomicBool) -> Option<Chunk> {
             Some("f") => {
                 let mut f = [0i64; 3];
                 for i in &mut f {
-                    // Digits with an optional sign only: `v/vt/vn` corners go to tobj.
-                    let word = words.next()?;
-                    if !word.trim_start_matches('-').bytes().all(|b| b.is_ascii_digit()) {
-                        return None;
-                    }
-                    *i = word.parse().ok().filter(|&i: &i64| i != 0 && i.unsigned_abs() < 1 << 32)?;
+                    *i = index(words.next()?)?;
                 }
                 if words.next().is_some() {
                     return None;
@@ -133,6 +229,42 @@ fn parse_chunk(text: &str, refused: &AtomicBool) -> Option<Chunk> {
         }
     }
     Some(chunk)
+}
+
+/// A face's index: digits with an optional `-` (`v/vt/vn` corners go to tobj), not 0,
+/// less than 2^32 in size.
+fn index(word: &str) -> Option<i64> {
+    let (sign, digits) = match word.strip_prefix('-') {
+        Some(rest) => (-1, rest),
+        None => (1, word),
+    };
+    // Ten digits hold any index below 2^32 (leading zeros aside, which tobj reads too).
+    let digits = digits.trim_start_matches('0');
+    if word.len() == usize::from(sign < 0) || digits.len() > 10 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let value = digits.bytes().fold(0i64, |v, b| 10 * v + i64::from(b - b'0'));
+    (value != 0 && value < 1 << 32).then_some(sign * value)
+}
+
+/// The words of a line: runs of bytes between ASCII whitespace (the whitespace of
+/// `str::split_whitespace` below 0x80, CR included).
+struct Words<'a> {
+    line: &'a str,
+    at: usize,
+}
+
+impl<'a> Iterator for Words<'a> {
+    type Item = &'a str;
+
+    fn next(&mut self) -> Option<&'a str> {
+        let bytes = self.line.as_bytes();
+        let space = |b: u8| matches!(b, b' ' | b'\t' | b'\r' | b'\n' | 0x0b | 0x0c);
+        let start = self.at + bytes[self.at..].iter().position(|&b| !space(b))?;
+        let end = bytes[start..].iter().position(|&b| space(b)).map_or(bytes.len(), |k| start + k);
+        self.at = end;
+        Some(&self.line[start..end])
+    }
 }
 
 #[cfg(test)]
@@ -186,6 +318,35 @@ mod tests {
         }
     }
 
+    /// Read in blocks of any size (each at least the longest line), the same mesh:
+    /// lines, faces and their relative indices cut anywhere between blocks, a block
+    /// ending exactly at the file's end, CRLF split from its line end.
+    #[test]
+    fn blocks_of_any_size_give_the_same_mesh() {
+        let mut text = String::from("v 0 0 0\r\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# comment\n\n");
+        for k in 0..60 {
+            text += &format!("v {k} 0.1 -2.5e-3\nv {k} 1 0\r\nv {k}.5 0 1\nf -1 -2 -3\nf {} 2 -1\n", 3 * k + 4);
+        }
+        text += "f 1 100 183";
+        let want = tobj(&text).unwrap();
+        let longest = text.lines().map(str::len).max().unwrap() + 2;
+        for block in (longest..longest + 40).chain([text.len() - 1, text.len(), text.len() + 1, 1 << 20]) {
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let got = pool.install(|| read_in_blocks(text.as_bytes(), block)).unwrap();
+                assert!(got.as_ref() == Some(&want), "{block}-byte blocks, {threads} threads");
+            }
+        }
+        // A line longer than a block is left to tobj, as is a file that turns out not
+        // to be plain in a later block.
+        assert!(read_in_blocks(text.as_bytes(), 8).unwrap().is_none());
+        let late = format!("{text}\nvn 0 0 1\n");
+        assert!(read_in_blocks(late.as_bytes(), longest).unwrap().is_none());
+        // A face naming a position no block has.
+        let missing = format!("{text}\nf 1 2 999\n");
+        assert!(read_in_blocks(missing.as_bytes(), longest).unwrap().is_none());
+    }
+
     /// Anything else goes to tobj (which reads it, or says what is wrong).
     #[test]
     fn anything_else_is_left_to_tobj() {
@@ -209,6 +370,14 @@ mod tests {
             assert!(parse(format!("{base}{extra}").as_bytes()).is_none(), "{extra:?}");
         }
         assert!(parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\xff\nf 1 2 3\n").is_none(), "not UTF-8");
+        // Whitespace beyond ASCII (tobj splits at it too): tobj's.
+        for odd in ["v 1\u{a0}1 0\nf 1 2 5\n", "\u{2003}f 1 2 3\n", "f 1 2\u{3000}3\n"] {
+            assert!(parse(format!("{base}{odd}").as_bytes()).is_none(), "{odd:?}");
+        }
+        // Comments may hold any text.
+        let noted = format!("# caf\u{e9} \u{a0}\n{base}#\u{2003}x\nf 1 2 3\n");
+        let got = parse(noted.as_bytes());
+        assert!(got.is_some() && got == tobj(&noted), "{noted:?}");
     }
 
     /// `n` words for a statement: one in `one_in` from `tricky`, the others from `usual`.
