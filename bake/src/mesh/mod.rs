@@ -399,8 +399,9 @@ impl Mesh {
         let unreadable = |source| Error::Unreadable { path: path.into(), source };
         if format == MeshFormat::Obj {
             // A plain OBJ (positions and triangles) is read a block at a time, never
-            // whole; any other is read again below, whole, for tobj.
-            if let Some(mesh) = Mesh::read_plain_obj(path, zst, options.max_file_bytes).map_err(unreadable)? {
+            // whole, under the triangle budget; any other is read again below, whole,
+            // under the file-size limit, for tobj.
+            if let Some(mesh) = Mesh::read_plain_obj(path, zst, options)? {
                 return mesh.checked(path, options);
             }
         }
@@ -410,17 +411,32 @@ impl Mesh {
         Mesh::from_bytes_with(&bytes, format, path, base.as_deref(), options)
     }
 
-    /// A plain OBJ file's mesh, read (and decompressed) a block at a time under the
-    /// limits of [`Mesh::load_with`], or `None` for an OBJ that is not plain.
-    fn read_plain_obj(path: &Path, zst: bool, max: u64) -> std::io::Result<Option<Mesh>> {
-        let file = octrace_format::open_regular_file(path)?;
-        let len = file.metadata()?.len();
-        if len > max {
-            return Err(too_large(format!("{len} bytes, more than the limit of {max}")));
-        }
-        match zst {
-            true => obj_plain::read(Capped::zstd(zstd::stream::read::Decoder::new(file)?, len, max)),
-            false => obj_plain::read(Capped::file(file, max)),
+    /// A plain OBJ file's mesh, read (and decompressed) a block at a time, or `None`
+    /// for an OBJ that is not plain. Its size is not limited (it is never held whole:
+    /// what it costs follows its triangles, which are counted against
+    /// [`LoadOptions::max_triangles`] as they are read); a compressed one may expand
+    /// [`MAX_MESH_COMPRESSION_RATIO`] times.
+    fn read_plain_obj(path: &Path, zst: bool, options: &LoadOptions) -> Result<Option<Mesh>> {
+        let read = |file: std::fs::File| match zst {
+            true => {
+                let len = file.metadata()?.len();
+                let decoder = zstd::stream::read::Decoder::new(file)?;
+                Ok(obj_plain::read(Capped::zstd(decoder, len, u64::MAX), options.max_triangles))
+            }
+            false => Ok(obj_plain::read(file, options.max_triangles)),
+        };
+        let unreadable = |source| Error::Unreadable { path: path.into(), source };
+        let file = octrace_format::open_regular_file(path).map_err(unreadable)?;
+        match read(file).map_err(unreadable)? {
+            Ok(mesh) => Ok(mesh),
+            Err(obj_plain::Stop::Read(source)) => Err(unreadable(source)),
+            Err(obj_plain::Stop::Budget { what, needed, limit }) => Err(Error::Budget {
+                path: path.into(),
+                what: what.into(),
+                needed,
+                limit,
+                option: "--max-triangles (positions: three a triangle), LoadOptions::max_triangles",
+            }),
         }
     }
 
@@ -493,9 +509,9 @@ fn decompress(raw: &[u8], max: u64) -> std::io::Result<Vec<u8>> {
     Ok(out)
 }
 
-/// A reader that fails with `refusal` once more than `left` bytes come from `inner`:
-/// a mesh file that grows past its limit while it is read, or a compressed one that
-/// expands past it, is refused there, whatever reads it.
+/// A zstd stream that fails once it expands past [`MAX_MESH_COMPRESSION_RATIO`] times
+/// its compressed size or `max` bytes, whichever is less: a compressed bomb is refused
+/// there, whatever reads it.
 struct Capped<R> {
     inner: R,
     /// Bytes still allowed.
@@ -504,18 +520,12 @@ struct Capped<R> {
 }
 
 impl<R> Capped<R> {
-    /// A file of at most `max` bytes.
-    fn file(inner: R, max: u64) -> Capped<R> {
-        Capped { inner, left: max, refusal: format!("grew past the limit of {max} bytes while read") }
-    }
-
-    /// A zstd stream of `len` bytes, which may expand [`MAX_MESH_COMPRESSION_RATIO`]
-    /// times, to at most `max` bytes.
+    /// A zstd stream of `len` bytes that may expand to at most `max` bytes.
     fn zstd(inner: R, len: u64, max: u64) -> Capped<R> {
         let limit = len.saturating_mul(MAX_MESH_COMPRESSION_RATIO).min(max);
-        let refusal = format!(
-            "decompresses to more than {limit} bytes ({MAX_MESH_COMPRESSION_RATIO} times its size, at most {max})"
-        );
+        let at_most = if max == u64::MAX { String::new() } else { format!(", at most {max}") };
+        let refusal =
+            format!("decompresses to more than {limit} bytes ({MAX_MESH_COMPRESSION_RATIO} times its size{at_most})");
         Capped { inner, left: limit, refusal }
     }
 }

@@ -45,25 +45,43 @@ struct Plain {
     faces: Vec<[u32; 3]>,
 }
 
+/// Why a plain file's reading stopped.
+#[derive(Debug)]
+pub(super) enum Stop {
+    /// The input's error, or [`std::io::ErrorKind::OutOfMemory`] where the allocator
+    /// refused the positions, faces or triangles (never an abort).
+    Read(std::io::Error),
+    /// More faces than the triangle budget, or more positions than three a triangle
+    /// of it: `what` and at least how many.
+    Budget { what: &'static str, needed: u64, limit: u64 },
+}
+
+impl From<std::io::Error> for Stop {
+    fn from(e: std::io::Error) -> Stop {
+        Stop::Read(e)
+    }
+}
+
 /// The mesh of a plain OBJ file held in memory, or `None` for any other (tobj then
-/// reads it).
+/// reads it, and counts its triangles).
 pub(super) fn parse(bytes: &[u8]) -> Option<Mesh> {
     // Reading from memory fails only where memory does.
-    read(bytes).ok().flatten()
+    read(bytes, u64::MAX).ok().flatten()
 }
 
 /// The mesh of a plain OBJ file read from `input` a block at a time, or `None` for
-/// any other (tobj then reads it).
+/// any other (tobj then reads it): at most `max_triangles` faces and three times as
+/// many positions, counted as they are read, so that the memory it takes follows
+/// the mesh whatever the file's size.
 ///
 /// # Errors
-/// `input`'s errors, and [`std::io::ErrorKind::OutOfMemory`] where the allocator refuses
-/// the positions, faces or triangles (never an abort).
-pub(super) fn read(input: impl Read) -> std::io::Result<Option<Mesh>> {
-    read_in_blocks(input, BLOCK_BYTES)
+/// [`Stop`].
+pub(super) fn read(input: impl Read, max_triangles: u64) -> Result<Option<Mesh>, Stop> {
+    read_in_blocks(input, BLOCK_BYTES, max_triangles)
 }
 
 /// [`read`], `block_bytes` at a time.
-fn read_in_blocks(mut input: impl Read, block_bytes: usize) -> std::io::Result<Option<Mesh>> {
+fn read_in_blocks(mut input: impl Read, block_bytes: usize, max_triangles: u64) -> Result<Option<Mesh>, Stop> {
     let mut plain = Plain::default();
     let mut block = vec![0u8; block_bytes];
     let mut filled = 0;
@@ -73,7 +91,7 @@ fn read_in_blocks(mut input: impl Read, block_bytes: usize) -> std::io::Result<O
                 Ok(0) => break true,
                 Ok(n) => filled += n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(e),
+                Err(e) => return Err(Stop::Read(e)),
             }
             if filled == block.len() {
                 break false;
@@ -92,10 +110,17 @@ fn read_in_blocks(mut input: impl Read, block_bytes: usize) -> std::io::Result<O
         if !plain.add(text)? {
             return Ok(None);
         }
+        let counted = [
+            ("triangles", plain.faces.len() as u64, max_triangles),
+            ("positions", plain.positions.len() as u64, max_triangles.saturating_mul(3)),
+        ];
+        if let Some(&(what, needed, limit)) = counted.iter().find(|(_, n, limit)| n > limit) {
+            return Err(Stop::Budget { what, needed, limit });
+        }
         block.copy_within(cut..filled, 0);
         filled -= cut;
         if last {
-            return plain.mesh();
+            return Ok(plain.mesh()?);
         }
     }
 }
@@ -333,18 +358,29 @@ mod tests {
         for block in (longest..longest + 40).chain([text.len() - 1, text.len(), text.len() + 1, 1 << 20]) {
             for threads in [1, 3] {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-                let got = pool.install(|| read_in_blocks(text.as_bytes(), block)).unwrap();
+                let got = pool.install(|| read_in_blocks(text.as_bytes(), block, u64::MAX)).unwrap();
                 assert!(got.as_ref() == Some(&want), "{block}-byte blocks, {threads} threads");
             }
         }
         // A line longer than a block is left to tobj, as is a file that turns out not
         // to be plain in a later block.
-        assert!(read_in_blocks(text.as_bytes(), 8).unwrap().is_none());
+        assert!(read_in_blocks(text.as_bytes(), 8, u64::MAX).unwrap().is_none());
         let late = format!("{text}\nvn 0 0 1\n");
-        assert!(read_in_blocks(late.as_bytes(), longest).unwrap().is_none());
+        assert!(read_in_blocks(late.as_bytes(), longest, u64::MAX).unwrap().is_none());
         // A face naming a position no block has.
         let missing = format!("{text}\nf 1 2 999\n");
-        assert!(read_in_blocks(missing.as_bytes(), longest).unwrap().is_none());
+        assert!(read_in_blocks(missing.as_bytes(), longest, u64::MAX).unwrap().is_none());
+        // The budget: 122 faces and 183 positions, counted as the blocks come.
+        let stop = |max| match read_in_blocks(text.as_bytes(), longest, max) {
+            Err(Stop::Budget { what, needed, limit }) => Some((what, needed > limit, limit)),
+            Ok(_) => None,
+            Err(e) => panic!("{e:?}"),
+        };
+        assert_eq!(stop(121), Some(("triangles", true, 121)));
+        assert_eq!(stop(122), None);
+        let positions = format!("{text}\n{}", "v 0 0 0\n".repeat(400));
+        let stopped = read_in_blocks(positions.as_bytes(), longest, 122);
+        assert!(matches!(stopped, Err(Stop::Budget { what: "positions", limit: 366, .. })), "{stopped:?}");
     }
 
     /// Anything else goes to tobj (which reads it, or says what is wrong).

@@ -33,8 +33,11 @@ pub enum References {
 pub struct LoadOptions {
     /// Where the mesh's references may lead.
     pub references: References,
-    /// The largest file read, in bytes: the mesh file, its decompressed contents, each
-    /// glTF buffer. Checked before anything is read.
+    /// The largest file read whole, in bytes: the mesh file, its decompressed contents,
+    /// each glTF buffer. Checked before anything is read. A plain OBJ (positions and
+    /// triangles alone) is read a block at a time, never whole, and is not held to it:
+    /// what it costs follows its triangles, counted against `max_triangles` as it is
+    /// read (and its positions, three a triangle).
     pub max_file_bytes: u64,
     /// The most node placements a glTF scene may make ([`DEFAULT_MAX_INSTANCES`]): a
     /// node listed twice as a child, or under two parents, is placed twice, and its
@@ -56,7 +59,7 @@ pub const DEFAULT_MAX_INSTANCES: u64 = 1 << 20;
 pub const DEFAULT_MAX_TRIANGLES: u64 = 1 << 27;
 
 /// The default [`LoadOptions::max_file_bytes`]: 4 GiB, eight times the dragon's
-/// glTF-sized data and far beyond what the format's 2^32 - 1 triangles need in OBJ.
+/// glTF-sized data (a plain OBJ, read a block at a time, is not held to it).
 pub const DEFAULT_MAX_FILE_BYTES: u64 = 4 << 30;
 
 /// The largest material library read (MTL files are a few kilobytes).

@@ -84,6 +84,22 @@ fn instanced_triangles_are_counted_before_loading() {
     )
     .unwrap_err();
     assert!(err.to_string().contains("triangles: 2 is past the budget of 1"), "{err}");
+    // And from a file, read a block at a time (a plain OBJ is not held to the file-size
+    // limit: its triangles and positions are counted as the blocks come).
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.obj");
+    std::fs::write(&path, obj).unwrap();
+    let tiny = LoadOptions { max_file_bytes: 8, ..LoadOptions::default() };
+    assert_eq!(Mesh::load_with(&path, &tiny).unwrap().triangles.len(), 2);
+    let err = Mesh::load_with(&path, &LoadOptions { max_triangles: 1, ..tiny }).unwrap_err();
+    assert!(err.to_string().contains("m.obj: triangles: 2 is past the budget of 1"), "{err}");
+    std::fs::write(&path, format!("{obj}{}", "v 0 0 0\n".repeat(4))).unwrap();
+    let err = Mesh::load_with(&path, &LoadOptions { max_triangles: 2, ..LoadOptions::default() }).unwrap_err();
+    assert!(err.to_string().contains("m.obj: positions: 7 is past the budget of 6"), "{err}");
+    // An OBJ that is not plain is read whole, under the file-size limit.
+    std::fs::write(&path, format!("o named\n{obj}")).unwrap();
+    let err = Mesh::load_with(&path, &tiny).unwrap_err();
+    assert!(err.to_string().contains("more than the limit of 8"), "{err}");
 }
 
 /// Coincident copies of one triangle share every cell it meets, at every depth: the
