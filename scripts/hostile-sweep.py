@@ -16,6 +16,9 @@ trusted=True)`) and
 asked `cast_rays`, `list_intersections` and `contains`. Every command runs alone under
 --timeout seconds (default 20) and --memory MiB of address space (default 4096).
 
+The mesh files are mutated too (the cube's OBJ, the same with relative face indices,
+the leaf's glTF), N each, and baked.
+
 With --python, the module's array handling is fuzzed too: random dtypes, shapes,
 strides, NaN and infinity, empty and huge-but-empty arrays, into every query.
 
@@ -206,6 +209,27 @@ def main():
                         count(what, *run([sys.executable, "-c", PY_SCENE, "m.oct", trusted], args.timeout,
                                          args.memory, d))
                         runs += 1
+        # The mesh files themselves, mutated, baked (the OBJ read in blocks, the glTF
+        # loader): the cube's OBJ, its faces written relative, and the leaf's glTF.
+        relative = "".join(
+            line if not line.startswith("f ") else
+            "f " + " ".join(str(int(i) - 9) for i in line.split()[1:]) + "\n"
+            for line in (d / "cube.obj").read_text().splitlines(keepends=True)
+        )
+        meshes = {
+            "cube.obj": (d / "cube.obj").read_bytes(),
+            "relative.obj": relative.encode(),
+            "leaf.gltf": inputs["leaf"].read_bytes(),
+        }
+        for png in ("leaf.png",):
+            (d / png).write_bytes((inputs["leaf"].parent / png).read_bytes())
+        for name, data in meshes.items():
+            for k in range(args.mutations):
+                m = d / ("m" + Path(name).suffix)
+                m.write_bytes(mutate(data, rng))
+                count("bake " + Path(name).suffix, *run([bin_, "bake", m.name, "-o", "mesh.oct"], args.timeout,
+                                                        args.memory, d))
+                runs += 1
         if args.python:
             for seed in range(args.mutations // 10 + 1):
                 count("python arrays", *run([sys.executable, "-c", PY_ARRAYS, "cube.oct", str(seed)],
