@@ -1,5 +1,11 @@
 //! Number formatting for human-readable output.
 
+/// How the command line names a choice (`incoherent`, `cells`), for messages: never
+/// the enum's Rust name.
+pub(crate) fn choice(value: impl clap::ValueEnum) -> String {
+    value.to_possible_value().map_or_else(String::new, |v| v.get_name().to_string())
+}
+
 /// `1234567` as `1,234,567`.
 pub(crate) fn thousands(n: u64) -> String {
     let s = n.to_string();

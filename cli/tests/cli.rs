@@ -32,7 +32,7 @@ triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
 triangles / leaf   mean 1.92 over non-empty leaves, max 6, 372 references
-overfull leaves    0
+overfull leaves    0 (at depth 3, the limit, with more than 16 triangles: 8 x the leaf size)
 fans               none (no leaf of 256+ references has 24+ triangles around one vertex)
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
@@ -746,11 +746,12 @@ fn report_measures_every_knob_and_writes_markdown_and_json() {
     assert!(count(&|p| p[0] < 64 && p[1] < 64 && p[2] < 64) > 2000, "text and axes");
 }
 
-fn fails_saying(dir: &Path, args: &[&str], says: &str) {
+fn fails_saying(dir: &Path, args: &[&str], says: &str) -> String {
     let out = octrace(dir, args);
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(!out.status.success(), "octrace {args:?} succeeded");
     assert!(stderr.contains(says), "octrace {args:?}: expected '{says}' in: {stderr}");
+    stderr
 }
 
 /// `bake same.obj -o same.obj`, `render x.oct -o x.oct`, `rays`, `trace --out`: an
@@ -842,9 +843,19 @@ fn oversized_requests_are_refused_before_work() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
-    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--margin", "0.1"], "margin 0.1 is outside 0 to 0.0009765625");
-    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--leaf-size", "0"], "--leaf-size");
-    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--max-depth", "40"], "beyond the format's deepest level");
+    // Each names its own option, not the three (issue 50, item 7).
+    for (option, value, says) in [
+        ("--margin", "0.1", "margin 0.1 (--margin, BuildParams::margin) is outside 0 to 0.0009765625"),
+        (
+            "--max-depth",
+            "40",
+            "depth 40 (--max-depth, BuildParams::max_depth) is beyond the format's deepest level, 20",
+        ),
+    ] {
+        let err = fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", option, value], says);
+        assert!(!err.contains(" or --"), "{err}");
+    }
+    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--leaf-size", "0"], "'--leaf-size <LEAF_SIZE>': 0 is not in 1..");
     fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--threads", "100000"], "--threads must be from 1 to 1024");
     assert!(!d.join("c.oct").exists());
     ok(d, &["bake", "cube.obj", "-o", "c.oct"]);
@@ -1073,7 +1084,13 @@ fn contains_answers_points_and_refuses_bad_input() {
     std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
     ok(dir.path(), &["bake", "cube.obj", "-o", "cube.oct"]);
     let out = ok(dir.path(), &["points", "cube.oct", "--count", "5000", "-o", "uniform.bin"]);
-    assert!(out.starts_with("wrote 5,000 Uniform points"), "{out}");
+    // Choices are named as the command line names them, numbers with separators
+    // (issue 50, item 7: `Uniform`, `Incoherent`, `Cells` and `41484 of 262144`).
+    assert!(out.starts_with("wrote 5,000 uniform points"), "{out}");
+    let out = ok(dir.path(), &["rays", "cube.oct", "--set", "incoherent", "-o", "incoherent.bin"]);
+    assert!(out.starts_with("wrote 1,000,000 incoherent rays"), "{out}");
+    let out = ok(dir.path(), &["render", "cube.oct", "--mode", "cells", "--width", "64", "-o", "cells.png"]);
+    assert!(out.contains("(64 x 64, cells): ") && out.contains(" of 4,096 rays hit"), "{out}");
     ok(dir.path(), &["points", "cube.oct", "--set", "near", "--count", "5000", "-o", "near.bin"]);
     for set in ["uniform.bin", "near.bin"] {
         let out = ok(dir.path(), &["contains", "cube.oct", "--points", set, "--out", "in.bin", "--check"]);
@@ -1308,7 +1325,11 @@ fn inspect_reports_overfull_leaves() {
     let overfull = &json["overfull_leaves"];
     assert!(overfull["leaves"].as_u64().unwrap() >= 1, "{overfull}");
     assert!(overfull["references"].as_u64().unwrap() > 1000, "{overfull}");
-    assert!(ok(d, &["inspect", "fan.oct"]).contains("at the depth limit with more than 8 x the leaf size"));
+    let text = ok(d, &["inspect", "fan.oct"]);
+    assert!(
+        text.contains("the limit, with more than ") && text.contains("references: triangles sharing cells"),
+        "{text}"
+    );
     std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
     ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
     let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "cube.oct", "--json"])).unwrap();

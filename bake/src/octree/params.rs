@@ -115,15 +115,19 @@ impl BuildParams {
         let fail = |message: String| Err(crate::Error::Params { message });
         let max_level = octrace_format::layout::MAX_LEVEL;
         if self.leaf_size == Some(0) {
-            return fail("the leaf target must be at least 1".into());
+            return fail(
+                "leaf size 0 (--leaf-size, BuildParams::leaf_size): the leaf target must be at least 1".into(),
+            );
         }
         if let Some(d) = self.max_depth.filter(|&d| d > max_level) {
-            return fail(format!("depth {d} is beyond the format's deepest level, {max_level}"));
+            return fail(format!(
+                "depth {d} (--max-depth, BuildParams::max_depth) is beyond the format's deepest level, {max_level}"
+            ));
         }
         if !(self.margin.is_finite() && (0.0..=MAX_MARGIN).contains(&self.margin)) {
             return fail(format!(
-                "margin {} is outside 0 to {MAX_MARGIN} (2^-10) of the root edge; past it every triangle is \
-                 copied into a growing cube of cells",
+                "margin {} (--margin, BuildParams::margin) is outside 0 to {MAX_MARGIN} (2^-10) of the root edge; \
+                 past it every triangle is copied into a growing cube of cells",
                 self.margin
             ));
         }

@@ -89,7 +89,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         margin: args.margin,
         max_tree_bytes: args.max_memory,
     };
-    params.check().context("--max-depth, --leaf-size or --margin")?;
+    // Each limit's message names its option.
+    params.check()?;
     let progress = Progress::new();
     progress.stage("loading");
     let started = Instant::now();

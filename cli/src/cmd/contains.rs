@@ -289,9 +289,9 @@ pub(crate) fn points(args: PointsArgs) -> anyhow::Result<()> {
     crate::output::write_data(&args.output, &[bytemuck::cast_slice(&points)])?;
     crate::report!(
         crate::output::is_stdout(&args.output),
-        "wrote {} {:?} points to {}",
+        "wrote {} {} points to {}",
         thousands(points.len() as u64),
-        args.set,
+        crate::output::choice(args.set),
         crate::show(&args.output)
     );
     Ok(())

@@ -141,13 +141,14 @@ impl<'a> Report<'a> {
                 thousands(s.triangle_references)
             ),
             format!(
-                "overfull leaves    {}{}",
+                "overfull leaves    {} (at depth {}, the limit, with more than {} triangles: {} x the leaf size){}",
                 thousands(s.overfull_leaves),
+                v.params.max_depth,
+                thousands(octrace_format::stats::OVERFULL_FACTOR * u64::from(v.params.leaf_size.max(1))),
+                octrace_format::stats::OVERFULL_FACTOR,
                 if s.overfull_leaves > 0 {
                     format!(
-                        " at the depth limit with more than {} x the leaf size ({} references: triangles sharing \
-                         cells at every depth, fans or copies)",
-                        octrace_format::stats::OVERFULL_FACTOR,
+                        "; {} references: triangles sharing cells at every depth, fans or copies",
                         thousands(s.overfull_references)
                     )
                 } else {

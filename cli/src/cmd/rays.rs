@@ -47,9 +47,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     crate::output::write_data(&args.output, &[bytemuck::cast_slice(&rays)])?;
     crate::report!(
         crate::output::is_stdout(&args.output),
-        "wrote {} {:?} rays to {}",
+        "wrote {} {} rays to {}",
         thousands(rays.len() as u64),
-        args.set,
+        crate::output::choice(args.set),
         crate::show(&args.output)
     );
     Ok(())

@@ -245,7 +245,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if args.json {
         let mut j = serde_json::json!({
             "scene": crate::show(&args.scene), "output": crate::show(&args.output),
-            "width": camera.width, "height": camera.height, "mode": format!("{:?}", args.mode).to_lowercase(),
+            "width": camera.width, "height": camera.height, "mode": crate::output::choice(args.mode),
             "seconds": secs, "gpu": args.gpu, "notes": notes,
             "gpu_setup_seconds": if args.gpu { Some(setup) } else { None },
         });
@@ -284,13 +284,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         }
         Summary::Walks(stats) => crate::report!(
             to_stdout,
-            "rendered {} ({} x {}, {:?}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
+            "rendered {} ({} x {}, {}): {} of {} rays hit, {:.1} leaves and {:.1} triangle tests a ray (max {} leaves), {:.3} s -> {}",
             crate::show(&args.scene),
             camera.width,
             camera.height,
-            args.mode,
-            stats.hits,
-            stats.rays,
+            crate::output::choice(args.mode),
+            thousands(stats.hits),
+            thousands(stats.rays),
             stats.mean_leaves,
             stats.mean_triangle_tests,
             stats.max_leaves,
