@@ -855,7 +855,11 @@ fn oversized_requests_are_refused_before_work() {
         let err = fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", option, value], says);
         assert!(!err.contains(" or --"), "{err}");
     }
-    fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--leaf-size", "0"], "'--leaf-size <LEAF_SIZE>': 0 is not in 1..");
+    fails_saying(
+        d,
+        &["bake", "cube.obj", "-o", "c.oct", "--leaf-size", "0"],
+        "'--leaf-size <LEAF_SIZE>': 0 is not in 1..",
+    );
     fails_saying(d, &["bake", "cube.obj", "-o", "c.oct", "--threads", "100000"], "--threads must be from 1 to 1024");
     assert!(!d.join("c.oct").exists());
     ok(d, &["bake", "cube.obj", "-o", "c.oct"]);
@@ -1091,6 +1095,13 @@ fn contains_answers_points_and_refuses_bad_input() {
     assert!(out.starts_with("wrote 1,000,000 incoherent rays"), "{out}");
     let out = ok(dir.path(), &["render", "cube.oct", "--mode", "cells", "--width", "64", "-o", "cells.png"]);
     assert!(out.contains("(64 x 64, cells): ") && out.contains(" of 4,096 rays hit"), "{out}");
+    // A PNG is written under a PNG's name (issue 50, item 6: `-o x.jpg` held PNG bytes).
+    for name in ["x.jpg", "x.JPEG", "x.ppm"] {
+        fails_saying(dir.path(), &["render", "cube.oct", "-o", name], "render writes PNG images");
+        assert!(!dir.path().join(name).exists());
+    }
+    ok(dir.path(), &["render", "cube.oct", "--width", "8", "-o", "upper.PNG"]);
+    ok(dir.path(), &["render", "cube.oct", "--width", "8", "-o", "bare"]);
     ok(dir.path(), &["points", "cube.oct", "--set", "near", "--count", "5000", "-o", "near.bin"]);
     for set in ["uniform.bin", "near.bin"] {
         let out = ok(dir.path(), &["contains", "cube.oct", "--points", set, "--out", "in.bin", "--check"]);

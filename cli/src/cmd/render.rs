@@ -179,6 +179,16 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     check_size(args.width, height)?;
     crate::output::refuse_overwriting(&args.output, "-o", &[&args.scene])?;
     let to_stdout = crate::output::is_stdout(&args.output);
+    // The bytes are a PNG's: a name that says another format would be a file that
+    // lies about itself.
+    if let Some(ext) = args.output.extension().filter(|e| !to_stdout && !e.eq_ignore_ascii_case("png")) {
+        anyhow::bail!(
+            "{}: render writes PNG images, and '.{}' names another format: give a .png name (or - for standard \
+             output)",
+            crate::show(&args.output),
+            crate::output::printable(&ext.to_string_lossy())
+        );
+    }
     if let Some(fov) = args.fov {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
     }
