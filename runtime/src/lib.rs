@@ -28,6 +28,7 @@
 pub mod baselines;
 pub mod cpu;
 mod error;
+mod exact;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 mod ray;

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: the bunny the repository carries, baked
 //! once per test binary.
 
+pub mod exact;
 pub mod gltf;
 
 use std::path::PathBuf;

@@ -19,7 +19,7 @@ use octrace_format::layout::{LEAF_HEADER_WORDS, TRIANGLE_FLOATS};
 
 use super::fans;
 use super::tables::ExitRule;
-use super::tracer::Tracer;
+use super::tracer::{Tracer, TriangleTest};
 use super::walk::RayWalk;
 use crate::ray::Ray;
 
@@ -204,8 +204,10 @@ impl Tracer<'_> {
         // Where the walk stops: the ray's tmax, or where it leaves the mesh box.
         let (tmin, tmax, stop) = (w.tmin(), w.t_best(), w.tmax());
         let (shear, d) = (w.shear(), w.d());
-        // A ray under the exact exit rule is tested in f64 (`Shear::intersect_f64`).
+        // A ray under the exact exit rule is tested in f64 (`Shear::intersect_f64`);
+        // the exact test (`TriangleTest::Exact`) decides every ray exactly.
         let exact = w.rule() == ExitRule::Exact;
+        let exact_test = self.triangle_test() == TriangleTest::Exact;
         let v = self.view();
         // The end of the previous leaf's piece; `None` in the first leaf, whose piece
         // starts at tmin, closed.
@@ -227,7 +229,7 @@ impl Tracer<'_> {
             // A fan's leaf: the triangles its hierarchy picks (`fans.rs`), in the same order.
             let mut room = fans::candidates_room();
             let refs = self
-                .fan_refs((box_index, offset, refs), || (!exact).then_some(&shear), true, &mut room)
+                .fan_refs((box_index, offset, refs), || (!exact && !exact_test).then_some(&shear), true, &mut room)
                 .unwrap_or(refs);
             buffer.0.clear();
             for &prim in refs {
@@ -236,8 +238,13 @@ impl Tracer<'_> {
                 else {
                     continue;
                 };
-                let hit =
-                    if exact { shear.intersect_owned_f64(tri, tmin, hi) } else { shear.intersect_owned(tri, tmin, hi) };
+                let hit = if exact_test {
+                    shear.intersect_owned_exact(tri, tmin, hi)
+                } else if exact {
+                    shear.intersect_owned_f64(tri, tmin, hi)
+                } else {
+                    shear.intersect_owned(tri, tmin, hi)
+                };
                 let Some((t, u, vv)) = hit else { continue };
                 if lo.is_some_and(|lo| t <= lo) {
                     continue;
@@ -247,7 +254,15 @@ impl Tracer<'_> {
                 buffer.0.push((Crossing { t, triangle, u, v: vv, enters }, prim));
             }
             if buffer.0.len() > 1 {
-                buffer.0.sort_unstable_by(|x, y| x.0.t.total_cmp(&y.0.t).then(x.0.triangle.cmp(&y.0.triangle)));
+                // Equal rounded distances in exact order under the exact test.
+                let stored = |prim: u32| &v.triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+                buffer.0.sort_unstable_by(|x, y| {
+                    let exactly = || match exact_test && x.0.t == y.0.t {
+                        true => shear.compare_distances(stored(x.1), stored(y.1)),
+                        false => std::cmp::Ordering::Equal,
+                    };
+                    x.0.t.total_cmp(&y.0.t).then_with(exactly).then(x.0.triangle.cmp(&y.0.triangle))
+                });
             }
             for &(c, prim) in &buffer.0 {
                 let c = Crossing { t: w.unshift_distance(c.t), ..c };
@@ -443,7 +458,11 @@ impl Tracer<'_> {
     /// processor has them, else ray by ray.
     fn crossings_into_sink(&self, rays: &[Ray], limit: usize, sink: &mut impl CrossingSink) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        if self.uses_x86_64_v3() && self.uses_lanes() && super::simd::lanes::fits(self) {
+        if self.uses_x86_64_v3()
+            && self.uses_lanes()
+            && self.triangle_test() != TriangleTest::Exact
+            && super::simd::lanes::fits(self)
+        {
             // SAFETY: the processor has the features (`uses_x86_64_v3` is never true
             // where it does not), and the arrays fit the gathers.
             return unsafe { super::simd::lanes_crossings::trace(self, rays, limit, sink) };

@@ -31,7 +31,7 @@ use octrace_format::topology::EdgeCensus;
 use robust::{orient3d, Coord3D};
 
 use super::crossings::{arrives_on_front, Crossing, CrossingCount, LeafCrossings};
-use super::tracer::Tracer;
+use super::tracer::{Tracer, TriangleTest};
 use super::watertight::Shear;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
@@ -346,7 +346,9 @@ impl Tracer<'_> {
             }
             // The segment ends at the reference point, clear of every plane: a crossing
             // lies before t = 1 by far. Near t = 0 its side is decided exactly.
-            let hit = if fine {
+            let hit = if self.triangle_test() == TriangleTest::Exact {
+                shear.intersect_owned_exact(tri, f32::NEG_INFINITY, 1.0)
+            } else if fine {
                 shear.intersect_owned(tri, f32::NEG_INFINITY, 1.0)
             } else {
                 shear.intersect_owned_f64(tri, f32::NEG_INFINITY, 1.0)

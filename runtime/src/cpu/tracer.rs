@@ -126,18 +126,33 @@ pub enum TriangleTest {
     /// Möller & Trumbore in `f64` (the oracle's arithmetic, `reference::intersect_f64`,
     /// on the `f32` ray and vertices): the slowest; for measuring what `f32` costs.
     F64,
+    /// The watertight test as exact arithmetic decides it: the same `f32` edge
+    /// functions with an error bound each, decided again on integers wherever a bound
+    /// leaves a sign in doubt (a ray within rounding of an edge or a vertex, or nearly
+    /// in a triangle's plane); distances correctly rounded from the exact quotient;
+    /// of hits at the same rounded distance, the exactly nearer, then the lower input
+    /// index; crossings in exact order. Answers equal exact arithmetic on the `f32`
+    /// ray and vertices, with the stated rules: a ray in a triangle's plane meets it
+    /// nowhere, a hit counts where its rounded distance lies in `[tmin, tmax]`, and
+    /// the crossing queries' edge rule ([`crate::cpu::watertight::Shear::intersect_owned`])
+    /// decides a ray exactly through an edge or a vertex. Walks one triangle at a time
+    /// (no eight-wide batches, no fan hierarchies).
+    Exact,
 }
 
 /// [`TriangleTest`]s as the const parameters of the SIMD step.
 pub(crate) const TEST_WATERTIGHT: u8 = 0;
 pub(crate) const TEST_MOLLER_TRUMBORE: u8 = 1;
 pub(crate) const TEST_F64: u8 = 2;
+pub(crate) const TEST_EXACT: u8 = 3;
 
 /// `with_tests!(tracer; ANY; f; args)` calls `f::<ANY, TEST, SLAB>(args)` with the
 /// tracer's triangle and exit tests as const generics: one dispatch a call, none a step.
 macro_rules! with_tests {
     ($tracer:expr; $any:tt; $($f:ident)::+; $($args:expr),*) => {{
-        use $crate::cpu::tracer::{ExitTest as E, TriangleTest as T, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+        use $crate::cpu::tracer::{
+            ExitTest as E, TriangleTest as T, TEST_EXACT, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT,
+        };
         match ($tracer.triangle_test(), $tracer.exit_test()) {
             (T::Watertight, E::Plucker) => $($f)::+::<$any, TEST_WATERTIGHT, false>($($args),*),
             (T::Watertight, E::Slab) => $($f)::+::<$any, TEST_WATERTIGHT, true>($($args),*),
@@ -145,6 +160,8 @@ macro_rules! with_tests {
             (T::MollerTrumbore, E::Slab) => $($f)::+::<$any, TEST_MOLLER_TRUMBORE, true>($($args),*),
             (T::F64, E::Plucker) => $($f)::+::<$any, TEST_F64, false>($($args),*),
             (T::F64, E::Slab) => $($f)::+::<$any, TEST_F64, true>($($args),*),
+            (T::Exact, E::Plucker) => $($f)::+::<$any, TEST_EXACT, false>($($args),*),
+            (T::Exact, E::Slab) => $($f)::+::<$any, TEST_EXACT, true>($($args),*),
         }
     }};
 }
@@ -406,6 +423,7 @@ impl<'a> Tracer<'a> {
             TriangleTest::Watertight => shear.intersect(t, tmin, tmax),
             TriangleTest::MollerTrumbore => intersect(tri, t, tmin, tmax),
             TriangleTest::F64 => intersect_f64(tri, t, tmin, tmax),
+            TriangleTest::Exact => shear.intersect_exact(t, tmin, tmax),
         }
     }
 

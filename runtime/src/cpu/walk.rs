@@ -87,6 +87,14 @@ pub(crate) trait LeafTest {
         Batch::OneByOne
     }
 
+    /// How the exact distances to triangles `new` and `kept` compare, where the test
+    /// decides ties of rounded distances exactly (`TriangleTest::Exact`); `None`
+    /// elsewhere (the later of equal rounded distances is kept).
+    #[inline(always)]
+    fn nearer(&self, _new: &[f32], _kept: &[f32]) -> Option<std::cmp::Ordering> {
+        None
+    }
+
     /// The shear of [`Shear::intersect`], where every triangle is tested with it (so a
     /// fan's hierarchy may choose which: `fans.rs`); `None` for the other tests.
     #[inline(always)]
@@ -126,7 +134,15 @@ impl LeafTest for ScalarTest<'_, '_> {
         if self.exact && self.tracer.triangle_test() == TriangleTest::Watertight {
             return self.shear.intersect_f64(t, tmin, tmax);
         }
+        if self.tracer.triangle_test() == TriangleTest::Exact {
+            return self.shear.intersect_exact(t, tmin, tmax);
+        }
         self.tracer.hit_triangle(&self.shear, &self.tri, t, tmin, tmax)
+    }
+
+    #[inline(always)]
+    fn nearer(&self, new: &[f32], kept: &[f32]) -> Option<std::cmp::Ordering> {
+        (self.tracer.triangle_test() == TriangleTest::Exact).then(|| self.shear.compare_distances(new, kept))
     }
 
     #[inline(always)]
@@ -304,11 +320,18 @@ impl Tracer<'_> {
     fn begin_near(&self, ray: &Ray) -> Option<RayWalk> {
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
-        let (t_enter, t_leave, entry_axis) = clip(o, d, self.frame.root_lo, self.frame.root_hi)?;
         // Beyond the (enlarged) mesh box there is nothing to hit: a ray that misses it
         // costs nothing more, and a walk stops where the ray leaves it (a little later:
         // a relative slack for the rounding of distances far from the origin).
         let (box_enter, box_leave, _) = clip(o, d, self.frame.box_lo, self.frame.box_hi)?;
+        // A mesh whose box reaches the root cube's faces (the root is the box made a
+        // cube) can be touched by a ray that grazes the root's edge, which the clip's
+        // rounding may call a miss: such a ray starts in the leaf where it enters the
+        // enlarged box (point location clamps into the root).
+        let (t_enter, t_leave, entry_axis, grazes) = match clip(o, d, self.frame.root_lo, self.frame.root_hi) {
+            Some((enter, leave, axis)) => (enter, leave, axis, false),
+            None => (box_enter, box_leave, 0, true),
+        };
         let t_start = t_enter.max(ray.tmin);
         let box_stop = box_leave + box_leave.abs() * BOX_T_SLACK;
         let t_stop = ray.tmax.min(box_stop);
@@ -326,7 +349,9 @@ impl Tracer<'_> {
         }
         // The entry leaf, and its cell: with the cell, every box along the walk is
         // computed rather than loaded (the paper's own suggestion, section 6).
-        let (address, level, cell) = if box_enter > t_start {
+        let (address, level, cell) = if grazes {
+            self.locate_cell(point_at(o, d, t_start))
+        } else if box_enter > t_start {
             self.locate_cell(point_at(o, d, box_enter))
         } else if t_enter > ray.tmin {
             self.enter_through_cube_map(o, d, t_enter, entry_axis)
@@ -474,6 +499,9 @@ impl Tracer<'_> {
                 continue;
             };
             if let Some(hit) = test.hit(data, walk.tmin, *walk.t_best) {
+                if hit.0 == *walk.t_best && !self.replaces(test, tri, data, walk.best.as_ref()) {
+                    continue;
+                }
                 self.keep(walk, tri, box_index, hit);
                 if ANY {
                     return true;
@@ -481,6 +509,26 @@ impl Tracer<'_> {
             }
         }
         false
+    }
+
+    /// Whether stored triangle `tri` (`data`), hit at the rounded distance of the
+    /// walk's best, replaces it: the later one does, unless the test decides ties
+    /// exactly ([`LeafTest::nearer`]): then the exactly nearer, and of exactly equal
+    /// distances the lower input index.
+    #[inline(always)]
+    fn replaces(&self, test: &impl LeafTest, tri: u32, data: &[f32], kept: Option<&Hit>) -> bool {
+        let Some(kept) = kept else { return true };
+        let v = &self.view;
+        let Some(kept_data) =
+            v.triangles.get(kept.prim.0 as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+        else {
+            return true;
+        };
+        match test.nearer(data, kept_data) {
+            None | Some(std::cmp::Ordering::Less) => true,
+            Some(std::cmp::Ordering::Greater) => false,
+            Some(std::cmp::Ordering::Equal) => v.input_index(StoredIndex(tri)) < v.input_index(kept.prim),
+        }
     }
 
     /// Makes stored triangle `tri`'s hit `(t, u, v)` the walk's best (its `triangle`

@@ -113,6 +113,60 @@ impl Shear {
         self.test_f64::<true>(t, tmin, tmax)
     }
 
+    /// [`Shear::intersect`] as exact arithmetic decides it: the same `f32` edge
+    /// functions, each with an error bound; where a bound leaves a sign in doubt (the
+    /// ray passes within rounding of an edge or a vertex, or lies nearly in the plane),
+    /// the test runs again on integers (`exact::hit`), and the distance is the exact
+    /// one correctly rounded to `f32` ([`plane_distance_rounded`]). See
+    /// [`crate::TriangleTest::Exact`].
+    #[inline(always)]
+    pub fn intersect_exact(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test_exact::<false>(t, tmin, tmax)
+    }
+
+    /// [`Shear::intersect_owned`] as exact arithmetic decides it (its edge rule made
+    /// exact: the sheared coordinates' differences are signed exactly).
+    #[inline(always)]
+    pub fn intersect_owned_exact(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        self.test_exact::<true>(t, tmin, tmax)
+    }
+
+    /// Whether the ray meets triangle `a` exactly nearer (`Less`), at the same exact
+    /// distance (`Equal`) or farther than triangle `b` (both hit: their planes are not
+    /// parallel to the ray).
+    pub fn compare_distances(&self, a: &[f32], b: &[f32]) -> std::cmp::Ordering {
+        crate::exact::compare_distances(self.o, self.d, a, b)
+    }
+
+    #[inline(always)]
+    fn test_exact<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, _] = self.s;
+        let o = self.o;
+        let rel = |i: usize| [t[3 * i] - o[0], t[3 * i + 1] - o[1], t[3 * i + 2] - o[2]];
+        let (a, b, c) = (rel(0), rel(1), rel(2));
+        let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+        let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+        let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let bound = edge_error_bound([a, b, c], [(ax, ay), (bx, by), (cx, cy)]);
+        let (pos, neg) = (u > bound || v > bound || w > bound, u < -bound || v < -bound || w < -bound);
+        if pos && neg {
+            return None; // two edges decided, on opposite sides
+        }
+        let decided = u.abs() > bound && v.abs() > bound && w.abs() > bound;
+        if !decided {
+            return crate::exact::hit(self.o, self.d, self.k, t, tmin, tmax, OWNED);
+        }
+        // All three decided and agreeing: inside, off every edge (so no edge rule),
+        // and the plane not parallel to the ray (det is their sum, of one sign).
+        let det = u + v + w;
+        let dist = plane_distance_rounded(o, self.d, t)?;
+        (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
+    }
+
     fn test_f64<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
         let d = self.d.map(f64::from);
@@ -202,6 +256,70 @@ fn owns64(positive: bool, from: (f64, f64), to: (f64, f64)) -> bool {
     let s = if positive { 1.0 } else { -1.0 };
     let (ex, ey) = (s * (to.0 - from.0), s * (to.1 - from.1));
     ey > 0.0 || (ey == 0.0 && ex > 0.0)
+}
+
+/// A bound on the error of each of [`Shear::intersect`]'s `f32` edge functions for
+/// the triangle whose vertices relative to the origin are `r` and whose sheared
+/// coordinates are `s` (as that test computes them): a function whose magnitude
+/// exceeds it has the sign of the exact one, which is the sign of the Plücker product
+/// of the ray and the edge.
+///
+/// Each sheared coordinate `x = r[kx] - (d[kx] / d[kz]) r[kz]` is off by at most
+/// `(2 |r[kx]| + 4 |r[kz]|) 2^-24` (the difference, the quotient, the product and the
+/// subtraction round once each; `|d[kx] / d[kz]| <= 1`), under `E = 2^-21 m` with `m`
+/// the largest `|r|`, plus `2^-147` for underflow. An edge function
+/// `x_q y_p - y_q x_p` is then off by at most `2 E T + 2^-22 T^2` with `T` the largest
+/// `|x| + |y|` plus `E` (the two products and the difference round once each). The
+/// bound is computed with a margin for its own rounding; an overflow makes it
+/// infinite, and the exact test decides.
+#[inline(always)]
+pub(crate) fn edge_error_bound(r: [[f32; 3]; 3], s: [(f32, f32); 3]) -> f32 {
+    let big = |p: [f32; 3]| p[0].abs().max(p[1].abs()).max(p[2].abs());
+    let m = big(r[0]).max(big(r[1])).max(big(r[2]));
+    let e = m * (1.0 / (1u32 << 21) as f32) + f32::from_bits(4); // 2^-147
+    let size = |p: (f32, f32)| p.0.abs() + p.1.abs();
+    let t = size(s[0]).max(size(s[1])).max(size(s[2])) + e;
+    let bound = t * (2.0 * e + t * (1.0 / (1u32 << 22) as f32));
+    bound * (1.0 + 1.0 / (1u32 << 16) as f32) + f32::from_bits(4)
+}
+
+/// [`plane_distance`] correctly rounded: the `f64` quotient where its error bound
+/// leaves one `f32` it can round to, else the exact one (`exact::distance`). `None`
+/// where the ray is parallel to the plane or the distance is past `f32`'s range.
+///
+/// The `f64` numerator `n.(a - o)` and denominator `n.d` (see [`plane_distance`]) are
+/// within `g A` and `g B` of their exact values, with `g = 2^-49` (eight roundings and
+/// more), `A = sum |a - o|_i N_i`, `B = sum |d_i| N_i`, `N_i` the magnitude of the
+/// normal's terms; the quotient then within `(g A + |t| g B) / |n.d|`, plus its own
+/// rounding.
+#[inline(always)]
+pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
+    let v = |i: usize| [t[3 * i] as f64, t[3 * i + 1] as f64, t[3 * i + 2] as f64];
+    let (a, b, c) = (v(0), v(1), v(2));
+    let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let terms = |j: usize, k: usize| (e1[j] * e2[k], e1[k] * e2[j]);
+    let (n0, n1, n2) = (terms(1, 2), terms(2, 0), terms(0, 1));
+    let n = [n0.0 - n0.1, n1.0 - n1.1, n2.0 - n2.1];
+    let big = [n0.0.abs() + n0.1.abs(), n1.0.abs() + n1.1.abs(), n2.0.abs() + n2.1.abs()];
+    let ao = [a[0] - o[0] as f64, a[1] - o[1] as f64, a[2] - o[2] as f64];
+    let d64 = d.map(f64::from);
+    let num = ao[0] * n[0] + ao[1] * n[1] + ao[2] * n[2];
+    let den = d64[0] * n[0] + d64[1] * n[1] + d64[2] * n[2];
+    let g = 2f64.powi(-49);
+    let err_num = g * (ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2]);
+    let err_den = g * (d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2]);
+    let q = num / den;
+    // Decided only where den is far from its error (then |t| <= 2 |q| below).
+    if err_den < 0.25 * den.abs() && q.is_finite() {
+        let err = (err_num + 2.0 * q.abs() * err_den) / den.abs() * (1.0 + 1e-6) + q.abs() * 2f64.powi(-52);
+        let (lo, hi) = ((q - err) as f32, (q + err) as f32);
+        // (Zeros go to the exact path, which signs them.)
+        if lo == hi && lo != 0.0 && lo.is_finite() {
+            return Some(lo);
+        }
+    }
+    crate::exact::distance(o, d, t)
 }
 
 /// Where the ray `o + t d` meets the plane of triangle `t` (nine floats), in `f64`,

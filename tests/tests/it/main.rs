@@ -7,6 +7,7 @@ mod bunny;
 mod crossings;
 mod effects;
 mod environment;
+mod exact;
 mod format;
 mod gltf_lenient;
 mod gpu;

@@ -8,7 +8,7 @@ use octrace_format::layout::{links_before, COARSER_SHIFT, LEAF_HEADER_WORDS};
 
 use super::avx2;
 use crate::cpu::hw::prefetch;
-use crate::cpu::tracer::{Tally, Tracer, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
+use crate::cpu::tracer::{Tally, Tracer, TEST_EXACT, TEST_F64, TEST_MOLLER_TRUMBORE, TEST_WATERTIGHT};
 use crate::cpu::triangle::{intersect_f64, TriRay};
 use crate::cpu::walk::{exit_along_moving_axes, Batch, LeafTest, LeafVisit, RayWalk};
 use crate::cpu::watertight::{plane_distance, Shear};
@@ -283,6 +283,7 @@ impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
                 let o: [f32; 4] = bytemuck::cast(self.o);
                 intersect_f64(&TriRay { o: [o[0], o[1], o[2]], d: self.d_s }, tri, tmin, tmax)
             }
+            TEST_EXACT => self.shear.scalar().intersect_exact(tri, tmin, tmax),
             _ => self.shear.intersect(tri, tmin, tmax),
         }
     }
@@ -301,6 +302,11 @@ impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
         // SAFETY: `wide` is set only where the processor has AVX2 (the tracer's
         // x86-64-v3 walk); `batch_size` is 0 otherwise and the step does not call this.
         unsafe { avx2::hit8::<ANY>(self.shear.scalar(), triangles, refs, tmin, tmax) }
+    }
+
+    #[inline(always)]
+    fn nearer(&self, new: &[f32], kept: &[f32]) -> Option<std::cmp::Ordering> {
+        (TEST == TEST_EXACT).then(|| self.shear.scalar().compare_distances(new, kept))
     }
 
     #[inline(always)]

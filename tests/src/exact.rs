@@ -1,0 +1,450 @@
+//! An exact oracle: every ray–triangle question answered in rational arithmetic
+//! (`num-rational`), by formulas other than the tracer's, so that it can find the
+//! tracer's errors rather than share them.
+//!
+//! The tracer decides a hit by the signs of the edge functions of the ray sheared onto
+//! `+z` (Plücker coordinates, in effect). Here the ray's point on the triangle's plane,
+//! `p = o + t d` with `t = n.(a - o) / n.d`, is computed as a rational and tested
+//! against each edge in the plane: `((q - p0) x (p - p0)).n >= 0` for every edge
+//! `p0 -> q` (closed edges). Where a crossing lies exactly on an edge or a vertex, the
+//! stated rule decides which triangle owns it (`Shear::intersect_owned`): in the plane
+//! the ray is sheared onto, the edge, oriented by the sign of the triangle's sheared
+//! area, must point up, or right when level; at a vertex both of its edges. Distances
+//! are rounded to `f32` by a search over `f32` values compared exactly.
+//!
+//! Stated rules the tracer promises and the oracle follows: a ray lying in a
+//! triangle's plane meets it nowhere; a hit counts where its distance, rounded to the
+//! nearest `f32`, lies in `[tmin, tmax]`; the nearest hit is the exactly nearest, ties
+//! (exactly equal distances) to the lowest input index; crossings come in exact order,
+//! ties by index.
+
+use num_bigint::BigInt;
+use num_rational::BigRational;
+use num_traits::{Signed, Zero};
+use std::cmp::Ordering;
+
+type Q = BigRational;
+
+/// The exact value of an `f32`.
+pub fn rational(x: f32) -> Q {
+    Q::from_float(x).expect("finite")
+}
+
+fn v3(p: [f32; 3]) -> [Q; 3] {
+    p.map(rational)
+}
+
+fn sub(a: &[Q; 3], b: &[Q; 3]) -> [Q; 3] {
+    [&a[0] - &b[0], &a[1] - &b[1], &a[2] - &b[2]]
+}
+
+fn cross(a: &[Q; 3], b: &[Q; 3]) -> [Q; 3] {
+    [&a[1] * &b[2] - &a[2] * &b[1], &a[2] * &b[0] - &a[0] * &b[2], &a[0] * &b[1] - &a[1] * &b[0]]
+}
+
+fn dot(a: &[Q; 3], b: &[Q; 3]) -> Q {
+    &a[0] * &b[0] + &a[1] * &b[1] + &a[2] * &b[2]
+}
+
+fn sign(q: &Q) -> i32 {
+    if q.is_zero() {
+        0
+    } else if q.is_positive() {
+        1
+    } else {
+        -1
+    }
+}
+
+/// `x` rounded to the nearest `f32`, ties to even; `None` past `f32::MAX` (where
+/// rounding gives an infinity).
+pub fn round_f32(x: &Q) -> Option<f32> {
+    if x.is_negative() {
+        let r = round_f32(&-x)?;
+        return Some(-r);
+    }
+    // The largest f32 at or below x, by bisection over the ordered bit patterns.
+    let (mut lo, mut hi) = (0u32, 0x7F80_0000u32); // [0, inf)
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if rational(f32::from_bits(mid)) <= *x {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let below = f32::from_bits(lo);
+    if rational(below) == *x {
+        return Some(below);
+    }
+    // Between `below` and the next value up (2^128 past MAX).
+    let above =
+        if lo + 1 == 0x7F80_0000 { Q::from_integer(BigInt::from(1) << 128) } else { rational(f32::from_bits(lo + 1)) };
+    let mid = (rational(below) + &above) / Q::from_integer(2.into());
+    let up = match x.cmp(&mid) {
+        Ordering::Less => false,
+        Ordering::Greater => true,
+        Ordering::Equal => lo & 1 == 1,
+    };
+    if !up {
+        Some(below)
+    } else if lo + 1 == 0x7F80_0000 {
+        None
+    } else {
+        Some(f32::from_bits(lo + 1))
+    }
+}
+
+/// A ray, exactly.
+pub struct ExactRay {
+    o: [Q; 3],
+    d: [Q; 3],
+    /// The sheared frame's axes, as the tracer picks them.
+    k: [usize; 3],
+    /// `d[kx] / d[kz]`, `d[ky] / d[kz]`, exactly.
+    shear: (Q, Q),
+    tmin: f32,
+    tmax: f32,
+}
+
+/// One hit of the exact oracle.
+#[derive(Clone, Debug)]
+pub struct ExactHit {
+    /// The exact distance.
+    pub t: Q,
+    /// The distance rounded to the nearest `f32`.
+    pub t32: f32,
+    /// Input index.
+    pub triangle: u32,
+    /// Barycentric weights of the second and third vertices.
+    pub u: f64,
+    /// See `u`.
+    pub v: f64,
+    /// Whether the ray arrives on the front (`n.d < 0`).
+    pub enters: bool,
+}
+
+impl ExactRay {
+    /// The ray `o + t d`, `t` in `[tmin, tmax]` (`d` not zero).
+    pub fn new(o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> ExactRay {
+        let a = d.map(f32::abs);
+        let kz = if a[0] >= a[1] && a[0] >= a[2] {
+            0
+        } else if a[1] >= a[2] {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let dq = v3(d);
+        let shear = (&dq[kx] / &dq[kz], &dq[ky] / &dq[kz]);
+        ExactRay { o: v3(o), d: dq, k: [kx, ky, kz], shear, tmin, tmax }
+    }
+
+    /// The sheared-plane coordinates of a vector (a difference of points).
+    fn sheared(&self, e: &[Q; 3]) -> (Q, Q) {
+        let [kx, ky, kz] = self.k;
+        (&e[kx] - &self.shear.0 * &e[kz], &e[ky] - &self.shear.1 * &e[kz])
+    }
+
+    /// The hit of triangle `tri`, whose input index is `id`: edges closed, or owned by
+    /// the rule when `owned`.
+    pub fn hit(&self, tri: &[[f32; 3]; 3], id: u32, owned: bool) -> Option<ExactHit> {
+        let v = tri.map(v3);
+        let e1 = sub(&v[1], &v[0]);
+        let e2 = sub(&v[2], &v[0]);
+        let n = cross(&e1, &e2);
+        let den = dot(&n, &self.d);
+        if den.is_zero() {
+            return None;
+        }
+        let t = dot(&n, &sub(&v[0], &self.o)) / &den;
+        let p = [0, 1, 2].map(|i| &self.o[i] + &t * &self.d[i]);
+        // Which side of each edge p lies, in the plane (positive inside).
+        let side = |i: usize| {
+            let (a, b) = (&v[i], &v[(i + 1) % 3]);
+            sign(&dot(&cross(&sub(b, a), &sub(&p, a)), &n))
+        };
+        // Edges 0->1, 1->2, 2->0.
+        let s = [side(0), side(1), side(2)];
+        if s.contains(&-1) {
+            return None;
+        }
+        if owned && s.contains(&0) {
+            // The sign the tracer's test gives the sheared area (its edge functions
+            // sum to minus the 2D cross product of the sheared edges).
+            let (ax, ay) = self.sheared(&e1);
+            let (bx, by) = self.sheared(&e2);
+            let area = -sign(&(&ax * &by - &ay * &bx));
+            for i in 0..3 {
+                if s[i] != 0 {
+                    continue;
+                }
+                let (ex, ey) = self.sheared(&sub(&v[(i + 1) % 3], &v[i]));
+                let (ex, ey) = (area * sign(&ex), area * sign(&ey));
+                if !(ey > 0 || (ey == 0 && ex > 0)) {
+                    return None;
+                }
+            }
+        }
+        let t32 = round_f32(&t)?;
+        if !(t32 >= self.tmin && t32 <= self.tmax) {
+            return None;
+        }
+        // Barycentrics: areas of the sub-triangles against the whole, along n.
+        let nn = dot(&n, &n);
+        let weight = |i: usize| {
+            let (a, b) = (&v[(i + 1) % 3], &v[(i + 2) % 3]);
+            let w = dot(&cross(&sub(a, &p), &sub(b, &p)), &n) / &nn;
+            num_traits::ToPrimitive::to_f64(&w).unwrap_or(f64::NAN)
+        };
+        Some(ExactHit { t, t32, triangle: id, u: weight(1), v: weight(2), enters: den.is_negative() })
+    }
+}
+
+/// The exact oracle over a triangle list (input indices are positions).
+pub struct ExactOracle<'m> {
+    triangles: &'m [[[f32; 3]; 3]],
+}
+
+impl<'m> ExactOracle<'m> {
+    /// The oracle of `triangles`.
+    pub fn new(triangles: &'m [[[f32; 3]; 3]]) -> ExactOracle<'m> {
+        ExactOracle { triangles }
+    }
+
+    /// Every hit of `ray` (edges closed or owned), in no order. Only the triangles
+    /// whose boxes the ray's line comes near are tested exactly.
+    pub fn hits(&self, ray: &ExactRay, o: [f32; 3], d: [f32; 3], owned: bool) -> Vec<ExactHit> {
+        self.triangles
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| near_line(t, o, d))
+            .filter_map(|(i, t)| ray.hit(t, i as u32, owned))
+            .collect()
+    }
+
+    /// The nearest hit in `[tmin, tmax]` (edges closed), exactly nearest, ties to the
+    /// lowest index.
+    pub fn nearest(&self, o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> Option<ExactHit> {
+        let ray = ExactRay::new(o, d, tmin, tmax);
+        self.hits(&ray, o, d, false).into_iter().min_by(|a, b| a.t.cmp(&b.t).then(a.triangle.cmp(&b.triangle)))
+    }
+
+    /// Every crossing in `[tmin, tmax]` (edges owned), in exact order, ties by index.
+    pub fn crossings(&self, o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> Vec<ExactHit> {
+        let ray = ExactRay::new(o, d, tmin, tmax);
+        let mut hits = self.hits(&ray, o, d, true);
+        hits.sort_by(|a, b| a.t.cmp(&b.t).then(a.triangle.cmp(&b.triangle)));
+        hits
+    }
+}
+
+/// Whether the line `o + t d` passes within a generous margin of the triangle's box
+/// (a cheap prefilter in `f64`: it never drops a triangle the line touches).
+fn near_line(t: &[[f32; 3]; 3], o: [f32; 3], d: [f32; 3]) -> bool {
+    let lo = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::INFINITY, f64::min));
+    let hi = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::NEG_INFINITY, f64::max));
+    let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let scale = (0..3).map(|k| lo[k].abs().max(hi[k].abs()).max((o[k] as f64).abs())).fold(0.0, f64::max);
+    let margin = 1e-6 * (size + scale) + 1e-300;
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..3 {
+        let (lo, hi) = (lo[k] - margin, hi[k] + margin);
+        let (ok, dk) = (o[k] as f64, d[k] as f64);
+        if dk == 0.0 {
+            if ok < lo || ok > hi {
+                return false;
+            }
+            continue;
+        }
+        let (a, b) = ((lo - ok) / dk, (hi - ok) / dk);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    // Loose: the slab distances carry rounding; widen by a relative hair.
+    t0 <= t1 + 1e-9 * (t0.abs() + t1.abs()) || !t0.is_finite() || !t1.is_finite()
+}
+
+/// Whether `p` is inside the closed mesh, exactly, by the tracer's stated rule for
+/// points on the surface (answered as the points just beside them along `dir`): the
+/// parity of the owned crossings of the ray from `p` along `dir` at exact distances
+/// above zero.
+pub fn exact_inside(oracle: &ExactOracle<'_>, p: [f32; 3], dir: [f32; 3]) -> bool {
+    let ray = ExactRay::new(p, dir, f32::NEG_INFINITY, f32::INFINITY);
+    let hits = oracle.hits(&ray, p, dir, true);
+    hits.iter().filter(|h| h.t.is_positive()).count() % 2 == 1
+}
+
+/// Generators of the rays and points exact arithmetic is needed for.
+pub mod hard {
+    /// A small random generator (SplitMix64).
+    pub struct Rng(pub u64);
+
+    impl Rng {
+        /// The next 64 random bits.
+        pub fn next_u64(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+
+        /// Uniform in `[0, 1)`.
+        pub fn unit(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        }
+
+        /// Uniform in `0..n`.
+        pub fn below(&mut self, n: usize) -> usize {
+            (self.next_u64() % n as u64) as usize
+        }
+
+        /// A uniform direction.
+        pub fn direction(&mut self) -> [f64; 3] {
+            let z = 1.0 - 2.0 * self.unit();
+            let phi = std::f64::consts::TAU * self.unit();
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            [r * phi.cos(), r * phi.sin(), z]
+        }
+    }
+
+    /// `x` moved by `k` representable steps (negative: down).
+    pub fn ulps(x: f32, k: i32) -> f32 {
+        let mut x = x;
+        for _ in 0..k.unsigned_abs() {
+            x = if k > 0 { next_up(x) } else { -next_up(-x) };
+        }
+        x
+    }
+
+    fn next_up(x: f32) -> f32 {
+        if x == 0.0 {
+            return f32::from_bits(1);
+        }
+        let b = x.to_bits();
+        f32::from_bits(if x > 0.0 { b + 1 } else { b - 1 })
+    }
+
+    /// Each coordinate moved by -2..=2 ulps at random.
+    pub fn jitter(p: [f32; 3], rng: &mut Rng) -> [f32; 3] {
+        p.map(|c| ulps(c, rng.below(5) as i32 - 2))
+    }
+
+    fn to32(p: [f64; 3]) -> [f32; 3] {
+        p.map(|c| c as f32)
+    }
+
+    /// The kinds of hard rays, by name.
+    pub const RAY_KINDS: [&str; 7] =
+        ["near-vertex", "near-edge", "through-vertex", "grazing", "along-edge", "axis-plane", "far-vertex"];
+
+    /// `n` rays of kind `kind` at `triangles`, as `(origin, direction)`.
+    pub fn rays(triangles: &[[[f32; 3]; 3]], kind: &str, n: usize, seed: u64) -> Vec<([f32; 3], [f32; 3])> {
+        let mut rng = Rng(seed);
+        let lo = [0, 1, 2].map(|k| triangles.iter().flatten().map(|v| v[k]).fold(f32::INFINITY, f32::min));
+        let hi = [0, 1, 2].map(|k| triangles.iter().flatten().map(|v| v[k]).fold(f32::NEG_INFINITY, f32::max));
+        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+        let mut out = Vec::with_capacity(n);
+        while out.len() < n {
+            let tri = triangles[rng.below(triangles.len())];
+            let i = rng.below(3);
+            let (a, b) = (tri[i].map(f64::from), tri[(i + 1) % 3].map(f64::from));
+            let dir = rng.direction();
+            // A point of the ray, and how far back its origin stands.
+            let back = size * (0.2 + rng.unit());
+            let (target, d): ([f64; 3], [f64; 3]) = match kind {
+                "near-vertex" | "through-vertex" | "far-vertex" => (a, dir),
+                "near-edge" => {
+                    let s = rng.unit();
+                    ([0, 1, 2].map(|k| a[k] + s * (b[k] - a[k])), dir)
+                }
+                "grazing" => {
+                    // Along the triangle's plane, tilted off it by about 2^-20.
+                    let c = tri[(i + 2) % 3].map(f64::from);
+                    let e = [0, 1, 2].map(|k| b[k] - a[k]);
+                    let f = [0, 1, 2].map(|k| c[k] - a[k]);
+                    let n = [e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0]];
+                    let (ln, le) = (norm(n), norm(e));
+                    let tilt = (rng.unit() - 0.5) * 2f64.powi(-19);
+                    let s = rng.unit();
+                    let d = [0, 1, 2].map(|k| e[k] / le + (f[k] / norm(f)) * (rng.unit() - 0.5) + tilt * n[k] / ln);
+                    ([0, 1, 2].map(|k| a[k] + s * f[k] * 0.5), d)
+                }
+                "along-edge" => {
+                    let e = [0, 1, 2].map(|k| b[k] - a[k]);
+                    (a, e)
+                }
+                "axis-plane" => {
+                    let mut d = dir;
+                    d[rng.below(3)] = 0.0;
+                    (a, d)
+                }
+                other => panic!("no ray kind {other}"),
+            };
+            let l = norm(d);
+            if l == 0.0 {
+                continue;
+            }
+            let d = d.map(|c| c / l);
+            let back = if kind == "far-vertex" { size * 1e4 } else { back };
+            let o = to32([0, 1, 2].map(|k| target[k] - back * d[k]));
+            let d32 = to32(d);
+            let (o, d32) = match kind {
+                // Exactly through the vertex in f32: the direction is the difference.
+                "through-vertex" => (o, to32([0, 1, 2].map(|k| a[k] - o[k] as f64))),
+                "along-edge" | "axis-plane" => (o, d32),
+                _ => (jitter(o, &mut rng), d32),
+            };
+            if d32 != [0.0; 3] && d32.iter().all(|c| c.is_finite()) {
+                out.push((o, d32));
+            }
+        }
+        out
+    }
+
+    /// The kinds of hard points, by name.
+    pub const POINT_KINDS: [&str; 4] = ["at-vertex", "near-vertex", "near-edge", "subnormal"];
+
+    /// `n` points of kind `kind` at `triangles`.
+    pub fn points(triangles: &[[[f32; 3]; 3]], kind: &str, n: usize, seed: u64) -> Vec<[f32; 3]> {
+        let mut rng = Rng(seed);
+        let mut out = Vec::with_capacity(n);
+        while out.len() < n {
+            let tri = triangles[rng.below(triangles.len())];
+            let i = rng.below(3);
+            let (a, b) = (tri[i], tri[(i + 1) % 3]);
+            let p = match kind {
+                "at-vertex" => a,
+                "near-vertex" => jitter(a, &mut rng),
+                "near-edge" => {
+                    let s = rng.unit();
+                    jitter([0, 1, 2].map(|k| (a[k] as f64 + s * (b[k] as f64 - a[k] as f64)) as f32), &mut rng)
+                }
+                "subnormal" => {
+                    // A vertex's zero coordinates (or its smallest one) moved to a
+                    // subnormal either side.
+                    let mut p = a;
+                    let k = (0..3).min_by(|&x, &y| p[x].abs().total_cmp(&p[y].abs())).unwrap();
+                    let tiny = f32::from_bits(1 + rng.below(4) as u32);
+                    p[k] = if rng.below(2) == 0 { tiny } else { -tiny };
+                    if a[k] != 0.0 {
+                        p[k] += a[k];
+                    }
+                    p
+                }
+                other => panic!("no point kind {other}"),
+            };
+            out.push(p);
+        }
+        out
+    }
+
+    fn norm(v: [f64; 3]) -> f64 {
+        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+    }
+}

@@ -1,0 +1,145 @@
+//! The queries against exact arithmetic (`octrace_tests::exact`, rational, formulas of
+//! its own) on the rays and points that floating point gets wrong: within ulps of
+//! vertices and edges, exactly through vertices, grazing faces, along edges, in
+//! coordinate planes, from far away; points at, beside and a subnormal off vertices.
+//! `OCTRACE_EXACT_RAYS` sets how many of each kind a mesh gets (the audit ran
+//! 10^5 a kind: `OCTRACE_EXACT_RAYS=20000 cargo test --release -p octrace-tests exact`).
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use octrace_bake::procedural::{closed_solids, cube};
+use octrace_bake::{bake, BuildParams, Mesh};
+use octrace_runtime::cpu::{CrossingCount, Solid};
+use octrace_runtime::{Ray, Scene, Tracer, TriangleTest};
+use octrace_tests::exact::{exact_inside, hard, ExactOracle};
+use rayon::prelude::*;
+
+fn per_kind(default: usize) -> usize {
+    std::env::var("OCTRACE_EXACT_RAYS").ok().and_then(|s| s.parse().ok()).unwrap_or(default)
+}
+
+/// The closed meshes: the leak tests' solids and a cube whose vertices have zero
+/// coordinates (where subnormal neighbours live).
+fn meshes() -> Vec<(String, Mesh)> {
+    let mut out: Vec<(String, Mesh)> = closed_solids().into_iter().map(|s| (s.name.to_string(), s.mesh)).collect();
+    out.push(("zero-cube".into(), cube([-1.0; 3], [1.0; 3], 4)));
+    out
+}
+
+/// What a ray's answers got wrong.
+#[derive(Default, Clone, Copy, Debug)]
+struct Wrong {
+    rays: usize,
+    nearest: usize,
+    nearest_batch: usize,
+    lists: usize,
+    counts: usize,
+}
+
+fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &mut Vec<String>) -> usize {
+    let oracle = ExactOracle::new(&mesh.triangles);
+    let mut total = 0;
+    for (k, kind) in hard::RAY_KINDS.iter().enumerate() {
+        let rays = hard::rays(&mesh.triangles, kind, n, 0xE8AC7 + k as u64);
+        let rs: Vec<Ray> = rays.iter().map(|&(o, d)| Ray::new(Vec3::from(o), Vec3::from(d))).collect();
+        let mut batch = vec![None; rs.len()];
+        tracer.intersect_batch(&rs, &mut batch);
+        let mut counts = vec![CrossingCount::default(); rs.len()];
+        tracer.count_crossings_batch(&rs, &mut counts);
+        let wrong = rays
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(o, d))| {
+                let mut w = Wrong { rays: 1, ..Wrong::default() };
+                let want = oracle.nearest(o, d, 0.0, f32::INFINITY).map(|h| (h.t32, h.triangle));
+                let got = tracer.intersect(&rs[i]).map(|h| (h.t, h.triangle));
+                w.nearest += (got != want) as usize;
+                if got != want && std::env::var_os("OCTRACE_EXACT_SHOW").is_some() {
+                    eprintln!("{name} {kind} o {o:?} d {d:?}: nearest {got:?}, exact {want:?}");
+                }
+                w.nearest_batch += (batch[i].map(|h| (h.t, h.triangle)) != want) as usize;
+                let want: Vec<(f32, u32, bool)> =
+                    oracle.crossings(o, d, 0.0, f32::INFINITY).iter().map(|h| (h.t32, h.triangle, h.enters)).collect();
+                let got: Vec<(f32, u32, bool)> =
+                    tracer.all_crossings(&rs[i]).iter().map(|c| (c.t, c.triangle, c.enters)).collect();
+                w.lists += (got != want) as usize;
+                if got != want && std::env::var_os("OCTRACE_EXACT_SHOW").is_some() {
+                    eprintln!("{name} {kind} o {o:?} d {d:?}: crossings {got:?}, exact {want:?}");
+                }
+                let entries = want.iter().filter(|c| c.2).count() as u32;
+                w.counts += (counts[i].total != want.len() as u32 || counts[i].entries != entries) as usize;
+                w
+            })
+            .reduce(Wrong::default, |a, b| Wrong {
+                rays: a.rays + b.rays,
+                nearest: a.nearest + b.nearest,
+                nearest_batch: a.nearest_batch + b.nearest_batch,
+                lists: a.lists + b.lists,
+                counts: a.counts + b.counts,
+            });
+        total += wrong.nearest + wrong.nearest_batch + wrong.lists + wrong.counts;
+        report.push(format!(
+            "{name:10} {kind:15} rays {:6}  nearest {:5}  batch {:5}  lists {:5}  counts {:5}",
+            wrong.rays, wrong.nearest, wrong.nearest_batch, wrong.lists, wrong.counts
+        ));
+    }
+    total
+}
+
+fn check_points(
+    name: &str,
+    mesh: &Mesh,
+    tracer: &Tracer<'_>,
+    solid: &Solid,
+    n: usize,
+    report: &mut Vec<String>,
+) -> usize {
+    let oracle = ExactOracle::new(&mesh.triangles);
+    let dir = octrace_runtime::cpu::COUNT_DIRECTION;
+    let mut total = 0;
+    for (k, kind) in hard::POINT_KINDS.iter().enumerate() {
+        let points = hard::points(&mesh.triangles, kind, n, 0x9017 + k as u64);
+        let mut got = vec![false; points.len()];
+        tracer.contains_batch(solid, &points, &mut got);
+        let wrong: BTreeMap<usize, usize> = points
+            .par_iter()
+            .zip(&got)
+            .map(|(&p, &g)| {
+                let one = tracer.contains(solid, p);
+                let want = exact_inside(&oracle, p, dir);
+                BTreeMap::from([(0, (g != want) as usize), (1, (one != want) as usize)])
+            })
+            .reduce(BTreeMap::new, |mut a, b| {
+                for (k, v) in b {
+                    *a.entry(k).or_default() += v;
+                }
+                a
+            });
+        let (batch, one) = (wrong.get(&0).copied().unwrap_or(0), wrong.get(&1).copied().unwrap_or(0));
+        total += batch + one;
+        report.push(format!("{name:10} {kind:15} points {:5}  contains {one:5}  batch {batch:5}", points.len()));
+    }
+    total
+}
+
+/// The exact test (`TriangleTest::Exact`) answers as exact arithmetic does, ray for
+/// ray, on every kind; the default test's wrong answers are counted beside it (the
+/// gap the exact test closes).
+#[test]
+fn the_exact_test_agrees_with_exact_arithmetic_on_hard_rays_and_points() {
+    let n = per_kind(100);
+    let (mut report, mut default_report) = (Vec::new(), Vec::new());
+    let (mut wrong, mut default_wrong) = (0, 0);
+    for (name, mesh) in meshes() {
+        let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
+        let solid = scene.solid().expect("closed");
+        let exact = scene.tracer().with_triangle_test(TriangleTest::Exact);
+        wrong += check_rays(&format!("{name}*"), &mesh, &exact, n, &mut report);
+        wrong += check_points(&name, &mesh, &exact, solid, n, &mut report);
+        default_wrong += check_rays(&name, &mesh, &scene.tracer(), n, &mut default_report);
+    }
+    eprintln!("exact test:\n{}\ndefault test:\n{}", report.join("\n"), default_report.join("\n"));
+    eprintln!("wrong answers: exact test {wrong}, default test {default_wrong}");
+    assert_eq!(wrong, 0, "answers that differ from exact arithmetic:\n{}", report.join("\n"));
+}
