@@ -29,7 +29,7 @@ fn fixture() -> &'static (Scene, Vec<Ray>, Vec<Ray>) {
     })
 }
 
-#[divan::bench(args = [TriangleTest::Watertight, TriangleTest::MollerTrumbore])]
+#[divan::bench(args = [TriangleTest::Watertight, TriangleTest::MollerTrumbore, TriangleTest::Exact])]
 fn primary_single_thread(bencher: divan::Bencher, test: TriangleTest) {
     let (scene, rays, _) = fixture();
     let tracer = scene.tracer().with_triangle_test(test);
