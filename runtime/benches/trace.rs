@@ -37,10 +37,10 @@ fn primary_single_thread(bencher: divan::Bencher, test: TriangleTest) {
     bencher.counter(divan::counter::ItemsCount::new(rays.len())).bench_local(|| tracer.intersect_batch(rays, &mut out));
 }
 
-#[divan::bench]
-fn incoherent_single_thread(bencher: divan::Bencher) {
+#[divan::bench(args = [TriangleTest::Watertight, TriangleTest::Exact])]
+fn incoherent_single_thread(bencher: divan::Bencher, test: TriangleTest) {
     let (scene, _, rays) = fixture();
-    let tracer = scene.tracer();
+    let tracer = scene.tracer().with_triangle_test(test);
     let mut out: Vec<Option<Hit>> = vec![None; rays.len()];
     bencher.counter(divan::counter::ItemsCount::new(rays.len())).bench_local(|| tracer.intersect_batch(rays, &mut out));
 }

@@ -134,8 +134,7 @@ impl Tracer<'_> {
     ) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         if self.uses_x86_64_v3() {
-            // (The exact test walks ray by ray: the lanes' entry is their own.)
-            if !SLAB && TEST != super::tracer::TEST_EXACT && self.uses_lanes() && simd::lanes::fits(self) {
+            if !SLAB && self.uses_lanes() && simd::lanes::fits(self) {
                 // SAFETY: the processor has the features (as below), and the arrays
                 // fit the gathers.
                 return unsafe { simd::lanes::trace::<ANY, TEST>(self, rays, done) };

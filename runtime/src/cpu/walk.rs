@@ -466,6 +466,12 @@ impl Tracer<'_> {
             match test.batch::<ANY>(v.triangles, chunk, walk.tmin, *walk.t_best) {
                 Batch::Miss => {}
                 Batch::Hit(i, t, u, vv) => {
+                    if t == *walk.t_best {
+                        let data = &v.triangles[chunk[i] as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+                        if !self.replaces(test, chunk[i], data, walk.best.as_ref()) {
+                            continue;
+                        }
+                    }
                     self.keep(walk, chunk[i], box_index, (t, u, vv));
                     if ANY {
                         return true;
@@ -518,6 +524,9 @@ impl Tracer<'_> {
     #[inline(always)]
     fn replaces(&self, test: &impl LeafTest, tri: u32, data: &[f32], kept: Option<&Hit>) -> bool {
         let Some(kept) = kept else { return true };
+        if kept.prim.0 == tri {
+            return false; // the same triangle, met again in a later leaf
+        }
         let v = &self.view;
         let Some(kept_data) =
             v.triangles.get(kept.prim.0 as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))

@@ -158,13 +158,55 @@ impl Shear {
         }
         let decided = u.abs() > bound && v.abs() > bound && w.abs() > bound;
         if !decided {
-            return crate::exact::hit(self.o, self.d, self.k, t, tmin, tmax, OWNED);
+            return self.test_exact_f64::<OWNED>(t, tmin, tmax);
         }
         // All three decided and agreeing: inside, off every edge (so no edge rule),
         // and the plane not parallel to the ray (det is their sum, of one sign).
         let det = u + v + w;
         let dist = plane_distance_rounded(o, self.d, t)?;
         (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
+    }
+
+    /// The second stage of [`Shear::intersect_exact`], where the `f32` bound left a
+    /// sign in doubt: the edge functions times `d[kz]^2` (no quotient:
+    /// `X = r[kx] d[kz] - d[kx] r[kz]`, the form `exact::hit` evaluates on integers)
+    /// in `f64`, each with its error bound, some 2^29 times finer than the `f32` one.
+    /// Only what this leaves in doubt (a ray within about 2^-50 of an edge or a
+    /// vertex, relatively) goes to the integers.
+    ///
+    /// With `m` the largest `|r|` (vertices relative to the origin, exact or within
+    /// `2^-53` in `f64`), each `X` is off by at most `4 (|r[kx] d[kz]| + |d[kx] r[kz]|)
+    /// 2^-53 <= 2^-50 |d[kz]| m`, taken twice over as `E`; an edge function by at most
+    /// `2 E T + 2^-51 T^2` with `T` the largest `|X| + |Y|` plus `E`. Nothing
+    /// underflows or overflows: the products of at most four `f32` values stay within
+    /// `2^-600` to `2^520`.
+    #[cold]
+    #[inline(never)]
+    fn test_exact_f64<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.k;
+        let d = self.d.map(f64::from);
+        let o = self.o.map(f64::from);
+        let rel = |i: usize| [0, 1, 2].map(|k| t[3 * i + k] as f64 - o[k]);
+        let (a, b, c) = (rel(0), rel(1), rel(2));
+        let m = [a, b, c].iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let sheared = |r: [f64; 3]| (r[kx] * d[kz] - d[kx] * r[kz], r[ky] * d[kz] - d[ky] * r[kz]);
+        let (pa, pb, pc) = (sheared(a), sheared(b), sheared(c));
+        let edge = |p: (f64, f64), q: (f64, f64)| q.0 * p.1 - q.1 * p.0;
+        let (u, v, w) = (edge(pb, pc), edge(pc, pa), edge(pa, pb));
+        let e = 2f64.powi(-49) * d[kz].abs() * m;
+        let size = |p: (f64, f64)| p.0.abs() + p.1.abs();
+        let big = size(pa).max(size(pb)).max(size(pc)) + e;
+        let bound = big * (2.0 * e + big * 2f64.powi(-51)) * (1.0 + 2f64.powi(-20));
+        let (pos, neg) = (u > bound || v > bound || w > bound, u < -bound || v < -bound || w < -bound);
+        if pos && neg {
+            return None;
+        }
+        if !(u.abs() > bound && v.abs() > bound && w.abs() > bound) {
+            return crate::exact::hit(self.o, self.d, self.k, t, tmin, tmax, OWNED);
+        }
+        let det = u + v + w;
+        let dist = plane_distance_rounded(self.o, self.d, t)?;
+        (dist >= tmin && dist <= tmax).then_some((dist, (v / det) as f32, (w / det) as f32))
     }
 
     fn test_f64<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {

@@ -15,7 +15,7 @@ use std::arch::x86_64::*;
 use octrace_format::layout::TRIANGLE_FLOATS;
 
 use crate::cpu::walk::Batch;
-use crate::cpu::watertight::Shear;
+use crate::cpu::watertight::{plane_distance_rounded, Shear};
 
 /// Triangles a batch.
 pub(crate) const LANES: usize = 8;
@@ -148,7 +148,7 @@ pub(crate) unsafe fn prefetch_triangles(triangles: &[f32], refs: &[u32]) {
 /// # Safety
 /// The processor must have AVX2.
 #[inline(always)]
-pub(crate) unsafe fn hit8<const ANY: bool>(
+pub(crate) unsafe fn hit8<const ANY: bool, const EXACT: bool>(
     shear: &Shear,
     triangles: &[f32],
     refs: &[u32],
@@ -156,7 +156,7 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
     tmax: f32,
 ) -> Batch {
     // SAFETY: the caller's.
-    let (inside, det, v, w, p) = match unsafe { accepted8(shear, triangles, refs) } {
+    let (inside, det, v, w, p) = match unsafe { accepted8::<EXACT>(shear, triangles, refs) } {
         Accepted::OneByOne => return Batch::OneByOne,
         Accepted::Miss => return Batch::Miss,
         Accepted::Inside { inside, det, v, w, p } => (inside, det, v, w, p),
@@ -175,7 +175,21 @@ pub(crate) unsafe fn hit8<const ANY: bool>(
             let lane = left.trailing_zeros() as usize;
             left &= left - 1;
             let tmax = best.map_or(tmax, |b| b.1);
-            let t = plane_distance(o, d, p[lane]);
+            let t = if EXACT {
+                // Correctly rounded; two hits at one rounded distance are ordered
+                // exactly one by one.
+                let Some(t) =
+                    plane_distance_rounded(shear.origin(), shear.direction(), std::slice::from_raw_parts(p[lane], 9))
+                else {
+                    continue;
+                };
+                if best.is_some_and(|b| b.1 == t) {
+                    return Batch::OneByOne;
+                }
+                t
+            } else {
+                plane_distance(o, d, p[lane])
+            };
             if t >= tmin && t <= tmax {
                 best = Some((lane, t));
                 if ANY {
@@ -207,7 +221,7 @@ enum Accepted {
 /// # Safety
 /// The processor must have AVX2.
 #[inline(always)]
-unsafe fn accepted8(shear: &Shear, triangles: &[f32], refs: &[u32]) -> Accepted {
+unsafe fn accepted8<const EXACT: bool>(shear: &Shear, triangles: &[f32], refs: &[u32]) -> Accepted {
     debug_assert!((1..=LANES).contains(&refs.len()));
     let stored = triangles.len() / TRIANGLE_FLOATS;
     let Some(limit) = stored.checked_sub(1) else { return Accepted::OneByOne };
@@ -271,7 +285,31 @@ unsafe fn accepted8(shear: &Shear, triangles: &[f32], refs: &[u32]) -> Accepted 
         let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
         let used = (1u32 << refs.len()) - 1;
         let zero = _mm256_setzero_ps();
-        if lanes(any3::<_CMP_EQ_OQ>(u, v, w, zero), used) != 0 {
+        if EXACT {
+            // `watertight::edge_error_bound`, lane by lane: a lane whose signs the
+            // bound leaves in doubt (and that two decided signs do not rule out)
+            // sends the batch one by one, to the exact test.
+            let abs = |x: __m256| _mm256_andnot_ps(_mm256_set1_ps(-0.0), x);
+            let max3 = |r: &[__m256; 3]| _mm256_max_ps(_mm256_max_ps(abs(r[0]), abs(r[1])), abs(r[2]));
+            let m = _mm256_max_ps(_mm256_max_ps(max3(&a), max3(&b)), max3(&c));
+            let tiny = _mm256_set1_ps(f32::from_bits(4));
+            let e = _mm256_add_ps(_mm256_mul_ps(m, _mm256_set1_ps(1.0 / (1u32 << 21) as f32)), tiny);
+            let size = |x: __m256, y: __m256| _mm256_add_ps(abs(x), abs(y));
+            let big = _mm256_max_ps(_mm256_max_ps(size(ax, ay), size(bx, by)), size(cx, cy));
+            let big = _mm256_add_ps(big, e);
+            let inner =
+                _mm256_add_ps(_mm256_add_ps(e, e), _mm256_mul_ps(big, _mm256_set1_ps(1.0 / (1u32 << 22) as f32)));
+            let bound = _mm256_mul_ps(_mm256_mul_ps(big, inner), _mm256_set1_ps(1.0 + 1.0 / (1u32 << 16) as f32));
+            let bound = _mm256_add_ps(bound, tiny);
+            let neg_bound = _mm256_sub_ps(zero, bound);
+            let pos = any3::<_CMP_GT_OQ>(u, v, w, bound);
+            let neg = any3::<_CMP_LT_OQ>(u, v, w, neg_bound);
+            let ruled_out = _mm256_and_ps(pos, neg);
+            let doubt = any3::<_CMP_NGT_UQ>(abs(u), abs(v), abs(w), bound);
+            if lanes(_mm256_andnot_ps(ruled_out, doubt), used) != 0 {
+                return Accepted::OneByOne;
+            }
+        } else if lanes(any3::<_CMP_EQ_OQ>(u, v, w, zero), used) != 0 {
             return Accepted::OneByOne;
         }
         let mixed = _mm256_and_ps(any3::<_CMP_LT_OQ>(u, v, w, zero), any3::<_CMP_GT_OQ>(u, v, w, zero));
@@ -307,7 +345,7 @@ pub(crate) unsafe fn crossings8(
     mut found: impl FnMut(usize, f32, f32, f32, bool),
 ) -> bool {
     // SAFETY: the caller's.
-    let (inside, det, v, w, p) = match unsafe { accepted8(shear, triangles, refs) } {
+    let (inside, det, v, w, p) = match unsafe { accepted8::<false>(shear, triangles, refs) } {
         Accepted::OneByOne => return false,
         Accepted::Miss => return true,
         Accepted::Inside { inside, det, v, w, p } => (inside, det, v, w, p),
@@ -471,9 +509,9 @@ mod tests {
                     // SAFETY: the processor has AVX2 (checked above).
                     let got = unsafe {
                         if any {
-                            hit8::<true>(&shear, &tris, &refs, 0.0, tmax)
+                            hit8::<true, false>(&shear, &tris, &refs, 0.0, tmax)
                         } else {
-                            hit8::<false>(&shear, &tris, &refs, 0.0, tmax)
+                            hit8::<false, false>(&shear, &tris, &refs, 0.0, tmax)
                         }
                     };
                     batches += 1;
@@ -506,8 +544,9 @@ mod tests {
         );
         // An index past the triangles is left to the one-by-one path.
         // SAFETY: the processor has AVX2.
-        let past =
-            unsafe { hit8::<false>(&Shear::new([0.0; 3], [0.0, 0.0, 1.0]), &tris, &[0, count as u32], 0.0, 1.0) };
+        let past = unsafe {
+            hit8::<false, false>(&Shear::new([0.0; 3], [0.0, 0.0, 1.0]), &tris, &[0, count as u32], 0.0, 1.0)
+        };
         assert!(matches!(past, Batch::OneByOne));
         // So is one in a full batch of eight (checked all at once), wherever it is.
         for at in 0..LANES {
@@ -515,7 +554,7 @@ mod tests {
             refs[at] = if at % 2 == 0 { count as u32 } else { u32::MAX };
             let shear = Shear::new([0.5, 0.5, 0.0], [0.0, 0.0, 1.0]);
             // SAFETY: the processor has AVX2.
-            let past = unsafe { hit8::<false>(&shear, &tris, &refs, 0.0, 10.0) };
+            let past = unsafe { hit8::<false, false>(&shear, &tris, &refs, 0.0, 10.0) };
             assert!(matches!(past, Batch::OneByOne), "index past the end in lane {at}");
         }
     }

@@ -179,7 +179,11 @@ pub(crate) unsafe fn begin8(t: &Tracer<'_>, rays: &[Ray; LANES]) -> Begun {
             _mm256_and_ps(in_root, in_box),
         );
         let hits = _mm256_movemask_ps(hits) as u32;
-        out.misses = eligible & !hits;
+        // A ray that meets the mesh box but not, after rounding, the root cube (it
+        // grazes the root's edge where the box reaches the root's faces) is left to
+        // the scalar begin, which starts it where it enters the box.
+        let grazes = _mm256_movemask_ps(_mm256_andnot_ps(in_root, in_box)) as u32;
+        out.misses = eligible & !hits & !grazes;
         // Where the walk begins: at the mesh box when it is entered after the walk's
         // start; through the cube map when the ray enters the root after its `tmin`
         // (left to the scalar begin); else at the walk's start.

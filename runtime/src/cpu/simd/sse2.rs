@@ -290,7 +290,7 @@ impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
 
     #[inline(always)]
     fn batch_size(&self) -> usize {
-        if TEST == TEST_WATERTIGHT && self.wide {
+        if (TEST == TEST_WATERTIGHT || TEST == TEST_EXACT) && self.wide {
             avx2::LANES
         } else {
             0
@@ -301,7 +301,13 @@ impl<const TEST: u8, S: WatertightTest> LeafTest for SseTest<'_, TEST, S> {
     fn batch<const ANY: bool>(&self, triangles: &[f32], refs: &[u32], tmin: f32, tmax: f32) -> Batch {
         // SAFETY: `wide` is set only where the processor has AVX2 (the tracer's
         // x86-64-v3 walk); `batch_size` is 0 otherwise and the step does not call this.
-        unsafe { avx2::hit8::<ANY>(self.shear.scalar(), triangles, refs, tmin, tmax) }
+        unsafe {
+            if TEST == TEST_EXACT {
+                avx2::hit8::<ANY, true>(self.shear.scalar(), triangles, refs, tmin, tmax)
+            } else {
+                avx2::hit8::<ANY, false>(self.shear.scalar(), triangles, refs, tmin, tmax)
+            }
+        }
     }
 
     #[inline(always)]
