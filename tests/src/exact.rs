@@ -281,17 +281,20 @@ pub fn exact_inside(oracle: &ExactOracle<'_>, p: [f32; 3], dir: [f32; 3]) -> boo
 
 /// Generators of the rays and points exact arithmetic is needed for.
 pub mod hard {
-    /// A small random generator (SplitMix64).
-    pub struct Rng(pub u64);
+    use octrace_bake::procedural::SplitMix;
+
+    /// The procedural meshes' generator (SplitMix64), drawing in `f64`.
+    pub struct Rng(pub SplitMix);
 
     impl Rng {
+        /// The generator seeded with `seed`.
+        pub fn new(seed: u64) -> Rng {
+            Rng(SplitMix(seed))
+        }
+
         /// The next 64 random bits.
         pub fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
+            self.0.next_u64()
         }
 
         /// Uniform in `[0, 1)`.
@@ -345,7 +348,7 @@ pub mod hard {
 
     /// `n` rays of kind `kind` at `triangles`, as `(origin, direction)`.
     pub fn rays(triangles: &[[[f32; 3]; 3]], kind: &str, n: usize, seed: u64) -> Vec<([f32; 3], [f32; 3])> {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let lo = [0, 1, 2].map(|k| triangles.iter().flatten().map(|v| v[k]).fold(f32::INFINITY, f32::min));
         let hi = [0, 1, 2].map(|k| triangles.iter().flatten().map(|v| v[k]).fold(f32::NEG_INFINITY, f32::max));
         let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
@@ -412,7 +415,7 @@ pub mod hard {
 
     /// `n` points of kind `kind` at `triangles`.
     pub fn points(triangles: &[[[f32; 3]; 3]], kind: &str, n: usize, seed: u64) -> Vec<[f32; 3]> {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let mut out = Vec::with_capacity(n);
         while out.len() < n {
             let tri = triangles[rng.below(triangles.len())];

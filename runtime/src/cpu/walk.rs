@@ -134,9 +134,6 @@ impl LeafTest for ScalarTest<'_, '_> {
         if self.exact && self.tracer.triangle_test() == TriangleTest::Watertight {
             return self.shear.intersect_f64(t, tmin, tmax);
         }
-        if self.tracer.triangle_test() == TriangleTest::Exact {
-            return self.shear.intersect_exact(t, tmin, tmax);
-        }
         self.tracer.hit_triangle(&self.shear, &self.tri, t, tmin, tmax)
     }
 

@@ -138,8 +138,11 @@ impl Shear {
         crate::exact::compare_distances(self.o, self.d, a, b)
     }
 
+    /// What the `f32` tests start from: the vertices of triangle `t` relative to the
+    /// origin, their sheared `x` and `y`, and the edge functions of the edges B->C,
+    /// C->A and A->B.
     #[inline(always)]
-    fn test_exact<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    fn edges(&self, t: &[f32]) -> Edges {
         let [kx, ky, kz] = self.k;
         let [sx, sy, _] = self.s;
         let o = self.o;
@@ -148,10 +151,14 @@ impl Shear {
         let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
         let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
         let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        let bound = edge_error_bound([a, b, c], [(ax, ay), (bx, by), (cx, cy)]);
+        let f = [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax];
+        Edges { rel: [a, b, c], sheared: [(ax, ay), (bx, by), (cx, cy)], f }
+    }
+
+    #[inline(always)]
+    fn test_exact<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let Edges { rel, sheared, f: [u, v, w] } = self.edges(t);
+        let bound = edge_error_bound(rel, sheared);
         let (pos, neg) = (u > bound || v > bound || w > bound, u < -bound || v < -bound || w < -bound);
         if pos && neg {
             return None; // two edges decided, on opposite sides
@@ -163,7 +170,7 @@ impl Shear {
         // All three decided and agreeing: inside, off every edge (so no edge rule),
         // and the plane not parallel to the ray (det is their sum, of one sign).
         let det = u + v + w;
-        let dist = plane_distance_rounded(o, self.d, t)?;
+        let dist = plane_distance_rounded(self.o, self.d, t)?;
         (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
     }
 
@@ -240,20 +247,8 @@ impl Shear {
 
     #[inline(always)]
     fn test<const OWNED: bool>(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
-        let [sx, sy, _] = self.s;
-        let o = self.o;
-        // Vertices relative to the origin.
-        let rel = |i: usize| [t[3 * i] - o[0], t[3 * i + 1] - o[1], t[3 * i + 2] - o[2]];
-        let (a, b, c) = (rel(0), rel(1), rel(2));
-        // Sheared x and y.
-        let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
-        let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
-        let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
-        // Edge functions; exact zeros are decided again in f64.
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
+        let Edges { sheared: [(ax, ay), (bx, by), (cx, cy)], f: [mut u, mut v, mut w], .. } = self.edges(t);
+        // Exact zeros are decided again in f64.
         if u == 0.0 || v == 0.0 || w == 0.0 {
             let e = |px: f32, py: f32, qx: f32, qy: f32| (px as f64 * qy as f64 - py as f64 * qx as f64) as f32;
             u = e(cx, cy, bx, by);
@@ -276,12 +271,19 @@ impl Shear {
                 return None;
             }
         }
-        let dist = plane_distance(o, self.d, t);
+        let dist = plane_distance(self.o, self.d, t);
         // Barycentrics by division: |v| and |w| are at most |det| (the three agree in
         // sign), so the quotients stay in [0, 1] even where det is subnormal (a
         // reciprocal there overflows).
         (dist >= tmin && dist <= tmax).then_some((dist, v / det, w / det))
     }
+}
+
+/// [`Shear::edges`]: a triangle against the sheared ray, in `f32`.
+struct Edges {
+    rel: [[f32; 3]; 3],
+    sheared: [(f32, f32); 3],
+    f: [f32; 3],
 }
 
 /// Whether a triangle whose projected area has the sign of `det` owns its edge from
@@ -325,6 +327,33 @@ pub(crate) fn edge_error_bound(r: [[f32; 3]; 3], s: [(f32, f32); 3]) -> f32 {
     bound * (1.0 + 1.0 / (1u32 << 16) as f32) + f32::from_bits(4)
 }
 
+/// The sums of [`plane_distance`] in `f64`: with `n = (b - a) x (c - a)`, the
+/// numerator `n.(a - o)` and denominator `n.d`, and for their error bound
+/// ([`plane_distance_rounded`]) `a - o` and the magnitude of each of `n`'s components'
+/// two terms.
+struct PlaneSums {
+    num: f64,
+    den: f64,
+    ao: [f64; 3],
+    big: [f64; 3],
+}
+
+#[inline(always)]
+fn plane_sums(o: [f32; 3], d: [f32; 3], t: &[f32]) -> PlaneSums {
+    let v = |i: usize| [t[3 * i] as f64, t[3 * i + 1] as f64, t[3 * i + 2] as f64];
+    let (a, b, c) = (v(0), v(1), v(2));
+    let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let terms = |j: usize, k: usize| (e1[j] * e2[k], e1[k] * e2[j]);
+    let (n0, n1, n2) = (terms(1, 2), terms(2, 0), terms(0, 1));
+    let n = [n0.0 - n0.1, n1.0 - n1.1, n2.0 - n2.1];
+    let big = [n0.0.abs() + n0.1.abs(), n1.0.abs() + n1.1.abs(), n2.0.abs() + n2.1.abs()];
+    let ao = [a[0] - o[0] as f64, a[1] - o[1] as f64, a[2] - o[2] as f64];
+    let num = ao[0] * n[0] + ao[1] * n[1] + ao[2] * n[2];
+    let den = d[0] as f64 * n[0] + d[1] as f64 * n[1] + d[2] as f64 * n[2];
+    PlaneSums { num, den, ao, big }
+}
+
 /// [`plane_distance`] correctly rounded: the `f64` quotient where its error bound
 /// leaves one `f32` it can round to, else the exact one (`exact::distance`). `None`
 /// where the ray is parallel to the plane or the distance is past `f32`'s range.
@@ -336,18 +365,8 @@ pub(crate) fn edge_error_bound(r: [[f32; 3]; 3], s: [(f32, f32); 3]) -> f32 {
 /// rounding.
 #[inline(always)]
 pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
-    let v = |i: usize| [t[3 * i] as f64, t[3 * i + 1] as f64, t[3 * i + 2] as f64];
-    let (a, b, c) = (v(0), v(1), v(2));
-    let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-    let terms = |j: usize, k: usize| (e1[j] * e2[k], e1[k] * e2[j]);
-    let (n0, n1, n2) = (terms(1, 2), terms(2, 0), terms(0, 1));
-    let n = [n0.0 - n0.1, n1.0 - n1.1, n2.0 - n2.1];
-    let big = [n0.0.abs() + n0.1.abs(), n1.0.abs() + n1.1.abs(), n2.0.abs() + n2.1.abs()];
-    let ao = [a[0] - o[0] as f64, a[1] - o[1] as f64, a[2] - o[2] as f64];
+    let PlaneSums { num, den, ao, big } = plane_sums(o, d, t);
     let d64 = d.map(f64::from);
-    let num = ao[0] * n[0] + ao[1] * n[1] + ao[2] * n[2];
-    let den = d64[0] * n[0] + d64[1] * n[1] + d64[2] * n[2];
     let g = 2f64.powi(-49);
     let err_num = g * (ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2]);
     let err_den = g * (d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2]);
@@ -398,14 +417,7 @@ pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32
 /// the adapter has `f64` (`runtime::gpu`).
 #[inline(always)]
 pub fn plane_distance(o: [f32; 3], d: [f32; 3], t: &[f32]) -> f32 {
-    let v = |i: usize| [t[3 * i] as f64, t[3 * i + 1] as f64, t[3 * i + 2] as f64];
-    let (a, b, c) = (v(0), v(1), v(2));
-    let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
-    let ao = [a[0] - o[0] as f64, a[1] - o[1] as f64, a[2] - o[2] as f64];
-    let num = ao[0] * n[0] + ao[1] * n[1] + ao[2] * n[2];
-    let den = d[0] as f64 * n[0] + d[1] as f64 * n[1] + d[2] as f64 * n[2];
+    let PlaneSums { num, den, .. } = plane_sums(o, d, t);
     let t = (num / den) as f32;
     if t.abs() < f32::INFINITY {
         t

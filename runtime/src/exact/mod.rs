@@ -37,8 +37,7 @@ pub(crate) fn hit(
     let [kx, ky, kz] = k;
     let bo = o.map(Big::of);
     let bd = d.map(Big::of);
-    let vertex = |i: usize| [0, 1, 2].map(|c| Big::of(t[3 * i + c]));
-    let (va, vb, vc) = (vertex(0), vertex(1), vertex(2));
+    let [va, vb, vc] = vertices(t);
     let rel = |v: &[Big; 3]| [0, 1, 2].map(|c| v[c].sub(&bo[c]));
     let (ra, rb, rc) = (rel(&va), rel(&vb), rel(&vc));
     // Sheared coordinates, times d[kz].
