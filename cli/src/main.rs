@@ -25,6 +25,7 @@ mod embree;
 #[cfg(feature = "obvhs")]
 mod peer;
 
+use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -82,6 +83,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    quiet_display_probe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bake(a) => cmd::bake::run(a),
@@ -105,6 +107,21 @@ fn main() -> ExitCode {
             eprintln!("octrace: error: {}", output::printable(&message(&e)));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Opening Vulkan (`--gpu`) probes for a Wayland display, and without
+/// `XDG_RUNTIME_DIR` libwayland writes "error: XDG_RUNTIME_DIR is invalid or not set in
+/// the environment." to standard error, once per probe, although nothing is wrong: no
+/// display is needed. Where the variable is unset (or not an absolute path, which
+/// libwayland refuses alike) this points it at a path that does not exist, so the probe
+/// finds no display quietly. A session with a display has the variable and is left as
+/// it is.
+fn quiet_display_probe() {
+    let set = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| Path::new(&d).is_absolute());
+    if !set {
+        // Single-threaded still: nothing else reads the environment yet.
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir().join("octrace-no-display"));
     }
 }
 

@@ -374,6 +374,35 @@ fn trace_answers_a_subnormal_direction_on_every_path() {
     }
 }
 
+/// Without `XDG_RUNTIME_DIR` (a headless machine, a container) `--gpu` says nothing
+/// about it: Vulkan's probe for a display wrote "XDG_RUNTIME_DIR is invalid or not set"
+/// twice, on a run that then succeeded.
+#[test]
+fn the_gpu_without_a_runtime_dir_prints_no_display_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let ray = [0.5f32, 0.5, -1.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY];
+    std::fs::write(d.join("rays.bin"), ray.iter().flat_map(|w| w.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_octrace"))
+        .args(["trace", "cube.oct", "--rays", "rays.bin", "-o", "hits.bin", "--gpu"])
+        .current_dir(d)
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success()
+        && err.contains("no Vulkan adapter")
+        && std::env::var("OCTRACE_REQUIRE_GPU").as_deref() != Ok("1")
+    {
+        eprintln!("SKIPPED the_gpu_without_a_runtime_dir_prints_no_display_error: {err}");
+        return;
+    }
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("XDG_RUNTIME_DIR"), "{err}");
+}
+
 #[test]
 fn compressed_bakes_open_and_inspect_shows_both_sizes() {
     let dir = tempfile::tempdir().unwrap();

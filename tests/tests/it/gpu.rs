@@ -76,6 +76,7 @@ fn the_standard_sets_on_the_bunny_match_the_cpu() {
 
 /// The same on the dragon (871k triangles, a 117 MB file), when `../shared` is there.
 #[test]
+#[cfg_attr(not(octrace_shared), ignore = "needs ../shared beside the clone (README: Set up)")]
 fn the_standard_sets_on_the_dragon_match_the_cpu() {
     let Some(gpu) = gpu("the_standard_sets_on_the_dragon_match_the_cpu") else { return };
     let test = "the_standard_sets_on_the_dragon_match_the_cpu";
@@ -595,21 +596,34 @@ fn vertex_coloured_scene_renders_on_the_gpu_as_on_the_cpu() {
 
 /// Emission through emissive textures on the GPU (issue 34): the glow scene with its
 /// light (the orange panel an area light, soft shadows, the black one none) and without
-/// (the headlight), and DamagedHelmet when `../shared` is there: the CPU's rays of
-/// every kind and its image.
+/// (the headlight): the CPU's rays of every kind and its image.
 #[test]
 fn emissive_textures_render_on_the_gpu_as_on_the_cpu() {
-    use octrace_format::Effect;
-    use octrace_runtime::render::effects::{EffectSet, RayKind, RenderOptions};
     let test = "emissive_textures_render_on_the_gpu_as_on_the_cpu";
     let Some(ctx) = gpu(test) else { return };
-    let mut scenes = vec![
+    let scenes = vec![
         ("glow, lit", crate::materials::glow_scene(true)),
         ("glow, headlight", crate::materials::glow_scene(false)),
     ];
-    if let Some(path) = octrace_tests::shared_file("gltf/DamagedHelmet.glb", test) {
-        scenes.push(("DamagedHelmet", octrace_bake::Mesh::load(path).unwrap()));
-    }
+    emissive_scenes_render_as_on_the_cpu(ctx, scenes);
+}
+
+/// The same on DamagedHelmet (its emissive texture a 2048 x 2048 JPEG).
+#[test]
+#[cfg_attr(not(octrace_shared), ignore = "needs ../shared beside the clone (README: Set up)")]
+fn damaged_helmets_emission_renders_on_the_gpu_as_on_the_cpu() {
+    let test = "damaged_helmets_emission_renders_on_the_gpu_as_on_the_cpu";
+    let Some(ctx) = gpu(test) else { return };
+    let Some(path) = octrace_tests::shared_file("gltf/DamagedHelmet.glb", test) else { return };
+    emissive_scenes_render_as_on_the_cpu(ctx, vec![("DamagedHelmet", octrace_bake::Mesh::load(path).unwrap())]);
+}
+
+fn emissive_scenes_render_as_on_the_cpu(
+    ctx: &octrace_runtime::gpu::GpuContext,
+    scenes: Vec<(&str, octrace_bake::Mesh)>,
+) {
+    use octrace_format::Effect;
+    use octrace_runtime::render::effects::{EffectSet, RayKind, RenderOptions};
     for (name, mesh) in scenes {
         let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
         let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();

@@ -385,6 +385,7 @@ fn vertex_colours_multiply_the_base_colour() {
 /// (within 6 degrees), not at the "Error" one (with the transposed matrix the bake
 /// used before: the other way round, 45 degrees off).
 #[test]
+#[cfg_attr(not(octrace_shared), ignore = "needs ../shared beside the clone (README: Set up)")]
 fn texture_rotation_points_the_arrow_at_the_correct_marker() {
     let test = "texture_rotation_points_the_arrow_at_the_correct_marker";
     let Some(path) = octrace_tests::shared_file("gltf/TextureTransformTest/TextureTransformTest.gltf", test) else {
@@ -606,6 +607,7 @@ fn a_scene_lit_only_through_emissive_textures_keeps_its_headlight() {
 /// the helmet's pixels (lamps, visor displays), not the whole helmet (the white
 /// silhouette of before); and `inspect`'s effects name no whole-surface area light.
 #[test]
+#[cfg_attr(not(octrace_shared), ignore = "needs ../shared beside the clone (README: Set up)")]
 fn damaged_helmet_glows_only_where_its_emissive_texture_is_bright() {
     let test = "damaged_helmet_glows_only_where_its_emissive_texture_is_bright";
     let Some(path) = octrace_tests::shared_file("gltf/DamagedHelmet.glb", test) else { return };
