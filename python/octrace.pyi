@@ -30,12 +30,12 @@ def bake(
     *,
     max_depth: Optional[int] = None,
     leaf_size: int = 16,
-    margin: float = ...,
+    margin: float = 2**-20,
     threads: int = 0,
     allow_outside_references: bool = False,
     max_memory: Optional[int] = None,
-    max_instances: int = ...,
-    max_triangles: int = ...,
+    max_instances: int = 2**20,
+    max_triangles: int = 2**27,
     compress: bool = False,
     level: int = 3,
     record_time: bool = False,
@@ -47,7 +47,7 @@ def bake_arrays(
     *,
     max_depth: Optional[int] = None,
     leaf_size: int = 16,
-    margin: float = ...,
+    margin: float = 2**-20,
     threads: int = 0,
     max_memory: Optional[int] = None,
     compress: bool = False,
@@ -63,7 +63,7 @@ class Scene:
         *,
         max_depth: Optional[int] = None,
         leaf_size: int = 16,
-        margin: float = ...,
+        margin: float = 2**-20,
         threads: int = 0,
         max_memory: Optional[int] = None,
     ) -> "Scene": ...
@@ -74,21 +74,26 @@ class Scene:
     @property
     def bounds(self) -> tuple[list[float], list[float]]: ...
     @property
+    def materials(self) -> list[dict[str, Any]]: ...
+    @property
     def is_closed(self) -> bool: ...
     def inspect(self) -> dict[str, Any]: ...
-    def cast_rays(self, rays: _Rays, nthreads: int = 0) -> dict[str, np.ndarray]: ...
+    def cast_rays(self, rays: _Rays, nthreads: int = 0, *, surface: bool = False) -> dict[str, np.ndarray]: ...
     def test_occlusions(
-        self, rays: _Rays, tnear: float = 0.0, tfar: float = ..., nthreads: int = 0
+        self, rays: _Rays, tnear: float = 0.0, tfar: float = float("inf"), nthreads: int = 0
     ) -> npt.NDArray[np.bool_]: ...
     def count_intersections(self, rays: _Rays, nthreads: int = 0) -> npt.NDArray[np.int32]: ...
     def list_intersections(
         self, rays: _Rays, nthreads: int = 0, *, max_hits: Optional[int] = None, max_memory: Optional[int] = None
     ) -> dict[str, np.ndarray]: ...
     def compute_occupancy(
-        self, query_points: _Points, nthreads: int = 0, nsamples: int = 1
+        self, query_points: _Points, nthreads: int = 0, nsamples: Optional[int] = None
     ) -> npt.NDArray[np.float32]: ...
     def contains(self, query_points: _Points, nthreads: int = 0) -> npt.NDArray[np.bool_]: ...
-    def length_inside(self, rays: _Rays, tmax: float = ..., nthreads: int = 0) -> npt.NDArray[np.float32]: ...
+    def contains_by_vote(
+        self, query_points: _Points, nsamples: int = 3, nthreads: int = 0
+    ) -> npt.NDArray[np.bool_]: ...
+    def length_inside(self, rays: _Rays, tmax: float = float("inf"), nthreads: int = 0) -> npt.NDArray[np.float32]: ...
     @overload
     @staticmethod
     def create_rays_pinhole(

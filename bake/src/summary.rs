@@ -55,16 +55,7 @@ pub fn json(
             "total": b.total(),
         },
         "scene_data": {
-            "materials": v.shading.materials.iter().map(|m| json!({
-                "name": m.name, "base_color": m.base_color, "metallic": m.metallic,
-                "roughness": m.roughness, "emissive": m.emissive,
-                "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
-                "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
-                "unlit": m.unlit, "base_color_texture": m.base_color_texture,
-                "emissive_texture": m.emissive_texture,
-                "metallic_roughness_texture": m.metallic_roughness_texture,
-                "occlusion_texture": m.occlusion_texture, "occlusion_strength": m.occlusion_strength,
-            })).collect::<Vec<_>>(),
+            "materials": v.shading.materials.iter().map(material_json).collect::<Vec<_>>(),
             "parts": v.shading.parts.iter().zip(&surface.parts).map(|(p, edges)| {
                 let mut part = json!({
                     "name": p.name, "first_triangle": p.first, "triangles": p.count,
@@ -147,5 +138,19 @@ fn surface_json(e: &EdgeCensus) -> serde_json::Value {
         "closed": e.is_closed(), "manifold": e.is_manifold(), "oriented": e.is_oriented(),
         "edges": e.edges, "boundary_edges": e.boundary, "non_manifold_edges": e.non_manifold,
         "flipped_edges": e.flipped,
+    })
+}
+
+/// A material as `inspect --json` prints it (`scene_data.materials`).
+pub fn material_json(m: &octrace_format::Material) -> serde_json::Value {
+    json!({
+        "name": m.name, "base_color": m.base_color, "metallic": m.metallic,
+        "roughness": m.roughness, "emissive": m.emissive,
+        "alpha_mode": format!("{:?}", m.alpha_mode).to_uppercase(), "alpha_cutoff": m.alpha_cutoff,
+        "transmission": m.transmission, "ior": m.ior, "specular": m.specular, "illum": m.illum,
+        "unlit": m.unlit, "base_color_texture": m.base_color_texture,
+        "emissive_texture": m.emissive_texture,
+        "metallic_roughness_texture": m.metallic_roughness_texture,
+        "occlusion_texture": m.occlusion_texture, "occlusion_strength": m.occlusion_strength,
     })
 }
