@@ -370,6 +370,12 @@ impl Scene {
     /// * ``create_rays_pinhole(intrinsic_matrix, extrinsic_matrix, width_px, height_px)``:
     ///   a 3x3 intrinsic matrix and the 4x4 world-to-camera transform.
     ///
+    /// Open3D's conventions, kept: ``fov_deg`` is the horizontal field of view (the
+    /// command line's ``--fov`` is vertical; its ``--hfov`` is this one), and the
+    /// camera's x axis is ``up x forward``, so row 0 is the bottom of the picture and
+    /// column 0 its right edge: ``t_hit[::-1, ::-1]`` is the image ``octrace render
+    /// --hfov FOV_DEG --target CENTER --eye EYE --up UP`` draws for the same camera.
+    ///
     /// Example::
     ///
     ///     rays = octrace.Scene.create_rays_pinhole(fov_deg=90, center=[1, 0, 0],

@@ -56,6 +56,15 @@ pub(crate) struct Args {
     /// Vertical field of view in degrees (default 45, or the scene camera's).
     #[arg(long)]
     pub fov: Option<f64>,
+    /// Horizontal field of view in degrees, instead of --fov: Open3D's `fov_deg`
+    /// (`create_rays_pinhole(fov_deg, center, eye, up, width_px, height_px)` is
+    /// `--hfov FOV_DEG --target CENTER --eye EYE --up UP --width W --height H`; its
+    /// rays, row by row, are this image turned half a turn: `depth[::-1, ::-1]`).
+    #[arg(long, conflicts_with_all = ["fov", "camera"])]
+    pub hfov: Option<f64>,
+    /// The camera's up direction `x,y,z` (default `0,1,0`, or the scene camera's).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, conflicts_with = "camera")]
+    pub up: Option<DVec3>,
     /// Render through the scene's camera with this number: a glTF file's camera index
     /// (its `cameras[N]`, placed by the first node that does), as `octrace inspect` lists
     /// them.
@@ -188,6 +197,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             crate::show(&args.output),
             crate::output::printable(&ext.to_string_lossy())
         );
+    }
+    if let Some(fov) = args.hfov {
+        anyhow::ensure!(fov > 0.0 && fov < 180.0, "--hfov must be between 0 and 180 degrees");
     }
     if let Some(fov) = args.fov {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
@@ -381,17 +393,20 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
         return Ok(Camera::from_scene(c, fov, args.width, height));
     }
     let height = args.height.unwrap_or(args.width);
-    Ok(match (args.eye, args.target, args.fov) {
-        (None, None, None) => Camera::standard_sized(&frame, args.width, height),
-        _ => {
-            let standard = Camera::standard(&frame);
-            Camera::look_at(
-                args.eye.unwrap_or(standard.eye),
-                args.target.unwrap_or(frame.c),
-                args.fov.unwrap_or(45.0),
-                args.width,
-                height,
-            )
-        }
-    })
+    if (args.eye, args.target, args.fov, args.hfov, args.up) == (None, None, None, None, None) {
+        return Ok(Camera::standard_sized(&frame, args.width, height));
+    }
+    let eye = args.eye.unwrap_or(Camera::standard(&frame).eye);
+    let mut camera = Camera::look_at(eye, args.target.unwrap_or(frame.c), args.fov.unwrap_or(45.0), args.width, height);
+    if let Some(up) = args.up {
+        // As a scene camera's up: the image's x axis is up x backward.
+        let u = up.cross(camera.w).normalize_or_zero();
+        anyhow::ensure!(u != DVec3::ZERO, "--up is zero or along the view direction");
+        camera.u = u;
+        camera.s = camera.w.cross(u);
+    }
+    if let Some(hfov) = args.hfov {
+        camera.tan_half_fov = (hfov / 2.0).to_radians().tan() * height as f64 / args.width as f64;
+    }
+    Ok(camera)
 }
