@@ -11,7 +11,8 @@
 //! - `pinhole`: `Scene.create_rays_pinhole`, Open3D's cameras;
 //! - `baking`: `octrace.bake` and `octrace.bake_arrays`;
 //! - `arrays`: numpy in and out, the thread pools;
-//! - `errors`: exceptions, and allocations that fail as `MemoryError`.
+//! - `errors`: exceptions, and allocations that fail as `MemoryError`;
+//! - `raycasting_scene.py`: `octrace.RaycastingScene`, Open3D's class over `Scene`.
 
 mod arrays;
 mod baking;
@@ -34,6 +35,11 @@ fn octrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("INVALID_ID", INVALID_ID)?;
     m.add_class::<Scene>()?;
+    // Open3D's `RaycastingScene`, in Python over `Scene` (`raycasting_scene.py`).
+    let code = std::ffi::CString::new(include_str!("raycasting_scene.py")).expect("no NUL in the source");
+    let open3d = PyModule::from_code(py, &code, c"raycasting_scene.py", c"octrace._raycasting_scene")?;
+    m.add("RaycastingScene", open3d.getattr("make")?.call1((py.get_type::<Scene>(), INVALID_ID))?)?;
+    m.add("Tensor", open3d.getattr("Tensor")?)?;
     m.add_function(wrap_pyfunction!(bake, m)?)?;
     m.add_function(wrap_pyfunction!(bake_arrays, m)?)?;
     m.add("FormatError", py.get_type::<FormatError>())?;
