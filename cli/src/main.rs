@@ -88,6 +88,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bake(a) => cmd::bake::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Trace(a) if a.along() => cmd::trace_crossings::run(a),
         Command::Trace(a) => cmd::trace::run(a),
         Command::Rays(a) => cmd::rays::run(a),
         Command::Contains(a) => cmd::contains::run(a),

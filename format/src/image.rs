@@ -6,7 +6,7 @@
 //! texels are first read, so both see the same pixels (and a hash of them, taken at
 //! bake, checks it).
 
-use crate::texture::{ImageKind, MAX_TEXTURE_SIDE};
+use crate::texture::{ImageKind, Texture, MAX_TEXTURE_SIDE};
 
 /// Texels a scene may hold in all (1 GiB of texel data): a bound on what a small file
 /// of many images can make the bake, or the decoding of a baked scene's images,
@@ -175,6 +175,35 @@ fn jpeg(bytes: &[u8], limit: usize) -> Result<Rgba8, String> {
     }
     let pixels = data.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
     Ok(Rgba8 { width: width as u32, height: height as u32, pixels })
+}
+
+/// Reading a texture's encoded image lives here, beside the header readers it calls,
+/// so that `texture` (the records) does not depend on `image` (the codecs' headers).
+impl Texture {
+    /// The bytes of the texture's encoded image in the scene's `images`, once its
+    /// header (read, not decoded) says the kind and size the record says.
+    ///
+    /// # Errors
+    /// A message (without the texture's name) for a texture that is not encoded, an
+    /// image past `images`, a header that cannot be read, or another kind or size.
+    pub fn encoded_image<'a>(&self, images: &'a [u8]) -> Result<&'a [u8], String> {
+        let e = self.encoded.as_ref().ok_or("not encoded")?;
+        let bytes = usize::try_from(e.offset)
+            .ok()
+            .zip(usize::try_from(e.bytes).ok())
+            .and_then(|(at, n)| images.get(at..at.checked_add(n)?))
+            .ok_or_else(|| {
+                format!(
+                    "its image ({} bytes from {}) runs past the {} bytes of images",
+                    e.bytes,
+                    e.offset,
+                    images.len()
+                )
+            })?;
+        let (kind, width, height) = dimensions(bytes)?;
+        self.same_image(kind, width, height)?;
+        Ok(bytes)
+    }
 }
 
 #[cfg(test)]

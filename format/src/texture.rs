@@ -137,31 +137,6 @@ pub struct Encoded {
 }
 
 impl Texture {
-    /// The bytes of the texture's encoded image in the scene's `images`, once its
-    /// header (read, not decoded) says the kind and size the record says.
-    ///
-    /// # Errors
-    /// A message (without the texture's name) for a texture that is not encoded, an
-    /// image past `images`, a header that cannot be read, or another kind or size.
-    pub fn encoded_image<'a>(&self, images: &'a [u8]) -> Result<&'a [u8], String> {
-        let e = self.encoded.as_ref().ok_or("not encoded")?;
-        let bytes = usize::try_from(e.offset)
-            .ok()
-            .zip(usize::try_from(e.bytes).ok())
-            .and_then(|(at, n)| images.get(at..at.checked_add(n)?))
-            .ok_or_else(|| {
-                format!(
-                    "its image ({} bytes from {}) runs past the {} bytes of images",
-                    e.bytes,
-                    e.offset,
-                    images.len()
-                )
-            })?;
-        let (kind, width, height) = crate::image::dimensions(bytes)?;
-        self.same_image(kind, width, height)?;
-        Ok(bytes)
-    }
-
     /// Whether an image of `kind` and `width x height` is the one the record says.
     pub(crate) fn same_image(&self, kind: ImageKind, width: u32, height: u32) -> Result<(), String> {
         let Some(e) = &self.encoded else { return Err("not encoded".into()) };

@@ -12,8 +12,24 @@
 //! included.
 //!
 //! # Example
+//! A scene baked by `octrace bake` (or `octrace_bake`), opened and traced with this
+//! crate alone:
+//! ```no_run
+//! use octrace_runtime::glam::Vec3; // the glam this crate speaks, re-exported
+//! use octrace_runtime::{Ray, Scene};
+//! let scene = Scene::open("bunny.oct")?;
+//! let ray = Ray::new(Vec3::new(0.0, 0.1, 1.0), Vec3::new(0.0, 0.0, -1.0));
+//! if let Some(hit) = scene.intersect(&ray) {
+//!     println!("t = {} on input triangle {}", hit.t, hit.triangle);
+//! }
+//! let hits = scene.intersect_batch(&vec![ray; 1024]); // many rays: on all cores
+//! # let _ = hits;
+//! # Ok::<(), octrace_runtime::Error>(())
 //! ```
-//! use glam::Vec3;
+//!
+//! Baking in the same program, with `octrace-bake`:
+//! ```
+//! use octrace_runtime::glam::Vec3;
 //! use octrace_runtime::{Ray, Scene};
 //! let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 16, 24);
 //! let baked = octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto())?;

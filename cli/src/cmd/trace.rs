@@ -87,15 +87,29 @@ pub(crate) const MISS: u32 = u32::MAX;
 /// The most rays a ray file may hold: 2^32 (128 GiB of rays, 32 GiB of hits).
 pub(crate) const MAX_RAYS: u64 = 1 << 32;
 
-pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+impl Args {
+    /// Whether the command asks a query along each ray (`--all-hits`, `--counts`,
+    /// `--length-inside`: `trace_crossings`) rather than the nearest or any hit.
+    pub(crate) fn along(&self) -> bool {
+        self.all_hits || self.counts || self.length_inside
+    }
+}
+
+/// The command's inputs, checked: the scene, the rays, and whether the output is
+/// standard output.
+pub(crate) fn inputs(args: &Args) -> anyhow::Result<(octrace_runtime::Scene, Vec<Ray>, bool)> {
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.rays])?;
     let to_stdout = crate::output::is_stdout(&args.out);
     let scene = crate::open::open_scene(&args.scene)?;
     let rays: Vec<Ray> = octrace_format::read_records(&args.rays, MAX_RAYS, "ray")
         .with_context(|| format!("cannot read {}", args.rays.display()))?;
-    if args.all_hits || args.counts || args.length_inside {
-        return crate::cmd::trace_crossings::run(&args, &scene, &rays, to_stdout);
-    }
+    Ok((scene, rays, to_stdout))
+}
+
+/// The nearest hit of each ray, or with `--occluded` any hit (the queries along a
+/// ray: `trace_crossings::run`).
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let (scene, rays, to_stdout) = inputs(&args)?;
     let (hits, seconds, on) = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;

@@ -6,14 +6,16 @@ use std::time::Instant;
 use anyhow::Context;
 
 use octrace_runtime::cpu::CrossingCount;
-use octrace_runtime::{Ray, Scene};
+use octrace_runtime::Ray;
 use serde_json::json;
 
 use super::trace::Args;
 use crate::output::{counted, thousands};
 
-/// Traces `rays` in the mode `args` asks for and writes its layout (`trace --help`).
-pub(crate) fn run(args: &Args, scene: &Scene, rays: &[Ray], to_stdout: bool) -> anyhow::Result<()> {
+/// Traces the rays in the mode `args` asks for and writes its layout (`trace --help`).
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    let (scene, rays, to_stdout) = super::trace::inputs(&args)?;
+    let (args, scene, rays) = (&args, &scene, &rays[..]);
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let gpu = args.gpu.then(octrace_runtime::gpu::GpuContext::new).transpose()?;
     let gpu_tracer =

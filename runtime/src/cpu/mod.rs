@@ -14,10 +14,12 @@
 
 mod batch;
 mod crossings;
+mod crossings_batch;
 pub(crate) mod fans;
 mod hw;
 pub(crate) mod inside;
 mod locate;
+mod locate_grid;
 mod one_ray;
 mod order;
 mod simd;
@@ -27,12 +29,13 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
+pub use crossings::{Crossing, CrossingCount};
 #[cfg(feature = "gpu")]
-pub(crate) use crossings::over_budget;
-pub use crossings::{BatchCrossings, Crossing, CrossingCount, CROSSING_BYTES};
+pub(crate) use crossings_batch::over_budget;
+pub use crossings_batch::{BatchCrossings, CROSSING_BYTES};
 pub use fans::{FanIndex, FanSummary, MIN_REFERENCES as FAN_MIN_REFERENCES, MIN_TRIANGLES as FAN_MIN_TRIANGLES};
 pub use inside::{Solid, COUNT_DIRECTION};
-pub use locate::LocateGrid;
+pub use locate_grid::LocateGrid;
 pub(crate) use tracer::{box_slack, BOX_T_SLACK};
 pub use tracer::{mesh_box, root_corners, ExitTest, MemoryOrder, Tracer, TreeFrame, TriangleTest, WalkStats};
 pub(crate) use walk::{clip, exit_along_moving_axes, point_at};

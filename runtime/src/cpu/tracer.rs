@@ -7,7 +7,7 @@ use octrace_format::layout::MAX_LEVEL;
 use octrace_format::SceneView;
 
 use super::fans::FanIndex;
-use super::locate::LocateGrid;
+use super::locate_grid::LocateGrid;
 use super::tables::RuleScale;
 use super::triangle::{intersect, intersect_f64, TriRay};
 use super::watertight::Shear;

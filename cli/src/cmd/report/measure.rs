@@ -9,8 +9,6 @@ use octrace_runtime::{Hit, Ray, Scene, Tracer};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::hard::HardSet;
-
 /// A tracer's answer for one ray.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Answer {
@@ -187,14 +185,9 @@ pub(super) struct Measured {
     pub hard: Vec<(&'static str, Errors)>,
 }
 
-/// Measures `traced` on `sets` (`runs` timed runs a set) and on `hard`.
-pub(super) fn measure(
-    traced: &dyn Traced,
-    far: Option<&dyn Traced>,
-    sets: &Sets,
-    hard: &HardSet,
-    runs: usize,
-) -> Measured {
+/// Measures `traced` on `sets` (`runs` timed runs a set); the hard rays' errors are
+/// the caller's to fill in (`HardSet::errors`).
+pub(super) fn measure(traced: &dyn Traced, sets: &Sets, runs: usize) -> Measured {
     let mut speeds = Vec::new();
     let mut errors = Errors::default();
     for (s, (_, rays, occlusion)) in sets.sets.iter().enumerate() {
@@ -210,8 +203,7 @@ pub(super) fn measure(
             errors.add(&sets.reference, &rays[i], &sets.wants[s][j], last[i]);
         }
     }
-    let hard = hard.errors(traced, far);
-    Measured { speeds, errors, hard }
+    Measured { speeds, errors, hard: Vec::new() }
 }
 
 /// Errors of `answers` for `rays` against the oracle's `wants`.

@@ -247,7 +247,8 @@ fn mesh_report(
         let built = if config == Config::Knob(Knob::Defaults) { None } else { Some(config.build(mesh, &base)?) };
         let built = built.as_ref().unwrap_or(&defaults);
         let far = config.build(&hard.far_mesh, &far_base)?;
-        let m = measure::measure(&*built.traced, Some(&*far.traced), &sets, &hard, args.runs);
+        let mut m = measure::measure(&*built.traced, &sets, args.runs);
+        m.hard = hard.errors(&*built.traced, Some(&*far.traced));
         let (leaks_per_million, leak_rays) = leaks::rate(leaks);
         let hard_errors: Vec<HardErrors> =
             m.hard.into_iter().map(|(kind, errors)| HardErrors { kind, errors }).collect();
