@@ -22,10 +22,7 @@ pub(crate) fn open_scene(path: &Path) -> anyhow::Result<Scene> {
             "{} is a mesh ({}), not a baked scene: bake it first (octrace bake {} -o scene.oct), then \
              use scene.oct",
             path.display(),
-            match format {
-                octrace_bake::MeshFormat::Obj => "OBJ",
-                octrace_bake::MeshFormat::Gltf => "glTF",
-            },
+            format.name(),
             path.display()
         );
     }

@@ -63,20 +63,16 @@ pub(crate) fn open_error(e: octrace_runtime::Error, path: &Path) -> PyErr {
             e @ (octrace_format::Error::Io { .. } | octrace_format::Error::Write { .. }),
         ) => format_error(e),
         // A mesh given where a baked scene is wanted: say what to do, as the CLI does.
-        octrace_runtime::Error::Format(_) if octrace_bake::MeshFormat::from_path(path).is_some() => {
-            let (format, _) = octrace_bake::MeshFormat::from_path(path).expect("just matched");
-            FormatError::new_err(format!(
+        octrace_runtime::Error::Format(e) => match octrace_bake::MeshFormat::from_path(path) {
+            Some((format, _)) => FormatError::new_err(format!(
                 "{} is a mesh ({}), not a baked scene: bake it first (octrace.bake('{}', 'scene.oct')), then \
                  open scene.oct",
                 path.display(),
-                match format {
-                    octrace_bake::MeshFormat::Obj => "OBJ",
-                    octrace_bake::MeshFormat::Gltf => "glTF",
-                },
+                format.name(),
                 path.display()
-            ))
-        }
-        octrace_runtime::Error::Format(e) => FormatError::new_err(format!("{}: {e}", path.display())),
+            )),
+            None => FormatError::new_err(format!("{}: {e}", path.display())),
+        },
         e => runtime_error(e),
     }
 }

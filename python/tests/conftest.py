@@ -84,3 +84,14 @@ def cube_arrays(lo=0.0, hi=1.0):
     quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
     t = [[a, b, c] for a, b, c, d in quads] + [[a, c, d] for a, b, c, d in quads]
     return v, np.array(t, np.int64)
+
+
+class Tensor:
+    """What Open3D's (and PyTorch's) CPU tensors offer numpy: a `numpy()` method, and
+    no element-by-element sequence protocol numpy could read."""
+
+    def __init__(self, array):
+        self._array = np.asarray(array)
+
+    def numpy(self):
+        return self._array

@@ -10,18 +10,7 @@ import numpy as np
 import pytest
 
 import octrace
-from conftest import BUNNY, cube_arrays
-
-
-class Tensor:
-    """What Open3D's (and PyTorch's) CPU tensors offer numpy: a `numpy()` method, and
-    no element-by-element sequence protocol numpy could read."""
-
-    def __init__(self, array):
-        self._array = np.asarray(array)
-
-    def numpy(self):
-        return self._array
+from conftest import BUNNY, Tensor, cube_arrays
 
 
 def points_in_box(lo, hi, n, seed=5):

@@ -9,17 +9,7 @@ import numpy as np
 import pytest
 
 import octrace
-from conftest import cube_arrays
-
-
-class Tensor:
-    """An Open3D tensor as octrace reads one: ``numpy()``."""
-
-    def __init__(self, array):
-        self._array = np.asarray(array)
-
-    def numpy(self):
-        return self._array
+from conftest import Tensor, cube_arrays
 
 
 def tensor_mesh(vertices, triangles):

@@ -362,6 +362,14 @@ impl MeshFormat {
         };
         Some((format, zst))
     }
+
+    /// The format's name as people write it: `OBJ`, `glTF`.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshFormat::Obj => "OBJ",
+            MeshFormat::Gltf => "glTF",
+        }
+    }
 }
 
 impl Mesh {
