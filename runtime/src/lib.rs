@@ -64,7 +64,7 @@ pub use glam;
 /// types the runtime hands out.
 pub use octrace_format as format;
 
-pub use cpu::{ExitTest, MemoryOrder, Tracer, TriangleTest, WalkStats};
+pub use cpu::{ClosestPoint, ExitTest, MemoryOrder, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
 pub use ray::{Hit, Ray};
 pub use scene::Scene;

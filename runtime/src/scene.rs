@@ -5,7 +5,7 @@ use std::path::Path;
 use octrace_format::topology::EdgeCensus;
 use octrace_format::{BakedScene, SceneFile, SceneView};
 
-use crate::cpu::{BatchCrossings, Crossing, CrossingCount, LocateGrid, Solid, Tracer};
+use crate::cpu::{BatchCrossings, ClosestPoint, Crossing, CrossingCount, LocateGrid, Solid, Tracer};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 
@@ -54,6 +54,8 @@ struct Inner {
     solid: std::sync::OnceLock<std::result::Result<crate::cpu::Solid, (u64, u64)>>,
     /// The stored triangles' edge census, counted on first use.
     edges: std::sync::OnceLock<EdgeCensus>,
+    /// The closest-point search's bounds, made on its first query.
+    bounds: std::sync::OnceLock<crate::cpu::SurfaceBounds>,
 }
 
 impl std::fmt::Debug for Scene {
@@ -144,6 +146,7 @@ impl Scene {
             frame: std::sync::OnceLock::new(),
             solid: std::sync::OnceLock::new(),
             edges: std::sync::OnceLock::new(),
+            bounds: std::sync::OnceLock::new(),
         };
         Scene { shared: std::sync::OnceLock::new(), inner: Box::new(inner) }
     }
@@ -361,6 +364,86 @@ impl Scene {
         let mut out = vec![0.0; rays.len()];
         self.tracer().par_length_inside(solid, rays, &mut out);
         Ok(out)
+    }
+}
+
+impl Scene {
+    /// The point of the surface nearest `p`: the distance exact, correctly rounded to
+    /// `f32`, the triangle the nearest (of equally near ones, the lowest input index),
+    /// the point and its barycentrics rounded from `f64` ([`Tracer::closest_point`]).
+    /// `None` for a scene without triangles or a point that is not finite.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::Scene;
+    /// let ball = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let near = ball.closest_point([0.0, 0.0, 3.0]).expect("a surface");
+    /// assert!((near.distance - 2.0).abs() < 1e-6); // the pole, a vertex
+    /// assert_eq!(near.point[2], 1.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn closest_point(&self, p: [f32; 3]) -> Option<ClosestPoint> {
+        self.shared_tracer().closest_point(self.surface_bounds(), p, f32::INFINITY)
+    }
+
+    /// The boxes of the surface in the point-location tree's nodes, which the
+    /// closest-point search prunes with ([`crate::cpu::SurfaceBounds`]): made on the
+    /// first call (reading every leaf's triangles once: milliseconds for the bunny).
+    pub fn surface_bounds(&self) -> &crate::cpu::SurfaceBounds {
+        self.inner.bounds.get_or_init(|| crate::cpu::SurfaceBounds::of(self.shared_tracer()))
+    }
+
+    /// [`Scene::closest_point`] if it lies at most `max_distance` from `p` (the rounded
+    /// distance compared): a band around the surface, whose far points are answered
+    /// `None` sooner.
+    pub fn closest_point_within(&self, p: [f32; 3], max_distance: f32) -> Option<ClosestPoint> {
+        self.shared_tracer().closest_point(self.surface_bounds(), p, max_distance)
+    }
+
+    /// [`Scene::closest_point_within`] for many points, on all cores (`f32::INFINITY`
+    /// for no limit).
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Vec<Option<ClosestPoint>> {
+        let mut out = vec![None; points.len()];
+        self.tracer().par_closest_point_batch(self.surface_bounds(), points, max_distance, &mut out);
+        out
+    }
+
+    /// The signed distance of each point from the scene, a closed mesh, on all cores:
+    /// [`Scene::closest_point`]'s distance, negative inside ([`Scene::contains`]: the
+    /// sign is exact, never a vote; a point on the surface is at `0`). Past
+    /// `max_distance`, infinity of the point's sign.
+    ///
+    /// # Errors
+    /// [`Error::NotClosed`] when the scene is not closed.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::Scene;
+    /// let ball = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let pole = ball.closest_point([0.0, 0.0, 3.0]).expect("a surface").point; // a vertex
+    /// let d = ball.signed_distance_batch(&[[0.0; 3], [0.0, 0.0, 3.0], pole], 1.5)?;
+    /// assert!(d[0] < -0.9 && d[0] > -1.0);
+    /// assert_eq!(d[1], f32::INFINITY);
+    /// assert_eq!(d[2], 0.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn signed_distance_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<f32>> {
+        let inside = self.contains_batch(points)?;
+        let near = self.closest_points_batch(points, max_distance);
+        Ok(near
+            .iter()
+            .zip(inside)
+            .map(|(c, inside)| {
+                let d = c.map_or(f32::INFINITY, |c| c.distance);
+                if inside && d != 0.0 {
+                    -d
+                } else {
+                    d
+                }
+            })
+            .collect())
     }
 }
 

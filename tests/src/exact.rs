@@ -451,3 +451,103 @@ pub mod hard {
         (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
     }
 }
+
+/// The exact squared distance from `p` to the triangle `t`, by construction: the foot
+/// of the perpendicular on the plane where it lies in the closed triangle, else the
+/// nearest of the edges' clamped feet (not the tracer's formulas: its foot is never
+/// formed).
+pub fn squared_distance(p: [f32; 3], t: [[f32; 3]; 3]) -> Q {
+    let p = v3(p);
+    let v = t.map(v3);
+    let n = cross(&sub(&v[1], &v[0]), &sub(&v[2], &v[0]));
+    let nn = dot(&n, &n);
+    if !nn.is_zero() {
+        let s = dot(&n, &sub(&p, &v[0])) / &nn;
+        let foot = [0, 1, 2].map(|k| &p[k] - &n[k] * &s);
+        let inside = (0..3).all(|i| {
+            let (a, b) = (&v[i], &v[(i + 1) % 3]);
+            sign(&dot(&cross(&sub(b, a), &sub(&foot, a)), &n)) >= 0
+        });
+        if inside {
+            let d = sub(&foot, &p);
+            return dot(&d, &d);
+        }
+    }
+    (0..3)
+        .map(|i| {
+            let (a, b) = (&v[i], &v[(i + 1) % 3]);
+            let e = sub(b, a);
+            let ee = dot(&e, &e);
+            let s = if ee.is_zero() {
+                Q::zero()
+            } else {
+                (dot(&sub(&p, a), &e) / &ee).clamp(Q::zero(), Q::from_integer(1.into()))
+            };
+            let d = sub(&[0, 1, 2].map(|k| &a[k] + &e[k] * &s), &p);
+            dot(&d, &d)
+        })
+        .min()
+        .expect("three edges")
+}
+
+/// `sqrt(x)` (`x >= 0`) rounded to the nearest `f32`, ties to even, infinity past
+/// `f32::MAX`: the largest `f32` whose square is at most `x`, by bisection over the
+/// ordered bit patterns, then the midpoint above it compared by squares.
+pub fn round_sqrt_f32(x: &Q) -> f32 {
+    let (mut lo, mut hi) = (0u32, 0x7F80_0000u32);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        let r = rational(f32::from_bits(mid));
+        if &r * &r <= *x {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let below = rational(f32::from_bits(lo));
+    if &below * &below == *x {
+        return f32::from_bits(lo);
+    }
+    let above =
+        if lo + 1 == 0x7F80_0000 { Q::from_integer(BigInt::from(1) << 128) } else { rational(f32::from_bits(lo + 1)) };
+    let mid = (below + above) / Q::from_integer(2.into());
+    let up = match x.cmp(&(&mid * &mid)) {
+        Ordering::Less => false,
+        Ordering::Greater => true,
+        Ordering::Equal => lo & 1 == 1,
+    };
+    match (up, lo + 1 == 0x7F80_0000) {
+        (false, _) => f32::from_bits(lo),
+        (true, true) => f32::INFINITY,
+        (true, false) => f32::from_bits(lo + 1),
+    }
+}
+
+/// The exact closest of `triangles` (input indices `ids`) to `p` and the distance
+/// rounded to `f32`: the least exact squared distance, ties to the lowest index. Exact arithmetic runs on the triangles an `f64` screen cannot rule out
+/// (within `1e-7` of the box's size of the `f64` least).
+pub fn closest(p: [f32; 3], triangles: &[[[f32; 3]; 3]], ids: &[u32]) -> Option<(f32, u32)> {
+    let pd = p.map(f64::from);
+    let size = triangles.iter().flatten().flatten().fold(0f64, |m, &x| m.max((x as f64).abs())).max(1.0);
+    let screen: Vec<f64> = triangles
+        .iter()
+        .map(|t| {
+            let t = t.map(|v| glam::DVec3::from(v.map(f64::from)));
+            (octrace_runtime::reference::nearest_on_triangle(pd.into(), &t) - glam::DVec3::from(pd)).length()
+        })
+        .collect();
+    let least = screen.iter().copied().fold(f64::INFINITY, f64::min);
+    let slack = 1e-7 * (least + size);
+    let mut best: Option<(Q, u32)> = None;
+    for (i, t) in triangles.iter().enumerate() {
+        if screen[i] > least + slack {
+            continue;
+        }
+        let d2 = squared_distance(p, *t);
+        let id = ids[i];
+        if best.as_ref().is_none_or(|(b, j)| d2 < *b || (d2 == *b && id < *j)) {
+            best = Some((d2, id));
+        }
+    }
+    best.map(|(d2, i)| (round_sqrt_f32(&d2), i))
+}

@@ -13,6 +13,7 @@
 //! (`tracer`, `walk`, `locate`), the walk below `simd/`, `simd/` below the calls.
 
 mod batch;
+mod closest;
 mod crossings;
 mod crossings_batch;
 pub(crate) mod fans;
@@ -29,6 +30,7 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
+pub use closest::{ClosestPoint, ClosestScratch, SurfaceBounds};
 pub use crossings::{Crossing, CrossingCount};
 #[cfg(feature = "gpu")]
 pub(crate) use crossings_batch::over_budget;

@@ -12,15 +12,22 @@ use std::cmp::Ordering;
 /// Limbs of a [`Big`].
 const LIMBS: usize = 28;
 
-/// A signed integer of up to 1,792 bits (see the module docs).
+/// A signed integer of up to 1,792 bits (see the module docs): the predicates' width.
+pub(crate) type Big = Wide<LIMBS>;
+
+/// A signed integer of up to `64 L` bits. The distance tests compare products of
+/// ten differences of `f32`s (`exact::distance`): [`Wider`].
 #[derive(Clone, Copy)]
-pub(crate) struct Big {
+pub(crate) struct Wide<const L: usize> {
     neg: bool,
     len: usize,
-    mag: [u64; LIMBS],
+    mag: [u64; L],
 }
 
-impl std::fmt::Debug for Big {
+/// 3,072 bits: ten factors of 279 bits and their sums' carries.
+pub(crate) type Wider = Wide<48>;
+
+impl<const L: usize> std::fmt::Debug for Wide<L> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}0x", if self.neg { "-" } else { "" })?;
         if self.len == 0 {
@@ -37,12 +44,12 @@ impl std::fmt::Debug for Big {
     }
 }
 
-impl Big {
+impl<const L: usize> Wide<L> {
     /// Zero.
-    pub const ZERO: Big = Big { neg: false, len: 0, mag: [0; LIMBS] };
+    pub const ZERO: Self = Wide { neg: false, len: 0, mag: [0; L] };
 
     /// `x * 2^149`, exactly (`x` finite).
-    pub fn of(x: f32) -> Big {
+    pub fn of(x: f32) -> Self {
         debug_assert!(x.is_finite());
         let bits = x.to_bits();
         let exponent = (bits >> 23) & 0xFF;
@@ -50,12 +57,12 @@ impl Big {
         // A normal number is (1.f) 2^(e - 127) = (2^23 + f) 2^(e - 150); a subnormal
         // one f 2^-149.
         let (mantissa, shift) = if exponent == 0 { (fraction, 0) } else { (fraction | 1 << 23, exponent - 1) };
-        Big::from_u64(mantissa).shl(shift as usize).negate_if(bits >> 31 == 1)
+        Self::from_u64(mantissa).shl(shift as usize).negate_if(bits >> 31 == 1)
     }
 
     /// A small non-negative integer.
-    pub fn from_u64(x: u64) -> Big {
-        let mut b = Big::ZERO;
+    pub fn from_u64(x: u64) -> Self {
+        let mut b = Self::ZERO;
         if x != 0 {
             b.mag[0] = x;
             b.len = 1;
@@ -83,7 +90,7 @@ impl Big {
     }
 
     /// The value negated when `neg`.
-    pub fn negate_if(mut self, neg: bool) -> Big {
+    pub fn negate_if(mut self, neg: bool) -> Self {
         if neg && self.len != 0 {
             self.neg = !self.neg;
         }
@@ -91,29 +98,29 @@ impl Big {
     }
 
     /// `-self`.
-    pub fn neg(self) -> Big {
+    pub fn neg(self) -> Self {
         self.negate_if(true)
     }
 
     /// `self * 2^n`.
-    pub fn shl(self, n: usize) -> Big {
+    pub fn shl(self, n: usize) -> Self {
         if self.len == 0 {
             return self;
         }
         let (words, bits) = (n / 64, n % 64);
-        let mut out = Big { neg: self.neg, len: 0, mag: [0; LIMBS] };
+        let mut out = Wide { neg: self.neg, len: 0, mag: [0; L] };
         for i in 0..self.len {
             let limb = self.mag[i];
             out.mag[i + words] |= limb << bits;
-            if bits != 0 && i + words + 1 < LIMBS {
+            if bits != 0 && i + words + 1 < L {
                 out.mag[i + words + 1] |= limb >> (64 - bits);
             }
         }
-        out.len = (self.len + words + 1).min(LIMBS);
+        out.len = (self.len + words + 1).min(L);
         out.trim()
     }
 
-    fn trim(mut self) -> Big {
+    fn trim(mut self) -> Self {
         while self.len > 0 && self.mag[self.len - 1] == 0 {
             self.len -= 1;
         }
@@ -124,7 +131,7 @@ impl Big {
     }
 
     /// Compares magnitudes.
-    fn cmp_mag(&self, other: &Big) -> Ordering {
+    fn cmp_mag(&self, other: &Self) -> Ordering {
         if self.len != other.len {
             return self.len.cmp(&other.len);
         }
@@ -138,9 +145,9 @@ impl Big {
     }
 
     /// `|a| + |b|` with the sign `neg`.
-    fn add_mag(a: &Big, b: &Big, neg: bool) -> Big {
+    fn add_mag(a: &Self, b: &Self, neg: bool) -> Self {
         let n = a.len.max(b.len);
-        let mut out = Big { neg, len: 0, mag: [0; LIMBS] };
+        let mut out = Wide { neg, len: 0, mag: [0; L] };
         let mut carry = 0u64;
         for i in 0..n {
             let (s1, c1) = a.mag[i].overflowing_add(b.mag[i]);
@@ -148,17 +155,17 @@ impl Big {
             out.mag[i] = s2;
             carry = (c1 | c2) as u64;
         }
-        assert!(n < LIMBS || carry == 0, "exact arithmetic overflowed its width");
-        if n < LIMBS {
+        assert!(n < L || carry == 0, "exact arithmetic overflowed its width");
+        if n < L {
             out.mag[n] = carry;
         }
-        out.len = (n + 1).min(LIMBS);
+        out.len = (n + 1).min(L);
         out.trim()
     }
 
     /// `|a| - |b|` (`|a| >= |b|`) with the sign `neg`.
-    fn sub_mag(a: &Big, b: &Big, neg: bool) -> Big {
-        let mut out = Big { neg, len: a.len, mag: [0; LIMBS] };
+    fn sub_mag(a: &Self, b: &Self, neg: bool) -> Self {
+        let mut out = Wide { neg, len: a.len, mag: [0; L] };
         let mut borrow = 0u64;
         for i in 0..a.len {
             let (d1, b1) = a.mag[i].overflowing_sub(b.mag[i]);
@@ -171,28 +178,28 @@ impl Big {
     }
 
     /// `self + other`.
-    pub fn add(&self, other: &Big) -> Big {
+    pub fn add(&self, other: &Self) -> Self {
         if self.neg == other.neg {
-            return Big::add_mag(self, other, self.neg);
+            return Self::add_mag(self, other, self.neg);
         }
         match self.cmp_mag(other) {
-            Ordering::Less => Big::sub_mag(other, self, other.neg),
-            _ => Big::sub_mag(self, other, self.neg),
+            Ordering::Less => Self::sub_mag(other, self, other.neg),
+            _ => Self::sub_mag(self, other, self.neg),
         }
     }
 
     /// `self - other`.
-    pub fn sub(&self, other: &Big) -> Big {
+    pub fn sub(&self, other: &Self) -> Self {
         self.add(&other.neg())
     }
 
     /// `self * other`.
-    pub fn mul(&self, other: &Big) -> Big {
+    pub fn mul(&self, other: &Self) -> Self {
         if self.len == 0 || other.len == 0 {
-            return Big::ZERO;
+            return Self::ZERO;
         }
-        assert!(self.len + other.len <= LIMBS + 1, "exact arithmetic overflowed its width");
-        let mut out = Big { neg: self.neg != other.neg, len: 0, mag: [0; LIMBS] };
+        assert!(self.len + other.len <= L + 1, "exact arithmetic overflowed its width");
+        let mut out = Wide { neg: self.neg != other.neg, len: 0, mag: [0; L] };
         for i in 0..self.len {
             let mut carry = 0u128;
             let a = self.mag[i] as u128;
@@ -203,18 +210,18 @@ impl Big {
                 carry = cur >> 64;
             }
             let k = i + other.len;
-            if k < LIMBS {
+            if k < L {
                 out.mag[k] = carry as u64;
             } else {
                 assert_eq!(carry, 0, "exact arithmetic overflowed its width");
             }
         }
-        out.len = (self.len + other.len).min(LIMBS);
+        out.len = (self.len + other.len).min(L);
         out.trim()
     }
 
     /// Compares values.
-    pub fn cmp(&self, other: &Big) -> Ordering {
+    pub fn cmp(&self, other: &Self) -> Ordering {
         self.sub(other).signum().cmp(&0)
     }
 
@@ -234,7 +241,7 @@ impl Big {
     }
 
     /// `self / other` as an `f64` (within a few `2^-52` relative; `other` not zero).
-    pub fn ratio(&self, other: &Big) -> f64 {
+    pub fn ratio(&self, other: &Self) -> f64 {
         let (a, ea) = self.scaled_f64();
         let (b, eb) = other.scaled_f64();
         scaled(a / b, ea - eb)

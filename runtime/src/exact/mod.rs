@@ -14,6 +14,7 @@
 //! quotient.
 
 pub(crate) mod big;
+pub(crate) mod distance;
 
 use big::Big;
 

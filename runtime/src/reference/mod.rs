@@ -9,7 +9,9 @@
 
 use glam::DVec3;
 
+mod closest;
 mod inside;
+pub use closest::{nearest_on_triangle, ReferenceClosest};
 pub use inside::{InsideReference, Side};
 
 use crate::ray::Ray;

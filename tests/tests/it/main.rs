@@ -4,6 +4,7 @@ mod attributes;
 mod back_faces;
 mod budgets;
 mod bunny;
+mod closest;
 mod crossings;
 mod effects;
 mod environment;

@@ -1,0 +1,572 @@
+//! The point of the surface nearest a query point, through the point-location tree.
+//!
+//! A best-first search: the tree's cells in order of their distance from the point
+//! (a heap), each leaf's triangles measured in `f64`, until the next cell lies farther
+//! than the nearest triangle found. Every point of a triangle lies in some leaf that
+//! lists it, so no triangle nearer than the answer is skipped.
+//!
+//! # What is exact
+//! Each triangle's squared distance is computed in `f64` with an error bound
+//! ([`near_f64`]); where two triangles' intervals overlap, exact arithmetic
+//! (`exact::distance`) decides which is nearer, ties going to the lower input index;
+//! where the interval of the answer's distance straddles a rounding boundary of `f32`,
+//! exact arithmetic rounds it. So the distance is the exact distance from the point to
+//! the stored triangles (their `f32` vertices), correctly rounded to `f32`, and the
+//! triangle is the nearest one, the lowest input index among equally near ones. The
+//! nearest point and its barycentrics are rounded from `f64` (within a few `f64`
+//! roundings of the exact ones, and so as near as `f32` holds them).
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use octrace_format::layout::{NodeRef, TRIANGLE_FLOATS};
+
+use super::tracer::Tracer;
+use crate::exact::distance::{point_on, squared_distance, Square};
+
+/// The point of a scene's surface nearest a query point ([`Tracer::closest_point`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosestPoint {
+    /// The distance from the query point: exact, correctly rounded to `f32`.
+    pub distance: f32,
+    /// The nearest point of the surface.
+    pub point: [f32; 3],
+    /// Input index of its triangle (of equally near ones, the lowest).
+    pub triangle: u32,
+    /// Stored index of its triangle (`octrace_format::StoredIndex`), for the scene's
+    /// per-triangle arrays.
+    pub prim: u32,
+    /// Barycentric coordinate of the point on the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric coordinate of the point on the triangle's third vertex.
+    pub v: f32,
+}
+
+/// `f64`'s unit roundoff, `2^-53`.
+const U: f64 = 1.0 / (1u64 << 53) as f64;
+
+/// A triangle's distance from the query point as `f64` computes it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Near {
+    /// Squared distance.
+    pub d2: f64,
+    /// A bound on the error of `d2`.
+    pub err: f64,
+    /// The nearest point, and its barycentrics on the second and third vertices.
+    pub q: [f64; 3],
+    pub u: f64,
+    pub v: f64,
+    /// Whether the triangle is so thin (`G` above 1000) that `q` may be off by more
+    /// than `f32` can hold: it is found again from the exact feature.
+    pub thin: bool,
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The nearest point of triangle `t` (nine floats) to `p`, by the triangle's Voronoi
+/// regions (Ericson, *Real-Time Collision Detection*, 5.1.5), in `f64`.
+///
+/// The error bound: with `M` the largest distance from `p` to a vertex and `G = M^2 /
+/// |n|` (`n` the cross product of two edges; `G` grows as the triangle thins), every
+/// quantity the regions and the point come from is a product of at most four
+/// differences, each off by a few roundings of its size; the point is off by some
+/// `u M (1 + G)^2` and the squared distance by twice that times `M`. The bound taken,
+/// `64 u M^2 (1 + G)^2`, is several times that (and checked against exact arithmetic
+/// in the tests, near every feature).
+#[inline]
+pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
+    let a = [t[0] as f64, t[1] as f64, t[2] as f64];
+    let b = [t[3] as f64, t[4] as f64, t[5] as f64];
+    let c = [t[6] as f64, t[7] as f64, t[8] as f64];
+    let (ab, ac) = (sub(b, a), sub(c, a));
+    let (ap, bp, cp) = (sub(p, a), sub(p, b), sub(p, c));
+    let m2 = dot(ap, ap).max(dot(bp, bp)).max(dot(cp, cp));
+    let n = cross(ab, ac);
+    let nn = dot(n, n).sqrt();
+    let g = if nn > 0.0 { m2 / nn } else { f64::INFINITY };
+    let err = 64.0 * U * m2 * (1.0 + g) * (1.0 + g);
+    let thin = g > 1000.0;
+    let at = |q: [f64; 3], u: f64, v: f64| {
+        let d = sub(q, p);
+        Near { d2: dot(d, d), err, q, u, v, thin }
+    };
+    let along = |o: [f64; 3], e: [f64; 3], s: f64| [o[0] + e[0] * s, o[1] + e[1] * s, o[2] + e[2] * s];
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return at(a, 0.0, 0.0);
+    }
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return at(b, 1.0, 0.0);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let s = d1 / (d1 - d3);
+        return at(along(a, ab, s), s, 0.0);
+    }
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return at(c, 0.0, 1.0);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let s = d2 / (d2 - d6);
+        return at(along(a, ac, s), 0.0, s);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let s = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return at(along(b, sub(c, b), s), 1.0 - s, s);
+    }
+    // Inside the face: the plane's distance (more accurate than |q - p| there).
+    let denom = 1.0 / (va + vb + vc);
+    let (u, v) = (vb * denom, vc * denom);
+    let q = [0, 1, 2].map(|k| a[k] + ab[k] * u + ac[k] * v);
+    let h = dot(n, ap);
+    Near { d2: h * h / (nn * nn), err, q, u, v, thin }
+}
+
+/// The best triangle so far.
+#[derive(Clone, Copy, Debug)]
+struct Best {
+    near: Near,
+    prim: u32,
+    id: u32,
+    /// Its exact squared distance, once asked.
+    exact: Option<Square>,
+}
+
+/// A node of the point-location tree waiting in the heap, nearest first.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    d2: f64,
+    node: u32,
+}
+
+impl PartialEq for Pending {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Pending {}
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Pending {
+    /// Reversed, so that the max-heap pops the nearest.
+    fn cmp(&self, other: &Self) -> Ordering {
+        other.d2.total_cmp(&self.d2)
+    }
+}
+
+/// An empty box: `lo > hi`.
+const EMPTY: [f32; 6] =
+    [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+
+/// The box of the surface in each node of the point-location tree: the union of the
+/// boxes of a leaf's triangles, clipped to the leaf's cell (rounded outwards), and the
+/// union of its children's for an internal node; empty leaves' boxes are empty. The
+/// closest-point search's bounds: tighter than the cells (a coarse cell holding a
+/// sliver of surface is as far as the sliver), and empty leaves are never opened.
+/// Made once a scene from its leaves and triangles ([`crate::Scene`] keeps it).
+#[derive(Clone, Debug)]
+pub struct SurfaceBounds {
+    /// By internal node index.
+    internal: Vec<[f32; 6]>,
+    /// By leaf box index.
+    leaves: Vec<[f32; 6]>,
+}
+
+impl SurfaceBounds {
+    /// The bounds of `tracer`'s scene.
+    pub fn of(tracer: &Tracer<'_>) -> SurfaceBounds {
+        let v = tracer.view();
+        let mut bounds =
+            SurfaceBounds { internal: vec![EMPTY; v.nodes.len() / 8], leaves: vec![EMPTY; v.leaf_count()] };
+        // Whether each internal node is done (or under way: a hostile file's cycle
+        // reads it as empty); leaves are measured once.
+        let mut done = vec![false; bounds.internal.len()];
+        let mut measured = vec![false; bounds.leaves.len()];
+        bounds.visit(tracer, v.root, 0, [0; 3], &mut done, &mut measured);
+        bounds
+    }
+
+    fn visit(
+        &mut self,
+        tracer: &Tracer<'_>,
+        word: u32,
+        level: u32,
+        cell: [u32; 3],
+        done: &mut [bool],
+        measured: &mut [bool],
+    ) -> [f32; 6] {
+        let v = tracer.view();
+        match NodeRef::decode(word) {
+            NodeRef::Leaf(address) => {
+                let Some(rec) = v.octree.get(address as usize..address as usize + 3) else { return EMPTY };
+                let b = rec[2] as usize;
+                if b >= measured.len() || measured[b] {
+                    return self.leaves.get(b).copied().unwrap_or(EMPTY);
+                }
+                measured[b] = true;
+                let mut acc = EMPTY;
+                let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
+                for &prim in refs {
+                    let Some(t) =
+                        v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+                    else {
+                        continue;
+                    };
+                    for corner in t.chunks_exact(3) {
+                        for k in 0..3 {
+                            acc[k] = acc[k].min(corner[k]);
+                            acc[k + 3] = acc[k + 3].max(corner[k]);
+                        }
+                    }
+                }
+                let (lo, hi) = tracer.cell_box(level, cell);
+                for k in 0..3 {
+                    acc[k] = acc[k].max(lo[k]);
+                    acc[k + 3] = acc[k + 3].min(hi[k]);
+                }
+                self.leaves[b] = acc;
+                acc
+            }
+            NodeRef::Internal(i) => {
+                let i = i as usize;
+                if i >= done.len() || done[i] || level >= tracer.frame.max_depth {
+                    return self.internal.get(i).copied().unwrap_or(EMPTY);
+                }
+                done[i] = true;
+                let mut acc = EMPTY;
+                for child in 0..8 {
+                    let Some(&w) = v.nodes.get(8 * i + child) else { continue };
+                    let c = [0, 1, 2].map(|k| cell[k] * 2 + ((child >> k) & 1) as u32);
+                    let b = self.visit(tracer, w, level + 1, c, done, measured);
+                    for k in 0..3 {
+                        acc[k] = acc[k].min(b[k]);
+                        acc[k + 3] = acc[k + 3].max(b[k + 3]);
+                    }
+                }
+                self.internal[i] = acc;
+                acc
+            }
+        }
+    }
+
+    /// The box of the node `word` refers to (empty where it holds no surface).
+    #[inline]
+    fn of_node(&self, view: &octrace_format::SceneView<'_>, word: u32) -> [f32; 6] {
+        match NodeRef::decode(word) {
+            NodeRef::Leaf(address) => view
+                .octree
+                .get(address as usize + 2)
+                .and_then(|&b| self.leaves.get(b as usize))
+                .copied()
+                .unwrap_or(EMPTY),
+            NodeRef::Internal(i) => self.internal.get(i as usize).copied().unwrap_or(EMPTY),
+        }
+    }
+}
+
+/// The squared distance from `p` to the box `b` (infinity where it is empty).
+#[inline]
+fn box_distance2(p: [f64; 3], b: &[f32; 6]) -> f64 {
+    if b[0] > b[3] {
+        return f64::INFINITY;
+    }
+    let mut d2 = 0.0;
+    for k in 0..3 {
+        let gap = (b[k] as f64 - p[k]).max(p[k] - b[k + 3] as f64).max(0.0);
+        d2 += gap * gap;
+    }
+    d2
+}
+
+/// Stored triangles a search has measured lately, by the low bits of their index:
+/// a triangle listed by several leaves is measured once (mostly).
+const SEEN: usize = 64;
+
+/// What a search reuses from one point to the next (its heap).
+#[derive(Debug, Default)]
+pub struct ClosestScratch {
+    heap: BinaryHeap<Pending>,
+}
+
+impl Tracer<'_> {
+    /// The point of the surface nearest `p` at most `max_distance` from it (infinity
+    /// for no limit), or `None` where there is none (or `p` is not finite, or
+    /// `max_distance` is NaN or negative). Exact as the module docs say: the distance
+    /// correctly rounded, the nearest triangle, ties to the lowest input index; a
+    /// `max_distance` compares with the rounded distance. `bounds` are the scene's
+    /// ([`SurfaceBounds::of`]; [`crate::Scene::closest_point`] keeps them).
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::cpu::SurfaceBounds;
+    /// use octrace_runtime::Scene;
+    /// let scene = Scene::from_baked(bake(&procedural::grid(4, 1.0), &BuildParams::auto())?)?;
+    /// let tracer = scene.tracer();
+    /// let bounds = SurfaceBounds::of(&tracer);
+    /// let near = tracer.closest_point(&bounds, [0.3, 0.6, 0.25], f32::INFINITY).expect("a surface");
+    /// assert_eq!(near.distance, 0.25);
+    /// assert_eq!(near.point, [0.3, 0.6, 0.0]);
+    /// assert!(tracer.closest_point(&bounds, [0.3, 0.6, 0.25], 0.2).is_none());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn closest_point(&self, bounds: &SurfaceBounds, p: [f32; 3], max_distance: f32) -> Option<ClosestPoint> {
+        self.closest_point_with(bounds, &mut ClosestScratch::default(), p, max_distance)
+    }
+
+    /// [`Tracer::closest_point`] reusing `scratch`'s memory.
+    pub fn closest_point_with(
+        &self,
+        bounds: &SurfaceBounds,
+        scratch: &mut ClosestScratch,
+        p: [f32; 3],
+        max_distance: f32,
+    ) -> Option<ClosestPoint> {
+        if !p.iter().all(|c| c.is_finite()) || max_distance.is_nan() || max_distance < 0.0 {
+            return None;
+        }
+        let pd = p.map(f64::from);
+        // Nodes farther than the limit are not opened (a margin for the rounding of the
+        // answer's distance, which the limit compares with).
+        let limit = max_distance as f64;
+        let limit2 = limit * limit * (1.0 + 1e-6);
+        let mut best: Option<Best> = None;
+        let mut seen = [u32::MAX; SEEN];
+        let heap = &mut scratch.heap;
+        heap.clear();
+        let root = self.view.root;
+        heap.push(Pending { d2: box_distance2(pd, &bounds.of_node(&self.view, root)), node: root });
+        let mut visits = 0usize;
+        while let Some(next) = heap.pop() {
+            let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
+            // Boxes' distances are rounded too: a relative margin keeps them below.
+            if next.d2 * (1.0 - 1e-9) > bound {
+                break;
+            }
+            visits += 1;
+            if visits > 2 * (bounds.leaves.len() + bounds.internal.len()) + 64 {
+                break; // a hostile file's cycle on the trusted path
+            }
+            match NodeRef::decode(next.node) {
+                NodeRef::Leaf(address) => self.closest_in_leaf(p, pd, address, &mut best, &mut seen),
+                NodeRef::Internal(index) => {
+                    let Some(children) = self.view.nodes.get(index as usize * 8..index as usize * 8 + 8) else {
+                        continue;
+                    };
+                    let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
+                    for &node in children {
+                        let d2 = box_distance2(pd, &bounds.of_node(&self.view, node));
+                        if d2 * (1.0 - 1e-9) <= bound {
+                            heap.push(Pending { d2, node });
+                        }
+                    }
+                }
+            }
+        }
+        let mut best = best?;
+        let distance = self.rounded_distance(p, &mut best);
+        if distance > max_distance {
+            return None;
+        }
+        let (q, u, v) = match best.exact {
+            Some(exact) if best.near.thin => point_on(p, corners(self.view.triangles, best.prim), exact.feature),
+            _ => (best.near.q, best.near.u, best.near.v),
+        };
+        Some(ClosestPoint {
+            distance,
+            point: q.map(|x| x as f32),
+            triangle: best.id,
+            prim: best.prim,
+            u: u as f32,
+            v: v as f32,
+        })
+    }
+
+    /// The box of the cell at `level`, `cell`, rounded outwards to `f32`.
+    fn cell_box(&self, level: u32, cell: [u32; 3]) -> ([f32; 3], [f32; 3]) {
+        let size = self.frame.sizes[level.min(31) as usize] as f64;
+        let lo = [0, 1, 2].map(|k| self.frame.root_lo[k] as f64 + cell[k] as f64 * size);
+        (lo.map(|x| (x as f32).next_down()), lo.map(|x| ((x + size) as f32).next_up()))
+    }
+
+    /// Measures the triangles of the leaf at `address` against the best so far.
+    fn closest_in_leaf(
+        &self,
+        p: [f32; 3],
+        pd: [f64; 3],
+        address: u32,
+        best: &mut Option<Best>,
+        seen: &mut [u32; SEEN],
+    ) {
+        let v = &self.view;
+        let Some(rec) = v.octree.get(address as usize..address as usize + 2) else { return };
+        let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
+        for &prim in refs {
+            let slot = &mut seen[prim as usize % SEEN];
+            if *slot == prim {
+                continue;
+            }
+            *slot = prim;
+            let Some(t) = v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
+            else {
+                continue;
+            };
+            let Some(&id) = v.triangle_ids.get(prim as usize) else { continue };
+            let near = near_f64(pd, t);
+            let Some(b) = *best else {
+                *best = Some(Best { near, prim, id, exact: None });
+                continue;
+            };
+            // Certainly farther, or certainly nearer.
+            if near.d2 - near.err > b.near.d2 + b.near.err {
+                continue;
+            }
+            if near.d2 + near.err < b.near.d2 - b.near.err {
+                *best = Some(Best { near, prim, id, exact: None });
+                continue;
+            }
+            // Too close to call in f64: exact arithmetic decides (ties to the lower id).
+            let held = b.exact.unwrap_or_else(|| squared_distance(p, corners(v.triangles, b.prim)));
+            let this = squared_distance(p, corners(v.triangles, prim));
+            let wins = match this.cmp(&held) {
+                Ordering::Less => true,
+                Ordering::Equal => id < b.id,
+                Ordering::Greater => false,
+            };
+            *best =
+                Some(if wins { Best { near, prim, id, exact: Some(this) } } else { Best { exact: Some(held), ..b } });
+        }
+    }
+
+    /// The best triangle's distance, correctly rounded: from `f64` where its error
+    /// interval rounds to one `f32` (and the triangle is not thin), else exactly (the
+    /// exact value kept in `best`).
+    fn rounded_distance(&self, p: [f32; 3], best: &mut Best) -> f32 {
+        if best.exact.is_none() {
+            let Near { d2, err, thin, .. } = best.near;
+            let lo = ((d2 - err).max(0.0).sqrt() * (1.0 - 4.0 * U)) as f32;
+            let hi = ((d2 + err).sqrt() * (1.0 + 4.0 * U)) as f32;
+            if lo == hi && !thin {
+                return lo;
+            }
+            best.exact = Some(squared_distance(p, corners(self.view.triangles, best.prim)));
+        }
+        best.exact.map_or(f32::NAN, |e| e.rounded())
+    }
+
+    /// [`Tracer::closest_point`] for each point, on this thread.
+    pub fn closest_point_batch(
+        &self,
+        bounds: &SurfaceBounds,
+        points: &[[f32; 3]],
+        max_distance: f32,
+        out: &mut [Option<ClosestPoint>],
+    ) {
+        assert_eq!(points.len(), out.len(), "one result slot a point");
+        let mut scratch = ClosestScratch::default();
+        for (p, o) in points.iter().zip(out) {
+            *o = self.closest_point_with(bounds, &mut scratch, *p, max_distance);
+        }
+    }
+
+    /// [`Tracer::closest_point_batch`] on all threads of the current rayon pool.
+    pub fn par_closest_point_batch(
+        &self,
+        bounds: &SurfaceBounds,
+        points: &[[f32; 3]],
+        max_distance: f32,
+        out: &mut [Option<ClosestPoint>],
+    ) {
+        use rayon::prelude::*;
+        assert_eq!(points.len(), out.len(), "one result slot a point");
+        points
+            .par_chunks(1024)
+            .zip(out.par_chunks_mut(1024))
+            .for_each(|(p, o)| self.closest_point_batch(bounds, p, max_distance, o));
+    }
+}
+
+/// The vertices of stored triangle `prim` (present: the caller read it).
+fn corners(triangles: &[f32], prim: u32) -> [[f32; 3]; 3] {
+    let t = &triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+    [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small generator (xorshift), so the tests need no dependency.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+        fn unit(&mut self) -> f32 {
+            (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    /// The f64 bound holds against exact arithmetic on random triangles (slivers among
+    /// them) and points placed near each of their features: faces, edges, vertices,
+    /// the regions' boundaries, far and near.
+    #[test]
+    fn the_f64_error_bound_holds_against_exact_arithmetic() {
+        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        for case in 0..4000 {
+            let scale = [1e-3f32, 1.0, 1e3][case % 3];
+            let mut t = [0f32; 9];
+            for x in &mut t {
+                *x = (rng.unit() - 0.5) * scale;
+            }
+            if case % 5 == 0 {
+                // A sliver: the third vertex near the first edge.
+                for k in 0..3 {
+                    let s = rng.unit();
+                    t[6 + k] = t[k] + (t[3 + k] - t[k]) * s + (rng.unit() - 0.5) * scale * 1e-5;
+                }
+            }
+            let w = [rng.unit(), rng.unit(), rng.unit()];
+            let sum = w[0] + w[1] + w[2];
+            let on = [0, 1, 2].map(|k| (w[0] * t[k] + w[1] * t[3 + k] + w[2] * t[6 + k]) / sum);
+            let feature = match case % 4 {
+                0 => on,
+                1 => [t[0], t[1], t[2]],
+                2 => [0, 1, 2].map(|k| (t[k] + t[3 + k]) * 0.5),
+                _ => [0, 1, 2].map(|_| (rng.unit() - 0.5) * scale * 2.0),
+            };
+            let off = [1e-7f32, 1e-3, 1.0][(case / 3) % 3] * scale;
+            let p = feature.map(|x| x + (rng.unit() - 0.5) * off);
+            let near = near_f64(p.map(f64::from), &t);
+            let tri = [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]];
+            let exact = squared_distance(p, tri);
+            let e = exact.approx();
+            assert!(
+                (near.d2 - e).abs() <= near.err + e * 1e-14,
+                "case {case}: f64 {} (bound {}) against exact {e}, p {p:?}, t {t:?}",
+                near.d2,
+                near.err
+            );
+        }
+    }
+}
