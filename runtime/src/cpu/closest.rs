@@ -20,6 +20,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use octrace_format::layout::{NodeRef, TRIANGLE_FLOATS};
+use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
 use crate::exact::distance::{point_on, squared_distance, Square};
@@ -386,7 +387,7 @@ impl Tracer<'_> {
             return None;
         }
         let (q, u, v) = match best.exact {
-            Some(exact) if best.near.thin => point_on(p, corners(self.view.triangles, best.prim), exact.feature),
+            Some(exact) if best.near.thin => point_on(p, self.view.triangle(StoredIndex(best.prim)), exact.feature),
             _ => (best.near.q, best.near.u, best.near.v),
         };
         Some(ClosestPoint {
@@ -443,8 +444,8 @@ impl Tracer<'_> {
                 continue;
             }
             // Too close to call in f64: exact arithmetic decides (ties to the lower id).
-            let held = b.exact.unwrap_or_else(|| squared_distance(p, corners(v.triangles, b.prim)));
-            let this = squared_distance(p, corners(v.triangles, prim));
+            let held = b.exact.unwrap_or_else(|| squared_distance(p, v.triangle(StoredIndex(b.prim))));
+            let this = squared_distance(p, v.triangle(StoredIndex(prim)));
             let wins = match this.cmp(&held) {
                 Ordering::Less => true,
                 Ordering::Equal => id < b.id,
@@ -466,7 +467,7 @@ impl Tracer<'_> {
             if lo == hi && !thin {
                 return lo;
             }
-            best.exact = Some(squared_distance(p, corners(self.view.triangles, best.prim)));
+            best.exact = Some(squared_distance(p, self.view.triangle(StoredIndex(best.prim))));
         }
         best.exact.map_or(f32::NAN, |e| e.rounded())
     }
@@ -501,12 +502,6 @@ impl Tracer<'_> {
             .zip(out.par_chunks_mut(1024))
             .for_each(|(p, o)| self.closest_point_batch(bounds, p, max_distance, o));
     }
-}
-
-/// The vertices of stored triangle `prim` (present: the caller read it).
-fn corners(triangles: &[f32], prim: u32) -> [[f32; 3]; 3] {
-    let t = &triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-    [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]]
 }
 
 #[cfg(test)]

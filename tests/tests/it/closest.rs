@@ -4,42 +4,29 @@
 //! the bunny (and the dragon where `../shared` has it), within one `f32` rounding.
 
 use glam::Vec3;
-use octrace_bake::hard_rays::GridPlanes;
 use octrace_bake::procedural::{self, SplitMix};
 use octrace_bake::{bake, BuildParams, Mesh};
 use octrace_runtime::reference::{InsideReference, Reference, Side};
 use octrace_runtime::{ClosestPoint, Scene};
 use octrace_tests::exact;
 
-/// Points of every kind a user's sampling meets: uniform in 1.1x the mesh's box,
-/// within `near` of the surface on either side, on vertices, near edges' midpoints,
-/// inside faces, on the octree's cell planes, and far off.
+/// Points of every kind a user's sampling meets: those of the inside tests (uniform in
+/// 1.1x the mesh's box, within `near` of the surface on either side, on the octree's
+/// cell planes), and points inside faces, on vertices, near edges' midpoints and off
+/// the mesh by up to its size.
 fn points(mesh: &Mesh, scene: &Scene, n: usize, near: f32, seed: u64) -> Vec<[f32; 3]> {
-    let mut rng = SplitMix(seed);
-    let (lo, hi) = mesh
-        .triangles
-        .iter()
-        .flatten()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(Vec3::from(p)), h.max(Vec3::from(p))));
+    let mut out = crate::inside::points(mesh, scene, n, near, seed);
+    let mut rng = SplitMix(seed ^ 0x5EED);
+    let (lo, hi) = crate::inside::mesh_box(mesh);
     let e = hi - lo;
-    let grid = GridPlanes::of(&scene.view());
-    let mut out = Vec::with_capacity(7 * n);
     for i in 0..n {
-        let u = Vec3::new(rng.unit(), rng.unit(), rng.unit());
-        out.push(lo - 0.05 * e + u * 1.1 * e);
         let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize].map(Vec3::from);
         let (a, b) = (rng.unit(), rng.unit());
         let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
-        let on = t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0]);
-        let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
-        out.push(on + normal * if i % 2 == 0 { near } else { -near });
-        out.push(on);
+        out.push(t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0]));
         out.push(t[i % 3]);
         out.push((t[i % 3] + t[(i + 1) % 3]) * 0.5);
-        let level = 1 + (rng.next_u64() % grid.depth.max(1) as u64) as u32;
-        let mut q = lo + u * e;
-        q[i % 3] = grid.snap(i % 3, level, q[i % 3]);
-        out.push(q);
+        let u = Vec3::new(rng.unit(), rng.unit(), rng.unit());
         out.push(lo + (u - 0.5) * 3.0 * e.max_element());
     }
     out.into_iter().map(|p| p.to_array()).collect()

@@ -13,13 +13,9 @@ use octrace_runtime::{Error, Ray, Scene};
 /// Points of three kinds: uniform in the mesh's box (a margin around it), within
 /// `near` of the surface on either side (along the triangle's normal), and snapped to
 /// the octree's cell planes.
-fn points(mesh: &Mesh, scene: &Scene, n: usize, near: f32, seed: u64) -> Vec<Vec3> {
+pub(crate) fn points(mesh: &Mesh, scene: &Scene, n: usize, near: f32, seed: u64) -> Vec<Vec3> {
     let mut rng = SplitMix(seed);
-    let (lo, hi) = mesh
-        .triangles
-        .iter()
-        .flatten()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(Vec3::from(p)), h.max(Vec3::from(p))));
+    let (lo, hi) = mesh_box(mesh);
     let e = hi - lo;
     let grid = GridPlanes::of(&scene.view());
     let mut out = Vec::with_capacity(3 * n);
@@ -39,6 +35,14 @@ fn points(mesh: &Mesh, scene: &Scene, n: usize, near: f32, seed: u64) -> Vec<Vec
         out.push(q);
     }
     out
+}
+
+/// The box of a mesh's vertices.
+pub(crate) fn mesh_box(mesh: &Mesh) -> (Vec3, Vec3) {
+    mesh.triangles
+        .iter()
+        .flatten()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), &p| (l.min(Vec3::from(p)), h.max(Vec3::from(p))))
 }
 
 fn check_solid(name: &str, mesh: &Mesh, n: usize, near: f32) -> (usize, usize) {
