@@ -1,6 +1,8 @@
 //! Closest points on one thread: points uniform in 1.1x the mesh's box, and points within
-//! 1 % of the box's diagonal from the surface; prints points a second and how many nodes
-//! and triangles a query measures.
+//! 1 % of the box's diagonal from the surface; prints points a second (median of three
+//! batches) and the spread of one point's time. `CLOSEST_CHECK=k` first compares `k`
+//! points of each kind with the brute-force `f64` oracle; `CLOSEST_SLOW=1` prints the
+//! uniform points that take over a millisecond.
 //!
 //! `cargo run --release -p octrace-runtime --example closest_timing -- scene.oct [points]`
 use std::time::Instant;
@@ -48,6 +50,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     let bounds = scene.surface_bounds();
     let tracer = scene.tracer();
+    for pts in [&uniform, &near] {
+        let mut us: Vec<f64> = pts
+            .iter()
+            .map(|p| {
+                let t = Instant::now();
+                std::hint::black_box(tracer.closest_point(bounds, *p, f32::INFINITY));
+                t.elapsed().as_secs_f64() * 1e6
+            })
+            .collect();
+        let mean = us.iter().sum::<f64>() / us.len() as f64;
+        us.sort_by(f64::total_cmp);
+        println!(
+            "per point us: mean {mean:.1} p10 {:.1} p50 {:.1} p90 {:.1} p99 {:.1} max {:.1}",
+            us[us.len() / 10],
+            us[us.len() / 2],
+            us[us.len() * 9 / 10],
+            us[us.len() * 99 / 100],
+            us[us.len() - 1]
+        );
+    }
+    if let Some(k) = std::env::var_os("CLOSEST_CHECK") {
+        // Against the brute-force f64 oracle: the distance within one f32 rounding.
+        let k: usize = k.to_str().and_then(|s| s.parse().ok()).unwrap_or(500);
+        let oracle = octrace_runtime::reference::Reference::from_view(&view);
+        let mut wrong = 0;
+        for p in uniform.iter().take(k).chain(near.iter().take(k)) {
+            let ours = tracer.closest_point(bounds, *p, f32::INFINITY).map(|c| c.distance);
+            let theirs = oracle.closest_point(*p).map(|c| c.distance);
+            let ok = match (ours, theirs) {
+                (Some(a), Some(b)) => (a as f64 - b).abs() <= (b * 1.2e-7).max(1e-15),
+                (a, b) => a.is_none() && b.is_none(),
+            };
+            if !ok {
+                wrong += 1;
+                println!("{p:?}: {ours:?} against {theirs:?}");
+            }
+        }
+        println!("{wrong} of {} points off the oracle", 2 * k);
+    }
     if std::env::var_os("CLOSEST_SLOW").is_some() {
         for (i, p) in uniform.iter().enumerate() {
             let t = Instant::now();

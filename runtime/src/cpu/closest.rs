@@ -23,7 +23,11 @@ use octrace_format::layout::{NodeRef, TRIANGLE_FLOATS};
 use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
+pub use bounds::SurfaceBounds;
+
 use crate::exact::distance::{point_on, squared_distance, Square};
+
+mod bounds;
 
 /// The point of a scene's surface nearest a query point ([`Tracer::closest_point`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -230,7 +234,7 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
 fn thin(m2: f64, k: f64, v: &[[f64; 3]; 3]) -> bool {
     let scale = v.iter().flatten().fold(0.0f64, |s, c| s.max(c.abs()));
     let off = m2.sqrt() * (k + 12.0 * U);
-    !(off <= scale * (1.0 / (1u64 << 32) as f64))
+    off.is_nan() || off > scale * (1.0 / (1u64 << 32) as f64)
 }
 
 /// The best triangle so far.
@@ -266,130 +270,6 @@ impl Ord for Pending {
     fn cmp(&self, other: &Self) -> Ordering {
         other.d2.total_cmp(&self.d2)
     }
-}
-
-/// An empty box: `lo > hi`.
-const EMPTY: [f32; 6] =
-    [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
-
-/// The box of the surface in each node of the point-location tree: the union of the
-/// boxes of a leaf's triangles, clipped to the leaf's cell (rounded outwards), and the
-/// union of its children's for an internal node; empty leaves' boxes are empty. The
-/// closest-point search's bounds: tighter than the cells (a coarse cell holding a
-/// sliver of surface is as far as the sliver), and empty leaves are never opened.
-/// Made once a scene from its leaves and triangles ([`crate::Scene`] keeps it).
-#[derive(Clone, Debug)]
-pub struct SurfaceBounds {
-    /// By internal node index.
-    internal: Vec<[f32; 6]>,
-    /// By leaf box index.
-    leaves: Vec<[f32; 6]>,
-}
-
-impl SurfaceBounds {
-    /// The bounds of `tracer`'s scene.
-    pub fn of(tracer: &Tracer<'_>) -> SurfaceBounds {
-        let v = tracer.view();
-        let mut bounds =
-            SurfaceBounds { internal: vec![EMPTY; v.nodes.len() / 8], leaves: vec![EMPTY; v.leaf_count()] };
-        // Whether each internal node is done (or under way: a hostile file's cycle
-        // reads it as empty); leaves are measured once.
-        let mut done = vec![false; bounds.internal.len()];
-        let mut measured = vec![false; bounds.leaves.len()];
-        bounds.visit(tracer, v.root, 0, [0; 3], &mut done, &mut measured);
-        bounds
-    }
-
-    fn visit(
-        &mut self,
-        tracer: &Tracer<'_>,
-        word: u32,
-        level: u32,
-        cell: [u32; 3],
-        done: &mut [bool],
-        measured: &mut [bool],
-    ) -> [f32; 6] {
-        let v = tracer.view();
-        match NodeRef::decode(word) {
-            NodeRef::Leaf(address) => {
-                let Some(rec) = v.octree.get(address as usize..address as usize + 3) else { return EMPTY };
-                let b = rec[2] as usize;
-                if b >= measured.len() || measured[b] {
-                    return self.leaves.get(b).copied().unwrap_or(EMPTY);
-                }
-                measured[b] = true;
-                let mut acc = EMPTY;
-                let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
-                for &prim in refs {
-                    let Some(t) =
-                        v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
-                    else {
-                        continue;
-                    };
-                    for corner in t.chunks_exact(3) {
-                        for k in 0..3 {
-                            acc[k] = acc[k].min(corner[k]);
-                            acc[k + 3] = acc[k + 3].max(corner[k]);
-                        }
-                    }
-                }
-                let (lo, hi) = tracer.cell_box(level, cell);
-                for k in 0..3 {
-                    acc[k] = acc[k].max(lo[k]);
-                    acc[k + 3] = acc[k + 3].min(hi[k]);
-                }
-                self.leaves[b] = acc;
-                acc
-            }
-            NodeRef::Internal(i) => {
-                let i = i as usize;
-                if i >= done.len() || done[i] || level >= tracer.frame.max_depth {
-                    return self.internal.get(i).copied().unwrap_or(EMPTY);
-                }
-                done[i] = true;
-                let mut acc = EMPTY;
-                for child in 0..8 {
-                    let Some(&w) = v.nodes.get(8 * i + child) else { continue };
-                    let c = [0, 1, 2].map(|k| cell[k] * 2 + ((child >> k) & 1) as u32);
-                    let b = self.visit(tracer, w, level + 1, c, done, measured);
-                    for k in 0..3 {
-                        acc[k] = acc[k].min(b[k]);
-                        acc[k + 3] = acc[k + 3].max(b[k + 3]);
-                    }
-                }
-                self.internal[i] = acc;
-                acc
-            }
-        }
-    }
-
-    /// The box of the node `word` refers to (empty where it holds no surface).
-    #[inline]
-    fn of_node(&self, view: &octrace_format::SceneView<'_>, word: u32) -> [f32; 6] {
-        match NodeRef::decode(word) {
-            NodeRef::Leaf(address) => view
-                .octree
-                .get(address as usize + 2)
-                .and_then(|&b| self.leaves.get(b as usize))
-                .copied()
-                .unwrap_or(EMPTY),
-            NodeRef::Internal(i) => self.internal.get(i as usize).copied().unwrap_or(EMPTY),
-        }
-    }
-}
-
-/// The squared distance from `p` to the box `b` (infinity where it is empty).
-#[inline]
-fn box_distance2(p: [f64; 3], b: &[f32; 6]) -> f64 {
-    if b[0] > b[3] {
-        return f64::INFINITY;
-    }
-    let mut d2 = 0.0;
-    for k in 0..3 {
-        let gap = (b[k] as f64 - p[k]).max(p[k] - b[k + 3] as f64).max(0.0);
-        d2 += gap * gap;
-    }
-    d2
 }
 
 /// Stored triangles a search has measured lately, by the low bits of their index:
@@ -449,7 +329,7 @@ impl Tracer<'_> {
         let heap = &mut scratch.heap;
         heap.clear();
         let root = self.view.root;
-        heap.push(Pending { d2: box_distance2(pd, &bounds.of_node(&self.view, root)), node: root });
+        heap.push(Pending { d2: bounds.root().distance2(pd, f64::INFINITY), node: root });
         let mut visits = 0usize;
         while let Some(next) = heap.pop() {
             let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
@@ -458,18 +338,20 @@ impl Tracer<'_> {
                 break;
             }
             visits += 1;
-            if visits > 2 * (bounds.leaves.len() + bounds.internal.len()) + 64 {
+            if visits > 2 * bounds.node_count() + 64 {
                 break; // a hostile file's cycle on the trusted path
             }
             match NodeRef::decode(next.node) {
                 NodeRef::Leaf(address) => self.closest_in_leaf(p, pd, address, &mut best, &mut seen),
                 NodeRef::Internal(index) => {
-                    let Some(children) = self.view.nodes.get(index as usize * 8..index as usize * 8 + 8) else {
+                    let (Some(children), Some(near)) =
+                        (self.view.nodes.get(index as usize * 8..index as usize * 8 + 8), bounds.children(index))
+                    else {
                         continue;
                     };
                     let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
-                    for &node in children {
-                        let d2 = box_distance2(pd, &bounds.of_node(&self.view, node));
+                    for (&node, near) in children.iter().zip(near) {
+                        let d2 = near.distance2(pd, bound);
                         if d2 * (1.0 - 1e-9) <= bound {
                             heap.push(Pending { d2, node });
                         }
@@ -525,6 +407,19 @@ impl Tracer<'_> {
             else {
                 continue;
             };
+            // The triangle's box is a cheap first look.
+            if let Some(b) = best {
+                let mut gap2 = 0.0;
+                for k in 0..3 {
+                    let lo = t[k].min(t[k + 3]).min(t[k + 6]) as f64;
+                    let hi = t[k].max(t[k + 3]).max(t[k + 6]) as f64;
+                    let gap = (lo - pd[k]).max(pd[k] - hi).max(0.0);
+                    gap2 += gap * gap;
+                }
+                if gap2 * (1.0 - 1e-9) > b.near.d2 + b.near.err {
+                    continue;
+                }
+            }
             let Some(&id) = v.triangle_ids.get(prim as usize) else { continue };
             let near = near_f64(pd, t);
             let Some(b) = *best else {

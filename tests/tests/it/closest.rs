@@ -98,6 +98,32 @@ fn slivers_and_needles_are_exact() {
     check_exactly("slivers", &octrace_bake::Mesh::from_triangles(tris), 60, 1e-7);
 }
 
+/// Tilted flat surfaces, where the search's bounds are slabs across the surface's
+/// normal rather than boxes: a fine grid turned off every axis, with a copy 1e-3 above
+/// it wound the other way (a thin wall, whose two sides' normals cancel if summed
+/// naively), and a crease folding it.
+#[test]
+fn tilted_sheets_and_thin_walls_are_exact() {
+    let grid = procedural::grid(12, 1.0);
+    let (c, s) = (0.6f32.cos(), 0.6f32.sin());
+    let (c2, s2) = (1.1f32.cos(), 1.1f32.sin());
+    let turn = |v: [f32; 3], lift: f32| {
+        let (x, y, z) = (v[0], v[1], v[2] + lift);
+        let (x, z) = (c * x - s * z, s * x + c * z);
+        [x, c2 * y - s2 * z, s2 * y + c2 * z]
+    };
+    let mut tris = Vec::new();
+    for t in &grid.triangles {
+        tris.push(t.map(|v| turn(v, 0.0)));
+        let [a, b, c] = t.map(|v| turn(v, 1e-3));
+        tris.push([a, c, b]);
+        // The crease: the grid bent up along x = 0.5.
+        let fold = t.map(|v| turn([v[0].min(0.5), v[1], (v[0] - 0.5).max(0.0) + 0.3], 0.0));
+        tris.push(fold);
+    }
+    check_exactly("tilted sheets", &Mesh::from_triangles(tris), 80, 1e-4);
+}
+
 /// Against the f64 brute force on the bunny: the same distance within one `f32`
 /// rounding, the same triangle or one as near within f64's reach (a tie); signed
 /// distances take the exact inside's sign (on a closed sphere).
