@@ -3,8 +3,9 @@
 //! docstrings, are in `scene`.
 
 use numpy::PyArray1;
+use octrace_format::StoredIndex;
 use octrace_runtime::cpu::CrossingCount;
-use octrace_runtime::Hit;
+use octrace_runtime::{ClosestPoint, Hit};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -329,5 +330,147 @@ impl Scene {
             })?
         })?;
         array(py, lengths, input.shape(&[]))
+    }
+}
+
+/// `compute_closest_points`' arrays.
+struct Closest {
+    points: Vec<f32>,
+    geometry: Vec<u32>,
+    primitive: Vec<u32>,
+    uvs: Vec<f32>,
+    normals: Vec<f32>,
+}
+
+/// `max_distance`, checked: not NaN, not negative.
+fn band(max_distance: f32) -> PyResult<f32> {
+    if max_distance.is_nan() || max_distance < 0.0 {
+        return Err(PyValueError::new_err(format!(
+            "max_distance: {max_distance}, expected a distance >= 0 (inf for no limit)"
+        )));
+    }
+    Ok(max_distance)
+}
+
+impl Scene {
+    /// Each query point's nearest point of the surface (`None` past `max_distance`),
+    /// and the result's shape.
+    fn closest(
+        &self,
+        query_points: &Bound<'_, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<(Vec<Option<ClosestPoint>>, Vec<usize>)> {
+        let max_distance = band(max_distance)?;
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let near = query_points.py().detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let points = to_points(values)?;
+                let mut near = zeros(points.len(), "closest points")?;
+                let bounds = self.inner.surface_bounds();
+                self.inner.tracer().par_closest_point_batch(bounds, &points, max_distance, &mut near);
+                Ok(near)
+            })?
+        })?;
+        Ok((near, input.shape(&[])))
+    }
+
+    /// `compute_closest_points`.
+    pub(crate) fn closest_points<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let py = query_points.py();
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let n = near.len();
+        let mut out = Closest {
+            points: zeros(3 * n, "points")?,
+            geometry: zeros(n, "geometry_ids")?,
+            primitive: zeros(n, "primitive_ids")?,
+            uvs: zeros(2 * n, "primitive_uvs")?,
+            normals: zeros(3 * n, "primitive_normals")?,
+        };
+        let view = self.inner.view();
+        let shading = self.inner.shading();
+        let arrays = out
+            .points
+            .par_chunks_mut(3)
+            .zip(&mut out.geometry)
+            .zip(&mut out.primitive)
+            .zip(out.uvs.par_chunks_mut(2))
+            .zip(out.normals.par_chunks_mut(3))
+            .zip(&near);
+        arrays.for_each(|(((((point, g), p), uv), normal), near)| match near {
+            Some(c) => {
+                point.copy_from_slice(&c.point);
+                *g = geometry_id(shading, c.triangle);
+                *p = c.triangle;
+                uv.copy_from_slice(&[c.u, c.v]);
+                let tri = view.triangle(StoredIndex(c.prim));
+                normal.copy_from_slice(&octrace_runtime::spawn::face_normal(&tri).to_array());
+            }
+            None => {
+                point.fill(f32::NAN);
+                *g = INVALID_ID;
+                *p = INVALID_ID;
+            }
+        });
+        let d = PyDict::new(py);
+        let at = |k: &[usize]| [shape.as_slice(), k].concat();
+        d.set_item("points", array(py, out.points, at(&[3]))?)?;
+        d.set_item("geometry_ids", array(py, out.geometry, at(&[]))?)?;
+        d.set_item("primitive_ids", array(py, out.primitive, at(&[]))?)?;
+        d.set_item("primitive_uvs", array(py, out.uvs, at(&[2]))?)?;
+        d.set_item("primitive_normals", array(py, out.normals, at(&[3]))?)?;
+        Ok(d)
+    }
+
+    /// `compute_distance`.
+    pub(crate) fn distances<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let d = collected(near.len(), "distances", near.iter().map(|c| c.map_or(f32::INFINITY, |c| c.distance)))?;
+        array(query_points.py(), d, shape)
+    }
+
+    /// `compute_signed_distance`: the sign exact on a closed mesh, by the vote of
+    /// `nsamples` rays on an open one.
+    pub(crate) fn signed_distances<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        nsamples: Option<usize>,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let py = query_points.py();
+        let closed = self.inner.edges().is_closed();
+        let inside = match nsamples {
+            Some(k) if !closed => self.vote(query_points, k, nthreads)?.0,
+            None if !closed => {
+                return Err(NotClosedError::new_err(
+                    "the mesh is not closed, so it has no inside to sign distances by; \
+                     compute_signed_distance signs an open mesh's distances by a vote, as Open3D does, \
+                     when given nsamples (an odd number of rays a point, e.g. nsamples=3)",
+                ))
+            }
+            _ => self.inside(query_points, nthreads)?.0,
+        };
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let signed = near.iter().zip(inside).map(|(c, inside)| {
+            let d = c.map_or(f32::INFINITY, |c| c.distance);
+            if inside && d != 0.0 {
+                -d
+            } else {
+                d
+            }
+        });
+        array(py, collected(near.len(), "signed distances", signed)?, shape)
     }
 }

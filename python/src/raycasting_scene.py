@@ -144,6 +144,21 @@ def make(Scene, invalid_id):
             of ``nsamples`` rays (odd), as Open3D answers."""
             return self._built().compute_occupancy(query_points, nthreads, nsamples).view(Tensor)
 
+        def compute_closest_points(self, query_points, nthreads=0):
+            """The nearest point of the scene to each point, exact: ``points``,
+            ``geometry_ids``, ``primitive_ids`` (within the geometry),
+            ``primitive_uvs``, ``primitive_normals``."""
+            return self._ids(self._built().compute_closest_points(query_points, nthreads))
+
+        def compute_distance(self, query_points, nthreads=0):
+            """The distance from each point to the scene, exact (correctly rounded)."""
+            return self._built().compute_distance(query_points, nthreads).view(Tensor)
+
+        def compute_signed_distance(self, query_points, nthreads=0, nsamples=1):
+            """The distance, negative inside: the sign exact on a closed mesh; on an
+            open one the vote of ``nsamples`` rays (odd), as Open3D signs."""
+            return self._built().compute_signed_distance(query_points, nthreads, nsamples).view(Tensor)
+
         @staticmethod
         def create_rays_pinhole(*args, **kwargs):
             """Rays of a pinhole camera: ``octrace.Scene.create_rays_pinhole``, Open3D's

@@ -313,6 +313,89 @@ impl Scene {
         self.occupancy(query_points, nthreads, nsamples)
     }
 
+    /// The nearest point of the surface to each query point (Open3D's
+    /// ``compute_closest_points``), exact: the nearest triangle (of equally near ones,
+    /// the lowest index), its distance correctly rounded to float32.
+    ///
+    /// Args:
+    ///     query_points: float32 ``(..., 3)``.
+    ///     nthreads: threads (0: all cores).
+    ///     max_distance: points farther than this from the surface answer "none"
+    ///         (and are answered sooner): a band around the surface, as signed
+    ///         distance sampling wants.
+    ///
+    /// Returns:
+    ///     a dict of arrays of the points' leading shape: ``points`` (float32
+    ///     ``(..., 3)``, NaN for none), ``geometry_ids`` (uint32 part, ``INVALID_ID``
+    ///     for none), ``primitive_ids`` (uint32 input triangle, ``INVALID_ID`` for none),
+    ///     ``primitive_uvs`` (float32 ``(..., 2)``: barycentrics of the second and third
+    ///     vertices), ``primitive_normals`` (float32 ``(..., 3)``: the triangle's unit
+    ///     normal).
+    ///
+    /// Raises:
+    ///     ValueError: points not float32 ``(..., 3)`` or NaN; ``max_distance`` NaN or
+    ///         negative.
+    #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
+    fn compute_closest_points<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        self.closest_points(query_points, nthreads, max_distance)
+    }
+
+    /// The distance from each query point to the surface (Open3D's
+    /// ``compute_distance``): float32 of the points' leading shape, exact (correctly
+    /// rounded); ``inf`` past ``max_distance``.
+    ///
+    /// Raises:
+    ///     ValueError: points not float32 ``(..., 3)`` or NaN; ``max_distance`` NaN or
+    ///         negative.
+    #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
+    fn compute_distance<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        self.distances(query_points, nthreads, max_distance)
+    }
+
+    /// The signed distance from each query point to the surface, negative inside
+    /// (Open3D's ``compute_signed_distance``): float32 of the points' leading shape,
+    /// the distance exact (``compute_distance``'s); ``+-inf`` past ``max_distance``;
+    /// ``0.0`` on the surface.
+    ///
+    /// On a closed mesh (``is_closed``) the sign is the exact inside/outside
+    /// (``contains``), never a vote, and ``nsamples`` is not needed. An open mesh has
+    /// no inside: there ``nsamples`` rays a point vote by the parity of their
+    /// crossings, as Open3D signs; without ``nsamples`` an open mesh raises.
+    ///
+    /// Args:
+    ///     query_points: float32 ``(..., 3)``.
+    ///     nthreads: threads (0: all cores).
+    ///     nsamples: rays a point for the vote on an open mesh: odd, 1 to 255.
+    ///     max_distance: a band around the surface; points past it answer ``+-inf``.
+    ///
+    /// Raises:
+    ///     NotClosedError: the mesh is open and ``nsamples`` is not given.
+    ///     ValueError: ``nsamples`` even or past 255; points not ``(..., 3)`` or NaN;
+    ///         ``max_distance`` NaN or negative.
+    #[pyo3(signature = (query_points, nthreads=0, nsamples=None, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, nsamples=None, *, max_distance=1e999)")]
+    fn compute_signed_distance<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        nsamples: Option<usize>,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        self.signed_distances(query_points, nthreads, nsamples, max_distance)
+    }
+
     /// Whether each point of ``query_points`` (float32 ``(..., 3)``) lies inside the
     /// scene, a closed mesh: a bool array of the points' leading shape, exact.
     ///

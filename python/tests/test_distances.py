@@ -1,0 +1,121 @@
+"""Closest points, distances and signed distances (Open3D's compute_closest_points,
+compute_distance, compute_signed_distance): against the analytic answers of a box,
+computed here in float64, and their limits, shapes and errors."""
+
+import numpy as np
+import pytest
+
+import octrace
+from conftest import cube_arrays
+
+LO, HI = np.array([-1.0, 0.0, 0.5]), np.array([1.0, 2.0, 1.5])
+
+
+@pytest.fixture(scope="module")
+def box():
+    v, t = cube_arrays()
+    return octrace.Scene.from_arrays(LO + v * (HI - LO), t)
+
+
+def box_distance(p):
+    """The float64 distance from each point to the box's surface, negative inside."""
+    outside = np.linalg.norm(np.maximum(np.maximum(LO - p, p - HI), 0.0), axis=-1)
+    inside = np.minimum(p - LO, HI - p).min(axis=-1)
+    return np.where(outside > 0, outside, -np.maximum(inside, 0.0))
+
+
+@pytest.fixture(scope="module")
+def points():
+    rng = np.random.default_rng(5)
+    uniform = rng.uniform(LO - 1.0, HI + 1.0, (4000, 3))
+    # On faces, edges and corners, and a hair off them.
+    corners = np.array([[x, y, z] for x in (LO[0], HI[0]) for y in (LO[1], HI[1]) for z in (LO[2], HI[2])])
+    hair = corners + rng.normal(0.0, 1e-5, corners.shape)
+    return np.concatenate([uniform, corners, hair]).astype(np.float32)
+
+
+def test_distances_are_the_exact_distances_rounded(box, points):
+    d = box.compute_distance(points)
+    assert d.dtype == np.float32 and d.shape == (len(points),)
+    exact = np.abs(box_distance(points.astype(np.float64)))
+    # One float32 rounding of the float64 value (which is itself within 1e-16 of exact).
+    np.testing.assert_array_equal(d, exact.astype(np.float32))
+
+
+def test_signed_distances_are_negative_inside(box, points):
+    s = box.compute_signed_distance(points)
+    np.testing.assert_array_equal(s, box_distance(points.astype(np.float64)).astype(np.float32))
+    assert (s < 0).any() and (s > 0).any()
+    np.testing.assert_array_equal(np.sign(s[s != 0]) < 0, box.contains(points)[s != 0])
+
+
+def test_closest_points_lie_on_the_box_at_the_distance(box, points):
+    ans = box.compute_closest_points(points)
+    assert set(ans) == {"points", "geometry_ids", "primitive_ids", "primitive_uvs", "primitive_normals"}
+    q = ans["points"].astype(np.float64)
+    outside = box_distance(points.astype(np.float64)) > 0
+    # Outside a box the nearest point is the point clamped to it.
+    np.testing.assert_allclose(q[outside], np.clip(points[outside], LO, HI), atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(q - points, axis=-1), box.compute_distance(points), atol=1e-6)
+    assert (ans["geometry_ids"] == 0).all()
+    assert (ans["primitive_ids"] < 12).all()
+    # The normal is the face's: an axis, and the point lies on that face's plane.
+    n = ans["primitive_normals"]
+    np.testing.assert_array_equal(np.abs(n).sum(axis=-1), 1.0)
+    axis = np.abs(n).argmax(axis=-1)
+    plane = np.where(n[np.arange(len(n)), axis] > 0, HI[axis], LO[axis])
+    np.testing.assert_allclose(q[np.arange(len(q)), axis], plane, atol=1e-6)
+    uv = ans["primitive_uvs"]
+    assert ((uv >= 0) & (uv.sum(axis=-1, keepdims=True) <= 1 + 1e-6)).all()
+
+
+def test_max_distance_bounds_the_answers(box):
+    p = np.array([[0, 1, 1], [0, 1, 3], [0, 1, 30], [5, 5, 5]], np.float32)
+    d = box.compute_distance(p, max_distance=2.0)
+    np.testing.assert_array_equal(d, [0.5, 1.5, np.inf, np.inf])
+    np.testing.assert_array_equal(box.compute_signed_distance(p, max_distance=2.0), [-0.5, 1.5, np.inf, np.inf])
+    ans = box.compute_closest_points(p, max_distance=2.0)
+    assert np.isnan(ans["points"][2:]).all()
+    np.testing.assert_array_equal(ans["primitive_ids"][2:], octrace.INVALID_ID)
+    np.testing.assert_array_equal(ans["geometry_ids"][2:], octrace.INVALID_ID)
+    for bad in (-1.0, np.nan):
+        with pytest.raises(ValueError, match="max_distance"):
+            box.compute_distance(p, max_distance=bad)
+
+
+def test_shapes_threads_and_bad_points(box, points):
+    grid = points[:60].reshape(3, 4, 5, 3)
+    assert box.compute_distance(grid).shape == (3, 4, 5)
+    assert box.compute_signed_distance(grid).shape == (3, 4, 5)
+    ans = box.compute_closest_points(grid)
+    assert ans["points"].shape == (3, 4, 5, 3) and ans["primitive_uvs"].shape == (3, 4, 5, 2)
+    np.testing.assert_array_equal(box.compute_distance(points, nthreads=1), box.compute_distance(points))
+    with pytest.raises(ValueError, match="NaN"):
+        box.compute_distance(np.array([[0, np.nan, 0]], np.float32))
+    with pytest.raises(ValueError):
+        box.compute_distance(np.zeros((4, 2), np.float32))
+
+
+def test_an_open_mesh_signs_by_a_vote_only_when_asked():
+    v, t = cube_arrays()
+    opened = octrace.Scene.from_arrays(v, t[1:])  # one triangle gone
+    p = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 3.0]], np.float32)
+    np.testing.assert_array_equal(opened.compute_distance(p), [0.5, 2.0])
+    with pytest.raises(octrace.NotClosedError, match="nsamples"):
+        opened.compute_signed_distance(p)
+    np.testing.assert_array_equal(opened.compute_signed_distance(p, nsamples=5), [-0.5, 2.0])
+
+
+def test_raycasting_scene_answers_by_geometry():
+    scene = octrace.RaycastingScene()
+    v, t = cube_arrays()
+    scene.add_triangles(v, t)
+    scene.add_triangles(v + np.float32(3.0), t)
+    p = np.array([[0.5, 0.5, 1.25], [3.5, 3.5, 4.5], [2.0, 2.0, 2.0]], np.float32)
+    ans = scene.compute_closest_points(p)
+    np.testing.assert_array_equal(ans["geometry_ids"].numpy(), [0, 1, 0])
+    assert (ans["primitive_ids"].numpy() < 12).all()
+    np.testing.assert_allclose(scene.compute_distance(p).numpy(), [0.25, 0.5, np.sqrt(3.0)], rtol=1e-7)
+    np.testing.assert_allclose(scene.compute_signed_distance(p).numpy(), [0.25, 0.5, np.sqrt(3.0)], rtol=1e-7)
+    inside = np.array([[0.5, 0.5, 0.6]], np.float32)
+    np.testing.assert_allclose(scene.compute_signed_distance(inside).numpy(), [-0.4], rtol=1e-6)
