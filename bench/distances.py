@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""Closest points, distances and signed distances: octrace beside Open3D, FCPW and
+libigl, on the same points, one core (run it under `taskset -c 0`: FCPW and libigl
+use every core they see), medians of three runs in one process.
+
+Points: uniform in 1.1x the mesh's box, and within 1 % of the box's diagonal from the
+surface (random points of random triangles, moved in a random direction). Wrong
+answers are counted against octrace's exact ones (checked in its tests against exact
+arithmetic and the brute force): a distance off by more than 1e-5 of the box's
+diagonal (Open3D and FCPW work in float), a sign that differs from the exact
+inside/outside (closed meshes).
+
+    taskset -c 0 python3 bench/distances.py ../shared/meshes/dragon.obj --points 20000
+
+Needs numpy, octrace (`pip install ./python`) and open3d-cpu; FCPW (`fcpw`) and libigl
+(`libigl`) are timed where installed.
+"""
+
+import argparse
+import os
+import tempfile
+import time
+
+import numpy as np
+
+import octrace
+
+
+def median_rate(n, f, runs=3):
+    rates = []
+    out = None
+    for _ in range(runs):
+        t = time.perf_counter()
+        out = f()
+        rates.append(n / (time.perf_counter() - t) / 1e6)
+    return float(np.median(rates)), out
+
+
+def point_sets(v, t, n, seed=1):
+    rng = np.random.default_rng(seed)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    size = hi - lo
+    uniform = lo - 0.05 * size + 1.1 * size * rng.random((n, 3))
+    tri = v[t[rng.integers(0, len(t), n)]]
+    a, b = rng.random((2, n, 1))
+    flip = (a + b) > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    on = tri[:, 0] + a * (tri[:, 1] - tri[:, 0]) + b * (tri[:, 2] - tri[:, 0])
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    near = on + d * (0.01 * np.linalg.norm(size) * rng.random((n, 1)))
+    return {"uniform 1.1x box": uniform.astype(np.float32), "within 1% of the surface": near.astype(np.float32)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("mesh", help="an OBJ (or any mesh Open3D reads)")
+    ap.add_argument("--points", type=int, default=20000, help="points of each kind")
+    args = ap.parse_args()
+
+    import open3d as o3d
+    legacy = o3d.io.read_triangle_mesh(args.mesh)
+    v = np.asarray(legacy.vertices, np.float32)
+    t = np.asarray(legacy.triangles, np.int64)
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    print(f"{args.mesh}: {len(t):,} triangles; {args.points:,} points of each kind; "
+          f"{os.cpu_count()} CPUs visible (pin with taskset -c 0)")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "mesh.oct")
+        octrace.bake_arrays(v, t, path)
+        ours = octrace.Scene(path)
+        closed = ours.is_closed
+        t0 = time.perf_counter()
+        ours.compute_distance(v[:1], nthreads=1)  # the search's bounds, made once a scene
+        bounds_s = time.perf_counter() - t0
+        o3d_scene = o3d.t.geometry.RaycastingScene()
+        o3d_scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(legacy))
+        peers = {}
+        try:
+            import fcpw
+            f = fcpw.scene_3D()
+            f.set_object_count(1)
+            f.set_object_vertices(np.asfortranarray(v), 0)
+            f.set_object_triangles(np.asfortranarray(t.astype(np.int32)), 0)
+            f.build(fcpw.aggregate_type.bvh_surface_area, True)
+            peers["fcpw"] = f
+        except ImportError:
+            pass
+        try:
+            import igl
+            peers["igl"] = igl
+        except ImportError:
+            pass
+        print(f"octrace: closed {closed}; the search's bounds {bounds_s * 1e3:.0f} ms once")
+
+        rows = []
+        for kind, p in point_sets(v, t, args.points).items():
+            n = len(p)
+            exact_d = ours.compute_distance(p, nthreads=1)
+            exact_in = ours.contains(p, nthreads=1) if closed else None
+            tensor = o3d.core.Tensor(p)
+
+            def wrong_d(d):
+                return int((np.abs(np.asarray(d, np.float64) - exact_d) > 1e-5 * diag).sum())
+
+            def wrong_sign(s):
+                if exact_in is None:
+                    return ""
+                return int(((np.asarray(s) < 0) != exact_in)[exact_d > 0].sum())
+
+            r, _ = median_rate(n, lambda: ours.compute_closest_points(p, nthreads=1))
+            rows.append((kind, "closest points", "octrace", r, 0))
+            r, d = median_rate(n, lambda: o3d_scene.compute_closest_points(tensor, nthreads=1))
+            dd = np.linalg.norm(d["points"].numpy() - p, axis=1)
+            rows.append((kind, "closest points", "Open3D", r, wrong_d(dd)))
+            if "fcpw" in peers:
+                f = peers["fcpw"]
+                inter = fcpw.interaction_3D_list()
+                radii = np.full(n, np.inf, np.float32)
+                pf = np.asfortranarray(p)
+                r, _ = median_rate(n, lambda: f.find_closest_points(pf, radii, inter))
+                fd = np.array([i.d for i in inter])
+                rows.append((kind, "closest points", "FCPW", r, wrong_d(fd)))
+            r, _ = median_rate(n, lambda: ours.compute_distance(p, nthreads=1))
+            rows.append((kind, "distance", "octrace", r, 0))
+            r, d = median_rate(n, lambda: o3d_scene.compute_distance(tensor, nthreads=1))
+            rows.append((kind, "distance", "Open3D", r, wrong_d(d.numpy())))
+            if closed:
+                r, s = median_rate(n, lambda: ours.compute_signed_distance(p, nthreads=1))
+                rows.append((kind, "signed distance", "octrace", r, wrong_sign(s)))
+                r, s = median_rate(n, lambda: o3d_scene.compute_signed_distance(tensor, nthreads=1))
+                rows.append((kind, "signed distance (1 vote)", "Open3D", r,
+                             f"{wrong_d(np.abs(s.numpy()))} d, {wrong_sign(s.numpy())} signs"))
+                if "igl" in peers:
+                    vd, td = v.astype(np.float64), t
+                    pd = p.astype(np.float64)
+                    r, res = median_rate(n, lambda: igl.signed_distance(pd, vd, td, sign_type=igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER), runs=1)
+                    rows.append((kind, "signed distance (fast winding)", "libigl", r,
+                                 f"{wrong_d(np.abs(res[0]))} d, {wrong_sign(res[0])} signs"))
+        print(f"\n| points | query | who | M points/s | wrong |\n| --- | --- | --- | ---: | ---: |")
+        for kind, query, who, r, wrong in rows:
+            print(f"| {kind} | {query} | {who} | {r:.4f} | {wrong} |")
+
+
+if __name__ == "__main__":
+    main()
