@@ -82,16 +82,20 @@ fn gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays() {
     }
     for solid in procedural::closed_solids() {
         let scene = scene_of(&solid.mesh, &BuildParams::auto());
+        // Every vertex and edge midpoint from inside, a third of those lines from
+        // outside (software adapters are slow: the test's time is the GPU's work).
         let mut rays = Vec::new();
-        for (o, d) in solid.leak_rays(1000, 4) {
+        for (i, (o, d)) in solid.leak_rays(200, 4).into_iter().enumerate() {
             let (o, d) = (Vec3::from(o), Vec3::from(d));
             rays.push(Ray::new(o, d));
-            rays.push(Ray::new(o - d * 50.0, d));
+            if i % 3 == 0 {
+                rays.push(Ray::new(o - d * 50.0, d));
+            }
         }
         let n = gpu_equals_cpu(solid.name, gpu, &scene, &rays);
         assert!(n >= rays.len(), "{}: {n} crossings for {} rays", solid.name, rays.len());
         // Lengths inside, of segments that start and end inside and out.
-        let segments: Vec<Ray> = rays.iter().map(|r| Ray { tmin: 0.25, tmax: 40.0, ..*r }).collect();
+        let segments: Vec<Ray> = rays.iter().step_by(2).map(|r| Ray { tmin: 0.25, tmax: 40.0, ..*r }).collect();
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
         let got = tracer.length_inside(scene.solid().unwrap(), &segments).unwrap();
         let want = scene.length_inside_batch(&segments).unwrap();
