@@ -100,6 +100,12 @@ def make(Scene, invalid_id):
             self._scene = None
             return len(self._triangles) - 1
 
+        def __getstate__(self):
+            # The meshes pickle; the scene baked from them is baked again where needed.
+            state = self.__dict__.copy()
+            state["_scene"] = None
+            return state
+
         def _built(self):
             if self._scene is None:
                 if not self._triangles:

@@ -35,6 +35,9 @@ pub(crate) struct Scene {
     pub(crate) inner: octrace_runtime::Scene,
     /// The file's size on disk, for `inspect` (0 for a scene baked in memory).
     file_bytes: u64,
+    /// The file and the options it was opened with, absolute (what a pickle holds);
+    /// `None` for a scene baked in memory.
+    opened: Option<(PathBuf, bool, bool)>,
 }
 
 #[pymethods]
@@ -71,8 +74,30 @@ impl Scene {
             }
             .map_err(|e| open_error(e, &path))?;
             let file_bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-            Ok(Scene { inner, file_bytes })
+            let absolute = std::path::absolute(&path).unwrap_or(path);
+            Ok(Scene { inner, file_bytes, opened: Some((absolute, mmap, trusted)) })
         })
+    }
+
+    /// What a pickle holds: the file's absolute path and the options it was opened
+    /// with, so that a worker process (``multiprocessing``, Dask, Ray) opens the same
+    /// file (mapped scenes share its pages through the page cache; ``trusted=True``
+    /// opens in microseconds). A scene baked in memory (``from_arrays``) has no file:
+    /// ``bake_arrays`` writes one to share.
+    ///
+    /// Raises:
+    ///     TypeError: the scene has no file.
+    fn __getnewargs_ex__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyTuple>, Bound<'py, PyDict>)> {
+        let Some((path, mmap, trusted)) = &self.opened else {
+            return Err(pyo3::exceptions::PyTypeError::new_err(
+                "cannot pickle a scene baked in memory (Scene.from_arrays): it has no file for \
+                 another process to open; write one with octrace.bake_arrays and open that",
+            ));
+        };
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("mmap", mmap)?;
+        kwargs.set_item("trusted", trusted)?;
+        Ok((PyTuple::new(py, [path])?, kwargs))
     }
 
     /// Bakes a mesh given as numpy arrays into a scene held in memory (no file).
@@ -110,7 +135,7 @@ impl Scene {
             let bytes = baked.to_file_bytes(0).map_err(format_error)?;
             drop(baked);
             let inner = octrace_runtime::Scene::from_bytes(&bytes).map_err(runtime_error)?;
-            Ok(Scene { inner, file_bytes: 0 })
+            Ok(Scene { inner, file_bytes: 0, opened: None })
         })
     }
 
