@@ -64,6 +64,9 @@ enum Command {
     Rays(cmd::rays::Args),
     /// Whether points lie inside a closed mesh (the formats: `octrace contains --help`).
     Contains(cmd::contains::Args),
+    /// The nearest point of the surface to each point and its distance, signed with
+    /// --signed, exact (the formats: `octrace distance --help`).
+    Distance(cmd::distance::Args),
     /// Write a standard point set (uniform in the box, or near the surface) for
     /// `contains`.
     Points(cmd::contains::PointsArgs),
@@ -92,6 +95,7 @@ fn main() -> ExitCode {
         Command::Trace(a) => cmd::trace::run(a),
         Command::Rays(a) => cmd::rays::run(a),
         Command::Contains(a) => cmd::contains::run(a),
+        Command::Distance(a) => cmd::distance::run(a),
         Command::Points(a) => cmd::contains::points(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Bench(a) => cmd::bench::run(a),

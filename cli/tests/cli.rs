@@ -1196,6 +1196,70 @@ fn contains_answers_points_and_refuses_bad_input() {
     );
 }
 
+/// `octrace distance`: exact distances from a cube's points (inside it the distance is
+/// the nearest face's, `min(c, 1 - c)`, exact in f32), signs, the band, the records'
+/// layout, and bad input.
+#[test]
+fn distance_answers_points_exactly_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    ok(d, &["points", "cube.oct", "--count", "3000", "-o", "uniform.bin"]);
+    let out = ok(d, &["distance", "cube.oct", "--points", "uniform.bin", "-o", "d.bin", "--signed", "--check"]);
+    assert!(out.contains("3,000 compared, 0 wrong") && out.contains("signed, exact"), "{out}");
+    let words = |name: &str| -> Vec<u32> {
+        let bytes = std::fs::read(d.join(name)).unwrap();
+        bytes.chunks_exact(4).map(|w| u32::from_le_bytes(w.try_into().unwrap())).collect()
+    };
+    let points: Vec<f32> = words("uniform.bin").into_iter().map(f32::from_bits).collect();
+    let records = words("d.bin");
+    assert_eq!(records.len(), 3000 * 7);
+    for (p, r) in points.chunks_exact(3).zip(records.chunks_exact(7)) {
+        let nearest_face = p.iter().map(|&c| c.min(1.0 - c)).fold(f32::INFINITY, f32::min);
+        assert_eq!(f32::from_bits(r[0]), -nearest_face, "point {p:?}");
+        let q: Vec<f32> = r[1..4].iter().map(|&w| f32::from_bits(w)).collect();
+        let off: f32 = (0..3).map(|k| (q[k] - p[k]).powi(2)).sum::<f32>().sqrt();
+        assert!((off - nearest_face).abs() <= 1e-6, "point {p:?}: nearest point {q:?}");
+        assert!(r[4] < 12, "triangle {}", r[4]);
+    }
+    let piped = octrace(d, &["distance", "cube.oct", "--points", "uniform.bin", "-o", "-", "--signed"]);
+    assert!(piped.status.success() && piped.stdout == std::fs::read(d.join("d.bin")).unwrap());
+    // A band: points farther than 0.1 answer -inf (inside) and no triangle.
+    let out =
+        ok(d, &["distance", "cube.oct", "--points", "uniform.bin", "-o", "b.bin", "--signed", "--max-distance", "0.1"]);
+    assert!(out.contains("within reach"), "{out}");
+    for (r, all) in words("b.bin").chunks_exact(7).zip(records.chunks_exact(7)) {
+        let d = f32::from_bits(all[0]);
+        if d < -0.1 {
+            assert_eq!((f32::from_bits(r[0]), r[4]), (f32::NEG_INFINITY, u32::MAX));
+            assert!(f32::from_bits(r[1]).is_nan());
+        } else {
+            assert_eq!(r, all);
+        }
+    }
+    fails_saying(
+        d,
+        &["distance", "cube.oct", "--points", "uniform.bin", "-o", "x.bin", "--max-distance=-1"],
+        "--max-distance",
+    );
+    fails_saying(d, &["distance", "cube.oct", "--points", "uniform.bin", "-o", "x.bin", "--vote", "3"], "--signed");
+    let open: String = CUBE_OBJ
+        .lines()
+        .filter(|l| !l.starts_with("f 2 3 7") && !l.starts_with("f 2 7 6"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(d.join("open.obj"), open).unwrap();
+    ok(d, &["bake", "open.obj", "-o", "open.oct"]);
+    let signed_open = ["distance", "open.oct", "--points", "uniform.bin", "-o", "o.bin", "--signed"];
+    fails_saying(d, &signed_open, "not closed");
+    let out = ok(d, &[&signed_open[..], &["--vote", "3", "--check", "--json"]].concat());
+    let j: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!((j["answer"].as_str(), j["check"]["wrong"].as_u64()), (Some("signed by a vote"), Some(0)), "{j}");
+    let out = ok(d, &["distance", "open.oct", "--points", "uniform.bin", "-o", "o.bin", "--check"]);
+    assert!(out.contains("3,000 compared, 0 wrong"), "{out}");
+}
+
 /// `bake`'s budgets name themselves and the option that raises them: a glTF whose
 /// nodes share children (2^39 placements from a few hundred bytes) is refused before
 /// loading, and raising --max-instances is not enough to make it bake; a tree past

@@ -70,7 +70,7 @@ pub(crate) struct Args {
 const MAX_POINTS: u64 = 1 << 32;
 
 /// Reads a point file: 12 bytes a point, every coordinate finite.
-fn read_points(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
+pub(crate) fn read_points(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
     let points: Vec<[f32; 3]> = octrace_format::read_records(path, MAX_POINTS, "point")
         .with_context(|| format!("cannot read {} (f32 x y z points)", path.display()))?;
     anyhow::ensure!(!points.is_empty(), "{}: empty file, no points", path.display());
@@ -196,7 +196,7 @@ fn code(side: Option<Side>) -> u8 {
     }
 }
 
-fn stored_triangles(scene: &Scene) -> Vec<[[f32; 3]; 3]> {
+pub(crate) fn stored_triangles(scene: &Scene) -> Vec<[[f32; 3]; 3]> {
     let v = scene.view();
     v.stored_triangles().collect()
 }

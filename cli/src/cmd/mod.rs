@@ -4,6 +4,7 @@ pub(crate) mod bake;
 pub(crate) mod bench;
 pub(crate) mod contains;
 pub(crate) mod demo;
+pub(crate) mod distance;
 pub(crate) mod inspect;
 pub(crate) mod rays;
 pub(crate) mod render;
