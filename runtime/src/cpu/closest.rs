@@ -166,14 +166,16 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
     for (s, (i, j)) in seg.iter_mut().zip(edges) {
         let along = dot(r[i], e[i]);
         let ee = e_len2[i];
-        let tt = if ee > 0.0 { (along / ee).clamp(0.0, 1.0) } else { 0.0 };
-        let d = [0, 1, 2].map(|c| r[i][c] - tt * e[i][c]);
-        // The foot is certainly at an end where r.e is certainly <= 0 or >= e.e.
+        let mut tt = if ee > 0.0 { (along / ee).clamp(0.0, 1.0) } else { 0.0 };
+        // The foot is certainly at an end where r.e is certainly <= 0 or >= e.e (and
+        // the point is then that vertex, exactly).
         let margin = 8.0 * U * (ee * dot(r[i], r[i])).sqrt();
         let bits = |x: [f64; 3]| x.map(|c| c as f32);
         let on = if along < -margin || ee == 0.0 {
+            tt = 0.0;
             On::Vertex(bits(v[i]))
         } else if along - ee > margin + 4.0 * U * ee {
+            tt = 1.0;
             On::Vertex(bits(v[j]))
         } else {
             let (a, b) = (bits(v[i]), bits(v[j]));
@@ -184,13 +186,18 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
                 On::Segment(b, a)
             }
         };
+        let d = [0, 1, 2].map(|c| r[i][c] - tt * e[i][c]);
         *s = (dot(d, d), tt, on);
     }
     let err_s = 32.0 * U * m2;
     let best = (0..3).min_by(|&a, &b| seg[a].0.total_cmp(&seg[b].0)).unwrap_or(0);
     let (s2, tt, _) = seg[best];
     let (i, j) = edges[best];
-    let q = [0, 1, 2].map(|c| v[i][c] + tt * e[best][c]);
+    let q = match tt {
+        0.0 => v[i],
+        1.0 => v[j],
+        _ => [0, 1, 2].map(|c| v[i][c] + tt * e[best][c]),
+    };
     let (mut u, mut w) = (0.0, 0.0);
     for (vertex, weight) in [(i, 1.0 - tt), (j, tt)] {
         match vertex {
