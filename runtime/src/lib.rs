@@ -54,6 +54,7 @@ pub mod render;
 mod scene;
 pub mod spawn;
 pub mod surface;
+pub mod winding;
 #[doc(hidden)]
 pub mod testing;
 

@@ -8,6 +8,7 @@ use octrace_format::{BakedScene, SceneFile, SceneView};
 use crate::cpu::{BatchCrossings, ClosestPoint, Crossing, CrossingCount, LocateGrid, Solid, Tracer};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
+use crate::winding::{Accuracy, Winding, WindingTree};
 
 enum Source {
     File(Box<SceneFile>),
@@ -56,6 +57,8 @@ struct Inner {
     edges: std::sync::OnceLock<EdgeCensus>,
     /// The closest-point search's bounds, made on its first query.
     bounds: std::sync::OnceLock<crate::cpu::SurfaceBounds>,
+    /// The winding numbers' clusters, made on their first query.
+    winding: std::sync::OnceLock<std::result::Result<crate::winding::WindingTree, octrace_format::memory::AllocError>>,
 }
 
 impl std::fmt::Debug for Scene {
@@ -147,6 +150,7 @@ impl Scene {
             solid: std::sync::OnceLock::new(),
             edges: std::sync::OnceLock::new(),
             bounds: std::sync::OnceLock::new(),
+            winding: std::sync::OnceLock::new(),
         };
         Scene { shared: std::sync::OnceLock::new(), inner: Box::new(inner) }
     }
@@ -444,6 +448,97 @@ impl Scene {
                 }
             })
             .collect())
+    }
+}
+
+/// Generalized winding numbers ([`crate::winding`]).
+impl Scene {
+    /// The stored triangles grouped for winding numbers ([`WindingTree`]), made on the
+    /// first call (a sort of the triangles: some 20 ms for the bunny, 0.3 s for the
+    /// dragon; about 135 bytes a triangle).
+    ///
+    /// # Errors
+    /// [`Error::Alloc`] where its memory cannot be had.
+    pub fn winding_tree(&self) -> Result<&WindingTree> {
+        let made = self.inner.winding.get_or_init(|| WindingTree::new(self.view().stored_triangles().collect()));
+        made.as_ref().map_err(|e| Error::Alloc(e.clone()))
+    }
+
+    /// Whether the scene's winding numbers are integers: closed, every edge in two
+    /// triangles that run it opposite ways. Its winding numbers are then answered
+    /// exactly ([`Scene::winding_numbers`]).
+    pub fn winds_exactly(&self) -> bool {
+        let e = self.edges();
+        e.is_manifold() && e.is_oriented()
+    }
+
+    /// The generalized winding number of each point (Jacobson et al.), on all cores:
+    /// 1 inside a closed mesh wound counter-clockwise seen from outside, 0 outside,
+    /// fractions where the surface has holes.
+    ///
+    /// Where the scene [winds exactly](Scene::winds_exactly) the answer is exact, an
+    /// integer with [`Winding::bound`] 0: the tree's sum within 0.45 (guaranteed)
+    /// rounded to the nearest integer whose parity is the exact inside/outside's
+    /// ([`Scene::contains`]). Elsewhere, as `accuracy` asks: within a tolerance,
+    /// guaranteed, or by Barill et al.'s fast rule ([`Accuracy::FAST`], libigl's).
+    ///
+    /// # Errors
+    /// [`Error::Alloc`] where the tree's or the answers' memory cannot be had.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams};
+    /// use octrace_runtime::winding::Accuracy;
+    /// use octrace_runtime::Scene;
+    /// let ball = Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?;
+    /// let w = ball.winding_numbers(&[[0.1, 0.2, 0.3], [0.0, 0.0, 2.0]], Accuracy::FAST)?;
+    /// assert_eq!((w[0].value, w[1].value), (1.0, 0.0)); // closed: exact
+    /// let sheet = Scene::from_baked(bake(&procedural::grid(8, 1.0), &BuildParams::auto())?)?;
+    /// let w = sheet.winding_numbers(&[[0.5, 0.5, 0.25]], Accuracy::Within(1e-6))?;
+    /// assert!(w[0].bound <= 1e-6 && w[0].value.abs() > 0.1 && w[0].value.abs() < 0.5);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn winding_numbers(&self, points: &[[f32; 3]], accuracy: Accuracy) -> Result<Vec<Winding>> {
+        let tree = self.winding_tree()?;
+        let mut out = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
+        if self.winds_exactly() {
+            let inside = self.contains_batch(points)?;
+            tree.winding_numbers(points, Accuracy::Within(0.45), &mut out);
+            for (w, inside) in out.iter_mut().zip(inside) {
+                // The exact number is an integer of the parity `inside` says, within
+                // 0.45 of the sum: the one.
+                let odd = inside as i64;
+                let near = w.value.round() as i64;
+                let value = if (near - odd).rem_euclid(2) == 0 {
+                    near
+                } else if w.value > near as f64 {
+                    near + 1
+                } else {
+                    near - 1
+                };
+                *w = Winding { value: value as f64, bound: 0.0 };
+            }
+        } else {
+            tree.winding_numbers(points, accuracy, &mut out);
+        }
+        Ok(out)
+    }
+
+    /// Whether each point is inside by its winding number: exactly [`Scene::contains`]
+    /// where the scene is closed; elsewhere whether its winding number is above 1/2
+    /// (libigl's rule, for meshes with holes, or non-manifold or self-intersecting
+    /// ones), decided with certainty ([`WindingTree::inside_batch`]). On all cores.
+    ///
+    /// # Errors
+    /// [`Error::Alloc`] where the tree's or the answers' memory cannot be had.
+    pub fn inside_by_winding(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
+        if self.edges().is_closed() {
+            return self.contains_batch(points);
+        }
+        let tree = self.winding_tree()?;
+        let mut out = octrace_format::memory::try_vec(points.len(), "inside labels")?;
+        tree.inside_batch(points, &mut out);
+        Ok(out)
     }
 }
 
