@@ -26,3 +26,4 @@ mod tangents;
 mod texcoords;
 mod trusted;
 mod unconstrained;
+mod winding;
