@@ -5,6 +5,7 @@
 use numpy::PyArray1;
 use octrace_format::StoredIndex;
 use octrace_runtime::cpu::CrossingCount;
+use octrace_runtime::winding::Accuracy;
 use octrace_runtime::{ClosestPoint, Hit};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -288,6 +289,39 @@ impl Scene {
         Ok((inside, input.shape(&[])))
     }
 
+    /// Each point inside by its winding number (`Scene::inside_by_winding`).
+    fn inside_by_winding(&self, query_points: &Bound<'_, PyAny>, nthreads: Threads) -> PyResult<Vec<bool>> {
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        query_points.py().detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                self.inner.inside_by_winding(&to_points(values)?).map_err(runtime_error)
+            })?
+        })
+    }
+
+    /// `winding_number`: float64 of the points' leading shape.
+    pub(crate) fn winding_numbers<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        tolerance: Option<f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let accuracy = match tolerance {
+            None => Accuracy::FAST,
+            Some(t) if t >= 0.0 => Accuracy::Within(t),
+            Some(t) => return Err(PyValueError::new_err(format!("tolerance: {t}, expected a number at least 0"))),
+        };
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let w = query_points.py().detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                self.inner.winding_numbers(&to_points(values)?, accuracy).map_err(runtime_error)
+            })?
+        })?;
+        array(query_points.py(), collected(w.len(), "winding numbers", w.iter().map(|w| w.value))?, input.shape(&[]))
+    }
+
     /// Each point inside by the parity vote of `nsamples` rays (any mesh), and the
     /// result's shape.
     pub(crate) fn vote(
@@ -440,8 +474,9 @@ impl Scene {
         array(query_points.py(), d, shape)
     }
 
-    /// `compute_signed_distance`: the sign exact on a closed mesh, by the vote of
-    /// `nsamples` rays on an open one.
+    /// `compute_signed_distance`: the sign exact on a closed mesh; on an open one by
+    /// the vote of `nsamples` rays where given, else by the winding number (`w > 1/2`,
+    /// decided with certainty).
     pub(crate) fn signed_distances<'py>(
         &self,
         query_points: &Bound<'py, PyAny>,
@@ -453,13 +488,7 @@ impl Scene {
         let closed = self.inner.edges().is_closed();
         let inside = match nsamples {
             Some(k) if !closed => self.vote(query_points, k, nthreads)?.0,
-            None if !closed => {
-                return Err(NotClosedError::new_err(
-                    "the mesh is not closed, so it has no inside to sign distances by; \
-                     compute_signed_distance signs an open mesh's distances by a vote, as Open3D does, \
-                     when given nsamples (an odd number of rays a point, e.g. nsamples=3)",
-                ))
-            }
+            None if !closed => self.inside_by_winding(query_points, nthreads)?,
             _ => self.inside(query_points, nthreads)?.0,
         };
         let (near, shape) = self.closest(query_points, nthreads, max_distance)?;

@@ -165,6 +165,11 @@ def make(Scene, invalid_id):
             open one the vote of ``nsamples`` rays (odd), as Open3D signs."""
             return self._built().compute_signed_distance(query_points, nthreads, nsamples).view(Tensor)
 
+        def winding_number(self, query_points, nthreads=0, tolerance=None):
+            """The generalized winding number of each point (not in Open3D):
+            ``octrace.Scene.winding_number``."""
+            return self._built().winding_number(query_points, nthreads, tolerance=tolerance).view(Tensor)
+
         @staticmethod
         def create_rays_pinhole(*args, **kwargs):
             """Rays of a pinhole camera: ``octrace.Scene.create_rays_pinhole``, Open3D's

@@ -396,17 +396,19 @@ impl Scene {
     ///
     /// On a closed mesh (``is_closed``) the sign is the exact inside/outside
     /// (``contains``), never a vote, and ``nsamples`` is not needed. An open mesh has
-    /// no inside: there ``nsamples`` rays a point vote by the parity of their
-    /// crossings, as Open3D signs; without ``nsamples`` an open mesh raises.
+    /// no inside: there the sign is the generalized winding number's (inside where it
+    /// is above 1/2, libigl's rule), decided with certainty (``winding_number``); or,
+    /// given ``nsamples``, ``nsamples`` rays a point vote by the parity of their
+    /// crossings, as Open3D signs.
     ///
     /// Args:
     ///     query_points: float32 ``(..., 3)``.
     ///     nthreads: threads (0: all cores).
-    ///     nsamples: rays a point for the vote on an open mesh: odd, 1 to 255.
+    ///     nsamples: rays a point for the vote on an open mesh: odd, 1 to 255
+    ///         (``None``: the winding number's sign).
     ///     max_distance: a band around the surface; points past it answer ``+-inf``.
     ///
     /// Raises:
-    ///     NotClosedError: the mesh is open and ``nsamples`` is not given.
     ///     ValueError: ``nsamples`` even or past 255; points not ``(..., 3)`` or NaN;
     ///         ``max_distance`` NaN or negative.
     #[pyo3(signature = (query_points, nthreads=0, nsamples=None, *, max_distance=f32::INFINITY),
@@ -419,6 +421,39 @@ impl Scene {
         max_distance: f32,
     ) -> PyResult<Bound<'py, PyAny>> {
         self.signed_distances(query_points, nthreads, nsamples, max_distance)
+    }
+
+    /// The generalized winding number of each query point (Jacobson et al. 2013):
+    /// float64 of the points' leading shape; 1 inside a closed mesh wound
+    /// counter-clockwise seen from outside, 0 outside, fractions where the surface has
+    /// holes (inside where above 1/2, libigl's rule).
+    ///
+    /// On a closed mesh whose every edge is in two triangles running it opposite ways
+    /// the answer is exact (an integer: 2 inside two nested shells, -1 inside an
+    /// inside-out one). Elsewhere: with ``tolerance``, within it of the exact
+    /// winding number of the triangles, guaranteed (a rigorous bound on the
+    /// expansions, refined where largest); without, Barill et al.'s fast rule
+    /// (``beta = 2``, as libigl's ``fast_winding_number``): errors measured below
+    /// 4e-3 on the bunny, not promised.
+    ///
+    /// Args:
+    ///     query_points: float32 ``(..., 3)``.
+    ///     nthreads: threads (0: all cores).
+    ///     tolerance: the largest error allowed, or ``None`` for the fast rule.
+    ///
+    /// Raises:
+    ///     ValueError: points not float32 ``(..., 3)`` or NaN; ``tolerance`` negative.
+    ///
+    /// Example:
+    ///     >>> w = scene.winding_number(points, tolerance=1e-4)
+    #[pyo3(signature = (query_points, nthreads=0, *, tolerance=None))]
+    fn winding_number<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        tolerance: Option<f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        self.winding_numbers(query_points, nthreads, tolerance)
     }
 
     /// Whether each point of ``query_points`` (float32 ``(..., 3)``) lies inside the

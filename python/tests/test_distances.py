@@ -96,14 +96,38 @@ def test_shapes_threads_and_bad_points(box, points):
         box.compute_distance(np.zeros((4, 2), np.float32))
 
 
-def test_an_open_mesh_signs_by_a_vote_only_when_asked():
+def test_an_open_mesh_signs_by_its_winding_number_or_a_vote():
     v, t = cube_arrays()
     opened = octrace.Scene.from_arrays(v, t[1:])  # one triangle gone
     p = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 3.0]], np.float32)
     np.testing.assert_array_equal(opened.compute_distance(p), [0.5, 2.0])
-    with pytest.raises(octrace.NotClosedError, match="nsamples"):
-        opened.compute_signed_distance(p)
+    np.testing.assert_array_equal(opened.compute_signed_distance(p), [-0.5, 2.0])
     np.testing.assert_array_equal(opened.compute_signed_distance(p, nsamples=5), [-0.5, 2.0])
+    # Half a triangle of the cube's twelve gone: 1 - 1/12 of the sphere at the centre.
+    w = opened.winding_number(p[:1], tolerance=1e-9)
+    assert abs(w[0] - (1 - 1 / 12)) <= 1e-9
+
+
+def test_winding_numbers_exact_on_closed_meshes_and_bounded_on_open_ones():
+    v, t = cube_arrays()
+    box = octrace.Scene.from_arrays(v, t)
+    grid = np.array([[[0.5, 0.5, 0.5], [2.0, 0.5, 0.5]], [[0.1, 0.9, 0.2], [-1.0, -1.0, -1.0]]], np.float32)
+    w = box.winding_number(grid)
+    assert w.shape == (2, 2) and w.dtype == np.float64
+    np.testing.assert_array_equal(w, [[1.0, 0.0], [1.0, 0.0]])
+    # Open: a square seen from above its centre, 4 asin(s^2 / (s^2 + 4 h^2)) / 4 pi.
+    sq = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    sheet = octrace.Scene.from_arrays(sq, np.array([[0, 1, 2], [0, 2, 3]], np.uint32))
+    h = float(np.float32(0.3))  # as the query holds it
+    want = -4 * np.arcsin(1 / (1 + 4 * h * h)) / (4 * np.pi)
+    got = sheet.winding_number(np.array([[0.5, 0.5, h]], np.float32), tolerance=1e-12)
+    assert abs(got[0] - want) <= 1e-12
+    assert abs(sheet.winding_number(np.array([[0.5, 0.5, h]], np.float32))[0] - want) < 1e-2
+    with pytest.raises(ValueError, match="tolerance"):
+        sheet.winding_number(grid, tolerance=-1.0)
+    rc = octrace.RaycastingScene()
+    rc.add_triangles(v, t)
+    np.testing.assert_array_equal(rc.winding_number(grid).numpy(), w)
 
 
 def test_raycasting_scene_answers_by_geometry():
