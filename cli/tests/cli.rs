@@ -1252,7 +1252,14 @@ fn distance_answers_points_exactly_and_refuses_bad_input() {
     std::fs::write(d.join("open.obj"), open).unwrap();
     ok(d, &["bake", "open.obj", "-o", "open.oct"]);
     let signed_open = ["distance", "open.oct", "--points", "uniform.bin", "-o", "o.bin", "--signed"];
-    fails_saying(d, &signed_open, "not closed");
+    // Signed by the winding number: above 1/2 everywhere inside the cube with a face
+    // open (the hole subtends less than half the sphere).
+    let out = ok(d, &signed_open);
+    assert!(out.contains("signed by the winding number"), "{out}");
+    for (p, r) in points.chunks_exact(3).zip(words("o.bin").chunks_exact(7)) {
+        let inside = p.iter().all(|&c| c > 0.0 && c < 1.0);
+        assert_eq!(f32::from_bits(r[0]) < 0.0, inside, "point {p:?}");
+    }
     let out = ok(d, &[&signed_open[..], &["--vote", "3", "--check", "--json"]].concat());
     let j: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert_eq!((j["answer"].as_str(), j["check"]["wrong"].as_u64()), (Some("signed by a vote"), Some(0)), "{j}");

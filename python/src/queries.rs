@@ -4,7 +4,7 @@
 
 use numpy::PyArray1;
 use octrace_format::StoredIndex;
-use octrace_runtime::cpu::CrossingCount;
+use octrace_runtime::cpu::{signed, CrossingCount};
 use octrace_runtime::winding::Accuracy;
 use octrace_runtime::{ClosestPoint, Hit};
 use pyo3::exceptions::PyValueError;
@@ -492,14 +492,7 @@ impl Scene {
             _ => self.inside(query_points, nthreads)?.0,
         };
         let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
-        let signed = near.iter().zip(inside).map(|(c, inside)| {
-            let d = c.map_or(f32::INFINITY, |c| c.distance);
-            if inside && d != 0.0 {
-                -d
-            } else {
-                d
-            }
-        });
+        let signed = near.iter().zip(inside).map(|(c, inside)| signed(c.map_or(f32::INFINITY, |c| c.distance), inside));
         array(py, collected(near.len(), "signed distances", signed)?, shape)
     }
 }

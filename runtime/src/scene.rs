@@ -439,14 +439,7 @@ impl Scene {
         Ok(near
             .iter()
             .zip(inside)
-            .map(|(c, inside)| {
-                let d = c.map_or(f32::INFINITY, |c| c.distance);
-                if inside && d != 0.0 {
-                    -d
-                } else {
-                    d
-                }
-            })
+            .map(|(c, inside)| crate::cpu::signed(c.map_or(f32::INFINITY, |c| c.distance), inside))
             .collect())
     }
 }

@@ -26,8 +26,9 @@ and third vertices.
 The distance is exact: the distance from the point to the stored (f32) triangles,
 correctly rounded to f32; the triangle is the nearest, the lowest input index of
 equally near ones. --signed takes the sign from the exact inside/outside of a closed
-scene (`octrace contains`); an open scene has no inside, and --vote K signs by the
-majority of K rays' crossing parities, approximately, as Open3D's
+scene (`octrace contains`). An open scene has no inside: its sign is its generalized
+winding number's (inside where above 1/2, libigl's rule, decided with certainty), or
+with --vote K the majority of K rays' crossing parities, approximately, as Open3D's
 compute_signed_distance(nsamples=K).
 
 --check compares every answer with the brute-force oracle (every triangle in f64, by
@@ -47,7 +48,8 @@ pub(crate) struct Args {
     /// then goes to standard error). Never one of the inputs.
     #[arg(short = 'o', long = "output", visible_alias = "out")]
     pub out: PathBuf,
-    /// Negative inside: the exact inside/outside of a closed scene (or --vote).
+    /// Negative inside: the exact inside/outside of a closed scene; an open one's
+    /// winding number above 1/2 (or --vote).
     #[arg(long)]
     pub signed: bool,
     /// With --signed, sign an open scene's distances by a majority of K rays' parities
@@ -103,14 +105,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let points = read_points(&args.points)?;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let closed = scene.edges().is_closed();
-    if args.signed && args.vote.is_none() && !closed {
-        anyhow::bail!("the scene is not closed, so it has no inside to sign distances by: --vote K signs by a vote");
-    }
     let (near, inside, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
         // The search's bounds (and the inside labels) are made once, before the clock.
         scene.surface_bounds();
         if args.signed && closed {
             scene.solid()?;
+        } else if args.signed && args.vote.is_none() {
+            scene.winding_tree()?;
         }
         let t = Instant::now();
         let near = scene.closest_points_batch(&points, args.max_distance);
@@ -121,6 +122,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
                 scene.tracer().par_contains_by_vote(&points, k as usize, &mut inside);
                 Some(inside)
             }
+            (true, None) if !closed => Some(scene.inside_by_winding(&points)?),
             (true, _) => Some(scene.contains_batch(&points)?),
         };
         Ok((near, inside, t.elapsed().as_secs_f64()))
@@ -130,10 +132,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         .enumerate()
         .map(|(i, c)| {
             let d = c.map_or(f32::INFINITY, |c| c.distance);
-            match &inside {
-                Some(inside) if inside[i] && d != 0.0 => -d,
-                _ => d,
-            }
+            inside.as_ref().map_or(d, |inside| octrace_runtime::cpu::signed(d, inside[i]))
         })
         .collect();
     let out: Vec<[u32; 7]> = near.iter().zip(&distances).map(|(c, &d)| record(c, d)).collect();
@@ -150,6 +149,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let how = match (args.signed, args.vote) {
         (false, _) => "unsigned",
         (true, Some(_)) if !closed => "signed by a vote",
+        (true, None) if !closed => "signed by the winding number",
         (true, _) => "signed, exact",
     };
     if args.json {

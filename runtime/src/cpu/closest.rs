@@ -47,6 +47,23 @@ pub struct ClosestPoint {
     pub v: f32,
 }
 
+/// A distance signed as the signed-distance calls sign it: negative inside, except 0
+/// (a point on the surface is at 0 whatever side it is counted on), so a band's
+/// infinity takes the point's side.
+///
+/// ```
+/// use octrace_runtime::cpu::signed;
+/// assert_eq!((signed(0.5, true), signed(0.5, false), signed(0.0, true)), (-0.5, 0.5, 0.0));
+/// assert_eq!(signed(f32::INFINITY, true), f32::NEG_INFINITY);
+/// ```
+pub fn signed(distance: f32, inside: bool) -> f32 {
+    if inside && distance != 0.0 {
+        -distance
+    } else {
+        distance
+    }
+}
+
 /// `f64`'s unit roundoff, `2^-53`.
 const U: f64 = 1.0 / (1u64 << 53) as f64;
 

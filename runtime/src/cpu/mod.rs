@@ -30,7 +30,7 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
-pub use closest::{ClosestPoint, ClosestScratch, SurfaceBounds};
+pub use closest::{signed, ClosestPoint, ClosestScratch, SurfaceBounds};
 pub use crossings::{Crossing, CrossingCount};
 #[cfg(feature = "gpu")]
 pub(crate) use crossings_batch::over_budget;
