@@ -138,7 +138,37 @@ def main():
                     r, res = median_rate(n, lambda: igl.signed_distance(pd, vd, td, sign_type=igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER), runs=1)
                     rows.append((kind, "signed distance (fast winding)", "libigl", r,
                                  f"{wrong_d(np.abs(res[0]))} d, {wrong_sign(res[0])} signs"))
-        print(f"\n| points | query | who | M points/s | wrong |\n| --- | --- | --- | ---: | ---: |")
+            # Winding numbers: the error's largest against the exact ones (octrace's
+            # integers on a closed oriented mesh, else the brute-force sum over every
+            # triangle, libigl's winding_number, on the first 200 points).
+            m = min(n, 200)
+            ours.winding_number(v[:1], nthreads=1)  # the clusters, made once a scene
+            if closed:
+                exact_w = ours.winding_number(p[:m], nthreads=1)
+            elif "igl" in peers:
+                exact_w = peers["igl"].winding_number(v.astype(np.float64), t, p[:m].astype(np.float64))
+            else:
+                exact_w = None
+
+            def err(w):
+                return "" if exact_w is None else f"{np.abs(np.asarray(w)[:m] - exact_w).max():.1e}"
+
+            name = "winding number (exact)" if closed else "winding number (beta 2)"
+            r, w = median_rate(n, lambda: ours.winding_number(p, nthreads=1))
+            rows.append((kind, name, "octrace", r, err(w)))
+            for tol in (1e-2, 1e-4):
+                if not closed:
+                    r, w = median_rate(n, lambda: ours.winding_number(p, nthreads=1, tolerance=tol), runs=1)
+                    rows.append((kind, f"winding number (within {tol:g}, guaranteed)", "octrace", r, err(w)))
+            if "igl" in peers:
+                vd, pd = v.astype(np.float64), p.astype(np.float64)
+                t0 = time.perf_counter()
+                igl.fast_winding_number(vd, t, pd[:1])
+                pre = time.perf_counter() - t0
+                r, w = median_rate(n, lambda: igl.fast_winding_number(vd, t, pd), runs=1)
+                rows.append((kind, f"fast_winding_number (beta 2; its tree, {pre * 1e3:.0f} ms, built in the call)",
+                             "libigl", r, err(w)))
+        print(f"\n| points | query | who | M points/s | wrong (winding: largest error) |\n| --- | --- | --- | ---: | ---: |")
         for kind, query, who, r, wrong in rows:
             print(f"| {kind} | {query} | {who} | {r:.4f} | {wrong} |")
 

@@ -93,7 +93,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = Instant::now();
         rayon::ThreadPoolBuilder::new().num_threads(1).build()?.install(|| tree.inside_batch(pts, &mut inside));
         let wrong = pts.iter().zip(&exact).zip(&inside).filter(|((_, e), i)| (**e > 0.5) != **i).count();
-        println!("{name:8} w > 1/2, certain: {:.3} M points/s, {wrong} of {} wrong", pts.len() as f64 / t.elapsed().as_secs_f64() / 1e6, exact.len());
+        println!(
+            "{name:8} w > 1/2, certain: {:.3} M points/s, {wrong} of {} wrong",
+            pts.len() as f64 / t.elapsed().as_secs_f64() / 1e6,
+            exact.len()
+        );
     }
     Ok(())
 }

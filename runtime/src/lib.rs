@@ -54,9 +54,9 @@ pub mod render;
 mod scene;
 pub mod spawn;
 pub mod surface;
-pub mod winding;
 #[doc(hidden)]
 pub mod testing;
+pub mod winding;
 
 /// The vector type of the API (`Ray::new` takes `glam::Vec3`), re-exported so that a
 /// caller needs no `glam` of its own (or a matching version of it).

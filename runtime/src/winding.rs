@@ -187,7 +187,8 @@ impl Cluster {
             c.add_moments(*a, norm(*a), offset);
             // The triangle's second moment about the centre: its centroid's, plus
             // `1/12 sum (v - g)(v - g)^T` (the uniform triangle's covariance).
-            let second = sym(|j, k| offset[j] * offset[k] + (d[0][j] * d[0][k] + d[1][j] * d[1][k] + d[2][j] * d[2][k]) / 12.0);
+            let second =
+                sym(|j, k| offset[j] * offset[k] + (d[0][j] * d[0][k] + d[1][j] * d[1][k] + d[2][j] * d[2][k]) / 12.0);
             for i in 0..3 {
                 for e in 0..6 {
                     c.t[i][e] += a[i] * second[e];
@@ -264,7 +265,9 @@ impl Cluster {
         let v = [0, 1, 2].map(|i| t[i][0] + t[i][1] + t[i][2]);
         let yty = [0, 1, 2].map(|i| {
             let t = &t[i];
-            t[0] * y[0] * y[0] + t[1] * y[1] * y[1] + t[2] * y[2] * y[2]
+            t[0] * y[0] * y[0]
+                + t[1] * y[1] * y[1]
+                + t[2] * y[2] * y[2]
                 + 2.0 * (t[3] * y[0] * y[1] + t[4] * y[0] * y[2] + t[5] * y[1] * y[2])
         });
         let inv5 = inv3 / r2;
@@ -274,7 +277,11 @@ impl Cluster {
         let truncation = 4.0 * self.area * r3 / (gap * gap * gap * gap * gap);
         let rounding = 64.0
             * f64::EPSILON
-            * (dipole.abs() + first.abs() + 6.0 * norm(my) * inv3 / dist + second.abs() + 24.0 * (norm(u) + norm(v)) * inv5 / dist * r2);
+            * (dipole.abs()
+                + first.abs()
+                + 6.0 * norm(my) * inv3 / dist
+                + second.abs()
+                + 24.0 * (norm(u) + norm(v)) * inv5 / dist * r2);
         (dipole + first + second, truncation + rounding)
     }
 }
@@ -490,7 +497,8 @@ impl WindingTree {
                 let c = if top.node == u32::MAX { &root } else { &self.nodes[top.node as usize] };
                 let (first, count) = (c.first as usize, c.count as usize);
                 if c.leaf {
-                    settled.value += self.triangles[first..first + count].iter().map(|t| solid_angle(p, t)).sum::<f64>();
+                    settled.value +=
+                        self.triangles[first..first + count].iter().map(|t| solid_angle(p, t)).sum::<f64>();
                     continue;
                 }
                 for (k, child) in self.nodes[first..first + count].iter().enumerate() {
@@ -599,4 +607,3 @@ fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
     }
     code
 }
-

@@ -43,7 +43,8 @@ fn check_bounds(name: &str, triangles: &[[[f32; 3]; 3]], pts: &[[f32; 3]], fast_
 fn winding_numbers_hold_their_bound_on_the_bunny_and_on_far_slivers() {
     let mesh = octrace_tests::bunny_mesh();
     let scene = octrace_tests::bunny_scene();
-    let pts: Vec<[f32; 3]> = crate::inside::points(mesh, scene, 12, 1e-4, 21).into_iter().map(|p| p.to_array()).collect();
+    let pts: Vec<[f32; 3]> =
+        crate::inside::points(mesh, scene, 12, 1e-4, 21).into_iter().map(|p| p.to_array()).collect();
     check_bounds("bunny", &mesh.triangles, &pts, 1e-2);
     // Slivers and a soup, far from the origin.
     let mut soup = procedural::soup(7, 400, 0.3, 1.0);
@@ -54,7 +55,8 @@ fn winding_numbers_hold_their_bound_on_the_bunny_and_on_far_slivers() {
         t[2] = [t[0][0] + 1e-3 * (t[1][0] - t[0][0]), t[0][1] + 1e-3, t[0][2]];
     }
     let mut rng = SplitMix(5);
-    let pts: Vec<[f32; 3]> = (0..60).map(|_| [1e5 + rng.unit() * 1.2 - 0.1, rng.unit() * 1.2 - 0.1, rng.unit() * 1.2 - 0.1]).collect();
+    let pts: Vec<[f32; 3]> =
+        (0..60).map(|_| [1e5 + rng.unit() * 1.2 - 0.1, rng.unit() * 1.2 - 0.1, rng.unit() * 1.2 - 0.1]).collect();
     check_bounds("far slivers", &soup.triangles, &pts, 1e-1);
 }
 
@@ -130,7 +132,8 @@ fn inside_by_winding_is_certain_on_open_meshes() {
     let mesh = octrace_tests::bunny_mesh();
     let scene = octrace_tests::bunny_scene();
     assert!(!scene.edges().is_closed());
-    let pts: Vec<[f32; 3]> = crate::inside::points(mesh, scene, 20, 1e-4, 23).into_iter().map(|p| p.to_array()).collect();
+    let pts: Vec<[f32; 3]> =
+        crate::inside::points(mesh, scene, 20, 1e-4, 23).into_iter().map(|p| p.to_array()).collect();
     let got = scene.inside_by_winding(&pts).unwrap();
     let mut decided = 0;
     for (p, got) in pts.iter().zip(got) {
