@@ -289,17 +289,6 @@ impl Scene {
         Ok((inside, input.shape(&[])))
     }
 
-    /// Each point inside by its winding number (`Scene::inside_by_winding`).
-    fn inside_by_winding(&self, query_points: &Bound<'_, PyAny>, nthreads: Threads) -> PyResult<Vec<bool>> {
-        let input = Floats::new(query_points, "query_points", 3)?;
-        let values = input.values();
-        query_points.py().detach(|| {
-            on_threads(nthreads, || -> PyResult<_> {
-                self.inner.inside_by_winding(&to_points(values)?).map_err(runtime_error)
-            })?
-        })
-    }
-
     /// `winding_number`: float64 of the points' leading shape.
     pub(crate) fn winding_numbers<'py>(
         &self,
@@ -330,11 +319,7 @@ impl Scene {
         nsamples: usize,
         nthreads: Threads,
     ) -> PyResult<(Vec<bool>, Vec<usize>)> {
-        if nsamples.is_multiple_of(2) || nsamples > MAX_VOTES {
-            return Err(PyValueError::new_err(format!(
-                "nsamples: {nsamples}, expected an odd number of rays from 1 to {MAX_VOTES}"
-            )));
-        }
+        votes(nsamples)?;
         let input = Floats::new(query_points, "query_points", 3)?;
         let values = input.values();
         let inside = query_points.py().detach(|| {
@@ -377,6 +362,16 @@ struct Closest {
 }
 
 /// `max_distance`, checked: not NaN, not negative.
+/// `nsamples` for a vote: odd, at most [`MAX_VOTES`].
+fn votes(nsamples: usize) -> PyResult<usize> {
+    if nsamples.is_multiple_of(2) || nsamples > MAX_VOTES {
+        return Err(PyValueError::new_err(format!(
+            "nsamples: {nsamples}, expected an odd number of rays from 1 to {MAX_VOTES}"
+        )));
+    }
+    Ok(nsamples)
+}
+
 fn band(max_distance: f32) -> PyResult<f32> {
     if max_distance.is_nan() || max_distance < 0.0 {
         return Err(PyValueError::new_err(format!(
@@ -476,7 +471,7 @@ impl Scene {
 
     /// `compute_signed_distance`: the sign exact on a closed mesh; on an open one by
     /// the vote of `nsamples` rays where given, else by the winding number (`w > 1/2`,
-    /// decided with certainty).
+    /// decided with certainty). The points are read once for both answers.
     pub(crate) fn signed_distances<'py>(
         &self,
         query_points: &Bound<'py, PyAny>,
@@ -485,14 +480,39 @@ impl Scene {
         max_distance: f32,
     ) -> PyResult<Bound<'py, PyAny>> {
         let py = query_points.py();
+        let max_distance = band(max_distance)?;
         let closed = self.inner.edges().is_closed();
-        let inside = match nsamples {
-            Some(k) if !closed => self.vote(query_points, k, nthreads)?.0,
-            None if !closed => self.inside_by_winding(query_points, nthreads)?,
-            _ => self.inside(query_points, nthreads)?.0,
-        };
-        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
-        let signed = near.iter().zip(inside).map(|(c, inside)| signed(c.map_or(f32::INFINITY, |c| c.distance), inside));
-        array(py, collected(near.len(), "signed distances", signed)?, shape)
+        if let Some(k) = nsamples.filter(|_| !closed) {
+            votes(k)?;
+        }
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let signed = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let points = to_points(values)?;
+                let inside = match nsamples {
+                    Some(k) if !closed => {
+                        let mut inside = zeros(points.len(), "occupancy")?;
+                        self.inner.tracer().par_contains_by_vote(&points, k, &mut inside);
+                        inside
+                    }
+                    None if !closed => self.inner.inside_by_winding(&points).map_err(runtime_error)?,
+                    _ => self.inner.contains_batch(&points).map_err(runtime_error)?,
+                };
+                let mut near = zeros(points.len(), "closest points")?;
+                self.inner.tracer().par_closest_point_batch(
+                    self.inner.surface_bounds(),
+                    &points,
+                    max_distance,
+                    &mut near,
+                );
+                collected(
+                    near.len(),
+                    "signed distances",
+                    near.iter().zip(inside).map(|(c, inside)| signed(c.map_or(f32::INFINITY, |c| c.distance), inside)),
+                )
+            })?
+        })?;
+        array(py, signed, input.shape(&[]))
     }
 }

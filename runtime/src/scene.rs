@@ -470,9 +470,10 @@ impl Scene {
     /// fractions where the surface has holes.
     ///
     /// Where the scene [winds exactly](Scene::winds_exactly) the answer is exact, an
-    /// integer with [`Winding::bound`] 0: the tree's sum within 0.45 (guaranteed)
+    /// integer with [`Winding::bound`] 0: the tree's sum within 0.95 (guaranteed)
     /// rounded to the nearest integer whose parity is the exact inside/outside's
-    /// ([`Scene::contains`]). Elsewhere, as `accuracy` asks: within a tolerance,
+    /// ([`Scene::contains`]): integers of one parity are 2 apart, so one lies within
+    /// less than 1 of the sum. Elsewhere, as `accuracy` asks: within a tolerance,
     /// guaranteed, or by Barill et al.'s fast rule ([`Accuracy::FAST`], libigl's).
     ///
     /// # Errors
@@ -496,10 +497,10 @@ impl Scene {
         let mut out = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
         if self.winds_exactly() {
             let inside = self.contains_batch(points)?;
-            tree.winding_numbers(points, Accuracy::Within(0.45), &mut out);
+            tree.winding_numbers(points, Accuracy::Within(0.95), &mut out);
             for (w, inside) in out.iter_mut().zip(inside) {
                 // The exact number is an integer of the parity `inside` says, within
-                // 0.45 of the sum: the one.
+                // 0.95 of the sum: the one.
                 let odd = inside as i64;
                 let near = w.value.round() as i64;
                 let value = if (near - odd).rem_euclid(2) == 0 {
