@@ -433,7 +433,8 @@ impl WindingTree {
     }
 
     /// The winding number at `p`, within `tolerance` of the exact one of the triangles
-    /// ([`Winding::bound`] says by how much at most; 0 sums every triangle).
+    /// ([`Winding::bound`] says by how much at most; 0 sums every triangle). A point
+    /// with an infinite coordinate winds 0; one with a NaN answers NaN.
     pub fn winding_number(&self, p: [f32; 3], tolerance: f64) -> Winding {
         self.winding_number_with(&mut WindingScratch::default(), p, tolerance, None)
     }
@@ -449,6 +450,9 @@ impl WindingTree {
         decide: Option<f64>,
     ) -> Winding {
         let Some(root) = self.root else { return Winding { value: 0.0, bound: 0.0 } };
+        if let Some(w) = not_finite(p) {
+            return w;
+        }
         let p = wide(p);
         let tolerance = if tolerance.is_nan() { 0.0 } else { tolerance.max(0.0) } * SPHERE;
         let threshold = decide.map(|t| t * SPHERE);
@@ -527,6 +531,9 @@ impl WindingTree {
     /// `beta = 2`, often more than 1). `beta` below 1 is taken as 1.
     pub fn winding_number_beta(&self, scratch: &mut WindingScratch, p: [f32; 3], beta: f64) -> Winding {
         let Some(root) = self.root else { return Winding { value: 0.0, bound: 0.0 } };
+        if let Some(w) = not_finite(p) {
+            return w;
+        }
         let p = wide(p);
         let beta2 = if beta >= 1.0 { beta * beta } else { 1.0 };
         let stack = &mut scratch.stack;
@@ -588,6 +595,18 @@ impl WindingTree {
                 *o = self.winding_number_with(&mut scratch, *p, 0.0, Some(0.5)).value > 0.5;
             }
         });
+    }
+}
+
+/// The answer for a point with a coordinate that is not finite: NaN for a NaN; 0,
+/// exactly, for a point at infinity (a finite surface subtends no solid angle there).
+fn not_finite(p: [f32; 3]) -> Option<Winding> {
+    if p.iter().any(|x| x.is_nan()) {
+        Some(Winding { value: f64::NAN, bound: f64::NAN })
+    } else if p.iter().any(|x| x.is_infinite()) {
+        Some(Winding { value: 0.0, bound: 0.0 })
+    } else {
+        None
     }
 }
 

@@ -84,6 +84,13 @@ fn a_square_winds_as_its_closed_form() {
         let w = tree.winding_number(p, 1e-9);
         assert!((w.value - want).abs() <= 1e-9 + 1e-12, "{p:?}: {w:?} against {want}");
     }
+    // Points at infinity wind 0 exactly; a NaN answers NaN, in both modes.
+    let mut scratch = WindingScratch::default();
+    for p in [[f32::INFINITY, 0.5, 0.5], [0.5, f32::NEG_INFINITY, 1.0]] {
+        assert_eq!(tree.winding_number(p, 1e-3).value, 0.0);
+        assert_eq!(tree.winding_number_beta(&mut scratch, p, 2.0).value, 0.0);
+    }
+    assert!(tree.winding_number([f32::NAN, 0.5, 0.5], 1e-3).value.is_nan());
 }
 
 /// Nested and inside-out spheres wind 2 and -1; the closed solids 0 and 1, as the
