@@ -39,6 +39,8 @@ use rayon::prelude::*;
 
 use octrace_format::memory::{try_with_capacity, AllocError};
 
+use crate::cpu::{cross, dot, sub};
+
 /// At most this many triangles a leaf cluster.
 pub const LEAF: usize = 16;
 
@@ -92,18 +94,6 @@ pub struct Winding {
     /// The exact winding number of the triangles lies within this of `value` (up to
     /// `f64` rounding); 0 where every triangle was summed one by one.
     pub bound: f64,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 fn wide(p: [f32; 3]) -> [f64; 3] {
@@ -164,20 +154,15 @@ impl Cluster {
         }
     }
 
+    /// A cluster at `centre` with nothing measured yet.
+    fn empty(centre: [f64; 3], first: u32, count: u32, leaf: bool) -> Cluster {
+        Cluster { centre, radius: 0.0, area: 0.0, n: [0.0; 3], m: [[0.0; 3]; 3], t: [[0.0; 6]; 3], first, count, leaf }
+    }
+
     fn of_triangles(triangles: &[[[f32; 3]; 3]], first: u32) -> Cluster {
         let measured: Vec<([f64; 3], [f64; 3])> = triangles.iter().map(moments).collect();
         let centre = Cluster::centre_of(measured.iter().map(|(n, g)| (norm(*n), *g)));
-        let mut c = Cluster {
-            centre,
-            radius: 0.0,
-            area: 0.0,
-            n: [0.0; 3],
-            m: [[0.0; 3]; 3],
-            t: [[0.0; 6]; 3],
-            first,
-            count: triangles.len() as u32,
-            leaf: true,
-        };
+        let mut c = Cluster::empty(centre, first, triangles.len() as u32, true);
         for (t, (a, g)) in triangles.iter().zip(&measured) {
             let d = t.map(|v| sub(wide(v), *g));
             for v in t {
@@ -211,17 +196,7 @@ impl Cluster {
 
     fn of_children(children: &[Cluster], first: u32) -> Cluster {
         let centre = Cluster::centre_of(children.iter().map(|k| (k.area, k.centre)));
-        let mut c = Cluster {
-            centre,
-            radius: 0.0,
-            area: 0.0,
-            n: [0.0; 3],
-            m: [[0.0; 3]; 3],
-            t: [[0.0; 6]; 3],
-            first,
-            count: children.len() as u32,
-            leaf: false,
-        };
+        let mut c = Cluster::empty(centre, first, children.len() as u32, false);
         for k in children {
             let d = sub(k.centre, centre);
             c.radius = c.radius.max(norm(d) + k.radius);
