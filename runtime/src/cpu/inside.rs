@@ -16,6 +16,11 @@
 //! (or leave the scene): that leaf's label, flipped by the parity of the count, is the
 //! answer.
 //!
+//! Before any of that, a grid over the root cube answers most points in one or two
+//! reads (`cells`): cells wholly in empty leaves of one side, and where the surface
+//! passes, finer cells that no triangle touches (a conservative test), labelled by
+//! flooding from the cells of one side or by one exact answer a group.
+//!
 //! A point on the surface is answered as the points just beside it along
 //! [`COUNT_DIRECTION`] are (crossings at a distance of zero are not counted): a
 //! defined answer, the same on every path, where the exact one is a tie.
@@ -35,6 +40,9 @@ use super::tracer::{Tracer, TriangleTest};
 use super::watertight::Shear;
 use crate::error::{Error, Result};
 use crate::ray::Ray;
+use cells::Cells;
+
+mod cells;
 
 /// The fixed direction points walk along to an empty leaf (and groups' counts run
 /// along): no coordinate plane holds it, so it lies in no cell plane.
@@ -67,7 +75,9 @@ pub struct Solid {
     /// By box index: outside, inside, or a leaf with triangles.
     labels: Vec<u8>,
     /// The labels again on a uniform grid of the root cube (`Cells`), where a cell
-    /// lies wholly in empty leaves of one side: most points are answered by one read.
+    /// lies wholly in empty leaves of one side, and on 4 x 4 x 4 finer cells where
+    /// the surface passes, where no triangle touches one: most points are answered by
+    /// one or two reads.
     cells: Cells,
     /// Connected groups of empty leaves, and how many of them are inside.
     groups: usize,
@@ -174,6 +184,8 @@ impl Solid {
             .collect();
         solid.labels = referenced;
         solid.cells = Cells::of(v, &solid.labels);
+        let blocks = solid.cells.blocks(v, |p| tracer.contains(&solid, p));
+        solid.cells.attach(blocks);
         Ok(solid)
     }
 
@@ -186,86 +198,18 @@ impl Solid {
     pub fn inside_groups(&self) -> usize {
         self.inside_groups
     }
-}
 
-/// A uniform grid over the root cube, `2^level` cells a side, each labelled
-/// [`OUTSIDE`] or [`INSIDE`] where it lies wholly in empty leaves of that side, else
-/// [`MIXED`]. The leaves are cells of the same cube, so a leaf either covers whole
-/// grid cells or lies in one.
-#[derive(Clone, Debug, Default)]
-struct Cells {
-    level: u32,
-    lo: [f64; 3],
-    /// Grid cells per unit of length.
-    scale: f64,
-    labels: Vec<u8>,
-}
-
-/// A grid cell not wholly in empty leaves of one side.
-const MIXED: u8 = 255;
-/// A grid cell no leaf has been seen in yet (while building).
-const UNSEEN: u8 = 254;
-
-impl Cells {
-    /// The finest grid of at most 2^21 cells (2 MiB), and no finer than the leaves.
-    fn of(v: &octrace_format::SceneView<'_>, labels: &[u8]) -> Cells {
-        let b = v.bounds;
-        let level = v.params.max_depth.min(7);
-        let side = 1usize << level;
-        let lo = b.root_lo.map(f64::from);
-        let scale = side as f64 / b.root_size as f64;
-        let mut grid = vec![UNSEEN; side * side * side];
-        // Leaves do not overlap, so they write each cell once, or share one: a file
-        // whose boxes write more (a hostile file on the trusted path) gets no grid.
-        let mut budget = grid.len() + labels.len();
-        for (i, &label) in labels.iter().enumerate() {
-            let Some(bx) = v.boxes.get(i * 6..i * 6 + 6) else { break };
-            let label = if label <= INSIDE { label } else { MIXED };
-            // The box in grid units: exact (power-of-two sizes and offsets).
-            let from = [0, 1, 2].map(|k| (((bx[k] as f64 - lo[k]) * scale).floor().max(0.0) as usize).min(side - 1));
-            let to =
-                [0, 1, 2].map(|k| (((bx[k + 3] as f64 - lo[k]) * scale).ceil() as usize).max(from[k] + 1).min(side));
-            let cells = (0..3).map(|k| to[k] - from[k]).product::<usize>();
-            if cells > budget {
-                return Cells::default();
-            }
-            budget -= cells;
-            for z in from[2]..to[2] {
-                for y in from[1]..to[1] {
-                    for x in from[0]..to[0] {
-                        let cell = &mut grid[(z * side + y) * side + x];
-                        *cell = if *cell == UNSEEN || *cell == label { label } else { MIXED };
-                    }
-                }
-            }
-        }
-        for cell in &mut grid {
-            if *cell == UNSEEN {
-                *cell = MIXED;
-            }
-        }
-        Cells { level, lo, scale, labels: grid }
+    /// Bytes of the grid that answers most points in one or two reads: two bits a
+    /// cell of a grid of up to 128 cells a side (outside, inside, mixed, or a block),
+    /// and for the cells the surface passes through, 4 x 4 x 4 finer labels in 16
+    /// bytes (a block).
+    pub fn grid_bytes(&self) -> usize {
+        self.cells.bytes()
     }
 
-    /// The label of the grid cell holding `p`: [`MIXED`] where the cell is, and where
-    /// `p` lies within rounding of a cell's face (so the rounding cannot move it into
-    /// the neighbour).
-    #[inline(always)]
-    fn label(&self, p: [f32; 3]) -> u8 {
-        if self.labels.is_empty() {
-            return MIXED;
-        }
-        let side = 1usize << self.level;
-        let mut index = 0usize;
-        for k in [2, 1, 0] {
-            let x = (p[k] as f64 - self.lo[k]) * self.scale;
-            let f = x.floor();
-            if !(x - f > 1e-9 && x - f < 1.0 - 1e-9 && f >= 0.0 && f < side as f64) {
-                return MIXED;
-            }
-            index = index * side + f as usize;
-        }
-        self.labels[index]
+    /// The grid's blocks of finer labels (see [`Solid::grid_bytes`]).
+    pub fn grid_blocks(&self) -> usize {
+        self.cells.block_count()
     }
 }
 

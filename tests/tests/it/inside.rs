@@ -90,6 +90,55 @@ fn closed_solids_contain_what_the_oracle_says() {
     }
 }
 
+/// The label grid's fine cells (4 x 4 x 4 a coarse cell where the surface passes,
+/// labelled where no triangle touches them) answer as the exact oracle does, on
+/// points beside the surface at every distance from a hundredth of a fine cell to a
+/// few coarse cells, both sides, where the cells hold many fine cells each (shallow
+/// bakes: leaves far larger than a fine cell) and few (the default), at the origin
+/// and far from it.
+#[test]
+fn the_fine_label_grid_answers_as_the_oracle_beside_the_surface() {
+    for (offset, scale) in [(0.0, 1.0), (1e4, 1.0)] {
+        for solid in procedural::closed_solids() {
+            let solid: ClosedSolid = solid.moved(offset, scale);
+            let mesh = &solid.mesh;
+            let oracle = InsideReference::new(&mesh.triangles);
+            for max_depth in [Some(2), None] {
+                let params = BuildParams { max_depth, ..BuildParams::auto() };
+                let scene = Scene::from_baked(bake(mesh, &params).unwrap()).unwrap();
+                let solid_labels = scene.solid().unwrap();
+                // Blocks of fine labels exist beside the coarse cells' entries.
+                assert!(solid_labels.grid_blocks() > 100, "{}: {} blocks", solid.label(), solid_labels.grid_blocks());
+                let level = (scene.view().params.max_depth + 2).min(7);
+                let fine = scene.view().bounds.root_size / (4u32 << level) as f32;
+                let mut rng = SplitMix(11);
+                let (mut compared, mut inside) = (0, 0);
+                let mut pts = Vec::new();
+                for i in 0..3000 {
+                    let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize].map(Vec3::from);
+                    let (a, b) = (rng.unit(), rng.unit());
+                    let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
+                    let on = t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0]);
+                    let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+                    // 0.01 to 100 fine cells, log-uniform, either side.
+                    let d = fine * 10f32.powf(-2.0 + 4.0 * rng.unit());
+                    pts.push((on + normal * if i % 2 == 0 { d } else { -d }).to_array());
+                }
+                let got = scene.contains_batch(&pts).unwrap();
+                for (p, g) in pts.iter().zip(got) {
+                    if let Some(want @ (Side::Inside | Side::Outside)) = oracle.side(*p) {
+                        let want = want == Side::Inside;
+                        assert_eq!(g, want, "{} (max depth {max_depth:?}): point {p:?}", solid.label());
+                        compared += 1;
+                        inside += want as usize;
+                    }
+                }
+                assert!(compared > 2500 && inside > 1000 && compared - inside > 1000, "{compared}, {inside}");
+            }
+        }
+    }
+}
+
 /// Points on the surface are answered as the points just beside them along the
 /// counting direction: points exactly on a closed box's faces, edges and corners (its
 /// planes are coordinates: inside where the direction, all of whose components are
