@@ -165,13 +165,20 @@ fn ray_of(r: &[f32], tmin: f32, tmax: f32) -> Ray {
 
 /// An error naming the first ray with a NaN, if one has.
 fn refuse_nan_rays(values: &[f32]) -> PyResult<()> {
-    // A branch-free pass (it vectorises); the ray is looked for only once one is there.
-    if values.par_chunks(1 << 14).any(|c| c.iter().fold(false, |nan, x| nan | x.is_nan())) {
-        let i = values.chunks_exact(6).position(|r| r.iter().any(|x| x.is_nan())).expect("a NaN was seen");
-        let r = &values[6 * i..6 * i + 6];
-        return Err(PyValueError::new_err(format!("rays: ray {i} has a NaN: {r:?}")));
+    match first_nan(values, 6) {
+        Some(i) => Err(PyValueError::new_err(format!("rays: ray {i} has a NaN: {:?}", &values[6 * i..6 * i + 6]))),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// The first of the `k`-float items of `values` holding a NaN: a branch-free pass (it
+/// vectorises), the item looked for only once one is there.
+fn first_nan(values: &[f32], k: usize) -> Option<usize> {
+    if values.par_chunks(1 << 14).any(|c| c.iter().fold(false, |nan, x| nan | x.is_nan())) {
+        values.chunks_exact(k).position(|r| r.iter().any(|x| x.is_nan()))
+    } else {
+        None
+    }
 }
 
 /// Every ray of `values` at once (for the calls whose answers are not one a ray).
@@ -182,15 +189,13 @@ pub(crate) fn to_rays(values: &[f32], tmin: f32, tmax: f32) -> PyResult<Vec<Ray>
     Ok(rays)
 }
 
-/// Points `[x, y, z]`; a NaN is an error naming the point.
-pub(crate) fn to_points(values: &[f32]) -> PyResult<Vec<[f32; 3]>> {
-    if let Some(i) = values.par_chunks_exact(3).position_first(|p| p.iter().any(|x| x.is_nan())) {
+/// Points `[x, y, z]`, read in place; a NaN is an error naming the point.
+pub(crate) fn to_points(values: &[f32]) -> PyResult<&[[f32; 3]]> {
+    if let Some(i) = first_nan(values, 3) {
         let p = &values[3 * i..3 * i + 3];
         return Err(PyValueError::new_err(format!("query_points: point {i} has a NaN: {p:?}")));
     }
-    let mut points = room(values.len() / 3, "query points")?;
-    points.par_extend(values.par_chunks_exact(3).map(|p| [p[0], p[1], p[2]]));
-    Ok(points)
+    Ok(values.as_chunks::<3>().0)
 }
 
 /// A numpy array of `shape` holding `values`.

@@ -283,7 +283,7 @@ impl Scene {
         let values = input.values();
         let inside = query_points.py().detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                self.inner.contains_batch(&to_points(values)?).map_err(runtime_error)
+                self.inner.contains_batch(to_points(values)?).map_err(runtime_error)
             })?
         })?;
         Ok((inside, input.shape(&[])))
@@ -305,7 +305,7 @@ impl Scene {
         let values = input.values();
         let w = query_points.py().detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                self.inner.winding_numbers(&to_points(values)?, accuracy).map_err(runtime_error)
+                self.inner.winding_numbers(to_points(values)?, accuracy).map_err(runtime_error)
             })?
         })?;
         array(query_points.py(), collected(w.len(), "winding numbers", w.iter().map(|w| w.value))?, input.shape(&[]))
@@ -326,7 +326,7 @@ impl Scene {
             on_threads(nthreads, || -> PyResult<_> {
                 let points = to_points(values)?;
                 let mut inside = zeros(points.len(), "occupancy")?;
-                self.inner.tracer().par_contains_by_vote(&points, nsamples, &mut inside);
+                self.inner.tracer().par_contains_by_vote(points, nsamples, &mut inside);
                 Ok(inside)
             })?
         })?;
@@ -398,7 +398,7 @@ impl Scene {
                 let points = to_points(values)?;
                 let mut near = zeros(points.len(), "closest points")?;
                 let bounds = self.inner.surface_bounds();
-                self.inner.tracer().par_closest_point_batch(bounds, &points, max_distance, &mut near);
+                self.inner.tracer().par_closest_point_batch(bounds, points, max_distance, &mut near);
                 Ok(near)
             })?
         })?;
@@ -493,16 +493,16 @@ impl Scene {
                 let inside = match nsamples {
                     Some(k) if !closed => {
                         let mut inside = zeros(points.len(), "occupancy")?;
-                        self.inner.tracer().par_contains_by_vote(&points, k, &mut inside);
+                        self.inner.tracer().par_contains_by_vote(points, k, &mut inside);
                         inside
                     }
-                    None if !closed => self.inner.inside_by_winding(&points).map_err(runtime_error)?,
-                    _ => self.inner.contains_batch(&points).map_err(runtime_error)?,
+                    None if !closed => self.inner.inside_by_winding(points).map_err(runtime_error)?,
+                    _ => self.inner.contains_batch(points).map_err(runtime_error)?,
                 };
                 let mut near = zeros(points.len(), "closest points")?;
                 self.inner.tracer().par_closest_point_batch(
                     self.inner.surface_bounds(),
-                    &points,
+                    points,
                     max_distance,
                     &mut near,
                 );
