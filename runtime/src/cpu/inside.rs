@@ -75,7 +75,7 @@ pub struct Solid {
     /// By box index: outside, inside, or a leaf with triangles.
     labels: Vec<u8>,
     /// The labels again on a uniform grid of the root cube (`Cells`), where a cell
-    /// lies wholly in empty leaves of one side, and on 4 x 4 x 4 finer cells where
+    /// lies wholly in empty leaves of one side, and on 8 x 8 x 8 finer cells where
     /// the surface passes, where no triangle touches one: most points are answered by
     /// one or two reads.
     cells: Cells,
@@ -201,7 +201,7 @@ impl Solid {
 
     /// Bytes of the grid that answers most points in one or two reads: two bits a
     /// cell of a grid of up to 128 cells a side (outside, inside, mixed, or a block),
-    /// and for the cells the surface passes through, 4 x 4 x 4 finer labels in 16
+    /// and for the cells the surface passes through, 8 x 8 x 8 finer labels in 128
     /// bytes (a block).
     pub fn grid_bytes(&self) -> usize {
         self.cells.bytes()

@@ -1,6 +1,6 @@
 //! The labels of a closed scene again on a grid of the root cube, so that most points
 //! are answered by one or two reads: coarse cells that lie wholly in empty leaves of
-//! one side, and, in the coarse cells where the surface is, blocks of 4 x 4 x 4 finer
+//! one side, and, in the coarse cells where the surface is, blocks of 8 x 8 x 8 finer
 //! cells labelled where no triangle touches them.
 
 use octrace_format::layout::TRIANGLE_FLOATS;
@@ -14,8 +14,8 @@ pub(super) const MIXED: u8 = 255;
 const UNSEEN: u8 = 254;
 
 /// Fine cells a side of a coarse cell's block.
-const SUB: usize = 4;
-const SUB_BITS: u32 = 2;
+const SUB: usize = 8;
+const SUB_BITS: u32 = 3;
 /// A coarse cell with a block (while building).
 const BLOCK: u8 = 253;
 /// A coarse cell's code, two bits: `OUTSIDE`, `INSIDE`, mixed, or with a block.
@@ -23,12 +23,17 @@ const CODE_MIXED: u64 = 2;
 const CODE_BLOCK: u64 = 3;
 /// The low bit of each code of a word.
 const LOW_BITS: u64 = 0x5555_5555_5555_5555;
-/// A block's fine cells, two bits each (`OUTSIDE`, `INSIDE`, or [`FINE_MIXED`]), in
-/// `(z * SUB + y) * SUB + x` order.
-type Block = u128;
+/// A block's fine cells, two bits each (`OUTSIDE`, `INSIDE`, or [`FINE_MIXED`]): a
+/// word a slice across z, cell `y * 8 + x` at bits `2 (y * 8 + x)` (a query reads 16
+/// bytes of the block's 128).
+type Block = [u128; SUB];
 const FINE_MIXED: u128 = 2;
 /// A block of mixed fine cells.
-const ALL_MIXED: Block = u128::MAX / 3 * 2;
+const ALL_MIXED: Block = [u128::MAX / 3 * 2; SUB];
+/// A set of a block's fine cells: a word a slice across z, bit `y * 8 + x`.
+type Bits = [u64; SUB];
+const NONE: Bits = [0; SUB];
+const ALL: Bits = [u64::MAX; SUB];
 
 /// What a mixed coarse cell becomes: one label where no triangle touches it after
 /// all (a cell of a leaf with triangles, away from them), or a block.
@@ -36,15 +41,15 @@ pub(super) enum Fine {
     Label(u8),
     Block(Block),
 }
-/// At most this many blocks (16 bytes each: 16 MiB).
-const MAX_BLOCKS: usize = 1 << 20;
+/// At most this many blocks (128 bytes each: 32 MiB).
+const MAX_BLOCKS: usize = 1 << 18;
 /// At most this many fine cells looked at for triangles (a second or two): a file of
 /// many large triangles over fine leaves (a hostile one) gets no blocks past it.
 const MAX_WORK: u64 = 1 << 28;
 
 /// A uniform grid over the root cube, `2^level` coarse cells a side, each labelled
 /// [`OUTSIDE`] or [`INSIDE`] where it lies wholly in empty leaves of that side; the
-/// others (the surface's) hold a block of `4^3` fine cells, labelled where no triangle
+/// others (the surface's) hold a block of `8^3` fine cells, labelled where no triangle
 /// touches the fine cell (the side of one point of it then is the side of all), else
 /// mixed. The leaves are cells of the same cube, so a leaf either covers whole coarse
 /// cells or lies in one.
@@ -68,11 +73,11 @@ pub(super) struct Cells {
 impl Cells {
     /// The coarse labels from the leaves' (`labels`, by box index: `OUTSIDE`, `INSIDE`,
     /// or anything else for a leaf with triangles): the finest grid of at most 2^21
-    /// cells, and at most four times finer than the leaves. No blocks yet
+    /// cells, and at most twice as fine as the leaves. No blocks yet
     /// ([`Cells::blocks`]).
     pub(super) fn of(v: &SceneView<'_>, labels: &[u8]) -> Cells {
         let b = v.bounds;
-        let level = (v.params.max_depth + 2).min(7);
+        let level = (v.params.max_depth + 1).min(7);
         let side = 1usize << level;
         let lo = b.root_lo.map(f64::from);
         let scale = side as f64 / b.root_size as f64;
@@ -121,7 +126,8 @@ impl Cells {
         for (i, &c) in mixed.iter().enumerate() {
             slot[c as usize] = i as u32;
         }
-        let touched: Vec<AtomicU64> = (0..mixed.len()).map(|_| AtomicU64::new(0)).collect();
+        let touched: Vec<[AtomicU64; SUB]> =
+            (0..mixed.len()).map(|_| std::array::from_fn(|_| AtomicU64::new(0))).collect();
         let coarse = 1usize << self.level;
         let fine_side = coarse * SUB;
         let size = 1.0 / self.scale;
@@ -185,14 +191,15 @@ impl Cells {
                         (f[i], f[j], f[k]) = (a, b, c);
                         let cell = ((f[2] / SUB) * coarse + f[1] / SUB) * coarse + f[0] / SUB;
                         let Some(&block) = slot.get(cell).filter(|&&b| b != u32::MAX) else { continue };
-                        let bit = 1u64 << (((f[2] % SUB) * SUB + f[1] % SUB) * SUB + f[0] % SUB);
-                        if touched[block as usize].load(Relaxed) & bit != 0 {
+                        let (word, bit) =
+                            (&touched[block as usize][f[2] % SUB], 1u64 << ((f[1] % SUB) * SUB + f[0] % SUB));
+                        if word.load(Relaxed) & bit != 0 {
                             continue;
                         }
                         let centre = f.map(|c| c as f64 + 0.5);
                         let centre = [0, 1, 2].map(|k| self.lo[k] + centre[k] * size);
                         if probe.touches(centre, h) {
-                            touched[block as usize].fetch_or(bit, Relaxed);
+                            word.fetch_or(bit, Relaxed);
                         }
                     }
                 }
@@ -201,13 +208,13 @@ impl Cells {
         if gave_up.into_inner() {
             return Vec::new();
         }
-        let touched: Vec<u64> = touched.into_iter().map(AtomicU64::into_inner).collect();
+        let touched: Vec<Bits> = touched.into_iter().map(|t| t.map(AtomicU64::into_inner)).collect();
         // Coarse cells no triangle touches after all are on one side throughout, and
         // so are such cells joined through faces, with each other and with the coarse
         // cells of one side: labelled by a flood from those, then, where a group meets
         // none, by one point of it.
         let mut known = self.entries.clone();
-        let clear = |c: usize| slot[c] != u32::MAX && touched[slot[c] as usize] == 0;
+        let clear = |c: usize| slot[c] != u32::MAX && touched[slot[c] as usize] == NONE;
         let mut queue: Vec<usize> = Vec::new();
         let flood = |known: &mut Vec<u8>, queue: &mut Vec<usize>| {
             while let Some(c) = queue.pop() {
@@ -246,7 +253,7 @@ impl Cells {
             .zip(&touched)
             .filter_map(|(&cell, &touched)| {
                 let cell = cell as usize;
-                if touched == 0 {
+                if touched == NONE {
                     return (known[cell] <= INSIDE).then_some((cell as u32, Fine::Label(known[cell])));
                 }
                 self.block(cell, touched, &known, &side).map(|b| (cell as u32, b))
@@ -256,8 +263,8 @@ impl Cells {
 
     /// The fine labels of coarse cell `cell`, whose fine cells with bits in `touched`
     /// a triangle may touch (one label where none is); `None` where every one is.
-    fn block(&self, cell: usize, touched: u64, known: &[u8], side: impl Fn([f32; 3]) -> bool) -> Option<Fine> {
-        if touched == u64::MAX {
+    fn block(&self, cell: usize, touched: Bits, known: &[u8], side: impl Fn([f32; 3]) -> bool) -> Option<Fine> {
+        if touched == ALL {
             return None;
         }
         let coarse = 1usize << self.level;
@@ -276,26 +283,27 @@ impl Cells {
             (l <= INSIDE).then_some(l as u128)
         };
         let mut block = ALL_MIXED;
-        let free = !touched;
+        let free = touched.map(|w| !w);
         let mut left = free;
-        while left != 0 {
+        while let Some(z) = left.iter().position(|&w| w != 0) {
             // A group of untouched fine cells joined through faces: grown from its
             // first cell one step at a time.
-            let start = left.trailing_zeros() as usize;
-            let mut group = 1u64 << start;
+            let start = z * 64 + left[z].trailing_zeros() as usize;
+            let mut group = NONE;
+            group[z] = 1 << (start % 64);
             loop {
-                let grown = (group | step(group)) & free;
+                let grown = and(or(group, step(group)), free);
                 if grown == group {
                     break;
                 }
                 group = grown;
             }
-            left &= !group;
+            left = and(left, group.map(|w| !w));
             // Its side: a coarse cell of one side it meets through a face, else one of
             // its points' (the centre of its first cell, which lies in that cell unless
             // the cell is a few f32 ulps wide: then the group stays mixed).
             let found = (0..6).find_map(|face| {
-                if group & FACES[face] == 0 {
+                if and(group, FACES[face]) == NONE {
                     return None;
                 }
                 across(face / 2, face % 2 == 1)
@@ -305,14 +313,15 @@ impl Cells {
                 let centre = [0, 1, 2].map(|k| self.lo[k] + ((at[k] * SUB + f[k]) as f64 + 0.5) * size);
                 within(centre, half).map_or(FINE_MIXED, |point| side(point) as u128)
             });
-            if group == u64::MAX {
+            if group == ALL {
                 return (l != FINE_MIXED).then_some(Fine::Label(l as u8));
             }
-            let mut bits = group;
-            while bits != 0 {
-                let at = 2 * bits.trailing_zeros();
-                block = block & !(3 << at) | l << at;
-                bits &= bits - 1;
+            for (word, mut bits) in block.iter_mut().zip(group) {
+                while bits != 0 {
+                    let at = 2 * bits.trailing_zeros();
+                    *word = *word & !(3 << at) | l << at;
+                    bits &= bits - 1;
+                }
             }
         }
         Some(Fine::Block(block))
@@ -397,9 +406,9 @@ impl Cells {
                 rank as usize + (below & (below >> 1) & LOW_BITS).count_ones() as usize
             }
         };
-        let Some(&block) = self.blocks.get(b) else { return MIXED };
+        let Some(block) = self.blocks.get(b) else { return MIXED };
         let [x, y, z] = fine.map(|f| f & (SUB - 1));
-        match (block >> (2 * ((z * SUB + y) * SUB + x))) & 3 {
+        match (block[z] >> (2 * (y * SUB + x))) & 3 {
             0 => OUTSIDE,
             1 => INSIDE,
             _ => MIXED,
@@ -425,27 +434,25 @@ fn span(bx: &[f32], lo: [f64; 3], scale: f64, side: usize) -> ([usize; 3], [usiz
     (from, to)
 }
 
-/// The fine cells of a block (bit `(z * 4 + y) * 4 + x`) on each of its faces: low x,
-/// high x, low y, high y, low z, high z.
-const FACES: [u64; 6] = {
-    let mut faces = [0u64; 6];
-    let mut i = 0;
-    while i < 64 {
-        let f = [i % SUB, (i / SUB) % SUB, i / (SUB * SUB)];
-        let mut k = 0;
-        while k < 3 {
-            if f[k] == 0 {
-                faces[2 * k] |= 1 << i;
-            }
-            if f[k] == SUB - 1 {
-                faces[2 * k + 1] |= 1 << i;
-            }
-            k += 1;
-        }
-        i += 1;
-    }
-    faces
+/// The fine cells of a block on each of its faces: low x, high x, low y, high y, low
+/// z, high z.
+const FACES: [Bits; 6] = {
+    const ROW: u64 = 0xff;
+    const COLUMN: u64 = 0x0101_0101_0101_0101;
+    let mut top = NONE;
+    top[SUB - 1] = u64::MAX;
+    let mut bottom = NONE;
+    bottom[0] = u64::MAX;
+    [[COLUMN; SUB], [COLUMN << 7; SUB], [ROW; SUB], [ROW << 56; SUB], bottom, top]
 };
+
+fn and(a: Bits, b: Bits) -> Bits {
+    std::array::from_fn(|z| a[z] & b[z])
+}
+
+fn or(a: Bits, b: Bits) -> Bits {
+    std::array::from_fn(|z| a[z] | b[z])
+}
 
 /// The coarse cells next to coarse cell `c` (of a grid `side` a side) through faces.
 fn neighbours(c: usize, side: usize) -> impl Iterator<Item = usize> {
@@ -469,13 +476,18 @@ fn within(centre: [f64; 3], half: f64) -> Option<[f32; 3]> {
 }
 
 /// The fine cells of a block next to those of `bits` through a face.
-fn step(bits: u64) -> u64 {
-    let mut out = 0;
-    for (k, shift) in [1u32, 4, 16].into_iter().enumerate() {
-        out |= (bits & !FACES[2 * k + 1]) << shift; // towards high k
-        out |= (bits & !FACES[2 * k]) >> shift; // towards low k
-    }
-    out
+fn step(bits: Bits) -> Bits {
+    std::array::from_fn(|z| {
+        let w = bits[z];
+        let mut out = (w & !FACES[1][z]) << 1 | (w & !FACES[0][z]) >> 1 | w << SUB | w >> SUB;
+        if z > 0 {
+            out |= bits[z - 1];
+        }
+        if z + 1 < SUB {
+            out |= bits[z + 1];
+        }
+        out
+    })
 }
 
 /// A triangle made ready for [`Probe::touches`]: its normal.
