@@ -82,14 +82,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         rates.sort_by(f64::total_cmp);
-        scene.solid()?;
-        let t = Instant::now();
-        let via_scene = scene.contains_batch(pts)?;
-        println!(
-            "  Scene::contains_batch (all threads of the pool): {:.2} M/s",
-            n as f64 / t.elapsed().as_secs_f64() / 1e6
-        );
-        assert_eq!(via_scene, out);
         let inside = out.iter().filter(|&&x| x).count();
         println!("{name}: {:.2} M points/s (median of 3), {inside} inside", rates[1]);
     }

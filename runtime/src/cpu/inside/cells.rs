@@ -148,8 +148,8 @@ impl Cells {
             for k in 0..3 {
                 let lo = tri[0][k].min(tri[1][k]).min(tri[2][k]) - 2.0 * slack(big);
                 let hi = tri[0][k].max(tri[1][k]).max(tri[2][k]) + 2.0 * slack(big);
-                let a = ((lo - self.lo[k]) * self.scale).floor();
-                let b = ((hi - self.lo[k]) * self.scale).floor();
+                let a = floor((lo - self.lo[k]) * self.scale);
+                let b = floor((hi - self.lo[k]) * self.scale);
                 if !(a < fine_side as f64 && b >= 0.0) {
                     return; // outside the root (or not finite: touches nothing there)
                 }
@@ -178,8 +178,8 @@ impl Cells {
                         let cj = self.lo[j] + (b as f64 + 0.5) * size;
                         let d = n[0] * tri[0][0] + n[1] * tri[0][1] + n[2] * tri[0][2];
                         let mid = (d - n[i] * ci - n[j] * cj) / n[k];
-                        let lo = ((mid - reach - self.lo[k]) * self.scale).floor();
-                        let hi = ((mid + reach - self.lo[k]) * self.scale).floor();
+                        let lo = floor((mid - reach - self.lo[k]) * self.scale);
+                        let hi = floor((mid + reach - self.lo[k]) * self.scale);
                         if !(lo <= last as f64 && hi >= first as f64) {
                             continue;
                         }
@@ -316,12 +316,9 @@ impl Cells {
             if group == ALL {
                 return (l != FINE_MIXED).then_some(Fine::Label(l as u8));
             }
-            for (word, mut bits) in block.iter_mut().zip(group) {
-                while bits != 0 {
-                    let at = 2 * bits.trailing_zeros();
-                    *word = *word & !(3 << at) | l << at;
-                    bits &= bits - 1;
-                }
+            for (word, bits) in block.iter_mut().zip(group) {
+                let cells = spread(bits);
+                *word = (*word & !(cells * 3)) | (cells * l);
             }
         }
         Some(Fine::Block(block))
@@ -475,6 +472,32 @@ fn within(centre: [f64; 3], half: f64) -> Option<[f32; 3]> {
     (0..3).all(|k| (point[k] as f64 - centre[k]).abs() < half).then_some(point)
 }
 
+/// `x`'s bits at even places: bit `i` at bit `2 i` (each fine cell's low label bit).
+fn spread(x: u64) -> u128 {
+    let mut x = x as u128;
+    x = (x | x << 32) & 0x0000_0000_FFFF_FFFF_0000_0000_FFFF_FFFF;
+    x = (x | x << 16) & 0x0000_FFFF_0000_FFFF_0000_FFFF_0000_FFFF;
+    x = (x | x << 8) & 0x00FF_00FF_00FF_00FF_00FF_00FF_00FF_00FF;
+    x = (x | x << 4) & 0x0F0F_0F0F_0F0F_0F0F_0F0F_0F0F_0F0F_0F0F;
+    x = (x | x << 2) & 0x3333_3333_3333_3333_3333_3333_3333_3333;
+    (x | x << 1) & 0x5555_5555_5555_5555_5555_5555_5555_5555
+}
+
+/// `x` rounded down to an integer (NaN stays NaN); without a call to libm's `floor`
+/// where the target has no rounding instruction. Exact: `x` past 2^62 is an integer.
+#[inline]
+fn floor(x: f64) -> f64 {
+    if x.is_nan() || x.abs() >= (1u64 << 62) as f64 {
+        return x;
+    }
+    let t = x as i64 as f64;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
 /// The fine cells of a block next to those of `bits` through a face.
 fn step(bits: Bits) -> Bits {
     std::array::from_fn(|z| {
@@ -535,4 +558,39 @@ fn l1(x: [f64; 3]) -> f64 {
 /// `2^-50 big` a unit of the axis, `2^-30` is ample.
 fn slack(big: f64) -> f64 {
     big * (1.0 / (1u64 << 30) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_puts_each_bit_at_twice_its_place() {
+        for x in [0u64, 1, 0x8000_0000_0000_0000, 0xdead_beef_0123_4567, u64::MAX] {
+            let want = (0..64).filter(|i| x >> i & 1 == 1).fold(0u128, |w, i| w | 1 << (2 * i));
+            assert_eq!(spread(x), want, "{x:x}");
+        }
+    }
+
+    #[test]
+    fn floor_is_the_floor() {
+        for x in [0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.999, -2.999, 1e17, -1e17, 4.6e18, f64::INFINITY, -f64::INFINITY] {
+            assert_eq!(floor(x), x.floor(), "{x}");
+        }
+        assert!(floor(f64::NAN).is_nan());
+    }
+
+    /// Steps reach the six face neighbours of a cell and nothing across a block's
+    /// faces.
+    #[test]
+    fn steps_join_faces_only() {
+        let mut one = NONE;
+        one[3] = 1 << (2 * SUB + 7); // x 7, y 2, z 3
+        let next = step(one);
+        let mut want = NONE;
+        want[3] = 1 << (2 * SUB + 6) | 1 << (SUB + 7) | 1 << (3 * SUB + 7);
+        want[2] = 1 << (2 * SUB + 7);
+        want[4] = 1 << (2 * SUB + 7);
+        assert_eq!(next, want);
+    }
 }
