@@ -350,10 +350,10 @@ impl Scene {
     /// [`Scene::contains`] for many points, on all cores.
     ///
     /// # Errors
-    /// As [`Scene::contains`].
+    /// As [`Scene::contains`]; [`Error::Alloc`] where the answers' memory cannot be had.
     pub fn contains_batch(&self, points: &[[f32; 3]]) -> Result<Vec<bool>> {
         let solid = self.solid()?;
-        let mut out = vec![false; points.len()];
+        let mut out = octrace_format::memory::try_vec(points.len(), "inside answers")?;
         self.tracer().par_contains_batch(solid, points, &mut out);
         Ok(out)
     }
@@ -407,10 +407,13 @@ impl Scene {
 
     /// [`Scene::closest_point_within`] for many points, on all cores (`f32::INFINITY`
     /// for no limit).
-    pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Vec<Option<ClosestPoint>> {
-        let mut out = vec![None; points.len()];
+    ///
+    /// # Errors
+    /// [`Error::Alloc`] where the answers' memory (40 bytes a point) cannot be had.
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<Option<ClosestPoint>>> {
+        let mut out = octrace_format::memory::try_vec(points.len(), "closest points")?;
         self.tracer().par_closest_point_batch(self.surface_bounds(), points, max_distance, &mut out);
-        out
+        Ok(out)
     }
 
     /// The signed distance of each point from the scene, a closed mesh, on all cores:
@@ -419,7 +422,8 @@ impl Scene {
     /// `max_distance`, infinity of the point's sign.
     ///
     /// # Errors
-    /// [`Error::NotClosed`] when the scene is not closed.
+    /// [`Error::NotClosed`] when the scene is not closed; [`Error::Alloc`] where the
+    /// answers' memory cannot be had.
     ///
     /// # Example
     /// ```
@@ -435,12 +439,14 @@ impl Scene {
     /// ```
     pub fn signed_distance_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<f32>> {
         let inside = self.contains_batch(points)?;
-        let near = self.closest_points_batch(points, max_distance);
-        Ok(near
-            .iter()
-            .zip(inside)
-            .map(|(c, inside)| crate::cpu::signed(c.map_or(f32::INFINITY, |c| c.distance), inside))
-            .collect())
+        let near = self.closest_points_batch(points, max_distance)?;
+        let mut out = octrace_format::memory::try_with_capacity(points.len(), "signed distances")?;
+        out.extend(
+            near.iter()
+                .zip(inside)
+                .map(|(c, inside)| crate::cpu::signed(c.map_or(f32::INFINITY, |c| c.distance), inside)),
+        );
+        Ok(out)
     }
 }
 

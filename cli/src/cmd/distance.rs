@@ -114,11 +114,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             scene.winding_tree()?;
         }
         let t = Instant::now();
-        let near = scene.closest_points_batch(&points, args.max_distance);
+        let near = scene.closest_points_batch(&points, args.max_distance)?;
         let inside = match (args.signed, args.vote) {
             (false, _) => None,
             (true, Some(k)) if !closed => {
-                let mut inside = vec![false; points.len()];
+                let mut inside = octrace_format::memory::try_vec(points.len(), "inside answers")?;
                 scene.tracer().par_contains_by_vote(&points, k as usize, &mut inside);
                 Some(inside)
             }

@@ -38,7 +38,7 @@ fn scene_of(mesh: &Mesh) -> Scene {
 
 /// The batch, and one point at a time, agree.
 fn answers(scene: &Scene, pts: &[[f32; 3]]) -> Vec<Option<ClosestPoint>> {
-    let got = scene.closest_points_batch(pts, f32::INFINITY);
+    let got = scene.closest_points_batch(pts, f32::INFINITY).unwrap();
     for (p, g) in pts.iter().zip(&got).step_by(7) {
         assert_eq!(*g, scene.closest_point(*p), "batch and one point differ at {p:?}");
     }
