@@ -3,6 +3,8 @@
 //! one side, and, in the coarse cells where the surface is, blocks of 8 x 8 x 8 finer
 //! cells labelled where no triangle touches them.
 
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
+
 use octrace_format::layout::TRIANGLE_FLOATS;
 use octrace_format::SceneView;
 
@@ -43,9 +45,12 @@ pub(super) enum Fine {
 }
 /// At most this many blocks (128 bytes each: 32 MiB).
 const MAX_BLOCKS: usize = 1 << 18;
-/// At most this many fine cells looked at for triangles (a second or two): a file of
+/// At most this many fine cells looked at for triangles (seconds): a file of
 /// many large triangles over fine leaves (a hostile one) gets no blocks past it.
 const MAX_WORK: u64 = 1 << 28;
+/// At most this many groups of fine cells labelled by `contains` (a second or so): past
+/// it (a file whose triangles cut blocks into many pockets), groups stay mixed.
+const MAX_ASKED: u64 = 1 << 20;
 
 /// A uniform grid over the root cube, `2^level` coarse cells a side, each labelled
 /// [`OUTSIDE`] or [`INSIDE`] where it lies wholly in empty leaves of that side; the
@@ -115,7 +120,6 @@ impl Cells {
     /// such coarse cell (`contains`, exact, which may read these coarse cells).
     pub(super) fn blocks(&self, v: &SceneView<'_>, side: impl Fn([f32; 3]) -> bool + Sync) -> Vec<(u32, Fine)> {
         use rayon::prelude::*;
-        use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
         let mixed: Vec<u32> =
             (0..self.entries.len() as u32).filter(|&c| self.entries[c as usize] == MIXED).take(MAX_BLOCKS).collect();
         if mixed.is_empty() {
@@ -140,6 +144,12 @@ impl Cells {
                 return;
             }
             let t = &v.triangles[prim * TRIANGLE_FLOATS..(prim + 1) * TRIANGLE_FLOATS];
+            if !t.iter().all(|x| x.is_finite()) {
+                // Nothing is certain about where it lies (a hostile file on the trusted
+                // path): no blocks at all.
+                gave_up.store(true, Relaxed);
+                return;
+            }
             let tri = [0, 3, 6].map(|o| [t[o] as f64, t[o + 1] as f64, t[o + 2] as f64]);
             let big = t.iter().fold(root_far.max(half), |m, x| m.max(x.abs() as f64));
             let h = half + slack(big);
@@ -151,7 +161,7 @@ impl Cells {
                 let a = floor((lo - self.lo[k]) * self.scale);
                 let b = floor((hi - self.lo[k]) * self.scale);
                 if !(a < fine_side as f64 && b >= 0.0) {
-                    return; // outside the root (or not finite: touches nothing there)
+                    return; // outside the root: touches none of its cells
                 }
                 from[k] = a.clamp(0.0, (fine_side - 1) as f64) as usize;
                 to[k] = b.clamp(0.0, (fine_side - 1) as f64) as usize;
@@ -236,12 +246,14 @@ impl Cells {
                 }
             }
         }
+        let asked = AtomicU64::new(0);
         for &c in &mixed {
             let c = c as usize;
             if clear(c) && known[c] == MIXED {
                 let at = [c % coarse, (c / coarse) % coarse, c / (coarse * coarse)];
                 let centre = [0, 1, 2].map(|k| self.lo[k] + ((at[k] * SUB) as f64 + 0.5 * SUB as f64) * size);
-                if let Some(point) = within(centre, half * SUB as f64) {
+                let point = within(centre, half * SUB as f64).filter(|_| asked.fetch_add(1, Relaxed) < MAX_ASKED);
+                if let Some(point) = point {
                     known[c] = side(point) as u8;
                     queue.push(c);
                     flood(&mut known, &mut queue);
@@ -256,14 +268,21 @@ impl Cells {
                 if touched == NONE {
                     return (known[cell] <= INSIDE).then_some((cell as u32, Fine::Label(known[cell])));
                 }
-                self.block(cell, touched, &known, &side).map(|b| (cell as u32, b))
+                self.block(cell, touched, &known, &asked, &side).map(|b| (cell as u32, b))
             })
             .collect()
     }
 
     /// The fine labels of coarse cell `cell`, whose fine cells with bits in `touched`
     /// a triangle may touch (one label where none is); `None` where every one is.
-    fn block(&self, cell: usize, touched: Bits, known: &[u8], side: impl Fn([f32; 3]) -> bool) -> Option<Fine> {
+    fn block(
+        &self,
+        cell: usize,
+        touched: Bits,
+        known: &[u8],
+        asked: &AtomicU64,
+        side: impl Fn([f32; 3]) -> bool,
+    ) -> Option<Fine> {
         if touched == ALL {
             return None;
         }
@@ -311,7 +330,10 @@ impl Cells {
             let l = found.unwrap_or_else(|| {
                 let f = [start % SUB, (start / SUB) % SUB, start / (SUB * SUB)];
                 let centre = [0, 1, 2].map(|k| self.lo[k] + ((at[k] * SUB + f[k]) as f64 + 0.5) * size);
-                within(centre, half).map_or(FINE_MIXED, |point| side(point) as u128)
+                match within(centre, half) {
+                    Some(point) if asked.fetch_add(1, Relaxed) < MAX_ASKED => side(point) as u128,
+                    _ => FINE_MIXED,
+                }
             });
             if group == ALL {
                 return (l != FINE_MIXED).then_some(Fine::Label(l as u8));
