@@ -21,22 +21,7 @@ import time
 import numpy as np
 
 import octrace
-
-
-def point_sets(v, t, n, seed=1):
-    rng = np.random.default_rng(seed)
-    lo, hi = v.min(axis=0), v.max(axis=0)
-    size = hi - lo
-    uniform = lo - 0.05 * size + 1.1 * size * rng.random((n, 3))
-    tri = v[t[rng.integers(0, len(t), n)]]
-    a, b = rng.random((2, n, 1))
-    flip = (a + b) > 1
-    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
-    on = tri[:, 0] + a * (tri[:, 1] - tri[:, 0]) + b * (tri[:, 2] - tri[:, 0])
-    d = rng.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    near = on + d * (0.01 * np.linalg.norm(size) * rng.random((n, 1)))
-    return {"uniform 1.1x box": uniform.astype(np.float32), "within 1% of the surface": near.astype(np.float32)}
+from distances import point_sets  # the same points as the distance benchmark (this folder)
 
 
 def main():

@@ -361,17 +361,17 @@ struct Closest {
     normals: Vec<f32>,
 }
 
-/// `max_distance`, checked: not NaN, not negative.
-/// `nsamples` for a vote: odd, at most [`MAX_VOTES`].
-fn votes(nsamples: usize) -> PyResult<usize> {
+/// `nsamples` for a vote, checked: odd, at most [`MAX_VOTES`].
+fn votes(nsamples: usize) -> PyResult<()> {
     if nsamples.is_multiple_of(2) || nsamples > MAX_VOTES {
         return Err(PyValueError::new_err(format!(
             "nsamples: {nsamples}, expected an odd number of rays from 1 to {MAX_VOTES}"
         )));
     }
-    Ok(nsamples)
+    Ok(())
 }
 
+/// `max_distance`, checked: not NaN, not negative.
 fn band(max_distance: f32) -> PyResult<f32> {
     if max_distance.is_nan() || max_distance < 0.0 {
         return Err(PyValueError::new_err(format!(

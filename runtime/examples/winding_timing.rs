@@ -9,18 +9,8 @@ use std::time::Instant;
 use octrace_runtime::winding::{solid_angle, Accuracy, WindingScratch, WindingTree};
 use octrace_runtime::Scene;
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
+#[path = "shared/point_sets.rs"]
+mod point_sets;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -29,26 +19,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let check: usize = std::env::var("WINDING_CHECK").map_or(Ok(50), |s| s.parse())?;
     let scene = Scene::open(&path)?;
     let view = scene.view();
-    let (lo, hi) = (view.bounds.mesh_lo, view.bounds.mesh_hi);
-    let size: [f32; 3] = [0, 1, 2].map(|k| hi[k] - lo[k]);
-    let diag = size.iter().map(|s| s * s).sum::<f32>().sqrt();
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-    let uniform: Vec<[f32; 3]> =
-        (0..n).map(|_| [0, 1, 2].map(|k| lo[k] - 0.05 * size[k] + 1.1 * size[k] * rng.unit())).collect();
+    let (uniform, near) = point_sets::point_sets(&view, n);
     let triangles: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
-    let near: Vec<[f32; 3]> = (0..n)
-        .map(|_| {
-            let t = triangles[(rng.next() % triangles.len() as u64) as usize];
-            let (mut a, mut b) = (rng.unit(), rng.unit());
-            if a + b > 1.0 {
-                (a, b) = (1.0 - a, 1.0 - b);
-            }
-            let offset = 0.01 * diag * rng.unit();
-            let dir = [0, 1, 2].map(|_| rng.unit() * 2.0 - 1.0);
-            let len = dir.iter().map(|d| d * d).sum::<f32>().sqrt().max(1e-6);
-            [0, 1, 2].map(|k| t[0][k] + a * (t[1][k] - t[0][k]) + b * (t[2][k] - t[0][k]) + offset * dir[k] / len)
-        })
-        .collect();
     let t = Instant::now();
     let tree = WindingTree::new(triangles.clone())?;
     println!("tree: {} triangles, {:.1} MB, {:.3} s", tree.len(), tree.bytes() as f64 / 1e6, t.elapsed().as_secs_f64());
