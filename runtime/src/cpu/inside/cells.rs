@@ -11,7 +11,7 @@ use octrace_format::SceneView;
 use super::{INSIDE, OUTSIDE};
 
 /// A coarse or fine cell not known to lie on one side.
-pub(super) const MIXED: u8 = 255;
+const MIXED: u8 = 255;
 /// A coarse cell no leaf has been seen in yet (while building).
 const UNSEEN: u8 = 254;
 
@@ -113,8 +113,8 @@ impl Cells {
     }
 
     /// Blocks of fine labels for the mixed coarse cells (up to [`MAX_BLOCKS`]): a fine
-    /// cell that no triangle touches (a conservative separating-axis test, each
-    /// triangle against the fine cells its box reaches) is on one side throughout, and
+    /// cell that no triangle touches (each triangle's plane and box tested against the
+    /// fine cells its box reaches, conservatively) is on one side throughout, and
     /// fine cells so joined through faces, or through a face with a coarse cell of one
     /// side, are on the same side; `side` labels one point of each group that meets no
     /// such coarse cell (`contains`, exact, which may read these coarse cells).
