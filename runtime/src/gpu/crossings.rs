@@ -39,8 +39,9 @@ impl GpuTracer<'_> {
     /// # Ok(()) }
     /// ```
     pub fn count_crossings(&self, rays: &[Ray]) -> GpuResult<Vec<CrossingCount>> {
-        let tracer = self.scene.tracer();
+        let tracer = self.cpu_tracer();
         let counts = self.kernel_counts(rays)?;
+        self.finished_here(counts.iter().filter(|c| c.is_none()).count());
         Ok(counts.iter().zip(rays).map(|(c, r)| c.unwrap_or_else(|| tracer.count_crossings(r))).collect())
     }
 
@@ -80,8 +81,9 @@ impl GpuTracer<'_> {
         use octrace_format::memory::try_vec;
         // A walk the counting kernel could not finish is listed on the CPU once, and
         // its list gives its count.
-        let tracer = self.scene.tracer();
+        let tracer = self.cpu_tracer();
         let gpu_counts = self.kernel_counts(rays)?;
+        self.finished_here(gpu_counts.iter().filter(|c| c.is_none()).count());
         let cpu_lists: Vec<Option<Vec<Crossing>>> =
             gpu_counts.iter().zip(rays).map(|(c, r)| c.is_none().then(|| tracer.first_crossings(r, limit))).collect();
         let total = |i: usize| {
@@ -136,6 +138,7 @@ impl GpuTracer<'_> {
                     continue;
                 }
                 if b - a != dest.len() || out[a].flags == OVER_BUDGET {
+                    self.finished_here(1);
                     dest.copy_from_slice(&tracer.first_crossings(&rays[i], limit));
                     continue;
                 }
@@ -202,7 +205,7 @@ impl GpuTracer<'_> {
                             &self.pipeline_layout,
                             &source,
                             "main",
-                            &[("MODE", mode), ("FANS", self.fans_constant())],
+                            &[("MODE", mode), ("FANS", self.fans_constant()), ("EXACT", self.exact_constant())],
                             label,
                         )
                         .map_err(|e| e.to_string())

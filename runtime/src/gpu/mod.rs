@@ -52,8 +52,8 @@ use source::shader_source;
 use stream::{Kernel, Pipelining, Source, Streams};
 
 use crate::ray::{Hit, Ray};
-use crate::Scene;
 use crate::WalkStats;
+use crate::{Scene, TriangleTest};
 use octrace_format::StoredIndex;
 
 /// What can go wrong on the GPU path.
@@ -103,6 +103,15 @@ pub struct GpuOptions {
     pub chunk_rays: Option<usize>,
     /// Chunks in flight at once (default 2, at most 8).
     pub in_flight: Option<usize>,
+    /// The triangle test: [`TriangleTest::Watertight`] (the default) or
+    /// [`TriangleTest::Exact`], the answers of the CPU's tracer with the same test, ray
+    /// for ray, bit for bit. Under the exact test the kernels decide what an error
+    /// bound certifies (the `f32` edge functions' signs, the distance correctly
+    /// rounded) and hand every other ray back to the CPU's exact test, as they hand
+    /// back a walk out of loop budget ([`GpuTracer::rays_finished_on_cpu`] counts
+    /// them); it needs an adapter with `f64` ([`GpuTracer::uses_f64`]). The renderer
+    /// ([`GpuRenderer`]) traces with the watertight test.
+    pub triangle_test: TriangleTest,
 }
 
 /// The kernel's uniform block (`Params` in trace.wgsl).
@@ -193,6 +202,10 @@ pub struct GpuTracer<'s> {
     /// Whether the scene has fans (the kernels' `FANS` constant).
     fans: bool,
     f64_edges: bool,
+    /// The triangle test (the kernels' `EXACT` constant), and the rays the CPU
+    /// finished (out of loop budget, or left in doubt by the exact test's filter).
+    test: TriangleTest,
+    finished_on_cpu: std::sync::atomic::AtomicU64,
     /// Nanoseconds a timestamp tick, where the device times passes.
     timestamps: Option<f64>,
     compile: Duration,
@@ -256,6 +269,18 @@ impl<'s> GpuTracer<'s> {
         check_bindings(&limits, chunks, TRACE_EXTRA_BINDINGS, offsets.total * 4, chunk_words * 4)?;
         let scene_buffers = upload(device, queue, &arrays, offsets.total, chunk_words);
         let f64_edges = device.features().contains(wgpu::Features::SHADER_F64);
+        match options.triangle_test {
+            TriangleTest::Watertight => {}
+            TriangleTest::Exact if f64_edges => {}
+            TriangleTest::Exact => {
+                return Err(GpuError::Unsupported(
+                    "the exact triangle test needs an adapter with 64-bit floats (shader f64); \
+                     trace on the CPU, or with the watertight test"
+                        .into(),
+                ))
+            }
+            other => return Err(GpuError::Unsupported(format!("the {other:?} triangle test (the CPU's only)"))),
+        }
         let cap = loop_cap(device, queue)?;
         let lanes = match cap {
             Some(cap) => lockstep_lanes(device, queue, cap)?,
@@ -331,6 +356,8 @@ impl<'s> GpuTracer<'s> {
             chunk_words,
             fans,
             f64_edges,
+            test: options.triangle_test,
+            finished_on_cpu: Default::default(),
             timestamps: timestamp_period(device, queue),
         };
         // The nearest-hit and any-hit kernels, made now (the others on first use).
@@ -482,7 +509,9 @@ impl<'s> GpuTracer<'s> {
     /// followed by as many words of bits marking walks that ran out of the adapter's
     /// loop budget; compact records mark them with a NaN distance, full records with
     /// `steps == u32::MAX`. Only an adapter with a loop cap ([`GpuTracer::loop_cap`]:
-    /// lavapipe, never hardware) has such walks.
+    /// lavapipe, never hardware) has such walks, and under the exact test
+    /// ([`GpuOptions::triangle_test`]) the rays its filter leaves in doubt, marked the
+    /// same way: trace those with the CPU's exact test.
     ///
     /// # Errors
     /// [`GpuError::Mismatch`] if a buffer is too small or not a storage buffer, or
@@ -566,6 +595,7 @@ impl<'s> GpuTracer<'s> {
                 ("FANS", self.fans_constant()),
                 ("RECORD", record.code()),
                 ("CAMERA", flag(camera)),
+                ("EXACT", self.exact_constant()),
             ],
             label,
         )?;
@@ -636,9 +666,48 @@ impl<'s> GpuTracer<'s> {
         }
     }
 
+    /// The kernels' `EXACT` constant: 1 under the exact test.
+    fn exact_constant(&self) -> f64 {
+        if self.exact() {
+            1.0
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether the kernels run the exact test's filter (and hand back what it leaves in
+    /// doubt).
+    fn exact(&self) -> bool {
+        self.test == TriangleTest::Exact
+    }
+
+    /// The triangle test in use ([`GpuOptions::triangle_test`]).
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.test
+    }
+
+    /// How many rays the CPU has traced for this tracer since it was made: walks out
+    /// of the adapter's loop budget ([`GpuTracer::loop_cap`]), and under the exact test
+    /// the rays whose decisions its filter left in doubt (a ray within about `2^-20`
+    /// of an edge, relatively, or two crossings at one rounded distance).
+    pub fn rays_finished_on_cpu(&self) -> u64 {
+        self.finished_on_cpu.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The CPU tracer that finishes what the kernels hand back: the scene's, with
+    /// this tracer's triangle test.
+    fn cpu_tracer(&self) -> crate::Tracer<'s> {
+        self.scene.tracer().with_triangle_test(self.test)
+    }
+
+    /// Counts `n` rays finished on the CPU.
+    fn finished_here(&self, n: usize) {
+        self.finished_on_cpu.fetch_add(n as u64, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// The kernel's source for this scene's bindings.
     fn source(&self) -> String {
-        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges, self.budget)
+        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges, self.compiler.denormals, self.budget)
     }
 
     /// A bind group for the tracing layout with the scene's buffers (and empty rays
@@ -730,7 +799,7 @@ mod tests {
             for budget in
                 [Budget::for_cap(None, 1), Budget::for_cap(Some(65_535), 8), Budget::for_cap(Some(65_535), 64)]
             {
-                let trace = shader_source(chunks, 1 << 10, f64_edges, budget);
+                let trace = shader_source(chunks, 1 << 10, f64_edges, chunks == 1, budget);
                 for source in [trace.clone(), render::render_source(&trace, 6)] {
                     validate(&source, f64_edges, chunks);
                 }
@@ -739,8 +808,11 @@ mod tests {
                 // Every record, rays read or made from a camera.
                 for record in [HitRecord::Full, HitRecord::Nearest, HitRecord::Distance, HitRecord::Occluded] {
                     for camera in [0.0, 1.0] {
-                        let constants = [("RECORD", record.code()), ("CAMERA", camera), ("ANY_HIT", 1.0)];
-                        spirv::compile(&trace, "main", &constants, true).unwrap();
+                        for exact in [0.0, 1.0] {
+                            let constants =
+                                [("RECORD", record.code()), ("CAMERA", camera), ("ANY_HIT", 1.0), ("EXACT", exact)];
+                            spirv::compile(&trace, "main", &constants, true).unwrap();
+                        }
                     }
                 }
                 spirv::compile(&render::render_source(&trace, 6), "render", &[("SHADOWS", 0.0)], false).unwrap();
@@ -753,7 +825,7 @@ mod tests {
     #[test]
     fn host_structs_match_the_kernels() {
         use std::mem::{offset_of, size_of};
-        let source = render::render_source(&shader_source(1, 1 << 10, false, Budget::for_cap(None, 1)), 6);
+        let source = render::render_source(&shader_source(1, 1 << 10, false, true, Budget::for_cap(None, 1)), 6);
         let module = naga::front::wgsl::parse_str(&source).expect("valid");
         let layout = |name: &str| {
             let ty = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name).1;

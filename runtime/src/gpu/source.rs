@@ -6,7 +6,16 @@ use super::device::Budget;
 
 /// The kernel's source: trace.wgsl with the scene's bindings, the `word` accessor over
 /// them, and the precision-dependent helpers.
-pub(super) fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, budget: Budget) -> String {
+///
+/// `subnormals`: whether the kernels keep `f32` subnormals (else the exact test's
+/// error bounds allow for flushed ones).
+pub(super) fn shader_source(
+    chunks: usize,
+    chunk_words: u64,
+    f64_edges: bool,
+    subnormals: bool,
+    budget: Budget,
+) -> String {
     let mut g =
         format!("const WORKGROUP_SIZE: u32 = {}u;\nconst LOOP_BUDGET: u32 = {}u;\n", budget.workgroup, budget.loops);
     for k in 0..chunks {
@@ -59,7 +68,19 @@ pub(super) fn shader_source(chunks: usize, chunk_words: u64, f64_edges: bool, bu
         g += "fn exact_side(off_a: f32, d_a: f32, m: f32, dk: f32, negative_a: bool) -> u32 {\n    \
               let p = f64(off_a) * f64(dk) - f64(m) * f64(d_a);\n    \
               return select(0u, 1u, (p > 0.0lf) != negative_a);\n}\n";
+        // The exact test's filter (trace.wgsl, EXACT): the f32 bound's floor for
+        // underflow, 2^-147 where subnormals are kept, 2^-120 where they may be flushed.
+        g += &format!(
+            "const EXACT_FLOOR: f64 = {};\n",
+            if subnormals { "5.605193857299268e-45lf" } else { "7.52316384526264e-37lf" }
+        );
+        g += FILTER_F64;
     } else {
+        // Without f64 the exact test is refused (`GpuTracer::with_options`); were it
+        // run, every triangle would be in doubt and every ray handed back.
+        g += "fn f64_above(x: f32, bound: f32) -> bool {\n    return false;\n}\n";
+        g += "fn edge_bound(r: vec3<f32>, sa: f32, sb: f32, sc: f32) -> f32 {\n    return 0.0;\n}\n";
+        g += "fn rounded_distance(o: vec3<f32>, d: vec3<f32>, at: u32) -> vec2<f32> {\n    return vec2<f32>(0.0);\n}\n";
         g += "fn edge(px: f32, py: f32, qx: f32, qy: f32) -> f32 {\n    return px * qy - py * qx;\n}\n";
         g += "fn product(a: f32, b: f32) -> f32 {\n    return a * b;\n}\n";
         g += "const PRODUCTS_EXACT: bool = false;\n";
@@ -181,6 +202,55 @@ fn hit_triangle_exact(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, ow
         return vec4<f32>(dist, f32(v / det), f32(w / det), 1.0);
     }
     return vec4<f32>(0.0);
+}
+";
+
+/// The exact test's filter in `f64` (trace.wgsl, EXACT; `cpu::watertight`'s
+/// `edge_error_bound` and `plane_distance_rounded`, with wider margins: a sign or a
+/// distance they certify is exact arithmetic's, whatever the adapter's last bits).
+///
+/// `edge_bound(r, sa, sb, sc)`: the bound on each `f32` edge function's error, with
+/// `r` the largest magnitudes of the vertices relative to the origin and `sa, sb, sc`
+/// the sheared vertices' `|x| + |y|`. `rounded_distance`: the distance correctly
+/// rounded to `f32`, `(t, 1)`, where the `f64` quotient's bound leaves one `f32`,
+/// else `(0, 0)` (in doubt: the ray is handed back).
+const FILTER_F64: &str = "fn f64_above(x: f32, bound: f64) -> bool {
+    return f64(x) > bound;
+}
+fn edge_bound(r: vec3<f32>, sa: f32, sb: f32, sc: f32) -> f64 {
+    let m = f64(max(max(r.x, r.y), r.z));
+    let e = m * 4.76837158203125e-7lf + EXACT_FLOOR;
+    let t = f64(max(max(sa, sb), sc)) * 1.0001lf + e;
+    return t * (2.0lf * e + t * 2.384185791015625e-7lf) * 1.0001lf + EXACT_FLOOR;
+}
+fn rounded_distance(o: vec3<f32>, d: vec3<f32>, at: u32) -> vec2<f32> {
+    let a = corner(at);
+    let e1 = corner(at + 3u) - a;
+    let e2 = corner(at + 6u) - a;
+    let t0 = vec3<f64>(e1.y * e2.z, e1.z * e2.x, e1.x * e2.y);
+    let t1 = vec3<f64>(e1.z * e2.y, e1.x * e2.z, e1.y * e2.x);
+    let n = t0 - t1;
+    let big = abs(t0) + abs(t1);
+    let ao = a - vec3<f64>(f64(o.x), f64(o.y), f64(o.z));
+    let dd = vec3<f64>(f64(d.x), f64(d.y), f64(d.z));
+    let num = ao.x * n.x + ao.y * n.y + ao.z * n.z;
+    let den = dd.x * n.x + dd.y * n.y + dd.z * n.z;
+    let g = 7.105427357601002e-15lf;
+    let err_num = g * (abs(ao.x) * big.x + abs(ao.y) * big.y + abs(ao.z) * big.z);
+    let err_den = g * (abs(dd.x) * big.x + abs(dd.y) * big.y + abs(dd.z) * big.z);
+    if !(err_den < 0.25lf * abs(den)) {
+        return vec2<f32>(0.0);
+    }
+    let q = num / den;
+    let err = (err_num + 2.0lf * abs(q) * err_den) / abs(den) * 1.001lf + abs(q) * 3.552713678800501e-15lf;
+    if !(abs(q) + err < 3.0e38lf) {
+        return vec2<f32>(0.0);
+    }
+    let lo = f32(q - err);
+    if lo != f32(q + err) || lo == 0.0 {
+        return vec2<f32>(0.0);
+    }
+    return vec2<f32>(lo, 1.0);
 }
 ";
 

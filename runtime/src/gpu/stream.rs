@@ -698,21 +698,24 @@ impl GpuTracer<'_> {
                 timings.kernel_device =
                     Some(timings.kernel_device.unwrap_or_default() + Duration::from_nanos((ticks * period) as u64));
             }
-            if record == HitRecord::Occluded && self.cap.is_some() {
+            if record == HitRecord::Occluded && (self.cap.is_some() || self.exact()) {
                 let words = p.count.div_ceil(32);
                 over = bytemuck::cast_slice::<u8, u32>(&records[4 * words..8 * words]).to_vec();
             }
         }
         readable.unmap();
         timings.download += t.elapsed();
-        if let (Some(_), Kernel::Trace { any }) = (self.cap, kernel) {
-            self.finish_on_cpu(source, any, answers, p.start, p.count, &over);
+        if let Kernel::Trace { any } = kernel {
+            if self.cap.is_some() || self.exact() {
+                self.finish_on_cpu(source, any, answers, p.start, p.count, &over);
+            }
         }
         Ok(())
     }
 
-    /// The walks of a chunk that ran out of the adapter's loop budget, traced on the CPU
-    /// into `answers` (`over`: the chunk's over-budget bits, for occlusion).
+    /// The walks of a chunk that ran out of the adapter's loop budget, or that the exact
+    /// test's filter handed back, traced on the CPU into `answers` (`over`: the chunk's
+    /// handed-back bits, for occlusion).
     fn finish_on_cpu(
         &self,
         source: Source<'_>,
@@ -722,8 +725,10 @@ impl GpuTracer<'_> {
         count: usize,
         over: &[u32],
     ) {
-        let tracer = self.scene.tracer();
+        let tracer = self.cpu_tracer();
+        let finished = std::cell::Cell::new(0usize);
         let nearest = |i: usize| {
+            finished.set(finished.get() + 1);
             let r = source.ray(i);
             if any {
                 (tracer.occluder(&r), WalkStats::default())
@@ -762,6 +767,7 @@ impl GpuTracer<'_> {
                 for (w, bits) in over.iter().enumerate() {
                     for b in (0..32).filter(|b| bits >> b & 1 != 0) {
                         let i = start + 32 * w + b;
+                        finished.set(finished.get() + 1);
                         let word = &mut a[i / 32];
                         *word &= !(1 << (i % 32));
                         *word |= u32::from(tracer.occluder(&source.ray(i)).is_some()) << (i % 32);
@@ -769,6 +775,7 @@ impl GpuTracer<'_> {
                 }
             }
         }
+        self.finished_here(finished.get());
     }
 
     /// Occlusion bits where workgroups are not whole words: the kernel's triangles,

@@ -26,6 +26,11 @@ override MODE: u32 = 0u;
 override RECORD: u32 = 0u;
 // Rays made here from a pinhole camera (`camera_ray`) rather than read from `rays`.
 override CAMERA: bool = false;
+// The exact test (cpu TriangleTest::Exact), on adapters with f64: each triangle's f32
+// edge functions with an error bound and its distance with its own
+// (`hit_triangle_filtered`); a ray any of whose decisions the bounds leave in doubt
+// is handed back to the host (`give_back`), which traces it with the CPU's exact test.
+override EXACT: bool = false;
 
 struct Params {
     ray_count: u32,
@@ -197,6 +202,13 @@ fn occlusion_bits(i: u32, lane: u32) {
 // traces or renders that ray or pixel on the CPU. Elsewhere the budget is unbounded.
 var<private> loops_left: u32 = LOOP_BUDGET;
 var<private> over_budget: bool = false;
+
+// Ends the walk and hands the ray back to the host as a walk out of budget is
+// (EXACT: a decision the filter leaves in doubt): every loop stops at its next tick.
+fn give_back() {
+    over_budget = true;
+    loops_left = 0u;
+}
 
 // Spends one loop iteration of the budget; false (and `over_budget`) when none is left.
 fn tick() -> bool {
@@ -384,6 +396,31 @@ fn hit_triangle(wk: ptr<function, Walk>, at: u32, tmin: f32, tmax: f32, owned: b
     var u = product(cx, by) - product(cy, bx);
     var v = product(ax, cy) - product(ay, cx);
     var w = product(bx, ay) - product(by, ax);
+    if EXACT {
+        // The exact test's first stage: what it leaves in doubt goes to the host.
+        let bound = edge_bound(max(max(abs(a), abs(b)), abs(c)), abs(ax) + abs(ay), abs(bx) + abs(by), abs(cx) + abs(cy));
+        let pos = f64_above(u, bound) || f64_above(v, bound) || f64_above(w, bound);
+        let neg = f64_above(-u, bound) || f64_above(-v, bound) || f64_above(-w, bound);
+        if pos && neg {
+            return vec4<f32>(0.0); // two edges decided, on opposite sides
+        }
+        if !(f64_above(abs(u), bound) && f64_above(abs(v), bound) && f64_above(abs(w), bound)) {
+            give_back();
+            return vec4<f32>(0.0);
+        }
+        // All three decided and agreeing: inside, off every edge (no edge rule), the
+        // plane not parallel to the ray; the distance correctly rounded or handed back.
+        let det = u + v + w;
+        let t = rounded_distance(o, (*wk).d, at);
+        if t.y == 0.0 {
+            give_back();
+            return vec4<f32>(0.0);
+        }
+        if t.x >= tmin && t.x <= tmax {
+            return vec4<f32>(t.x, div(v, det), div(w, det), 1.0);
+        }
+        return vec4<f32>(0.0);
+    }
     if u == 0.0 || v == 0.0 || w == 0.0 {
         // Exact zeros are decided again (generated `edge`: exactly in f64 where the
         // adapter has it), as cpu::watertight does.
@@ -446,7 +483,7 @@ fn with_fcomponent(v: vec3<f32>, i: u32, x: f32) -> vec3<f32> {
 fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
             picked: ptr<function, array<u32, FAN_PICKS>>) -> u32 {
     let leaves = (params.o_cube - params.o_boxes) / 6u;
-    if !FANS || count < FAN_MIN_REFERENCES || (*wk).rule == RULE_EXACT || box_index >= leaves {
+    if !FANS || EXACT || count < FAN_MIN_REFERENCES || (*wk).rule == RULE_EXACT || box_index >= leaves {
         return NO_FAN;
     }
     let at = word(params.o_fans + box_index);
@@ -576,11 +613,17 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     for (var j = 0u; j < tested && tick(); j++) {
         let tri = word(params.o_refs + offset + select(j, picked[min(j, FAN_PICKS - 1u)], fan != NO_FAN));
         var h: vec4<f32>;
-        if (*wk).rule == RULE_EXACT {
+        if (*wk).rule == RULE_EXACT && !EXACT {
             // In f64 throughout (generated: cpu::watertight::Shear::intersect_f64).
             h = hit_triangle_exact(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best, false);
         } else {
             h = hit_triangle(wk, params.o_tris + 9u * tri, (*wk).tmin, (*wk).t_best, false);
+        }
+        // The exact test orders equal rounded distances exactly (walk.rs, `replaces`):
+        // that comparison is the host's.
+        if EXACT && h.w != 0.0 && h.x == (*wk).t_best && (*wk).best.triangle != MISS && (*wk).best.prim != tri {
+            give_back();
+            return;
         }
         // Of equal hits the last tested, which is the lowest input id (walk.rs, `keep`).
         if h.w != 0.0 {
@@ -810,10 +853,17 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
         wk.best.t = tmax;
     }
     // Clip to the root cube, then to the mesh box: beyond it there is nothing to hit.
-    let root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
     let mesh = clip(o, d, params.box_lo.xyz, params.box_hi.xyz);
-    if root.w == 0.0 || mesh.w == 0.0 {
+    if mesh.w == 0.0 {
         return wk;
+    }
+    // A ray that grazes the root's edge where the mesh box reaches the root's faces,
+    // which the root clip's rounding calls a miss, starts where it enters the
+    // enlarged box (walk.rs, begin_near).
+    var root = clip(o, d, params.root_lo.xyz, params.root_hi.xyz);
+    let grazes = root.w == 0.0;
+    if grazes {
+        root = vec4<f32>(mesh.x, mesh.y, 0.0, 1.0);
     }
     let t0 = root.x;
     let entry_axis = u32(root.z);
@@ -831,7 +881,10 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     // The first leaf: through the cube map from outside, by point location inside.
     var leaf: vec2<u32>;
     var q: vec3<u32>;
-    if mesh.x > t_start {
+    if grazes {
+        q = grid_coords(o + t_start * d);
+        leaf = descend(params.root_node, 0u, q);
+    } else if mesh.x > t_start {
         q = grid_coords(o + mesh.x * d);
         leaf = descend(params.root_node, 0u, q);
     } else if t0 > tmin {
@@ -970,7 +1023,7 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
             let tri = word(params.o_refs + offset + select(j, picked[min(j, FAN_PICKS - 1u)], fan != NO_FAN));
             let at = params.o_tris + 9u * tri;
             var h: vec4<f32>;
-            if exact {
+            if exact && !EXACT {
                 h = hit_triangle_exact(&wk, at, wk.tmin, hi, true);
             } else {
                 h = hit_triangle(&wk, at, wk.tmin, hi, true);
@@ -1005,6 +1058,11 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
                         break;
                     }
                     let prev = get_hit(base + k - 1u);
+                    // Equal rounded distances: the exact test's order is the host's.
+                    if EXACT && prev.steps == key {
+                        give_back();
+                        break;
+                    }
                     if prev.steps < key || (prev.steps == key && prev.triangle < c.triangle) {
                         break;
                     }

@@ -143,3 +143,79 @@ fn the_exact_test_agrees_with_exact_arithmetic_on_hard_rays_and_points() {
     eprintln!("wrong answers: exact test {wrong}, default test {default_wrong}");
     assert_eq!(wrong, 0, "answers that differ from exact arithmetic:\n{}", report.join("\n"));
 }
+
+/// The GPU under the exact test (`GpuOptions::triangle_test`) answers as exact
+/// arithmetic does on the same hard rays: nearest hits, occlusion, counts and lists,
+/// its filter's decisions and the CPU's exact test for what it hands back, each
+/// answer bit for bit the CPU exact tracer's (barycentrics included).
+#[test]
+fn the_gpu_exact_test_agrees_with_exact_arithmetic_on_hard_rays() {
+    use octrace_runtime::gpu::{GpuOptions, GpuTracer};
+    let Some(gpu) = octrace_tests::gpu("the_gpu_exact_test_agrees_with_exact_arithmetic_on_hard_rays") else {
+        return;
+    };
+    let n = per_kind(100);
+    let (mut report, mut wrong, mut rays_in_all, mut handed_back) = (Vec::new(), 0, 0, 0);
+    for (name, mesh) in meshes() {
+        let scene = Scene::from_baked(bake(&mesh, &BuildParams::auto()).unwrap()).unwrap();
+        let options = GpuOptions { triangle_test: TriangleTest::Exact, ..GpuOptions::default() };
+        let tracer = match GpuTracer::with_options(&gpu.device, &gpu.queue, &scene, options) {
+            Ok(t) => t,
+            Err(e) if !gpu.device.features().contains(octrace_runtime::gpu::wgpu::Features::SHADER_F64) => {
+                eprintln!("SKIPPED: the adapter has no f64 ({e})");
+                return;
+            }
+            Err(e) => panic!("{e}"),
+        };
+        let cpu = scene.tracer().with_triangle_test(TriangleTest::Exact);
+        let oracle = ExactOracle::new(&mesh.triangles);
+        for (k, kind) in hard::RAY_KINDS.iter().enumerate() {
+            let rays = hard::rays(&mesh.triangles, kind, n, 0xE8AC7 + k as u64);
+            let rs: Vec<Ray> = rays.iter().map(|&(o, d)| Ray::new(Vec3::from(o), Vec3::from(d))).collect();
+            let before = tracer.rays_finished_on_cpu();
+            let nearest = tracer.intersect(&rs).unwrap();
+            let occluded = tracer.occluded(&rs).unwrap();
+            let counts = tracer.count_crossings(&rs).unwrap();
+            let lists = tracer.crossings(&rs).unwrap();
+            let back = (tracer.rays_finished_on_cpu() - before) as usize;
+            let mut w = Wrong::default();
+            let (mut occlusion, mut not_cpus) = (0, 0);
+            for (i, &(o, d)) in rays.iter().enumerate() {
+                w.rays += 1;
+                let want = oracle.nearest(o, d, 0.0, f32::INFINITY);
+                w.nearest +=
+                    (nearest[i].map(|h| (h.t, h.triangle)) != want.as_ref().map(|h| (h.t32, h.triangle))) as usize;
+                occlusion += (occluded[i] != want.is_some()) as usize;
+                let key = |h: Option<octrace_runtime::Hit>| {
+                    h.map(|h| (h.t.to_bits(), h.triangle, h.u.to_bits(), h.v.to_bits()))
+                };
+                not_cpus += (key(nearest[i]) != key(cpu.intersect(&rs[i]))) as usize;
+                if std::env::var_os("OCTRACE_EXACT_SHOW").is_some() && key(nearest[i]) != key(cpu.intersect(&rs[i])) {
+                    eprintln!("{name} {kind} o {o:?} d {d:?}: GPU {:?}, CPU {:?}", nearest[i], cpu.intersect(&rs[i]));
+                }
+                let want: Vec<(f32, u32, bool)> =
+                    oracle.crossings(o, d, 0.0, f32::INFINITY).iter().map(|h| (h.t32, h.triangle, h.enters)).collect();
+                let got: Vec<(f32, u32, bool)> = lists.of(i).iter().map(|c| (c.t, c.triangle, c.enters)).collect();
+                w.lists += (got != want) as usize;
+                let entries = want.iter().filter(|c| c.2).count() as u32;
+                w.counts += (counts[i].total != want.len() as u32 || counts[i].entries != entries) as usize;
+                not_cpus += (lists.of(i) != cpu.all_crossings(&rs[i]).as_slice()) as usize;
+            }
+            wrong += w.nearest + w.lists + w.counts + occlusion + not_cpus;
+            rays_in_all += 4 * rs.len();
+            handed_back += back;
+            report.push(format!(
+                "{name:10} {kind:15} rays {:6}  nearest {:5}  occluded {occlusion:5}  lists {:5}  counts {:5}  \
+                 not the CPU's {not_cpus:5}  finished on the CPU {back:6} of {}",
+                w.rays,
+                w.nearest,
+                w.lists,
+                w.counts,
+                4 * rs.len()
+            ));
+        }
+    }
+    eprintln!("GPU, exact test:\n{}", report.join("\n"));
+    eprintln!("wrong answers: {wrong}; {handed_back} of {rays_in_all} ray queries finished on the CPU");
+    assert_eq!(wrong, 0, "GPU answers that differ from exact arithmetic or the CPU's:\n{}", report.join("\n"));
+}

@@ -74,6 +74,56 @@ fn the_standard_sets_on_the_bunny_match_the_cpu() {
     standard_sets_match(gpu, bunny_scene(), &bunny_mesh().triangles);
 }
 
+/// Under the exact test (`GpuOptions::triangle_test`) the GPU gives the CPU's exact
+/// answers bit for bit on the bunny's standard sets (a quarter of the camera rays,
+/// 2^18 incoherent rays, the shadow rays' occlusion), its counts and lists too, and
+/// its filter decides nearly every ray itself: the CPU finishes under 1 %.
+#[test]
+fn the_exact_test_on_the_gpu_gives_the_cpus_exact_answers_on_the_standard_sets() {
+    use octrace_runtime::TriangleTest;
+    let Some(gpu) = gpu("the_exact_test_on_the_gpu_gives_the_cpus_exact_answers_on_the_standard_sets") else {
+        return;
+    };
+    let scene = bunny_scene();
+    let options = GpuOptions { triangle_test: TriangleTest::Exact, ..GpuOptions::default() };
+    let tracer = match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options) {
+        Ok(t) => t,
+        Err(e) if !gpu.device.features().contains(octrace_runtime::gpu::wgpu::Features::SHADER_F64) => {
+            return eprintln!("SKIPPED: the adapter has no f64 ({e})");
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let cpu = scene.tracer().with_triangle_test(TriangleTest::Exact);
+    let frame = Frame::from_triangles(&bunny_mesh().triangles);
+    let primary: Vec<Ray> = raysets::primary(&frame).into_iter().step_by(4).collect();
+    let incoherent = raysets::incoherent(&frame, 1 << 18);
+    let mut all = 0;
+    for (name, rays) in [("primary", &primary), ("incoherent", &incoherent)] {
+        let mut want = vec![None; rays.len()];
+        cpu.intersect_batch(rays, &mut want);
+        same_hits(name, rays, &want, &tracer.intersect(rays).unwrap());
+        all += rays.len();
+    }
+    let view = scene.view();
+    let hits: Vec<Option<Hit>> = primary.iter().map(|r| cpu.intersect(r)).collect();
+    let shadow = raysets::shadow(&frame, |i| hits.get(i).copied().flatten().map(|h| (h.t, view.triangle(h.prim))));
+    let want: Vec<bool> = shadow.iter().map(|r| cpu.occluder(r).is_some()).collect();
+    assert!(tracer.occluded(&shadow).unwrap() == want, "shadow: occlusion differs from the CPU's exact test");
+    all += shadow.len();
+    let some = &incoherent[..1 << 14];
+    let lists = tracer.crossings(some).unwrap();
+    let counts = tracer.count_crossings(some).unwrap();
+    for (i, r) in some.iter().enumerate() {
+        let want = cpu.all_crossings(r);
+        assert_eq!(lists.of(i), want.as_slice(), "incoherent ray {i} {r:?}: crossings");
+        assert_eq!(counts[i], cpu.count_crossings(r), "incoherent ray {i} {r:?}: counts");
+    }
+    all += 2 * some.len();
+    let back = tracer.rays_finished_on_cpu() as usize;
+    eprintln!("exact test on the GPU: {back} of {all} ray queries finished on the CPU");
+    assert!(back * 100 < all, "{back} of {all} ray queries finished on the CPU");
+}
+
 /// The same on the dragon (871k triangles, a 117 MB file), when `../shared` is there.
 #[test]
 #[cfg_attr(not(octrace_shared), ignore = "needs ../shared beside the clone (README: Set up)")]
@@ -367,6 +417,34 @@ fn tiny_directions_ties_and_t_zero_answer_as_on_the_cpu() {
     }
     assert!(cube.intersect(&subnormal).is_some_and(|h| h.t == 1.0));
     assert!(cube.intersect(&beyond).is_none());
+}
+
+/// Rays that graze the root cube's edge where the mesh box reaches the root's faces
+/// (the cube whose faces are the root's; the hard rays near its vertices and edges):
+/// the root clip's rounding calls some a miss, and the walk starts where they enter
+/// the enlarged mesh box, on the GPU as on the CPU (the kernel called them misses:
+/// `[2.7158, 0.114807256, -0.29501683]` towards `[-0.76740384, -0.27497694,
+/// 0.5792055]` meets the vertex `(1, -0.5, 1)` at t = 2.2358503).
+#[test]
+fn rays_grazing_the_roots_edge_are_walked_as_on_the_cpu() {
+    use octrace_tests::exact::hard;
+    let Some(gpu) = gpu("rays_grazing_the_roots_edge_are_walked_as_on_the_cpu") else { return };
+    let mesh = octrace_bake::procedural::cube([-1.0; 3], [1.0; 3], 4);
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &octrace_bake::BuildParams::auto()).unwrap()).unwrap();
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    let mut rays =
+        vec![Ray::new(Vec3::new(2.7158, 0.114807256, -0.29501683), Vec3::new(-0.76740384, -0.27497694, 0.5792055))];
+    for (k, kind) in ["near-vertex", "near-edge", "along-edge"].into_iter().enumerate() {
+        let made = hard::rays(&mesh.triangles, kind, 300, 0xE8AC7 + k as u64);
+        rays.extend(made.iter().map(|&(o, d)| Ray::new(Vec3::from(o), Vec3::from(d))));
+    }
+    let cpu = scene.intersect_batch(&rays);
+    assert!(cpu[0].is_some_and(|h| h.t == 2.2358503));
+    let got = tracer.intersect(&rays).unwrap();
+    assert_eq!(got.iter().filter(|h| h.is_some()).count(), cpu.iter().filter(|h| h.is_some()).count(), "hits");
+    if tracer.uses_f64() {
+        same_hits("grazing the root", &rays, &cpu, &got);
+    }
 }
 
 /// Cameras far from a unit sphere (10 to 1e9 away) on the GPU: the kernel moves far

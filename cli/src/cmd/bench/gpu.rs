@@ -1,8 +1,8 @@
 //! The GPU figures of `bench --gpu`.
 use std::time::{Duration, Instant};
 
-use octrace_runtime::gpu::{Answers, GpuCamera, GpuContext, GpuHit, GpuNearest, GpuTracer};
-use octrace_runtime::{Hit, Ray, Scene};
+use octrace_runtime::gpu::{Answers, GpuCamera, GpuContext, GpuHit, GpuNearest, GpuOptions, GpuTracer};
+use octrace_runtime::{Hit, Ray, Scene, TriangleTest};
 use serde_json::json;
 
 use super::Spread;
@@ -67,6 +67,9 @@ pub(super) struct GpuReport {
     /// Times each set was repeated in one batch.
     repeat: usize,
     buffers: u64,
+    /// Rays the CPU finished (out of loop budget, or left in doubt by the exact
+    /// test's filter), over every call.
+    finished_on_cpu: u64,
     sets: Vec<GpuSet>,
     camera: GpuCameraFigures,
 }
@@ -87,15 +90,19 @@ pub(super) fn measure(
     sets: &[(&'static str, Vec<Ray>, bool)],
     cpu: &[super::SetResult],
     runs: usize,
-    watertight: bool,
+    test: TriangleTest,
     repeat: usize,
     frame: &octrace_runtime::raysets::Frame,
 ) -> anyhow::Result<GpuReport> {
     let gpu = GpuContext::new()?;
     let t = Instant::now();
-    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene)?;
+    // The exact test where asked; the watertight one for the others (Möller-Trumbore
+    // is the CPU's only: its answers are compared by distance).
+    let gpu_test = if test == TriangleTest::Exact { TriangleTest::Exact } else { TriangleTest::Watertight };
+    let options = GpuOptions { triangle_test: gpu_test, ..GpuOptions::default() };
+    let tracer = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options)?;
     let setup = t.elapsed();
-    let bitwise = watertight && tracer.uses_f64();
+    let bitwise = test != TriangleTest::MollerTrumbore && tracer.uses_f64();
     let mut out = Vec::new();
     for ((name, set, occlusion), cpu) in sets.iter().zip(cpu) {
         let rays: Vec<Ray> =
@@ -186,6 +193,7 @@ pub(super) fn measure(
         lane_budget: tracer.lane_budget(),
         repeat,
         buffers: tracer.buffers_created(),
+        finished_on_cpu: tracer.rays_finished_on_cpu(),
         sets: out,
         camera,
     })
@@ -326,8 +334,9 @@ impl GpuReport {
             c.differ
         ));
         lines.push(format!(
-            "(full records: 32 bytes a ray back; compact: 8 for nearest hits, a bit for occlusion; {} buffers made)",
-            self.buffers
+            "(full records: 32 bytes a ray back; compact: 8 for nearest hits, a bit for occlusion; {} buffers made; \
+             {} rays finished on the CPU over every call)",
+            self.buffers, self.finished_on_cpu
         ));
         lines.join("\n")
     }
@@ -345,6 +354,7 @@ impl GpuReport {
             "lane_budget": self.lane_budget,
             "repeat": self.repeat,
             "buffers_created": self.buffers,
+            "rays_finished_on_cpu": self.finished_on_cpu,
             "camera": json!({
                 "rays": self.camera.rays, "mrays_nearest": self.camera.nearest,
                 "mrays_distance": self.camera.distance, "mrays_kernel_device": self.camera.kernel_device,

@@ -44,8 +44,14 @@ pub(crate) struct Args {
     pub no_peer: bool,
     /// Trace with the Möller-Trumbore triangle test instead of the watertight one
     /// (to measure what watertightness costs).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "exact")]
     pub moller_trumbore: bool,
+    /// Trace with the exact triangle test (`TriangleTest::Exact`: every decision as
+    /// exact arithmetic on the f32 inputs decides, distances correctly rounded), on
+    /// the CPU and, with --gpu, on the GPU (its filter, the rays it leaves in doubt
+    /// finished on the CPU): to measure what exactness costs.
+    #[arg(long)]
+    pub exact: bool,
     /// Also trace each set on the GPU (Vulkan; Mesa's lavapipe without a GPU): the
     /// adapter, Mrays/s of the kernel alone and with the transfers, and whether every
     /// ray's answer is the CPU's.
@@ -183,12 +189,31 @@ struct EmbreeAllThreads {
     ratio_one_ray: f64,
 }
 
+/// The triangle test the flags ask for.
+fn args_test(args: &Args) -> TriangleTest {
+    match (args.exact, args.moller_trumbore) {
+        (true, _) => TriangleTest::Exact,
+        (_, true) => TriangleTest::MollerTrumbore,
+        _ => TriangleTest::Watertight,
+    }
+}
+
+/// How the report names a triangle test.
+fn test_name(test: TriangleTest) -> &'static str {
+    match test {
+        TriangleTest::MollerTrumbore => "moller-trumbore",
+        TriangleTest::Exact => "exact",
+        TriangleTest::F64 => "f64",
+        _ => "watertight",
+    }
+}
+
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.runs >= 5, "--runs must be at least 5 (medians of fewer are noise)");
     let loaded = load(&args.input)?;
     let view = loaded.scene.view();
     let frame = Frame::from_bounds(view.bounds.mesh_lo, view.bounds.mesh_hi);
-    let test = if args.moller_trumbore { TriangleTest::MollerTrumbore } else { TriangleTest::Watertight };
+    let test = args_test(&args);
     let tracer = loaded.scene.tracer().with_triangle_test(test);
     let threads = crate::with_threads(args.threads, rayon::current_num_threads)?;
     #[cfg(feature = "obvhs")]
@@ -228,15 +253,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         results.push(r);
     }
     let gpu = if args.gpu {
-        Some(gpu::measure(
-            &loaded.scene,
-            &sets,
-            &results,
-            args.runs,
-            !args.moller_trumbore,
-            args.gpu_repeat as usize,
-            &frame,
-        )?)
+        Some(gpu::measure(&loaded.scene, &sets, &results, args.runs, test, args.gpu_repeat as usize, &frame)?)
     } else {
         None
     };
@@ -248,7 +265,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             let peer = collecting.as_ref();
             #[cfg(not(feature = "embree"))]
             let peer = None;
-            Some(queries::measure(&loaded.scene, rays, args.runs, args.threads, peer)?)
+            Some(queries::measure(&loaded.scene, test, rays, args.runs, args.threads, peer)?)
         }
         _ => None,
     };
@@ -368,7 +385,7 @@ fn report(
             "{}",
             serde_json::to_string_pretty(&json!({
                 "input": crate::show(&args.input), "threads": threads, "runs": args.runs,
-                "triangle_test": if args.moller_trumbore { "moller-trumbore" } else { "watertight" },
+                "triangle_test": test_name(args_test(args)),
                 "bake_s": l.bake.map(secs), "open_validated_s": secs(l.open_validated),
                 "open_trusted_s": l.open_trusted.map(secs), "bytes": l.bytes,
                 "obvhs_build_s": peer_build.map(secs), "sets": sets,
@@ -385,7 +402,7 @@ fn report(
         l.bake.map_or(String::new(), |b| format!(", baked in {:.2} s", b.as_secs_f64())),
         l.open_validated.as_secs_f64() * 1e3,
         l.open_trusted.map_or("n/a (compressed)".into(), |d| format!("{:.3} ms", d.as_secs_f64() * 1e3)),
-        if args.moller_trumbore { "Möller-Trumbore" } else { "watertight" },
+        test_name(args_test(args)),
         crate::output::counted(threads as u64, "thread"),
         args.runs
     );

@@ -7,7 +7,7 @@
 use octrace_runtime::cpu::{CrossingCount, COUNT_DIRECTION};
 use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::{InsideReference, Side};
-use octrace_runtime::{Ray, Scene};
+use octrace_runtime::{Ray, Scene, TriangleTest};
 use serde_json::json;
 
 use super::{median_ratio, mrays_of, Spread};
@@ -51,12 +51,13 @@ const POINTS: usize = 1_000_000;
 /// one thread, octrace on all threads of `pool` (`--threads`).
 pub(super) fn measure(
     scene: &Scene,
+    test: TriangleTest,
     rays: &[Ray],
     runs: usize,
     threads: Option<usize>,
     embree: Peer<'_>,
 ) -> anyhow::Result<QueryReport> {
-    let tracer = scene.tracer();
+    let tracer = scene.tracer().with_triangle_test(test);
     let n = rays.len();
     let mut rows = Vec::new();
 
