@@ -28,7 +28,7 @@ override RECORD: u32 = 0u;
 override CAMERA: bool = false;
 // The exact test (cpu TriangleTest::Exact), on adapters with f64: each triangle's f32
 // edge functions with an error bound and its distance with its own
-// (`hit_triangle_filtered`); a ray any of whose decisions the bounds leave in doubt
+// (the EXACT branch of `hit_triangle`); a ray any of whose decisions the bounds leave in doubt
 // is handed back to the host (`give_back`), which traces it with the CPU's exact test.
 override EXACT: bool = false;
 
