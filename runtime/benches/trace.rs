@@ -50,3 +50,28 @@ fn primary_all_threads(bencher: divan::Bencher) {
     let (scene, rays, _) = fixture();
     bencher.counter(divan::counter::ItemsCount::new(rays.len())).bench_local(|| scene.intersect_batch(rays));
 }
+
+/// Every crossing of a quarter of the incoherent set (counted: `count_crossings_batch`,
+/// the all-hits walk without the lists' memory).
+#[divan::bench(args = [TriangleTest::Watertight, TriangleTest::Exact])]
+fn crossings_single_thread(bencher: divan::Bencher, test: TriangleTest) {
+    let (scene, _, rays) = fixture();
+    let rays = &rays[..rays.len() / 4];
+    let tracer = scene.tracer().with_triangle_test(test);
+    let mut out = vec![octrace_runtime::cpu::CrossingCount::default(); rays.len()];
+    bencher
+        .counter(divan::counter::ItemsCount::new(rays.len()))
+        .bench_local(|| tracer.count_crossings_batch(rays, &mut out));
+}
+
+/// [`crossings_single_thread`] walked ray by ray (no lanes): what the lanes are worth.
+#[divan::bench(args = [TriangleTest::Watertight, TriangleTest::Exact])]
+fn crossings_single_thread_no_lanes(bencher: divan::Bencher, test: TriangleTest) {
+    let (scene, _, rays) = fixture();
+    let rays = &rays[..rays.len() / 4];
+    let tracer = scene.tracer().with_triangle_test(test).with_lanes(false);
+    let mut out = vec![octrace_runtime::cpu::CrossingCount::default(); rays.len()];
+    bencher
+        .counter(divan::counter::ItemsCount::new(rays.len()))
+        .bench_local(|| tracer.count_crossings_batch(rays, &mut out));
+}

@@ -21,6 +21,7 @@ use super::fans;
 use super::tables::ExitRule;
 use super::tracer::{Tracer, TriangleTest};
 use super::walk::RayWalk;
+use super::watertight::Shear;
 use crate::ray::Ray;
 
 /// One crossing of a ray with a triangle ([`Tracer::crossings`]).
@@ -253,17 +254,7 @@ impl Tracer<'_> {
                 let enters = arrives_on_front(d, tri);
                 buffer.0.push((Crossing { t, triangle, u, v: vv, enters }, prim));
             }
-            if buffer.0.len() > 1 {
-                // Equal rounded distances in exact order under the exact test.
-                let stored = |prim: u32| &v.triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
-                buffer.0.sort_unstable_by(|x, y| {
-                    let exactly = || match exact_test && x.0.t == y.0.t {
-                        true => shear.compare_distances(stored(x.1), stored(y.1)),
-                        false => std::cmp::Ordering::Equal,
-                    };
-                    x.0.t.total_cmp(&y.0.t).then_with(exactly).then(x.0.triangle.cmp(&y.0.triangle))
-                });
-            }
+            sort_piece(v.triangles, &shear, exact_test, &mut buffer.0);
             for &(c, prim) in &buffer.0 {
                 let c = Crossing { t: w.unshift_distance(c.t), ..c };
                 let tri = &v.triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
@@ -277,6 +268,24 @@ impl Tracer<'_> {
             }
         }
     }
+}
+
+/// A leaf's crossings in its piece of the ray, each with its stored triangle's index,
+/// in the walk's order: distances, then (under the exact test, `exact`, for equal
+/// rounded distances) the exact order, then input ids.
+#[inline(always)]
+pub(crate) fn sort_piece(triangles: &[f32], shear: &Shear, exact: bool, piece: &mut [(Crossing, u32)]) {
+    if piece.len() < 2 {
+        return;
+    }
+    let stored = |prim: u32| &triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
+    piece.sort_unstable_by(|x, y| {
+        let exactly = || match exact && x.0.t == y.0.t {
+            true => shear.compare_distances(stored(x.1), stored(y.1)),
+            false => std::cmp::Ordering::Equal,
+        };
+        x.0.t.total_cmp(&y.0.t).then_with(exactly).then(x.0.triangle.cmp(&y.0.triangle))
+    });
 }
 
 /// Whether a ray of direction `d` arrives on the front of triangle `tri` (nine

@@ -6,7 +6,7 @@
 use std::ops::ControlFlow;
 
 use super::crossings::{Crossing, CrossingCount, CrossingSink, LeafCrossings};
-use super::tracer::{Tracer, TriangleTest};
+use super::tracer::Tracer;
 use crate::ray::Ray;
 
 /// The crossings of a batch of rays, in one flat list: ray `i`'s are
@@ -175,11 +175,7 @@ impl Tracer<'_> {
     /// processor has them, else ray by ray.
     fn crossings_into_sink(&self, rays: &[Ray], limit: usize, sink: &mut impl CrossingSink) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        if self.uses_x86_64_v3()
-            && self.uses_lanes()
-            && self.triangle_test() != TriangleTest::Exact
-            && super::simd::lanes::fits(self)
-        {
+        if self.uses_x86_64_v3() && self.uses_lanes() && super::simd::lanes::fits(self) {
             // SAFETY: the processor has the features (`uses_x86_64_v3` is never true
             // where it does not), and the arrays fit the gathers.
             return unsafe { super::simd::lanes_crossings::trace(self, rays, limit, sink) };

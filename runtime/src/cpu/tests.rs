@@ -4,7 +4,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 
 use crate::reference::{Agreement, Reference};
-use crate::{MemoryOrder, Ray, Scene};
+use crate::{MemoryOrder, Ray, Scene, TriangleTest};
 use octrace_bake::{bake, procedural, BuildParams, Mesh};
 
 fn scene_of(mesh: &Mesh, params: BuildParams) -> (Scene, Reference) {
@@ -215,10 +215,13 @@ proptest! {
 }
 
 /// Every walk (one ray, batch, lanes or not, x86-64-v3 or not; nearest, occluded,
-/// occluder) answers each ray as the scalar walk does, bit for bit.
+/// occluder, every crossing), under the default and the exact test, answers each ray
+/// as the scalar walk does, bit for bit.
 fn same_on_every_walk(scene: &Scene, rays: &[Ray]) {
-    for (v3, lanes) in [(true, true), (true, false), (false, false)] {
-        let t = scene.tracer().with_x86_64_v3(v3).with_lanes(lanes);
+    let tests = [TriangleTest::Watertight, TriangleTest::Exact];
+    for (test, v3, lanes) in tests.into_iter().flat_map(|t| [(t, true, true), (t, true, false), (t, false, false)]) {
+        let t = scene.tracer().with_triangle_test(test).with_x86_64_v3(v3).with_lanes(lanes);
+        let lists = t.crossings_batch(rays, usize::MAX);
         let mut batch = vec![None; rays.len()];
         t.intersect_batch(rays, &mut batch);
         let mut occluded = vec![false; rays.len()];
@@ -231,6 +234,7 @@ fn same_on_every_walk(scene: &Scene, rays: &[Ray]) {
             assert_eq!(batch[i], scalar, "batch, ray {r:?}");
             assert_eq!(occluded[i], t.occluded_scalar(r), "occluded, ray {r:?}");
             assert_eq!(occluders[i], t.occluder(r), "occluder, ray {r:?}");
+            assert_eq!(lists.of(i), t.all_crossings(r).as_slice(), "crossings, {test:?}, ray {r:?}");
         }
     }
 }

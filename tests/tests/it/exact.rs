@@ -34,6 +34,7 @@ struct Wrong {
     nearest: usize,
     nearest_batch: usize,
     lists: usize,
+    lists_batch: usize,
     counts: usize,
 }
 
@@ -47,6 +48,7 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
         tracer.intersect_batch(&rs, &mut batch);
         let mut counts = vec![CrossingCount::default(); rs.len()];
         tracer.count_crossings_batch(&rs, &mut counts);
+        let lists = tracer.crossings_batch(&rs, usize::MAX);
         let wrong = rays
             .par_iter()
             .enumerate()
@@ -61,9 +63,12 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
                 w.nearest_batch += (batch[i].map(|h| (h.t, h.triangle)) != want) as usize;
                 let want: Vec<(f32, u32, bool)> =
                     oracle.crossings(o, d, 0.0, f32::INFINITY).iter().map(|h| (h.t32, h.triangle, h.enters)).collect();
-                let got: Vec<(f32, u32, bool)> =
-                    tracer.all_crossings(&rs[i]).iter().map(|c| (c.t, c.triangle, c.enters)).collect();
+                let one = tracer.all_crossings(&rs[i]);
+                let got: Vec<(f32, u32, bool)> = one.iter().map(|c| (c.t, c.triangle, c.enters)).collect();
                 w.lists += (got != want) as usize;
+                // The batch's lists (the lanes where the processor has them): the one
+                // ray's, barycentrics included.
+                w.lists_batch += (lists.of(i) != one.as_slice() || got != want) as usize;
                 if got != want && std::env::var_os("OCTRACE_EXACT_SHOW").is_some() {
                     eprintln!("{name} {kind} o {o:?} d {d:?}: crossings {got:?}, exact {want:?}");
                 }
@@ -76,12 +81,13 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
                 nearest: a.nearest + b.nearest,
                 nearest_batch: a.nearest_batch + b.nearest_batch,
                 lists: a.lists + b.lists,
+                lists_batch: a.lists_batch + b.lists_batch,
                 counts: a.counts + b.counts,
             });
-        total += wrong.nearest + wrong.nearest_batch + wrong.lists + wrong.counts;
+        total += wrong.nearest + wrong.nearest_batch + wrong.lists + wrong.lists_batch + wrong.counts;
         report.push(format!(
-            "{name:10} {kind:15} rays {:6}  nearest {:5}  batch {:5}  lists {:5}  counts {:5}",
-            wrong.rays, wrong.nearest, wrong.nearest_batch, wrong.lists, wrong.counts
+            "{name:10} {kind:15} rays {:6}  nearest {:5}  batch {:5}  lists {:5}  batch {:5}  counts {:5}",
+            wrong.rays, wrong.nearest, wrong.nearest_batch, wrong.lists, wrong.lists_batch, wrong.counts
         ));
     }
     total

@@ -14,6 +14,7 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::TRIANGLE_FLOATS;
 
+use crate::cpu::crossings::arrives_on_front;
 use crate::cpu::walk::Batch;
 use crate::cpu::watertight::{plane_distance_rounded, Shear};
 
@@ -333,10 +334,14 @@ unsafe fn accepted8<const EXACT: bool>(shear: &Shear, triangles: &[f32], refs: &
 /// decides; an index out of range): then nothing was reported. `enters` is the sign of
 /// `d . n` from the plane distance's own sum (`crossings::arrives_on_front`'s bits).
 ///
+/// With `EXACT`, the exact test's filter (`Shear::intersect_owned_exact`): a lane whose
+/// signs its bound leaves in doubt sends the batch one by one, and each crossing's
+/// distance is correctly rounded (`plane_distance_rounded`), as that test's.
+///
 /// # Safety
 /// The processor must have AVX2.
 #[inline(always)]
-pub(crate) unsafe fn crossings8(
+pub(crate) unsafe fn crossings8<const EXACT: bool>(
     shear: &Shear,
     triangles: &[f32],
     refs: &[u32],
@@ -345,7 +350,7 @@ pub(crate) unsafe fn crossings8(
     mut found: impl FnMut(usize, f32, f32, f32, bool),
 ) -> bool {
     // SAFETY: the caller's.
-    let (inside, det, v, w, p) = match unsafe { accepted8::<false>(shear, triangles, refs) } {
+    let (inside, det, v, w, p) = match unsafe { accepted8::<EXACT>(shear, triangles, refs) } {
         Accepted::OneByOne => return false,
         Accepted::Miss => return true,
         Accepted::Inside { inside, det, v, w, p } => (inside, det, v, w, p),
@@ -358,7 +363,13 @@ pub(crate) unsafe fn crossings8(
         while left != 0 {
             let lane = left.trailing_zeros() as usize;
             left &= left - 1;
-            let (t, enters) = plane_distance_facing(o, d, p[lane]);
+            let (t, enters) = if EXACT {
+                let tri = std::slice::from_raw_parts(p[lane], TRIANGLE_FLOATS);
+                let Some(t) = plane_distance_rounded(shear.origin(), shear.direction(), tri) else { continue };
+                (t, arrives_on_front(shear.direction(), tri))
+            } else {
+                plane_distance_facing(o, d, p[lane])
+            };
             if t >= tmin && t <= tmax {
                 let det = lane_of(det, lane);
                 found(lane, t, lane_of(v, lane) / det, lane_of(w, lane) / det, enters);

@@ -16,22 +16,25 @@ use octrace_format::layout::TRIANGLE_FLOATS;
 use super::avx2::{self, crossings8};
 use super::begin8::mask8;
 use super::lanes::{advance, records, refill, Feed, Group, Recent, Walk, F8, GROUPS, LANES, RECENT};
-use crate::cpu::crossings::{arrives_on_front, Crossing, CrossingSink, LeafCrossings};
+use crate::cpu::crossings::{arrives_on_front, sort_piece, Crossing, CrossingSink, LeafCrossings};
 use crate::cpu::fans;
-use crate::cpu::tracer::Tracer;
+use crate::cpu::tracer::{Tracer, TriangleTest};
 use crate::cpu::walk::RayWalk;
 use crate::ray::Ray;
 
 /// A lane's crossings: where the ray's current piece starts, what the current leaf
-/// found past it, and the ray's list so far.
+/// found past it (each with its stored triangle's index, which orders ties of rounded
+/// distances under the exact test), and the ray's list so far.
 #[derive(Debug, Default)]
 struct Lane {
     lo: f32,
-    pending: Vec<Crossing>,
+    pending: Vec<(Crossing, u32)>,
     list: Vec<Crossing>,
 }
 
-/// Walks `rays` eight at a time, handing each ray's first `limit` crossings to `sink`.
+/// Walks `rays` eight at a time, handing each ray's first `limit` crossings to `sink`,
+/// with the crossing walk's test: the exact one under `TriangleTest::Exact`, else the
+/// watertight one with edges owned (as `Tracer::crossings`).
 ///
 /// # Safety
 /// The processor must have x86-64-v3's features (AVX2 and friends), and
@@ -65,6 +68,7 @@ pub(crate) unsafe fn trace(t: &Tracer<'_>, rays: &[Ray], limit: usize, sink: &mu
         sink(i, list);
     };
     let mut emit = |i: usize, c: &[Crossing]| sink.ray(i, c);
+    let exact = t.triangle_test() == TriangleTest::Exact;
     for (g, ls) in groups.iter_mut().zip(lanes.iter_mut()) {
         for lane in 0..LANES {
             // SAFETY: AVX2 is this function's.
@@ -78,7 +82,12 @@ pub(crate) unsafe fn trace(t: &Tracer<'_>, rays: &[Ray], limit: usize, sink: &mu
                 continue;
             }
             // SAFETY: AVX2 is this function's; `fits` is the caller's.
-            let mut ended = unsafe { step(t, g, ls, &mut recent, limit) };
+            let mut ended = unsafe {
+                match exact {
+                    true => step::<true>(t, g, ls, &mut recent, limit),
+                    false => step::<false>(t, g, ls, &mut recent, limit),
+                }
+            };
             while ended != 0 {
                 let lane = ended.trailing_zeros() as usize;
                 ended &= ended - 1;
@@ -101,12 +110,18 @@ pub(crate) unsafe fn trace(t: &Tracer<'_>, rays: &[Ray], limit: usize, sink: &mu
 
 /// One step of every walk of the group: its leaf's crossings, then the exit, the
 /// piece's crossings sorted into each ray's list, and the next leaf. Returns the lanes
-/// whose walk is over.
+/// whose walk is over. `EXACT`: the tracer's test is `TriangleTest::Exact`.
 ///
 /// # Safety
 /// AVX2 must be available (inlined into `trace`); `lanes::fits` must hold.
 #[inline(always)]
-unsafe fn step(t: &Tracer<'_>, g: &mut Group, ls: &mut [Lane; LANES], recent: &mut Recent, limit: usize) -> u32 {
+unsafe fn step<const EXACT: bool>(
+    t: &Tracer<'_>,
+    g: &mut Group,
+    ls: &mut [Lane; LANES],
+    recent: &mut Recent,
+    limit: usize,
+) -> u32 {
     let octree = t.view().octree;
     // SAFETY: AVX2 is the caller's (and `fits`, for `records` and `advance`).
     unsafe {
@@ -138,7 +153,7 @@ unsafe fn step(t: &Tracer<'_>, g: &mut Group, ls: &mut [Lane; LANES], recent: &m
             let (offset, box_index) = (octree[a + 1], octree[a + 2]);
             // Tested up to the ray's tmax (`t_best`, never lowered here).
             let tmax = g.v.t_best.0[lane];
-            leaf_crossings(t, w, &mut ls[lane], (counts[lane], offset, box_index), tmax);
+            leaf_crossings::<EXACT>(t, w, &mut ls[lane], (counts[lane], offset, box_index), tmax);
             found |= (!ls[lane].pending.is_empty() as u32) << lane;
         }
         let mut exits = F8::default();
@@ -162,9 +177,11 @@ unsafe fn step(t: &Tracer<'_>, g: &mut Group, ls: &mut [Lane; LANES], recent: &m
             let lane = flush.trailing_zeros() as usize;
             flush &= flush - 1;
             let (l, hi) = (&mut ls[lane], his[lane]);
-            l.pending.retain(|c| c.t <= hi);
-            l.pending.sort_unstable_by(|x, y| x.t.total_cmp(&y.t).then(x.triangle.cmp(&y.triangle)));
-            l.list.append(&mut l.pending);
+            l.pending.retain(|c| c.0.t <= hi);
+            if let Some(w) = g.walks[lane].as_ref() {
+                sort_piece(t.view().triangles, &w.shear, EXACT, &mut l.pending);
+            }
+            l.list.extend(l.pending.drain(..).map(|c| c.0));
             over |= ((l.list.len() >= limit) as u32) << lane;
         }
         for (l, &hi) in ls.iter_mut().zip(&his) {
@@ -183,25 +200,32 @@ fn lo_of(ls: &[Lane; LANES]) -> [f32; LANES] {
 /// Lane `l`'s crossings in its leaf (`count` references from `offset`, box index
 /// `box_index`) past its piece's start, up to `tmax`, into `l.pending`: eight triangles
 /// at a time, one by one where an edge function is zero (ownership) or an index is out
-/// of range. In a fan's leaf, the triangles its hierarchy picks (`fans.rs`).
+/// of range. In a fan's leaf, the triangles its hierarchy picks (`fans.rs`), except
+/// under the exact test (`EXACT`), which tests leaves whole, as the scalar walk does.
 #[inline(always)]
-fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, (count, offset, box_index): (u32, u32, u32), tmax: f32) {
+fn leaf_crossings<const EXACT: bool>(
+    t: &Tracer<'_>,
+    w: &Walk,
+    l: &mut Lane,
+    (count, offset, box_index): (u32, u32, u32),
+    tmax: f32,
+) {
     let v = t.view();
     let refs = v.tri_refs.get(offset as usize..offset as usize + count as usize).unwrap_or_default();
     let mut room = fans::candidates_room();
-    let refs = t.fan_refs((box_index, offset, refs), || Some(&w.shear), true, &mut room).unwrap_or(refs);
+    let refs = t.fan_refs((box_index, offset, refs), || (!EXACT).then_some(&w.shear), true, &mut room).unwrap_or(refs);
     let lo = l.lo;
     for chunk in refs.chunks(LANES) {
         let mut push = |prim: u32, (tt, u, vv): (f32, f32, f32), enters: bool| {
             if tt > lo {
                 if let Some(&triangle) = v.triangle_ids.get(prim as usize) {
-                    l.pending.push(Crossing { t: tt, triangle, u, v: vv, enters });
+                    l.pending.push((Crossing { t: tt, triangle, u, v: vv, enters }, prim));
                 }
             }
         };
         // SAFETY: the lanes run only where the processor has AVX2.
         let batched = unsafe {
-            crossings8(&w.shear, v.triangles, chunk, w.tmin, tmax, |i, tt, u, vv, enters| {
+            crossings8::<EXACT>(&w.shear, v.triangles, chunk, w.tmin, tmax, |i, tt, u, vv, enters| {
                 push(chunk[i], (tt, u, vv), enters)
             })
         };
@@ -213,7 +237,11 @@ fn leaf_crossings(t: &Tracer<'_>, w: &Walk, l: &mut Lane, (count, offset, box_in
             else {
                 continue;
             };
-            if let Some(hit) = w.shear.intersect_owned(tri, w.tmin, tmax) {
+            let hit = match EXACT {
+                true => w.shear.intersect_owned_exact(tri, w.tmin, tmax),
+                false => w.shear.intersect_owned(tri, w.tmin, tmax),
+            };
+            if let Some(hit) = hit {
                 push(prim, hit, arrives_on_front(w.d_s, tri));
             }
         }
