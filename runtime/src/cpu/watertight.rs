@@ -367,9 +367,19 @@ fn plane_sums(o: [f32; 3], d: [f32; 3], t: &[f32]) -> PlaneSums {
 pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
     let PlaneSums { num, den, ao, big } = plane_sums(o, d, t);
     let d64 = d.map(f64::from);
+    let spread_num = ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2];
+    let spread_den = d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2];
+    rounded_if_certain(num, den, spread_num, spread_den).or_else(|| crate::exact::distance(o, d, t))
+}
+
+/// The `f32` that the quotient `num / den` of [`plane_distance_rounded`]'s sums
+/// rounds to, where their error bound leaves only one (`None` where it does not: the
+/// exact path decides). `spread_num` and `spread_den` are `sum |a - o|_i N_i` and
+/// `sum |d_i| N_i` (the bound's `A` and `B`), within rounding: the bound has room for it.
+#[inline(always)]
+pub(crate) fn rounded_if_certain(num: f64, den: f64, spread_num: f64, spread_den: f64) -> Option<f32> {
     let g = 2f64.powi(-49);
-    let err_num = g * (ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2]);
-    let err_den = g * (d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2]);
+    let (err_num, err_den) = (g * spread_num, g * spread_den);
     let q = num / den;
     // Decided only where den is far from its error (then |t| <= 2 |q| below).
     if err_den < 0.25 * den.abs() && q.is_finite() {
@@ -380,7 +390,7 @@ pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32
             return Some(lo);
         }
     }
-    crate::exact::distance(o, d, t)
+    None
 }
 
 /// Where the ray `o + t d` meets the plane of triangle `t` (nine floats), in `f64`,

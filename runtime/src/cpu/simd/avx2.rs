@@ -14,9 +14,8 @@ use std::arch::x86_64::*;
 
 use octrace_format::layout::TRIANGLE_FLOATS;
 
-use crate::cpu::crossings::arrives_on_front;
 use crate::cpu::walk::Batch;
-use crate::cpu::watertight::{plane_distance_rounded, Shear};
+use crate::cpu::watertight::{rounded_if_certain, Shear};
 
 /// Triangles a batch.
 pub(crate) const LANES: usize = 8;
@@ -179,11 +178,7 @@ pub(crate) unsafe fn hit8<const ANY: bool, const EXACT: bool>(
             let t = if EXACT {
                 // Correctly rounded; two hits at one rounded distance are ordered
                 // exactly one by one.
-                let Some(t) =
-                    plane_distance_rounded(shear.origin(), shear.direction(), std::slice::from_raw_parts(p[lane], 9))
-                else {
-                    continue;
-                };
+                let Some(t) = plane_distance_rounded_facing(shear, o, d, p[lane]).0 else { continue };
                 if best.is_some_and(|b| b.1 == t) {
                     return Batch::OneByOne;
                 }
@@ -364,9 +359,9 @@ pub(crate) unsafe fn crossings8<const EXACT: bool>(
             let lane = left.trailing_zeros() as usize;
             left &= left - 1;
             let (t, enters) = if EXACT {
-                let tri = std::slice::from_raw_parts(p[lane], TRIANGLE_FLOATS);
-                let Some(t) = plane_distance_rounded(shear.origin(), shear.direction(), tri) else { continue };
-                (t, arrives_on_front(shear.direction(), tri))
+                let (t, enters) = plane_distance_rounded_facing(shear, o, d, p[lane]);
+                let Some(t) = t else { continue };
+                (t, enters)
             } else {
                 plane_distance_facing(o, d, p[lane])
             };
@@ -408,6 +403,46 @@ unsafe fn plane_distance(o: __m256d, d: __m256d, tri: *const f32) -> f32 {
 /// As [`plane_distance`].
 #[inline(always)]
 unsafe fn plane_distance_facing(o: __m256d, d: __m256d, tri: *const f32) -> (f32, bool) {
+    // SAFETY: the caller's.
+    unsafe {
+        let (a, terms) = plane_terms(tri);
+        let (num, den) = dot_pair(_mm256_sub_pd(a, o), d, _mm256_sub_pd(terms.0, terms.1));
+        let t = (num / den) as f32;
+        (if t.abs() < f32::INFINITY { t } else { f32::NAN }, den < 0.0)
+    }
+}
+
+/// `watertight::plane_distance_rounded` with the axes in `f64` lanes, and whether the
+/// ray arrives on the triangle's front ([`plane_distance_facing`]'s sums, with the
+/// error bound's beside them): the same correctly rounded distance (the bound decides
+/// where the `f64` quotient rounds to one `f32`; elsewhere exact arithmetic does).
+///
+/// # Safety
+/// As [`plane_distance`].
+#[inline(always)]
+unsafe fn plane_distance_rounded_facing(shear: &Shear, o: __m256d, d: __m256d, tri: *const f32) -> (Option<f32>, bool) {
+    // SAFETY: the caller's.
+    unsafe {
+        let (a, (p, q)) = plane_terms(tri);
+        let ao = _mm256_sub_pd(a, o);
+        let (num, den) = dot_pair(ao, d, _mm256_sub_pd(p, q));
+        let abs = |v: __m256d| _mm256_andnot_pd(_mm256_set1_pd(-0.0), v);
+        let (spread_num, spread_den) = dot_pair(abs(ao), abs(d), _mm256_add_pd(abs(p), abs(q)));
+        let t = rounded_if_certain(num, den, spread_num, spread_den).or_else(|| {
+            crate::exact::distance(shear.origin(), shear.direction(), std::slice::from_raw_parts(tri, TRIANGLE_FLOATS))
+        });
+        (t, den < 0.0)
+    }
+}
+
+/// Triangle `tri`'s first vertex and the two terms of its normal's components,
+/// `e1.yzx * e2.zxy` and `e1.zxy * e2.yzx` (the normal is their difference, the
+/// scalar cross product lane by lane), in `f64` lanes (lane 3 junk).
+///
+/// # Safety
+/// As [`plane_distance`].
+#[inline(always)]
+unsafe fn plane_terms(tri: *const f32) -> (__m256d, (__m256d, __m256d)) {
     // SAFETY: the caller's: nine floats from `tri` (the loads read floats 0-3, 3-6
     // and 5-8).
     unsafe {
@@ -416,20 +451,28 @@ unsafe fn plane_distance_facing(o: __m256d, d: __m256d, tri: *const f32) -> (f32
         // (b.z, c.x, c.y, c.z) turned to (c.x, c.y, c.z, c.z).
         let c = _mm256_cvtps_pd(_mm_permute_ps::<0b11_11_10_01>(_mm_loadu_ps(tri.add(5))));
         let (e1, e2) = (_mm256_sub_pd(b, a), _mm256_sub_pd(c, a));
-        // n = e1.yzx * e2.zxy - e1.zxy * e2.yzx: the scalar cross product, lane by lane.
         let yzx = |v: __m256d| _mm256_permute4x64_pd::<0b11_00_10_01>(v);
         let zxy = |v: __m256d| _mm256_permute4x64_pd::<0b11_01_00_10>(v);
-        let n = _mm256_sub_pd(_mm256_mul_pd(yzx(e1), zxy(e2)), _mm256_mul_pd(zxy(e1), yzx(e2)));
+        (a, (_mm256_mul_pd(yzx(e1), zxy(e2)), _mm256_mul_pd(zxy(e1), yzx(e2))))
+    }
+}
+
+/// `(x . n, y . n)` over lanes 0-2, each summed `(x + y) + z` as the scalar sums are.
+///
+/// # Safety
+/// AVX must be available (where this is inlined).
+#[inline(always)]
+unsafe fn dot_pair(x: __m256d, y: __m256d, n: __m256d) -> (f64, f64) {
+    // SAFETY: the caller's.
+    unsafe {
         // Lane 3 holds junk: set to -0.0, which adds nothing below (x + -0.0 is x,
         // the sign of a zero included).
         let clear = |v: __m256d| _mm256_blend_pd::<0b1000>(v, _mm256_set1_pd(-0.0));
-        let (p, q) = (clear(_mm256_mul_pd(_mm256_sub_pd(a, o), n)), clear(_mm256_mul_pd(d, n)));
+        let (p, q) = (clear(_mm256_mul_pd(x, n)), clear(_mm256_mul_pd(y, n)));
         // (p.x + p.y, q.x + q.y, p.z + -0, q.z + -0), then (x + y) + z for both.
         let h = _mm256_hadd_pd(p, q);
         let sums = _mm_add_pd(_mm256_castpd256_pd128(h), _mm256_extractf128_pd::<1>(h));
-        let den = _mm_cvtsd_f64(_mm_unpackhi_pd(sums, sums));
-        let t = (_mm_cvtsd_f64(sums) / den) as f32;
-        (if t.abs() < f32::INFINITY { t } else { f32::NAN }, den < 0.0)
+        (_mm_cvtsd_f64(sums), _mm_cvtsd_f64(_mm_unpackhi_pd(sums, sums)))
     }
 }
 
@@ -574,7 +617,7 @@ mod tests {
     /// plane_distance`, the reference): random triangles, slivers and caps, origins on
     /// their planes (zero numerators of either sign), rays parallel to them.
     #[test]
-    fn the_vector_plane_distance_is_the_scalar_one() {
+    fn the_vector_plane_distances_are_the_scalar_ones() {
         if !std::arch::is_x86_feature_detected!("avx2") {
             eprintln!("no AVX2 here: the vector plane distance never runs on this processor");
             return;
@@ -605,6 +648,15 @@ mod tests {
                 "{tri:?} {o:?} {d:?}: {want} {got}"
             );
             checked += want.is_finite() as u32;
+            // The correctly rounded distance (the exact test's), and the side.
+            let shear = Shear::new(o, d);
+            let want = (
+                crate::cpu::watertight::plane_distance_rounded(o, d, &tri),
+                crate::cpu::crossings::arrives_on_front(d, &tri),
+            );
+            // SAFETY: as above.
+            let got = unsafe { plane_distance_rounded_facing(&shear, wide(o), wide(d), tri.as_ptr()) };
+            assert_eq!(want, got, "rounded: {tri:?} {o:?} {d:?}");
         }
         assert!(checked > 150_000);
     }
