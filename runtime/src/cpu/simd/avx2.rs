@@ -282,28 +282,34 @@ unsafe fn accepted8<const EXACT: bool>(shear: &Shear, triangles: &[f32], refs: &
         let used = (1u32 << refs.len()) - 1;
         let zero = _mm256_setzero_ps();
         if EXACT {
-            // `watertight::edge_error_bound`, lane by lane: a lane whose signs the
-            // bound leaves in doubt (and that two decided signs do not rule out)
-            // sends the batch one by one, to the exact test.
+            // `watertight::edge_error_bound`, lane by lane, with the largest `|r|`
+            // bounded by the sheared sizes instead: `|r[kx]| <= |x| + |r[kz]|` (the
+            // shear's factor is at most 1), so `m <= (max |r[kz]| + T) (1 + 2^-23)`,
+            // `T` the largest `|x| + |y|`; taken as `(1 + 2^-20)` for the sums'
+            // rounding. A bound at least the scalar one: a lane decided here is decided
+            // there, with the same `f32` functions (the same answer, bit for bit); a
+            // lane whose signs it leaves in doubt (and that two decided signs do not
+            // rule out) sends the batch one by one, to the scalar exact test.
             let abs = |x: __m256| _mm256_andnot_ps(_mm256_set1_ps(-0.0), x);
-            let max3 = |r: &[__m256; 3]| _mm256_max_ps(_mm256_max_ps(abs(r[0]), abs(r[1])), abs(r[2]));
-            let m = _mm256_max_ps(_mm256_max_ps(max3(&a), max3(&b)), max3(&c));
+            let size = |x: __m256, y: __m256| _mm256_add_ps(abs(x), abs(y));
+            let raw = _mm256_max_ps(_mm256_max_ps(size(ax, ay), size(bx, by)), size(cx, cy));
+            let far = _mm256_max_ps(_mm256_max_ps(abs(a[kz]), abs(b[kz])), abs(c[kz]));
+            let m = _mm256_mul_ps(_mm256_add_ps(far, raw), _mm256_set1_ps(1.0 + 1.0 / (1u32 << 20) as f32));
             let tiny = _mm256_set1_ps(f32::from_bits(4));
             let e = _mm256_add_ps(_mm256_mul_ps(m, _mm256_set1_ps(1.0 / (1u32 << 21) as f32)), tiny);
-            let size = |x: __m256, y: __m256| _mm256_add_ps(abs(x), abs(y));
-            let big = _mm256_max_ps(_mm256_max_ps(size(ax, ay), size(bx, by)), size(cx, cy));
-            let big = _mm256_add_ps(big, e);
+            let big = _mm256_add_ps(raw, e);
             let inner =
                 _mm256_add_ps(_mm256_add_ps(e, e), _mm256_mul_ps(big, _mm256_set1_ps(1.0 / (1u32 << 22) as f32)));
             let bound = _mm256_mul_ps(_mm256_mul_ps(big, inner), _mm256_set1_ps(1.0 + 1.0 / (1u32 << 16) as f32));
             let bound = _mm256_add_ps(bound, tiny);
-            let neg_bound = _mm256_sub_ps(zero, bound);
-            let pos = any3::<_CMP_GT_OQ>(u, v, w, bound);
-            let neg = any3::<_CMP_LT_OQ>(u, v, w, neg_bound);
-            let ruled_out = _mm256_and_ps(pos, neg);
-            let doubt = any3::<_CMP_NGT_UQ>(abs(u), abs(v), abs(w), bound);
-            if lanes(_mm256_andnot_ps(ruled_out, doubt), used) != 0 {
-                return Accepted::OneByOne;
+            let doubt = lanes(any3::<_CMP_NGT_UQ>(abs(u), abs(v), abs(w), bound), used);
+            if doubt != 0 {
+                // Rare: the lanes that two decided signs rule out stay misses.
+                let pos = any3::<_CMP_GT_OQ>(u, v, w, bound);
+                let neg = any3::<_CMP_LT_OQ>(u, v, w, _mm256_sub_ps(zero, bound));
+                if doubt & !lanes(_mm256_and_ps(pos, neg), used) != 0 {
+                    return Accepted::OneByOne;
+                }
             }
         } else if lanes(any3::<_CMP_EQ_OQ>(u, v, w, zero), used) != 0 {
             return Accepted::OneByOne;
