@@ -19,9 +19,11 @@ use octrace_format::StoredIndex;
 /// * Any finite nonzero direction is traced exactly as the others, its components
 ///   subnormal or not, its length tiny or huge: the walk takes its exit decisions in
 ///   `f64` where `f32` products would underflow or overflow (`cpu::tables::exit_rule`).
-/// * Of hits at the same distance on different triangles, the nearest-hit queries
-///   answer the one with the lowest input index (the oracle's rule too); the any-hit
-///   queries answer whichever they meet first.
+/// * Of hits at the same rounded distance on different triangles, the nearest-hit
+///   queries answer the exactly nearer under the exact test (the CPU's default,
+///   `TriangleTest::Exact`), and of exactly equal ones the lowest input index (the
+///   watertight test: the lowest input index); the any-hit queries answer whichever
+///   they meet first.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Ray {
@@ -100,10 +102,11 @@ impl Ray {
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
-    /// Distance along the ray, in units of its direction: with the watertight test
-    /// (the default), the exact distance to the hit triangle's plane rounded to `f32`,
-    /// within one ulp whatever the triangle's shape (`cpu::watertight::plane_distance`
-    /// states the bound).
+    /// Distance along the ray, in units of its direction: with the exact test (the
+    /// CPU's default), the exact distance to the hit triangle's plane correctly
+    /// rounded to `f32`; with the watertight test (the GPU's default), within one ulp
+    /// of it whatever the triangle's shape (`cpu::watertight::plane_distance` states
+    /// the bound).
     pub t: f32,
     /// The hit triangle's index in the input mesh.
     pub triangle: u32,

@@ -5,7 +5,7 @@ use std::path::Path;
 use octrace_format::topology::EdgeCensus;
 use octrace_format::{BakedScene, SceneFile, SceneView};
 
-use crate::cpu::{BatchCrossings, ClosestPoint, Crossing, CrossingCount, LocateGrid, Solid, Tracer};
+use crate::cpu::{BatchCrossings, ClosestPoint, Crossing, CrossingCount, LocateGrid, Solid, Tracer, TriangleTest};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 use crate::winding::{Accuracy, Winding, WindingTree};
@@ -207,13 +207,25 @@ impl Scene {
 
     /// A CPU tracer over the scene; build one per batch of rays. (The first one also
     /// builds the scene's point-location grid, a few milliseconds.)
+    ///
+    /// Its triangle test is the exact one ([`TriangleTest::Exact`]), except in a scene
+    /// with crowded fans ([`Scene::fans`]: a leaf of 256+ references with 24+
+    /// triangles around one vertex, which `octrace inspect` reports), where it is the
+    /// watertight one: the exact test tests such leaves whole, and a ray aimed near the
+    /// fan's vertex runs up to 70x slower than through the fan's hierarchy
+    /// (BENCHMARKS.md, "Fans"). Ask for the exact test there with
+    /// [`Tracer::with_triangle_test`].
     #[inline]
     pub fn tracer(&self) -> Tracer<'_> {
         let view = self.view();
         let grid = self.inner.grid.get_or_init(|| LocateGrid::build(&view));
         let frame = *self.inner.frame.get_or_init(|| crate::cpu::TreeFrame::of(&view));
         let fans = self.fans();
-        Tracer::with_frame(view, frame).with_locate_grid(grid).with_fans((!fans.is_empty()).then_some(fans))
+        let test = if fans.is_empty() { TriangleTest::Exact } else { TriangleTest::Watertight };
+        Tracer::with_frame(view, frame)
+            .with_locate_grid(grid)
+            .with_fans((!fans.is_empty()).then_some(fans))
+            .with_triangle_test(test)
     }
 
     /// The scene's crowded leaves, whose fans the walks use ([`crate::cpu::FanIndex`]):

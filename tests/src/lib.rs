@@ -115,3 +115,23 @@ pub fn gpu(test: &str) -> Option<&'static octrace_runtime::gpu::GpuContext> {
         }
     }
 }
+
+/// The CPU tracer whose answers a GPU tracer with the default options gives: the
+/// watertight test (`GpuOptions::triangle_test`'s default; the CPU's is the exact one).
+pub fn gpu_default_cpu(scene: &Scene) -> octrace_runtime::Tracer<'_> {
+    scene.tracer().with_triangle_test(octrace_runtime::TriangleTest::Watertight)
+}
+
+/// [`Scene::intersect_batch`] with [`gpu_default_cpu`]'s tracer.
+pub fn gpu_default_hits(scene: &Scene, rays: &[octrace_runtime::Ray]) -> Vec<Option<octrace_runtime::Hit>> {
+    let mut out = vec![None; rays.len()];
+    gpu_default_cpu(scene).par_intersect_batch(rays, &mut out);
+    out
+}
+
+/// [`Scene::occluded_batch`] with [`gpu_default_cpu`]'s tracer.
+pub fn gpu_default_occluded(scene: &Scene, rays: &[octrace_runtime::Ray]) -> Vec<bool> {
+    let mut out = vec![false; rays.len()];
+    gpu_default_cpu(scene).par_occluded_batch(rays, &mut out);
+    out
+}

@@ -49,7 +49,7 @@ pub(crate) struct Args {
     /// Seed of the ray generators.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Use the Möller-Trumbore triangle test instead of the watertight one.
+    /// Use the Möller-Trumbore triangle test instead of the exact one (the default).
     #[arg(long)]
     pub moller_trumbore: bool,
     /// Trace on the GPU too (Vulkan; Mesa's lavapipe without a GPU): the kernel's
@@ -77,7 +77,7 @@ struct Row {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    let test = if args.moller_trumbore { TriangleTest::MollerTrumbore } else { TriangleTest::Watertight };
+    let test = if args.moller_trumbore { TriangleTest::MollerTrumbore } else { TriangleTest::default() };
     anyhow::ensure!(!(args.gpu && args.moller_trumbore), "--moller-trumbore is a CPU knob: the kernel is watertight");
     let gpu = args.gpu.then(octrace_runtime::gpu::GpuContext::new).transpose()?;
     let placements = if args.near_only { &PLACEMENTS[..1] } else { &PLACEMENTS[..] };

@@ -74,11 +74,27 @@ pub(crate) struct Args {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Trace on the GPU (Vulkan; Mesa's lavapipe without a GPU): the CPU's answers,
-    /// bit for bit where the adapter has f64. The Mrays/s printed are then of the
+    /// bit for bit where the adapter has f64 (the exact test, its doubtful rays
+    /// finished on the CPU; elsewhere the watertight test, whose answers differ from
+    /// the exact ones only within rounding of edges and vertices). The Mrays/s printed are then of the
     /// kernel alone, without the transfers (of the whole call, transfers and both
     /// passes, with --all-hits, --counts and --length-inside).
     #[arg(long)]
     pub gpu: bool,
+}
+
+/// The GPU tracer of `trace --gpu`: the CPU's test, the exact one, where the adapter
+/// has `f64`; else the watertight one (`GpuOptions::triangle_test`).
+pub(crate) fn gpu_tracer<'s>(
+    gpu: &octrace_runtime::gpu::GpuContext,
+    scene: &'s octrace_runtime::Scene,
+) -> anyhow::Result<octrace_runtime::gpu::GpuTracer<'s>> {
+    use octrace_runtime::gpu::{GpuError, GpuOptions, GpuTracer};
+    let exact = GpuOptions { triangle_test: octrace_runtime::TriangleTest::Exact, ..GpuOptions::default() };
+    match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, exact) {
+        Err(GpuError::Unsupported(_)) => Ok(GpuTracer::new(&gpu.device, &gpu.queue, scene)?),
+        tracer => Ok(tracer?),
+    }
 }
 
 /// The id written for a miss.
@@ -112,7 +128,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let (scene, rays, to_stdout) = inputs(&args)?;
     let (hits, seconds, on) = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
-        let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+        let tracer = gpu_tracer(&gpu, &scene)?;
         let (hits, timings) = tracer.trace_timed(&rays, args.occluded)?;
         // The device's own clock where it has timestamps, else the host's.
         let (kernel, clock) = match timings.kernel_device {

@@ -18,8 +18,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let (args, scene, rays) = (&args, &scene, &rays[..]);
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let gpu = args.gpu.then(octrace_runtime::gpu::GpuContext::new).transpose()?;
-    let gpu_tracer =
-        gpu.as_ref().map(|g| octrace_runtime::gpu::GpuTracer::new(&g.device, &g.queue, scene)).transpose()?;
+    let gpu_tracer = gpu.as_ref().map(|g| super::trace::gpu_tracer(g, scene)).transpose()?;
     let (mode, seconds, summary) = if args.all_hits {
         let limit = args.max_hits.map_or(usize::MAX, |k| k as usize);
         let budget = args.max_memory.unwrap_or_else(|| octrace_format::memory::share(4));

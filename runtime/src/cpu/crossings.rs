@@ -137,33 +137,35 @@ impl Tracer<'_> {
     }
 
     /// [`Tracer::all_crossings`] by brute force: every stored triangle tested with the
-    /// same test and edge rule, from the same (possibly moved) origin, sorted by
-    /// distance and input id. The reference the walk is tested against: the same list,
-    /// bit for bit.
+    /// same test and edge rule, from the same (possibly moved) origin, sorted as the
+    /// walk sorts (distance, the exact order of equal distances under the exact test,
+    /// input id). The reference the walk is tested against: the same list, bit for bit.
     pub fn crossings_by_brute_force(&self, ray: &Ray) -> Vec<Crossing> {
         let Some(w) = self.begin(ray) else { return Vec::new() };
         let v = self.view();
         let (shear, d, exact) = (w.shear(), w.d(), w.rule() == ExitRule::Exact);
-        let mut out: Vec<Crossing> = v
+        let exact_test = self.triangle_test() == TriangleTest::Exact;
+        let mut out: Vec<(Crossing, u32)> = v
             .triangles
             .chunks_exact(TRIANGLE_FLOATS)
             .zip(v.triangle_ids)
-            .filter_map(|(tri, &triangle)| {
+            .enumerate()
+            .filter_map(|(prim, (tri, &triangle))| {
                 let (tmin, tmax) = (w.tmin(), w.t_best());
-                let hit = if exact {
+                let hit = if exact_test {
+                    shear.intersect_owned_exact(tri, tmin, tmax)
+                } else if exact {
                     shear.intersect_owned_f64(tri, tmin, tmax)
                 } else {
                     shear.intersect_owned(tri, tmin, tmax)
                 };
                 let (t, u, vv) = hit?;
-                Some(Crossing { t, triangle, u, v: vv, enters: arrives_on_front(d, tri) })
+                Some((Crossing { t, triangle, u, v: vv, enters: arrives_on_front(d, tri) }, prim as u32))
             })
             .collect();
-        // In the walk's order (its distances, then input ids), then measured from the
-        // ray's own origin.
-        out.sort_unstable_by(|x, y| x.t.total_cmp(&y.t).then(x.triangle.cmp(&y.triangle)));
-        out.iter_mut().for_each(|c| c.t = w.unshift_distance(c.t));
-        out
+        // In the walk's order, then measured from the ray's own origin.
+        sort_piece(v.triangles, &shear, exact_test, &mut out);
+        out.into_iter().map(|(c, _)| Crossing { t: w.unshift_distance(c.t), ..c }).collect()
     }
 
     /// [`Tracer::crossings`] with a caller's buffer (batches reuse one a thread).

@@ -116,9 +116,11 @@ fn walked_bytes(v: &SceneView<'_>) -> u64 {
 /// The ray/triangle test a tracer uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TriangleTest {
-    /// Woop, Benthin & Wald's watertight test: no ray passes between triangles that
-    /// share an edge (the default).
-    #[default]
+    /// Woop, Benthin & Wald's watertight test in `f32`: no ray passes between
+    /// triangles that share an edge, but a ray within rounding of an edge or a vertex
+    /// may be put on either side of it (a crossing listed twice or lost there, a hit
+    /// on the neighbour). The GPU's default (`gpu::GpuOptions`), the renderers' test,
+    /// and the CPU's in scenes with crowded fans ([`crate::Scene::tracer`]).
     Watertight,
     /// Möller & Trumbore: a ray through a shared edge can, rarely, miss both
     /// triangles.
@@ -136,7 +138,9 @@ pub enum TriangleTest {
     /// nowhere, a hit counts where its rounded distance lies in `[tmin, tmax]`, and
     /// the crossing queries' edge rule ([`crate::cpu::watertight::Shear::intersect_owned`])
     /// decides a ray exactly through an edge or a vertex. Leaves are tested whole (no
-    /// fan hierarchies); 0.75x the default test's speed on the bunny's camera rays.
+    /// fan hierarchies). The default ([`crate::Scene::tracer`] says where not): within
+    /// 10 % of [`TriangleTest::Watertight`]'s speed on the standard ray sets
+    /// (BENCHMARKS.md), the filter deciding almost every triangle.
     ///
     /// # Example
     /// ```
@@ -151,6 +155,7 @@ pub enum TriangleTest {
     /// assert_eq!((crossings[0].t, crossings[1].t), (2.0, 4.0));
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
+    #[default]
     Exact,
 }
 

@@ -91,7 +91,7 @@ pub enum GpuError {
 pub type GpuResult<T> = std::result::Result<T, GpuError>;
 
 /// Options of [`GpuTracer::with_options`].
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct GpuOptions {
     /// The largest storage binding to use, in bytes (default: the device's limit). The
     /// scene's words are split across as many bindings as this takes; smaller values
@@ -103,8 +103,10 @@ pub struct GpuOptions {
     pub chunk_rays: Option<usize>,
     /// Chunks in flight at once (default 2, at most 8).
     pub in_flight: Option<usize>,
-    /// The triangle test: [`TriangleTest::Watertight`] (the default) or
-    /// [`TriangleTest::Exact`], the answers of the CPU's tracer with the same test, ray
+    /// The triangle test: [`TriangleTest::Watertight`] (the default here, where the
+    /// CPU's is [`TriangleTest::Exact`]: every adapter runs it, and the exact kernels'
+    /// cost on GPUs is not yet measured) or [`TriangleTest::Exact`]; the answers are
+    /// those of the CPU's tracer with the same test ([`GpuTracer::cpu_tracer`]), ray
     /// for ray, bit for bit. Under the exact test the kernels decide what an error
     /// bound certifies (the `f32` edge functions' signs, the distance correctly
     /// rounded) and hand every other ray back to the CPU's exact test, as they hand
@@ -112,6 +114,18 @@ pub struct GpuOptions {
     /// them); it needs an adapter with `f64` ([`GpuTracer::uses_f64`]). The renderer
     /// ([`GpuRenderer`]) traces with the watertight test.
     pub triangle_test: TriangleTest,
+}
+
+impl Default for GpuOptions {
+    /// Every limit the device's, the watertight test.
+    fn default() -> GpuOptions {
+        GpuOptions {
+            max_binding_bytes: None,
+            chunk_rays: None,
+            in_flight: None,
+            triangle_test: TriangleTest::Watertight,
+        }
+    }
 }
 
 /// The kernel's uniform block (`Params` in trace.wgsl).
@@ -694,9 +708,9 @@ impl<'s> GpuTracer<'s> {
         self.finished_on_cpu.load(std::sync::atomic::Ordering::Relaxed)
     }
 
-    /// The CPU tracer that finishes what the kernels hand back: the scene's, with
-    /// this tracer's triangle test.
-    fn cpu_tracer(&self) -> crate::Tracer<'s> {
+    /// The CPU tracer whose answers this one gives, and that finishes what the
+    /// kernels hand back: the scene's, with this tracer's triangle test.
+    pub fn cpu_tracer(&self) -> crate::Tracer<'s> {
         self.scene.tracer().with_triangle_test(self.test)
     }
 

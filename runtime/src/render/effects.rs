@@ -395,7 +395,7 @@ pub fn render_effects(
     progress: &(dyn Fn(u32) + Sync),
 ) -> (Radiance, RayCounts) {
     let ctx = Context::new(scene.view(), camera, options);
-    let tracer = scene.tracer();
+    let tracer = super::renderers_tracer(scene);
     let rows_done = AtomicU32::new(0);
     let tiles: Vec<(Vec<Vec3>, RayCounts)> = (0..camera.height.div_ceil(TILE_ROWS))
         .into_par_iter()
@@ -444,7 +444,7 @@ pub(crate) fn render_pixels(
     pixels: &[u32],
 ) -> (Vec<Vec3>, RayCounts) {
     let ctx = Context::new(scene.view(), camera, options);
-    let tracer = scene.tracer();
+    let tracer = super::renderers_tracer(scene);
     let done: Vec<(Vec3, RayCounts)> =
         pixels.par_iter().map(|&p| ctx.run(&tracer, p..p + 1)).map(|(r, c)| (r[0], c)).collect();
     let counts = done.iter().fold(RayCounts::default(), |a, (_, c)| a.merge(*c));

@@ -99,9 +99,16 @@ pub struct RenderStats {
     pub mean_triangle_tests: f64,
 }
 
+/// The tracer the renderers trace with: the watertight test, as the GPU's renderer
+/// (a pixel's colour does not hang on which side of an edge an ulp-close ray passes,
+/// and the CPU's and the GPU's images stay the same, bit for bit).
+pub(crate) fn renderers_tracer(scene: &Scene) -> crate::Tracer<'_> {
+    scene.tracer().with_triangle_test(crate::TriangleTest::Watertight)
+}
+
 /// Renders `scene` through `camera` on all cores.
 pub fn render(scene: &Scene, camera: &Camera, mode: RenderMode) -> (Image, RenderStats) {
-    let tracer = scene.tracer();
+    let tracer = renderers_tracer(scene);
     let walks: Vec<(Option<Hit>, WalkStats)> = (0..camera.width * camera.height)
         .into_par_iter()
         .map(|i| tracer.intersect_with_stats(&pixel_ray(camera, i)))

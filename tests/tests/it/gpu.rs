@@ -6,7 +6,7 @@ use octrace_runtime::raysets::{self, Frame};
 use octrace_runtime::reference::ZERO_T_SPACINGS;
 use octrace_runtime::render::effects::Radiance;
 use octrace_runtime::{Hit, Ray, Scene};
-use octrace_tests::{bunny_mesh, bunny_scene, gpu};
+use octrace_tests::{bunny_mesh, bunny_scene, gpu, gpu_default_cpu, gpu_default_hits, gpu_default_occluded};
 
 /// How two answers for one ray compare.
 #[derive(Debug, Default)]
@@ -140,31 +140,31 @@ fn standard_sets_match(gpu: &octrace_runtime::gpu::GpuContext, scene: &Scene, tr
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
     let frame = Frame::from_triangles(triangles);
     let primary = raysets::primary(&frame);
-    let cpu_primary = scene.intersect_batch(&primary);
+    let cpu_primary = gpu_default_hits(scene, &primary);
     let incoherent = raysets::incoherent(&frame, 1_000_000);
     let view = scene.view();
     let shadow = raysets::shadow(&frame, |i| cpu_primary[i].map(|h| (h.t, view.triangle(h.prim))));
-    let cpu_occluded = scene.occluded_batch(&shadow);
+    let cpu_occluded = gpu_default_occluded(scene, &shadow);
     if tracer.uses_f64() {
         // The kernel's arithmetic is the CPU's: every answer the same, bit for bit.
         same_hits("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
         same_hits(
             "incoherent",
             &incoherent,
-            &scene.intersect_batch(&incoherent),
+            &gpu_default_hits(scene, &incoherent),
             &tracer.intersect(&incoherent).unwrap(),
         );
-        same_hits("shadow", &shadow, &scene.intersect_batch(&shadow), &tracer.intersect(&shadow).unwrap());
+        same_hits("shadow", &shadow, &gpu_default_hits(scene, &shadow), &tracer.intersect(&shadow).unwrap());
         assert!(tracer.occluded(&shadow).unwrap() == cpu_occluded, "shadow: occlusion differs");
         return;
     }
     // Without f64 the edge functions and distances round differently: the same
     // triangle or a tie, within 1e-5 t.
     check("primary", &primary, &cpu_primary, &tracer.intersect(&primary).unwrap());
-    check("incoherent", &incoherent, &scene.intersect_batch(&incoherent), &tracer.intersect(&incoherent).unwrap());
+    check("incoherent", &incoherent, &gpu_default_hits(scene, &incoherent), &tracer.intersect(&incoherent).unwrap());
     let (occluders, _) = tracer.trace_timed(&shadow, true).unwrap();
     assert_eq!(tracer.occluded(&shadow).unwrap(), occluders.iter().map(Option::is_some).collect::<Vec<_>>());
-    let cpu_occluders: Vec<Option<Hit>> = shadow.iter().map(|r| scene.tracer().occluder(r)).collect();
+    let cpu_occluders: Vec<Option<Hit>> = shadow.iter().map(|r| gpu_default_cpu(scene).occluder(r)).collect();
     let mut differ = 0;
     for (i, (&c, g)) in cpu_occluded.iter().zip(&occluders).enumerate() {
         if c != g.is_some() {
@@ -277,7 +277,7 @@ fn inside_origins_and_untraceable_rays_match_the_cpu() {
         Ray::new(Vec3::new(5.0, 5.0, 5.0), Vec3::X),
         Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, -0.0, 1.0)),
     ]);
-    let cpu = scene.intersect_batch(&rays);
+    let cpu = gpu_default_hits(&scene, &rays);
     let got = tracer.intersect(&rays).unwrap();
     if tracer.uses_f64() {
         same_hits("inside", &rays, &cpu, &got);
@@ -347,7 +347,7 @@ fn rays_on_cell_planes_never_leak_on_the_gpu() {
             assert_eq!(leaks, 0, "{}: {leaks} of {} rays leaked through the kernel", solid.label(), rays.len());
             assert!(tracer.occluded(&rays).unwrap().iter().all(|&o| o), "{}: any-hit leaks", solid.label());
             if tracer.uses_f64() {
-                same_hits(&solid.label(), &rays, &scene.intersect_batch(&rays), &got);
+                same_hits(&solid.label(), &rays, &gpu_default_hits(&scene, &rays), &got);
             }
         }
     }
@@ -404,7 +404,7 @@ fn tiny_directions_ties_and_t_zero_answer_as_on_the_cpu() {
     for (name, scene, rays) in cases {
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
         let got = tracer.intersect(&rays).unwrap();
-        let cpu = scene.intersect_batch(&rays);
+        let cpu = gpu_default_hits(scene, &rays);
         for (i, (c, g)) in cpu.iter().zip(&got).enumerate() {
             assert_eq!(c.is_some(), g.is_some(), "{name}: ray {i} {:?}: CPU {c:?}, GPU {g:?}", rays[i]);
             assert_eq!(c.map(|h| (h.triangle, h.t)), g.map(|h| (h.triangle, h.t)), "{name}: ray {i}");
@@ -438,7 +438,7 @@ fn rays_grazing_the_roots_edge_are_walked_as_on_the_cpu() {
         let made = hard::rays(&mesh.triangles, kind, 300, 0xE8AC7 + k as u64);
         rays.extend(made.iter().map(|&(o, d)| Ray::new(Vec3::from(o), Vec3::from(d))));
     }
-    let cpu = scene.intersect_batch(&rays);
+    let cpu = gpu_default_hits(&scene, &rays);
     assert!(cpu[0].is_some_and(|h| h.t == 2.2358503));
     let got = tracer.intersect(&rays).unwrap();
     assert_eq!(got.iter().filter(|h| h.is_some()).count(), cpu.iter().filter(|h| h.is_some()).count(), "hits");
@@ -458,7 +458,7 @@ fn far_cameras_see_as_on_the_cpu() {
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
     for exp in 1..=9 {
         let rays = far_rays(10f32.powi(exp), 1500, exp as u64);
-        let cpu = scene.intersect_batch(&rays);
+        let cpu = gpu_default_hits(&scene, &rays);
         let got = tracer.intersect(&rays).unwrap();
         if tracer.uses_f64() {
             same_hits(&format!("1e{exp}"), &rays, &cpu, &got);
@@ -466,7 +466,7 @@ fn far_cameras_see_as_on_the_cpu() {
         // A segment ending exactly at its nearest hit still hits it (the moved tmax,
         // walk.rs `moved_tmax`; trace.wgsl the same).
         let ended: Vec<Ray> = rays.iter().zip(&cpu).filter_map(|(r, h)| h.map(|h| Ray { tmax: h.t, ..*r })).collect();
-        let cpu_ended = scene.intersect_batch(&ended);
+        let cpu_ended = gpu_default_hits(&scene, &ended);
         assert!(cpu_ended.iter().all(Option::is_some), "1e{exp}: a segment ending at its hit missed it");
         if tracer.uses_f64() {
             same_hits(&format!("1e{exp}, ending at the hit"), &ended, &cpu_ended, &tracer.intersect(&ended).unwrap());
@@ -505,7 +505,7 @@ fn slivers_keep_the_distance_bound_on_the_gpu() {
     }
     assert!(hits > 10_000, "{hits}");
     if tracer.uses_f64() {
-        same_hits("zigzag", &rays, &scene.intersect_batch(&rays), &got);
+        same_hits("zigzag", &rays, &gpu_default_hits(&scene, &rays), &got);
     }
 }
 
@@ -633,7 +633,7 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
     let scene = Scene::from_baked(octrace_bake::bake(&mesh, &params).unwrap()).unwrap();
     let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
     let rays: Vec<Ray> = (0..16).map(|k| Ray::new(Vec3::new(k as f32 * 1e-3, 0.0, -1.0), Vec3::Z)).collect();
-    let cpu = scene.intersect_batch(&rays);
+    let cpu = gpu_default_hits(&scene, &rays);
     assert!(cpu.iter().all(|h| h.is_some_and(|h| h.triangle == 70_000)), "{cpu:?}");
     let (g, stats): (Vec<_>, Vec<_>) = tracer.intersect_with_stats(&rays).unwrap().into_iter().unzip();
     same_hits("long walks", &rays, &cpu, &g);
@@ -643,10 +643,10 @@ fn lavapipe_caps_loop_iterations_and_long_walks_still_get_whole_answers() {
     let lists = tracer.crossings(&rays).unwrap();
     let counts = tracer.count_crossings(&rays).unwrap();
     for (i, r) in rays.iter().enumerate() {
-        let cpu = scene.tracer().all_crossings(r);
+        let cpu = gpu_default_cpu(&scene).all_crossings(r);
         assert!(cpu.iter().any(|c| c.triangle == 70_000), "ray {i}: {cpu:?}");
         assert_eq!(lists.of(i), &cpu[..], "ray {i}");
-        assert_eq!(counts[i], scene.tracer().count_crossings(r), "ray {i}");
+        assert_eq!(counts[i], gpu_default_cpu(&scene).count_crossings(r), "ray {i}");
     }
 }
 
@@ -808,8 +808,8 @@ fn fans_trace_on_the_gpu_as_on_the_cpu_and_test_few_triangles() {
         let options = octrace_runtime::render::effects::RenderOptions::for_scene(scene.shading());
         let camera = raysets::Camera::standard_sized(&Frame::from_triangles(&mesh.triangles), 64, 64);
         renders_as_on_the_cpu(name, ctx, &tracer, &camera, &options);
-        let cpu = scene.tracer();
-        let whole = scene.tracer().with_fans(None);
+        let cpu = gpu_default_cpu(&scene);
+        let whole = gpu_default_cpu(&scene).with_fans(None);
         for (kind, rays) in &sets {
             let label = format!("{name} {kind}");
             let mut want = vec![None; rays.len()];

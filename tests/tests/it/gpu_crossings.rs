@@ -11,7 +11,7 @@ use octrace_bake::BuildParams;
 use octrace_runtime::cpu::{BatchCrossings, Crossing};
 use octrace_runtime::gpu::GpuTracer;
 use octrace_runtime::{Ray, Scene};
-use octrace_tests::gpu;
+use octrace_tests::{gpu, gpu_default_cpu};
 
 use crate::crossings::{random_rays, scene_of, test_meshes};
 
@@ -24,7 +24,7 @@ fn bits(c: &Crossing) -> (u32, u32, u32, u32, bool) {
 /// Returns the crossings compared.
 fn gpu_equals_cpu(name: &str, gpu: &octrace_runtime::gpu::GpuContext, scene: &Scene, rays: &[Ray]) -> usize {
     let tracer = GpuTracer::new(&gpu.device, &gpu.queue, scene).unwrap();
-    let cpu = scene.tracer();
+    let cpu = gpu_default_cpu(scene);
     let want: BatchCrossings = cpu.par_crossings_batch(rays, usize::MAX);
     let got = tracer.crossings(rays).unwrap();
     let counts = tracer.count_crossings(rays).unwrap();
@@ -98,7 +98,8 @@ fn gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays() {
         let segments: Vec<Ray> = rays.iter().step_by(2).map(|r| Ray { tmin: 0.25, tmax: 40.0, ..*r }).collect();
         let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
         let got = tracer.length_inside(scene.solid().unwrap(), &segments).unwrap();
-        let want = scene.length_inside_batch(&segments).unwrap();
+        let mut want = vec![0.0; segments.len()];
+        gpu_default_cpu(&scene).par_length_inside(scene.solid().unwrap(), &segments, &mut want);
         let same = got.iter().zip(&want).filter(|(g, w)| g.to_bits() == w.to_bits()).count();
         if tracer.uses_f64() {
             assert_eq!(same, want.len(), "{}: lengths inside", solid.name);

@@ -7,7 +7,7 @@ use octrace_runtime::gpu::{
 };
 use octrace_runtime::raysets::{self, Camera, Frame};
 use octrace_runtime::{Hit, Ray, Scene};
-use octrace_tests::{bunny_mesh, bunny_scene, gpu};
+use octrace_tests::{bunny_mesh, bunny_scene, gpu, gpu_default_hits, gpu_default_occluded};
 
 /// A hit's bits: (triangle, t, u, v).
 fn bits(h: &Option<Hit>) -> Option<[u32; 4]> {
@@ -16,8 +16,8 @@ fn bits(h: &Option<Hit>) -> Option<[u32; 4]> {
 
 /// Every record the batch path sends back equals the CPU's answer for the same ray.
 fn check_records(tracer: &GpuTracer<'_>, scene: &Scene, rays: &[Ray], what: &str) {
-    let cpu = scene.intersect_batch(rays);
-    let occluded = scene.occluded_batch(rays);
+    let cpu = gpu_default_hits(scene, rays);
+    let occluded = gpu_default_occluded(scene, rays);
     let mut full = vec![GpuHit::default(); rays.len()];
     tracer.trace_into(rays, false, Answers::Full(&mut full)).unwrap();
     let mut nearest = vec![GpuNearest::default(); rays.len()];
@@ -124,7 +124,7 @@ fn camera_rays_made_on_the_device_are_the_hosts() {
     let tracer = GpuTracer::with_options(&ctx.device, &ctx.queue, scene, options).unwrap();
     for (name, camera) in [("standard", standard), ("pinhole", pinhole)] {
         let rays = camera.rays();
-        let cpu = scene.intersect_batch(&rays);
+        let cpu = gpu_default_hits(scene, &rays);
         let hits = cpu.iter().filter(|h| h.is_some()).count();
         assert!(hits > rays.len() / 10, "{name}: the camera sees the bunny ({hits} hits)");
         let mut full = vec![GpuHit::default(); camera.len()];
@@ -180,7 +180,7 @@ fn rays_in_the_applications_buffers_trace_without_the_host() {
     readback.slice(..).map_async(wgpu::MapMode::Read, |r| r.unwrap());
     ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None }).unwrap();
     let got: Vec<GpuNearest> = bytemuck::cast_slice(&readback.slice(..).get_mapped_range().unwrap()).to_vec();
-    let cpu = scene.intersect_batch(&rays);
+    let cpu = gpu_default_hits(scene, &rays);
     for (i, (c, g)) in cpu.iter().zip(&got).enumerate() {
         let want = c.map_or(GpuNearest { t: f32::INFINITY, triangle: u32::MAX }, |h| GpuNearest {
             t: h.t,

@@ -84,25 +84,29 @@ fn memcpy_ms(src: &[u8], dst: &mut [u8]) -> f64 {
 }
 
 /// Times each set on the GPU and compares its answers with the CPU's (`cpu`, the
-/// sets' CPU results, in the same order); each set repeated `repeat` times in a batch.
+/// sets' CPU results, in the same order, traced with `test`); each set repeated
+/// `repeat` times in a batch. The GPU traces with the exact test where `exact` (the
+/// flag) asks, else with its default, the watertight one.
 pub(super) fn measure(
     scene: &Scene,
     sets: &[(&'static str, Vec<Ray>, bool)],
     cpu: &[super::SetResult],
     runs: usize,
-    test: TriangleTest,
+    (test, exact): (TriangleTest, bool),
     repeat: usize,
     frame: &octrace_runtime::raysets::Frame,
 ) -> anyhow::Result<GpuReport> {
     let gpu = GpuContext::new()?;
     let t = Instant::now();
-    // The exact test where asked; the watertight one for the others (Möller-Trumbore
-    // is the CPU's only: its answers are compared by distance).
-    let gpu_test = if test == TriangleTest::Exact { TriangleTest::Exact } else { TriangleTest::Watertight };
+    // The exact test where asked (--exact); else the GPU's default, the watertight
+    // one, compared with the CPU's watertight answers (Möller-Trumbore is the CPU's
+    // only: its answers are compared by distance).
+    let gpu_test = if exact { TriangleTest::Exact } else { TriangleTest::Watertight };
     let options = GpuOptions { triangle_test: gpu_test, ..GpuOptions::default() };
     let tracer = GpuTracer::with_options(&gpu.device, &gpu.queue, scene, options)?;
     let setup = t.elapsed();
     let bitwise = test != TriangleTest::MollerTrumbore && tracer.uses_f64();
+    let again = (test != TriangleTest::MollerTrumbore && test != gpu_test).then(|| tracer.cpu_tracer());
     let mut out = Vec::new();
     for ((name, set, occlusion), cpu) in sets.iter().zip(cpu) {
         let rays: Vec<Ray> =
@@ -144,19 +148,33 @@ pub(super) fn measure(
         // it liked: traced again).
         tracer.trace_into(&rays, *occlusion, Answers::Full(&mut full))?;
         let m = set.len();
+        // The CPU's answers with the GPU's test, where the sets were timed with another.
+        let recomputed;
+        let (cpu_nearest, cpu_occluded): (&[Option<Hit>], &[bool]) = match &again {
+            Some(t) => {
+                let (mut nearest, mut occluded) = (vec![None; m], vec![false; m]);
+                match *occlusion {
+                    true => t.par_occluded_batch(set, &mut occluded),
+                    false => t.par_intersect_batch(set, &mut nearest),
+                }
+                recomputed = (nearest, occluded);
+                (&recomputed.0, &recomputed.1)
+            }
+            None => (&cpu.nearest, &cpu.occluded),
+        };
         let differ = (0..n)
             .filter(|&i| {
                 let (g, c) = (full[i].hit(), i % m);
                 if *occlusion {
-                    cpu.occluded[c] != g.is_some() || cpu.occluded[c] != (bits[i / 32] >> (i % 32) & 1 != 0)
+                    cpu_occluded[c] != g.is_some() || cpu_occluded[c] != (bits[i / 32] >> (i % 32) & 1 != 0)
                 } else {
                     let same_full = if bitwise {
-                        bits_of(&cpu.nearest[c]) == bits_of(&g)
+                        bits_of(&cpu_nearest[c]) == bits_of(&g)
                     } else {
-                        same(nearest_of(&cpu.nearest[c]), nearest_of(&g), false)
+                        same(nearest_of(&cpu_nearest[c]), nearest_of(&g), false)
                     };
                     let compact = (nearest[i].triangle != u32::MAX).then_some((nearest[i].triangle, nearest[i].t));
-                    let same_compact = same(nearest_of(&cpu.nearest[c]), compact, bitwise);
+                    let same_compact = same(nearest_of(&cpu_nearest[c]), compact, bitwise);
                     !same_full || !same_compact
                 }
             })

@@ -42,14 +42,19 @@ pub(crate) struct Args {
     /// Skip the peers (obvhs; Embree too in a build with the `embree` feature).
     #[arg(long)]
     pub no_peer: bool,
-    /// Trace with the Möller-Trumbore triangle test instead of the watertight one
-    /// (to measure what watertightness costs).
-    #[arg(long, conflicts_with = "exact")]
+    /// Trace with the Möller-Trumbore triangle test instead of the exact one (to
+    /// measure what watertightness and exactness cost).
+    #[arg(long, conflicts_with_all = ["exact", "watertight"])]
     pub moller_trumbore: bool,
-    /// Trace with the exact triangle test (`TriangleTest::Exact`: every decision as
-    /// exact arithmetic on the f32 inputs decides, distances correctly rounded), on
-    /// the CPU and, with --gpu, on the GPU (its filter, the rays it leaves in doubt
-    /// finished on the CPU): to measure what exactness costs.
+    /// Trace with the watertight test in f32 (`TriangleTest::Watertight`, the GPU's
+    /// default) instead of the exact one: to measure what exactness costs.
+    #[arg(long, conflicts_with = "exact")]
+    pub watertight: bool,
+    /// Trace with the exact triangle test (`TriangleTest::Exact`, the CPU's default:
+    /// every decision as exact arithmetic on the f32 inputs decides, distances
+    /// correctly rounded), and with --gpu on the GPU too (its filter, the rays it
+    /// leaves in doubt finished on the CPU; the GPU traces with the watertight test
+    /// otherwise, as by default).
     #[arg(long)]
     pub exact: bool,
     /// Also trace each set on the GPU (Vulkan; Mesa's lavapipe without a GPU): the
@@ -191,10 +196,10 @@ struct EmbreeAllThreads {
 
 /// The triangle test the flags ask for.
 fn args_test(args: &Args) -> TriangleTest {
-    match (args.exact, args.moller_trumbore) {
-        (true, _) => TriangleTest::Exact,
-        (_, true) => TriangleTest::MollerTrumbore,
-        _ => TriangleTest::Watertight,
+    match (args.moller_trumbore, args.watertight) {
+        (true, _) => TriangleTest::MollerTrumbore,
+        (_, true) => TriangleTest::Watertight,
+        _ => TriangleTest::Exact,
     }
 }
 
@@ -253,7 +258,15 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         results.push(r);
     }
     let gpu = if args.gpu {
-        Some(gpu::measure(&loaded.scene, &sets, &results, args.runs, test, args.gpu_repeat as usize, &frame)?)
+        Some(gpu::measure(
+            &loaded.scene,
+            &sets,
+            &results,
+            args.runs,
+            (test, args.exact),
+            args.gpu_repeat as usize,
+            &frame,
+        )?)
     } else {
         None
     };
