@@ -35,6 +35,11 @@ pub(crate) fn hit(
     tmax: f32,
     owned: bool,
 ) -> Option<(f32, f32, f32)> {
+    // A non-finite coordinate (a hostile file's triangle) meets nothing, as in the
+    // floating-point tests, whose comparisons with NaN fail.
+    if !all_finite(&[&o, &d, t]) {
+        return None;
+    }
     let [kx, ky, kz] = k;
     let bo = o.map(Big::of);
     let bd = d.map(Big::of);
@@ -90,6 +95,11 @@ fn distance_terms(o: &[Big; 3], d: &[Big; 3], v: [&[Big; 3]; 3]) -> (Big, Big) {
     (dot(&ao), dot(d))
 }
 
+/// Whether every value of `parts` is finite (what [`Big::of`] takes).
+fn all_finite(parts: &[&[f32]]) -> bool {
+    parts.iter().all(|p| p.iter().all(|x| x.is_finite()))
+}
+
 fn vertices(t: &[f32]) -> [[Big; 3]; 3] {
     [0, 1, 2].map(|i| [0, 1, 2].map(|c| Big::of(t[3 * i + c])))
 }
@@ -100,6 +110,9 @@ fn vertices(t: &[f32]) -> [[Big; 3]; 3] {
 #[cold]
 #[inline(never)]
 pub(crate) fn distance(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
+    if !all_finite(&[&o, &d, t]) {
+        return None;
+    }
     let [a, b, c] = vertices(t);
     let (num, den) = distance_terms(&o.map(Big::of), &d.map(Big::of), [&a, &b, &c]);
     if den.is_zero() {
@@ -109,10 +122,13 @@ pub(crate) fn distance(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
 }
 
 /// Compares the exact distances along the ray to the planes of triangles `a` and `b`
-/// (neither parallel to the ray).
+/// (neither parallel to the ray; `Equal` where a coordinate is not finite).
 #[cold]
 #[inline(never)]
 pub(crate) fn compare_distances(o: [f32; 3], d: [f32; 3], a: &[f32], b: &[f32]) -> std::cmp::Ordering {
+    if !all_finite(&[&o, &d, a, b]) {
+        return std::cmp::Ordering::Equal;
+    }
     let (bo, bd) = (o.map(Big::of), d.map(Big::of));
     let [a0, a1, a2] = vertices(a);
     let [b0, b1, b2] = vertices(b);

@@ -36,9 +36,16 @@ struct Wrong {
     lists: usize,
     lists_batch: usize,
     counts: usize,
+    lengths: usize,
 }
 
-fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &mut Vec<String>) -> usize {
+fn check_rays(
+    name: &str,
+    mesh: &Mesh,
+    (tracer, solid): (&Tracer<'_>, &Solid),
+    n: usize,
+    report: &mut Vec<String>,
+) -> usize {
     let oracle = ExactOracle::new(&mesh.triangles);
     let mut total = 0;
     for (k, kind) in hard::RAY_KINDS.iter().enumerate() {
@@ -49,6 +56,8 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
         let mut counts = vec![CrossingCount::default(); rs.len()];
         tracer.count_crossings_batch(&rs, &mut counts);
         let lists = tracer.crossings_batch(&rs, usize::MAX);
+        let mut lengths = vec![0.0; rs.len()];
+        tracer.length_inside_batch(solid, &rs, &mut lengths);
         let wrong = rays
             .par_iter()
             .enumerate()
@@ -61,8 +70,9 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
                     eprintln!("{name} {kind} o {o:?} d {d:?}: nearest {got:?}, exact {want:?}");
                 }
                 w.nearest_batch += (batch[i].map(|h| (h.t, h.triangle)) != want) as usize;
-                let want: Vec<(f32, u32, bool)> =
-                    oracle.crossings(o, d, 0.0, f32::INFINITY).iter().map(|h| (h.t32, h.triangle, h.enters)).collect();
+                let exact = oracle.crossings(o, d, 0.0, f32::INFINITY);
+                w.lengths += !length_within(&exact, tracer.length_inside(solid, &rs[i]), lengths[i]) as usize;
+                let want: Vec<(f32, u32, bool)> = exact.iter().map(|h| (h.t32, h.triangle, h.enters)).collect();
                 let one = tracer.all_crossings(&rs[i]);
                 let got: Vec<(f32, u32, bool)> = one.iter().map(|c| (c.t, c.triangle, c.enters)).collect();
                 w.lists += (got != want) as usize;
@@ -82,15 +92,41 @@ fn check_rays(name: &str, mesh: &Mesh, tracer: &Tracer<'_>, n: usize, report: &m
                 nearest_batch: a.nearest_batch + b.nearest_batch,
                 lists: a.lists + b.lists,
                 lists_batch: a.lists_batch + b.lists_batch,
+                lengths: a.lengths + b.lengths,
                 counts: a.counts + b.counts,
             });
-        total += wrong.nearest + wrong.nearest_batch + wrong.lists + wrong.lists_batch + wrong.counts;
+        total += wrong.nearest + wrong.nearest_batch + wrong.lists + wrong.lists_batch + wrong.counts + wrong.lengths;
         report.push(format!(
-            "{name:10} {kind:15} rays {:6}  nearest {:5}  batch {:5}  lists {:5}  batch {:5}  counts {:5}",
-            wrong.rays, wrong.nearest, wrong.nearest_batch, wrong.lists, wrong.lists_batch, wrong.counts
+            "{name:10} {kind:15} rays {:6}  nearest {:5}  batch {:5}  lists {:5}  batch {:5}  counts {:5}  lengths {:5}",
+            wrong.rays, wrong.nearest, wrong.nearest_batch, wrong.lists, wrong.lists_batch, wrong.counts, wrong.lengths
         ));
     }
     total
+}
+
+/// Whether `one` and `batch`, a ray's `length_inside` from `t = 0` on, are within the
+/// rounding the documented query allows of the exact length that the exact crossings
+/// `exact` (in order) give: each crossing's distance rounded to `f32` (half an ulp of
+/// the farthest distance each) and the sum's own rounding, `(crossings + 2)` ulps of
+/// the farthest distance or the length, whichever is larger (the audit's criterion).
+fn length_within(exact: &[octrace_tests::exact::ExactHit], one: f32, batch: f32) -> bool {
+    use num_rational::BigRational;
+    use num_traits::{ToPrimitive, Zero};
+    // Inside where the crossings after a point are odd: from 0 if their count is odd.
+    let mut inside = exact.len() % 2 == 1;
+    let (mut from, mut length) = (BigRational::zero(), BigRational::zero());
+    for h in exact {
+        if inside {
+            length += &h.t - &from;
+        }
+        from = h.t.clone();
+        inside = !inside;
+    }
+    let want = length.to_f64().unwrap_or(f64::INFINITY);
+    let far = exact.last().map_or(0.0, |h| h.t32.abs()).max(want.abs() as f32);
+    let ulp = |x: f32| (f32::from_bits(x.to_bits() + 1) - x) as f64;
+    let allowed = (exact.len() + 2) as f64 * ulp(far);
+    (one as f64 - want).abs() <= allowed && one.to_bits() == batch.to_bits()
 }
 
 fn check_points(
@@ -142,10 +178,10 @@ fn the_exact_test_agrees_with_exact_arithmetic_on_hard_rays_and_points() {
         let solid = scene.solid().expect("closed");
         let exact = scene.tracer();
         assert_eq!(exact.triangle_test(), TriangleTest::Exact, "the default");
-        wrong += check_rays(&format!("{name}*"), &mesh, &exact, n, &mut report);
+        wrong += check_rays(&format!("{name}*"), &mesh, (&exact, solid), n, &mut report);
         wrong += check_points(&name, &mesh, &exact, solid, n, &mut report);
         let watertight = scene.tracer().with_triangle_test(TriangleTest::Watertight);
-        default_wrong += check_rays(&name, &mesh, &watertight, n, &mut default_report);
+        default_wrong += check_rays(&name, &mesh, (&watertight, solid), n, &mut default_report);
     }
     eprintln!("exact test:\n{}\nwatertight test:\n{}", report.join("\n"), default_report.join("\n"));
     eprintln!("wrong answers: exact test {wrong}, watertight test {default_wrong}");
