@@ -59,50 +59,96 @@ fn sign(q: &Q) -> i32 {
 /// `x` rounded to the nearest `f32`, ties to even; `None` past `f32::MAX` (where
 /// rounding gives an infinity).
 pub fn round_f32(x: &Q) -> Option<f32> {
-    if x.is_negative() {
-        let r = round_f32(&-x)?;
-        return Some(-r);
-    }
-    // The largest f32 at or below x, by bisection over the ordered bit patterns.
-    let (mut lo, mut hi) = (0u32, 0x7F80_0000u32); // [0, inf)
-    while hi - lo > 1 {
-        let mid = lo + (hi - lo) / 2;
-        if rational(f32::from_bits(mid)) <= *x {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    let below = f32::from_bits(lo);
-    if rational(below) == *x {
-        return Some(below);
-    }
-    // Between `below` and the next value up (2^128 past MAX).
-    let above =
-        if lo + 1 == 0x7F80_0000 { Q::from_integer(BigInt::from(1) << 128) } else { rational(f32::from_bits(lo + 1)) };
-    let mid = (rational(below) + &above) / Q::from_integer(2.into());
-    let up = match x.cmp(&mid) {
-        Ordering::Less => false,
-        Ordering::Greater => true,
-        Ordering::Equal => lo & 1 == 1,
-    };
-    if !up {
-        Some(below)
-    } else if lo + 1 == 0x7F80_0000 {
-        None
+    round_quotient_f32(x.numer(), x.denom())
+}
+
+/// The exact value of an `f32` times `2^149`: every finite `f32` is an integer there.
+fn int(x: f32) -> BigInt {
+    assert!(x.is_finite(), "finite");
+    let bits = x.to_bits();
+    let (field, fraction) = ((bits >> 23) & 0xFF, bits & 0x7F_FFFF);
+    // Subnormals are `fraction * 2^-149`; normals `(2^23 + fraction) * 2^(field - 150)`.
+    let magnitude =
+        if field == 0 { BigInt::from(fraction) } else { BigInt::from(fraction | 0x80_0000) << (field - 1) as usize };
+    if x < 0.0 {
+        -magnitude
     } else {
-        Some(f32::from_bits(lo + 1))
+        magnitude
     }
 }
 
-/// A ray, exactly.
+fn int3(p: [f32; 3]) -> [BigInt; 3] {
+    p.map(int)
+}
+
+fn isub(a: &[BigInt; 3], b: &[BigInt; 3]) -> [BigInt; 3] {
+    [&a[0] - &b[0], &a[1] - &b[1], &a[2] - &b[2]]
+}
+
+fn iadd(a: &[BigInt; 3], b: &[BigInt; 3]) -> [BigInt; 3] {
+    [&a[0] + &b[0], &a[1] + &b[1], &a[2] + &b[2]]
+}
+
+fn iscale(s: &BigInt, a: &[BigInt; 3]) -> [BigInt; 3] {
+    [s * &a[0], s * &a[1], s * &a[2]]
+}
+
+fn icross(a: &[BigInt; 3], b: &[BigInt; 3]) -> [BigInt; 3] {
+    [&a[1] * &b[2] - &a[2] * &b[1], &a[2] * &b[0] - &a[0] * &b[2], &a[0] * &b[1] - &a[1] * &b[0]]
+}
+
+fn idot(a: &[BigInt; 3], b: &[BigInt; 3]) -> BigInt {
+    &a[0] * &b[0] + &a[1] * &b[1] + &a[2] * &b[2]
+}
+
+fn isign(x: &BigInt) -> i32 {
+    match x.sign() {
+        num_bigint::Sign::Minus => -1,
+        num_bigint::Sign::NoSign => 0,
+        num_bigint::Sign::Plus => 1,
+    }
+}
+
+/// The quotient `n / d` (`d` not zero) rounded to the nearest `f32`, ties to even, by
+/// integer division at the quotient's binade; `None` past `f32::MAX`.
+pub fn round_quotient_f32(n: &BigInt, d: &BigInt) -> Option<f32> {
+    assert!(!d.is_zero(), "a quotient");
+    if n.is_zero() {
+        return Some(0.0);
+    }
+    let negative = n.is_negative() != d.is_negative();
+    let (n, d) = (n.abs(), d.abs());
+    // The binade: 2^e <= n / d < 2^(e + 1).
+    let (bn, bd) = (n.bits() as i64, d.bits() as i64);
+    let e = bn - bd;
+    let at_least = if e >= 0 { n >= (&d << e as usize) } else { (&n << (-e) as usize) >= d };
+    let e = if at_least { e } else { e - 1 };
+    if e >= 128 {
+        return None;
+    }
+    // The quantum there (subnormals share 2^-149), the quotient in quanta and its rest.
+    let q = e.max(-126) - 23;
+    let (num, den) = if q >= 0 { (n, d << q as usize) } else { (n << (-q) as usize, d) };
+    let m = &num / &den;
+    let twice: BigInt = (num - &m * &den) << 1usize;
+    let mut m = u64::try_from(&m).expect("at most 24 bits");
+    if twice > den || (twice == den && m & 1 == 1) {
+        m += 1;
+    }
+    let value = m as f64 * 2f64.powi(q as i32);
+    if value > f32::MAX as f64 {
+        return None;
+    }
+    let value = value as f32;
+    Some(if negative { -value } else { value })
+}
+
+/// A ray, exactly: its coordinates as integers (`f32` values times `2^149`).
 pub struct ExactRay {
-    o: [Q; 3],
-    d: [Q; 3],
+    o: [BigInt; 3],
+    d: [BigInt; 3],
     /// The sheared frame's axes, as the tracer picks them.
     k: [usize; 3],
-    /// `d[kx] / d[kz]`, `d[ky] / d[kz]`, exactly.
-    shear: (Q, Q),
     tmin: f32,
     tmax: f32,
 }
@@ -139,36 +185,46 @@ impl ExactRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let dq = v3(d);
-        let shear = (&dq[kx] / &dq[kz], &dq[ky] / &dq[kz]);
-        ExactRay { o: v3(o), d: dq, k: [kx, ky, kz], shear, tmin, tmax }
+        ExactRay { o: int3(o), d: int3(d), k: [kx, ky, kz], tmin, tmax }
     }
 
-    /// The sheared-plane coordinates of a vector (a difference of points).
-    fn sheared(&self, e: &[Q; 3]) -> (Q, Q) {
+    /// The signs of a vector's sheared-plane coordinates (a difference of points),
+    /// `e[kx] - e[kz] d[kx] / d[kz]` and the same for `ky`: the signs of those times
+    /// `d[kz]`, times the sign of `d[kz]`.
+    fn sheared(&self, e: &[BigInt; 3]) -> (BigInt, BigInt) {
         let [kx, ky, kz] = self.k;
-        (&e[kx] - &self.shear.0 * &e[kz], &e[ky] - &self.shear.1 * &e[kz])
+        let dz = &self.d[kz];
+        let s = if dz.is_negative() { -1 } else { 1 };
+        ((&e[kx] * dz - &self.d[kx] * &e[kz]) * BigInt::from(s), (&e[ky] * dz - &self.d[ky] * &e[kz]) * BigInt::from(s))
     }
 
     /// The hit of triangle `tri`, whose input index is `id`: edges closed, or owned by
     /// the rule when `owned`.
+    ///
+    /// In integers: with `n` the normal, `t = N / D` for `N = n.(a - o)` and `D = n.d`,
+    /// and `D (p - a) = D (o - a) + N d` for the ray's point `p` on the plane, so each
+    /// edge's side of `p` is a sign of integers times the sign of `D`.
     pub fn hit(&self, tri: &[[f32; 3]; 3], id: u32, owned: bool) -> Option<ExactHit> {
-        let v = tri.map(v3);
-        let e1 = sub(&v[1], &v[0]);
-        let e2 = sub(&v[2], &v[0]);
-        let n = cross(&e1, &e2);
-        let den = dot(&n, &self.d);
+        let v = tri.map(int3);
+        let e1 = isub(&v[1], &v[0]);
+        let e2 = isub(&v[2], &v[0]);
+        let n = icross(&e1, &e2);
+        let den = idot(&n, &self.d);
         if den.is_zero() {
             return None;
         }
-        let t = dot(&n, &sub(&v[0], &self.o)) / &den;
-        let p = [0, 1, 2].map(|i| &self.o[i] + &t * &self.d[i]);
-        // Which side of each edge p lies, in the plane (positive inside).
+        let num = idot(&n, &isub(&v[0], &self.o));
+        // D (p - a).
+        let pa = iadd(&iscale(&den, &isub(&self.o, &v[0])), &iscale(&num, &self.d));
+        let dp = |i: usize| iadd(&pa, &iscale(&den, &isub(&v[0], &v[i])));
+        let dps = [dp(0), dp(1), dp(2)];
+        let ds = isign(&den);
+        // Which side of each edge p lies, in the plane (positive inside): edges 0->1,
+        // 1->2, 2->0.
         let side = |i: usize| {
-            let (a, b) = (&v[i], &v[(i + 1) % 3]);
-            sign(&dot(&cross(&sub(b, a), &sub(&p, a)), &n))
+            let j = (i + 1) % 3;
+            ds * isign(&idot(&icross(&isub(&v[j], &v[i]), &dps[i]), &n))
         };
-        // Edges 0->1, 1->2, 2->0.
         let s = [side(0), side(1), side(2)];
         if s.contains(&-1) {
             return None;
@@ -178,53 +234,57 @@ impl ExactRay {
             // sum to minus the 2D cross product of the sheared edges).
             let (ax, ay) = self.sheared(&e1);
             let (bx, by) = self.sheared(&e2);
-            let area = -sign(&(&ax * &by - &ay * &bx));
+            let area = -isign(&(&ax * &by - &ay * &bx));
             for i in 0..3 {
                 if s[i] != 0 {
                     continue;
                 }
-                let (ex, ey) = self.sheared(&sub(&v[(i + 1) % 3], &v[i]));
-                let (ex, ey) = (area * sign(&ex), area * sign(&ey));
+                let (ex, ey) = self.sheared(&isub(&v[(i + 1) % 3], &v[i]));
+                let (ex, ey) = (area * isign(&ex), area * isign(&ey));
                 if !(ey > 0 || (ey == 0 && ex > 0)) {
                     return None;
                 }
             }
         }
-        let t32 = round_f32(&t)?;
+        let t32 = round_quotient_f32(&num, &den)?;
         if !(t32 >= self.tmin && t32 <= self.tmax) {
             return None;
         }
-        // Barycentrics: areas of the sub-triangles against the whole, along n.
-        let nn = dot(&n, &n);
+        // Barycentrics: areas of the sub-triangles against the whole, along n, from
+        // D (b - p) = D (b - a) - D (p - a).
+        let nn = idot(&n, &n);
+        let whole = &den * &den * &nn;
         let weight = |i: usize| {
-            let (a, b) = (&v[(i + 1) % 3], &v[(i + 2) % 3]);
-            let w = dot(&cross(&sub(a, &p), &sub(b, &p)), &n) / &nn;
-            num_traits::ToPrimitive::to_f64(&w).unwrap_or(f64::NAN)
+            let (a, b) = ((i + 1) % 3, (i + 2) % 3);
+            // (b - p) x (c - p) = (p - b) x (p - c).
+            let w = idot(&icross(&dps[a], &dps[b]), &n);
+            num_traits::ToPrimitive::to_f64(&Q::new_raw(w, whole.clone())).unwrap_or(f64::NAN)
         };
+        let t = if den.is_negative() { Q::new_raw(-num, -den.clone()) } else { Q::new_raw(num, den.clone()) };
         Some(ExactHit { t, t32, triangle: id, u: weight(1), v: weight(2), enters: den.is_negative() })
     }
 }
 
-/// The exact oracle over a triangle list (input indices are positions).
+/// The exact oracle over a triangle list (input indices are positions), with a
+/// bounding-box tree of its own to find the triangles a line comes near.
 pub struct ExactOracle<'m> {
     triangles: &'m [[[f32; 3]; 3]],
+    screen: Screen,
 }
 
 impl<'m> ExactOracle<'m> {
     /// The oracle of `triangles`.
     pub fn new(triangles: &'m [[[f32; 3]; 3]]) -> ExactOracle<'m> {
-        ExactOracle { triangles }
+        ExactOracle { triangles, screen: Screen::new(triangles) }
     }
 
     /// Every hit of `ray` (edges closed or owned), in no order. Only the triangles
     /// whose boxes the ray's line comes near are tested exactly.
     pub fn hits(&self, ray: &ExactRay, o: [f32; 3], d: [f32; 3], owned: bool) -> Vec<ExactHit> {
-        self.triangles
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| near_line(t, o, d))
-            .filter_map(|(i, t)| ray.hit(t, i as u32, owned))
-            .collect()
+        let mut near = Vec::new();
+        self.screen.near_line(o, d, &mut near);
+        near.sort_unstable();
+        near.into_iter().filter_map(|i| ray.hit(&self.triangles[i as usize], i, owned)).collect()
     }
 
     /// The nearest hit in `[tmin, tmax]` (edges closed), exactly nearest, ties to the
@@ -243,30 +303,116 @@ impl<'m> ExactOracle<'m> {
     }
 }
 
-/// Whether the line `o + t d` passes within a generous margin of the triangle's box
-/// (a cheap prefilter in `f64`: it never drops a triangle the line touches).
-fn near_line(t: &[[f32; 3]; 3], o: [f32; 3], d: [f32; 3]) -> bool {
-    let lo = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::INFINITY, f64::min));
-    let hi = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::NEG_INFINITY, f64::max));
-    let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-    let scale = (0..3).map(|k| lo[k].abs().max(hi[k].abs()).max((o[k] as f64).abs())).fold(0.0, f64::max);
-    let margin = 1e-6 * (size + scale) + 1e-300;
-    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
-    for k in 0..3 {
-        let (lo, hi) = (lo[k] - margin, hi[k] + margin);
-        let (ok, dk) = (o[k] as f64, d[k] as f64);
-        if dk == 0.0 {
-            if ok < lo || ok > hi {
-                return false;
-            }
-            continue;
-        }
-        let (a, b) = ((lo - ok) / dk, (hi - ok) / dk);
-        t0 = t0.max(a.min(b));
-        t1 = t1.min(a.max(b));
+/// A box in `f64`, widened so that the slab test below never misses a line that
+/// touches what it holds.
+#[derive(Clone, Copy)]
+struct Bounds {
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Bounds {
+    const EMPTY: Bounds = Bounds { lo: [f64::INFINITY; 3], hi: [f64::NEG_INFINITY; 3] };
+
+    fn of(t: &[[f32; 3]; 3]) -> Bounds {
+        let lo = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::INFINITY, f64::min));
+        let hi = [0, 1, 2].map(|k| t.iter().map(|v| v[k] as f64).fold(f64::NEG_INFINITY, f64::max));
+        Bounds { lo, hi }
     }
-    // Loose: the slab distances carry rounding; widen by a relative hair.
-    t0 <= t1 + 1e-9 * (t0.abs() + t1.abs()) || !t0.is_finite() || !t1.is_finite()
+
+    fn join(self, b: Bounds) -> Bounds {
+        Bounds { lo: [0, 1, 2].map(|k| self.lo[k].min(b.lo[k])), hi: [0, 1, 2].map(|k| self.hi[k].max(b.hi[k])) }
+    }
+
+    /// Whether the line `o + t d` passes within a generous margin of the box (a
+    /// prefilter in `f64`: it never drops a box the line touches).
+    fn near_line(&self, o: [f32; 3], d: [f32; 3]) -> bool {
+        let (lo, hi) = (self.lo, self.hi);
+        let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+        let scale = (0..3).map(|k| lo[k].abs().max(hi[k].abs()).max((o[k] as f64).abs())).fold(0.0, f64::max);
+        let margin = 1e-6 * (size + scale) + 1e-300;
+        let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+        for k in 0..3 {
+            let (lo, hi) = (lo[k] - margin, hi[k] + margin);
+            let (ok, dk) = (o[k] as f64, d[k] as f64);
+            if dk == 0.0 {
+                if ok < lo || ok > hi {
+                    return false;
+                }
+                continue;
+            }
+            let (a, b) = ((lo - ok) / dk, (hi - ok) / dk);
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+        // Loose: the slab distances carry rounding; widen by a relative hair.
+        t0 <= t1 + 1e-9 * (t0.abs() + t1.abs()) || !t0.is_finite() || !t1.is_finite()
+    }
+}
+
+/// A bounding-box tree over the triangles (median splits, four to a leaf): the
+/// oracle's screen. A node's box holds its triangles' boxes, so a line near a triangle's
+/// box is near every box above it, and the screen keeps every triangle the plain
+/// all-triangle screen keeps.
+struct Screen {
+    /// `(bounds, first, count)`: a leaf holds `order[first..first + count]`; an inner
+    /// node (`count == 0`) has children `first` and `first + 1`.
+    nodes: Vec<(Bounds, u32, u32)>,
+    order: Vec<u32>,
+    boxes: Vec<Bounds>,
+}
+
+impl Screen {
+    fn new(triangles: &[[[f32; 3]; 3]]) -> Screen {
+        let boxes: Vec<Bounds> = triangles.iter().map(Bounds::of).collect();
+        let mut screen =
+            Screen { nodes: vec![(Bounds::EMPTY, 0, 0)], order: (0..triangles.len() as u32).collect(), boxes };
+        screen.split(0, 0, triangles.len());
+        screen
+    }
+
+    fn split(&mut self, node: usize, first: usize, end: usize) {
+        let bounds = self.order[first..end].iter().fold(Bounds::EMPTY, |b, &i| b.join(self.boxes[i as usize]));
+        if end - first <= 4 {
+            self.nodes[node] = (bounds, first as u32, (end - first) as u32);
+            return;
+        }
+        let axis =
+            (0..3).max_by(|&a, &b| (bounds.hi[a] - bounds.lo[a]).total_cmp(&(bounds.hi[b] - bounds.lo[b]))).unwrap();
+        let mid = (first + end) / 2;
+        let boxes = &self.boxes;
+        let centre = |i: &u32| boxes[*i as usize].lo[axis] + boxes[*i as usize].hi[axis];
+        self.order[first..end].select_nth_unstable_by(mid - first, |a, b| centre(a).total_cmp(&centre(b)));
+        let children = self.nodes.len();
+        self.nodes.push((Bounds::EMPTY, 0, 0));
+        self.nodes.push((Bounds::EMPTY, 0, 0));
+        self.nodes[node] = (bounds, children as u32, 0);
+        self.split(children, first, mid);
+        self.split(children + 1, mid, end);
+    }
+
+    /// The triangles whose boxes the line `o + t d` comes near, in no order.
+    fn near_line(&self, o: [f32; 3], d: [f32; 3], out: &mut Vec<u32>) {
+        if self.order.is_empty() {
+            return;
+        }
+        let mut stack = vec![0usize];
+        while let Some(node) = stack.pop() {
+            let (bounds, first, count) = self.nodes[node];
+            if !bounds.near_line(o, d) {
+                continue;
+            }
+            if count == 0 {
+                stack.extend([first as usize, first as usize + 1]);
+                continue;
+            }
+            for &i in &self.order[first as usize..(first + count) as usize] {
+                if self.boxes[i as usize].near_line(o, d) {
+                    out.push(i);
+                }
+            }
+        }
+    }
 }
 
 /// Whether `p` is inside the closed mesh, exactly, by the tracer's stated rule for
@@ -550,4 +696,87 @@ pub fn closest(p: [f32; 3], triangles: &[[[f32; 3]; 3]], ids: &[u32]) -> Option<
         }
     }
     best.map(|(d2, i)| (round_sqrt_f32(&d2), i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The nearest `f32` to `x` by bisection over the ordered bit patterns and exact
+    /// comparisons with the midpoints (slow, plainly right).
+    fn round_by_bisection(x: &Q) -> Option<f32> {
+        if x.is_negative() {
+            return round_by_bisection(&-x).map(|r| -r);
+        }
+        let (mut lo, mut hi) = (0u32, 0x7F80_0000u32);
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if rational(f32::from_bits(mid)) <= *x {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let below = rational(f32::from_bits(lo));
+        let above = if lo + 1 == 0x7F80_0000 {
+            Q::from_integer(BigInt::from(1) << 128)
+        } else {
+            rational(f32::from_bits(lo + 1))
+        };
+        let mid = (&below + &above) / Q::from_integer(2.into());
+        let up = match x.cmp(&mid) {
+            Ordering::Less => false,
+            Ordering::Greater => true,
+            Ordering::Equal => lo & 1 == 1 && below != *x,
+        };
+        match (up, lo + 1 == 0x7F80_0000) {
+            (false, _) => Some(f32::from_bits(lo)),
+            (true, true) => None,
+            (true, false) => Some(f32::from_bits(lo + 1)),
+        }
+    }
+
+    /// Quotients rounded by integer division are the bisection's, over every binade
+    /// (subnormals and the overflow boundary included), exact values, midpoints
+    /// (ties to even) and a hair either side of them.
+    #[test]
+    fn quotients_round_to_the_nearest_f32_ties_to_even() {
+        let mut rng = hard::Rng::new(7);
+        let mut cases: Vec<Q> = Vec::new();
+        for _ in 0..3000 {
+            let bits = (rng.next_u64() % 0x7F80_0000) as u32;
+            let x = rational(f32::from_bits(bits));
+            let next = if bits + 1 == 0x7F80_0000 {
+                Q::from_integer(BigInt::from(1) << 128)
+            } else {
+                rational(f32::from_bits(bits + 1))
+            };
+            let mid = (&x + &next) / Q::from_integer(2.into());
+            let hair = (&next - &x) / Q::from_integer(BigInt::from(1) << 40);
+            cases.extend([x.clone(), mid.clone(), &mid + &hair, &mid - &hair]);
+            // A quotient of odd integers near x.
+            let den = BigInt::from(rng.next_u64() | 1);
+            let num = (&x * Q::from_integer(den.clone())).round().to_integer();
+            cases.push(Q::new(num, den));
+        }
+        for x in cases {
+            for x in [x.clone(), -x] {
+                assert_eq!(round_f32(&x), round_by_bisection(&x), "{x}");
+            }
+        }
+        assert_eq!(round_quotient_f32(&BigInt::from(1), &(BigInt::from(1) << 200)), Some(0.0));
+        // 0.75 and 1.5 of the least subnormal: up to it, and the tie to even.
+        assert_eq!(round_quotient_f32(&BigInt::from(3), &(BigInt::from(1) << 151)), Some(f32::from_bits(1)));
+        assert_eq!(round_quotient_f32(&BigInt::from(3), &(BigInt::from(1) << 150)), Some(f32::from_bits(2)));
+    }
+
+    /// The integers are the floats' exact values times `2^149`.
+    #[test]
+    fn floats_are_integers_at_two_to_the_149() {
+        for x in
+            [0.0f32, -0.0, 1.0, -1.5, f32::MAX, f32::MIN_POSITIVE, f32::from_bits(1), -f32::from_bits(0x7F_FFFF), 3e-39]
+        {
+            assert_eq!(Q::new(int(x), BigInt::from(1) << 149), rational(x), "{x}");
+        }
+    }
 }
