@@ -67,6 +67,7 @@ pub use octrace_format as format;
 
 pub use cpu::{ClosestPoint, ExitTest, MemoryOrder, Tracer, TriangleTest, WalkStats};
 pub use error::{Error, Result};
+pub use exact::exact_stage_runs;
 pub use ray::{Hit, Ray};
 pub use scene::Scene;
 pub use surface::HitSurface;

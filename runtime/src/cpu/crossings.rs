@@ -145,6 +145,7 @@ impl Tracer<'_> {
         let v = self.view();
         let (shear, d, exact) = (w.shear(), w.d(), w.rule() == ExitRule::Exact);
         let exact_test = self.triangle_test() == TriangleTest::Exact;
+        let far = w.far();
         let mut out: Vec<(Crossing, u32)> = v
             .triangles
             .chunks_exact(TRIANGLE_FLOATS)
@@ -152,7 +153,10 @@ impl Tracer<'_> {
             .enumerate()
             .filter_map(|(prim, (tri, &triangle))| {
                 let (tmin, tmax) = (w.tmin(), w.t_best());
-                let hit = if exact_test {
+                let hit = if let Some(far) = &far {
+                    // The ray as given decides, and gives its own distance.
+                    far.hit(tri, true, tmin, tmax).map(|((_, u, v), t)| (t, u, v))
+                } else if exact_test {
                     shear.intersect_owned_exact(tri, tmin, tmax)
                 } else if exact {
                     shear.intersect_owned_f64(tri, tmin, tmax)
@@ -164,8 +168,10 @@ impl Tracer<'_> {
             })
             .collect();
         // In the walk's order, then measured from the ray's own origin.
-        sort_piece(v.triangles, &shear, exact_test, &mut out);
-        out.into_iter().map(|(c, _)| Crossing { t: w.unshift_distance(c.t), ..c }).collect()
+        sort_piece(v.triangles, &far.map_or(shear, |f| f.shear), exact_test, &mut out);
+        out.into_iter()
+            .map(|(c, _)| Crossing { t: far.map_or_else(|| w.unshift_distance(c.t), |_| c.t), ..c })
+            .collect()
     }
 
     /// [`Tracer::crossings`] with a caller's buffer (batches reuse one a thread).
@@ -211,6 +217,10 @@ impl Tracer<'_> {
         // the exact test (`TriangleTest::Exact`) decides every ray exactly.
         let exact = w.rule() == ExitRule::Exact;
         let exact_test = self.triangle_test() == TriangleTest::Exact;
+        // A re-originated ray under the exact test: the ray as given decides each
+        // crossing and gives its distance; the walk's distance places it in a piece.
+        let far = w.far();
+        let order = far.map_or(shear, |f| f.shear);
         let v = self.view();
         // The end of the previous leaf's piece; `None` in the first leaf, whose piece
         // starts at tmin, closed.
@@ -241,24 +251,30 @@ impl Tracer<'_> {
                 else {
                     continue;
                 };
-                let hit = if exact_test {
-                    shear.intersect_owned_exact(tri, tmin, hi)
-                } else if exact {
-                    shear.intersect_owned_f64(tri, tmin, hi)
+                let hit = if let Some(far) = &far {
+                    far.hit(tri, true, tmin, hi)
                 } else {
-                    shear.intersect_owned(tri, tmin, hi)
+                    let hit = if exact_test {
+                        shear.intersect_owned_exact(tri, tmin, hi)
+                    } else if exact {
+                        shear.intersect_owned_f64(tri, tmin, hi)
+                    } else {
+                        shear.intersect_owned(tri, tmin, hi)
+                    };
+                    hit.map(|h| (h, h.0))
                 };
-                let Some((t, u, vv)) = hit else { continue };
+                // The walk's distance, and the one the crossing is listed with.
+                let Some(((t, u, vv), listed)) = hit else { continue };
                 if lo.is_some_and(|lo| t <= lo) {
                     continue;
                 }
                 let Some(&triangle) = v.triangle_ids.get(prim as usize) else { continue };
                 let enters = arrives_on_front(d, tri);
-                buffer.0.push((Crossing { t, triangle, u, v: vv, enters }, prim));
+                buffer.0.push((Crossing { t: listed, triangle, u, v: vv, enters }, prim));
             }
-            sort_piece(v.triangles, &shear, exact_test, &mut buffer.0);
+            sort_piece(v.triangles, &order, exact_test, &mut buffer.0);
             for &(c, prim) in &buffer.0 {
-                let c = Crossing { t: w.unshift_distance(c.t), ..c };
+                let c = if far.is_some() { c } else { Crossing { t: w.unshift_distance(c.t), ..c } };
                 let tri = &v.triangles[prim as usize * TRIANGLE_FLOATS..][..TRIANGLE_FLOATS];
                 if visit(c, tri).is_break() {
                     return;

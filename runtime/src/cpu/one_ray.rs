@@ -96,6 +96,6 @@ impl Tracer<'_> {
     #[inline(never)]
     pub(super) fn walk_scalar<const ANY: bool>(&self, mut w: RayWalk, stats: &mut impl Tally) -> Option<Hit> {
         while !self.step::<ANY>(&mut w, stats) {}
-        w.unshift(self.answer(w.best))
+        w.unshift(self.answer(w.best), self.view().triangles)
     }
 }

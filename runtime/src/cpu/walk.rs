@@ -65,6 +65,49 @@ pub(crate) struct RayWalk {
     /// For a ray re-originated near the scene ([`Tracer::begin_far`]): the distance
     /// its origin was moved (`f64`), and the ray's own `tmin` and `tmax`.
     shifted: Option<(f64, f32, f32)>,
+    /// For such a ray under the exact test: the ray as given, which decides its hits.
+    far: Option<Far>,
+}
+
+/// A re-originated ray under [`TriangleTest::Exact`]: the walk moves through the cells
+/// from the moved origin (whose `f32` coordinates are the scene's size), but the
+/// moved ray is not the ray as given (its origin is rounded), so that exact decisions
+/// about it would be exact about another ray. Each triangle is decided on the ray as
+/// given ([`Shear::intersect_exact`] from its own origin, in its own `[tmin, tmax]`);
+/// the walk places the hit at the exact distance less the shift, correctly rounded
+/// (`exact::shifted_distance`: as fine as the walk's distances, in the exact order),
+/// orders equal ones exactly on the ray as given, and answers its exact distance,
+/// correctly rounded.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Far {
+    /// The ray as given.
+    pub shear: Shear,
+    /// The distance the origin was moved, as two `f32` (their sum).
+    pub shift: (f32, f32),
+    /// The ray's own interval.
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl Far {
+    /// The hit of triangle `tri` (edges owned when `owned`) on the ray as given, as
+    /// `(t, u, v)` with `t` the walk's distance (from the moved origin) when it lies in
+    /// the walk's `[tmin, tmax]`; and the ray's own distance.
+    #[inline(always)]
+    pub(crate) fn hit(&self, tri: &[f32], owned: bool, tmin: f32, tmax: f32) -> Option<((f32, f32, f32), f32)> {
+        let (t, u, v) = match owned {
+            true => self.shear.intersect_owned_exact(tri, self.tmin, self.tmax)?,
+            false => self.shear.intersect_exact(tri, self.tmin, self.tmax)?,
+        };
+        let moved = crate::exact::shifted_distance(self.shear.origin(), self.shear.direction(), tri, self.shift)?;
+        (moved >= tmin && moved <= tmax).then_some(((moved, u, v), t))
+    }
+
+    /// The ray's own distance to the plane of `tri` (a triangle it hits), correctly
+    /// rounded.
+    pub(crate) fn distance(&self, tri: &[f32]) -> Option<f32> {
+        crate::cpu::watertight::plane_distance_rounded(self.shear.origin(), self.shear.direction(), tri)
+    }
 }
 
 /// A step's triangle test, for [`Tracer::visit_leaf`]: a trait rather than a closure
@@ -120,17 +163,22 @@ pub(crate) enum Batch {
 }
 
 /// The scalar step's test: the tracer's (the watertight test in `f64` for a ray under
-/// the exact exit rule: `Shear::intersect_f64`).
+/// the exact exit rule: `Shear::intersect_f64`; the ray as given for a re-originated
+/// one under the exact test: [`Far`]).
 struct ScalarTest<'t, 'a> {
     tracer: &'t Tracer<'a>,
     shear: Shear,
     tri: TriRay,
     exact: bool,
+    far: Option<Far>,
 }
 
 impl LeafTest for ScalarTest<'_, '_> {
     #[inline(always)]
     fn hit(&self, t: &[f32], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        if let Some(far) = &self.far {
+            return far.hit(t, false, tmin, tmax).map(|(hit, _)| hit);
+        }
         if self.exact && self.tracer.triangle_test() == TriangleTest::Watertight {
             return self.shear.intersect_f64(t, tmin, tmax);
         }
@@ -139,7 +187,8 @@ impl LeafTest for ScalarTest<'_, '_> {
 
     #[inline(always)]
     fn nearer(&self, new: &[f32], kept: &[f32]) -> Option<std::cmp::Ordering> {
-        (self.tracer.triangle_test() == TriangleTest::Exact).then(|| self.shear.compare_distances(new, kept))
+        let shear = self.far.as_ref().map_or(&self.shear, |f| &f.shear);
+        (self.tracer.triangle_test() == TriangleTest::Exact).then(|| shear.compare_distances(new, kept))
     }
 
     #[inline(always)]
@@ -193,6 +242,9 @@ impl RayWalk {
     pub(crate) fn shear(&self) -> Shear {
         self.shear
     }
+    pub(crate) fn far(&self) -> Option<Far> {
+        self.far
+    }
     pub(crate) fn rule(&self) -> ExitRule {
         self.rule
     }
@@ -201,9 +253,15 @@ impl RayWalk {
     pub(crate) fn scalar_only(&self) -> bool {
         self.rule == ExitRule::Exact || self.shifted.is_some()
     }
-    /// A finished walk's hit, its distance measured from the ray's own origin.
-    pub(crate) fn unshift(&self, hit: Option<Hit>) -> Option<Hit> {
-        hit.map(|h| Hit { t: self.unshift_distance(h.t), ..h })
+    /// A finished walk's hit, its distance measured from the ray's own origin (for
+    /// [`Far`], the ray's own exact distance to the hit's triangle in `triangles`).
+    pub(crate) fn unshift(&self, hit: Option<Hit>, triangles: &[f32]) -> Option<Hit> {
+        let h = hit?;
+        if let Some(far) = &self.far {
+            let tri = triangles.get(h.prim.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?;
+            return Some(Hit { t: far.distance(tri)?, ..h });
+        }
+        Some(Hit { t: self.unshift_distance(h.t), ..h })
     }
     /// A distance of this walk measured from the ray's own origin: shifted back by the
     /// distance a far origin was moved (rounded once, clamped into the ray's interval).
@@ -305,9 +363,22 @@ impl Tracer<'_> {
         let hi = entry as f32;
         let shift = hi as f64 + (entry - hi as f64) as f32 as f64;
         let moved = [0, 1, 2].map(|k| (o[k] as f64 + shift * d[k] as f64) as f32);
-        let near = Ray::segment(moved.into(), ray.dir, (ray.tmin as f64 - shift) as f32, moved_tmax(ray.tmax, shift));
+        let (mut tmin, mut tmax) = ((ray.tmin as f64 - shift) as f32, moved_tmax(ray.tmax, shift));
+        let exact = self.triangle_test() == TriangleTest::Exact;
+        if exact {
+            // The ray's own interval decides (`Far`); the walk's, a little wider, must
+            // hold the walk's distance of every hit in it (a rounding either side).
+            let ulp = |x: f32| (x.abs() * f32::EPSILON) as f64;
+            tmin = (ray.tmin as f64 - 2.0 * ulp(ray.tmin) - shift) as f32;
+            tmax = moved_tmax(ray.tmax + (2.0 * ulp(ray.tmax)) as f32, shift);
+        }
+        let near = Ray::segment(moved.into(), ray.dir, tmin, tmax);
         let mut w = self.begin_near(&near)?;
         w.shifted = Some((shift, ray.tmin, ray.tmax));
+        if exact {
+            let shear = Shear::new(o, d);
+            w.far = Some(Far { shear, shift: (hi, (shift - hi as f64) as f32), tmin: ray.tmin, tmax: ray.tmax });
+        }
         Some(w)
     }
 
@@ -372,6 +443,7 @@ impl Tracer<'_> {
             t_best: ray.tmax,
             steps: 0,
             shifted: None,
+            far: None,
         })
     }
 
@@ -566,7 +638,7 @@ impl Tracer<'_> {
     pub(crate) fn step<const ANY: bool>(&self, w: &mut RayWalk, stats: &mut impl Tally) -> bool {
         // 1. The leaf's triangles: keep the nearest in [tmin, t_best].
         let exact = w.rule == ExitRule::Exact;
-        let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d }, exact };
+        let test = ScalarTest { tracer: self, shear: w.shear, tri: TriRay { o: w.o, d: w.d }, exact, far: w.far };
         let mut visit = LeafVisit { tmin: w.tmin, t_best: &mut w.t_best, best: &mut w.best };
         let Some((_, ncount)) = self.visit_leaf::<ANY>(w.address, &mut w.steps, &mut visit, stats, &test) else {
             return true;

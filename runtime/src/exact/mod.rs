@@ -17,6 +17,29 @@ pub(crate) mod big;
 pub(crate) mod distance;
 
 use big::Big;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+
+/// Calls of the integer stage ([`hit`], [`distance`], [`compare_distances`]) in this
+/// process.
+static INTEGER_STAGE: AtomicU64 = AtomicU64::new(0);
+
+/// How many times, in this process, a ray–triangle question under
+/// [`TriangleTest::Exact`](crate::TriangleTest::Exact) was one the floating-point
+/// filter could not decide, so that exact integer arithmetic answered it (whether the
+/// ray meets the triangle, its correctly rounded distance, or which of two distances is
+/// nearer): a diagnostic of how often exactness costs more than the filter, which
+/// `octrace bench` reports per ray set. The count only grows; read it before and after a
+/// batch.
+///
+/// # Example
+/// ```
+/// let before = octrace_runtime::exact_stage_runs();
+/// // ... trace ...
+/// assert!(octrace_runtime::exact_stage_runs() >= before);
+/// ```
+pub fn exact_stage_runs() -> u64 {
+    INTEGER_STAGE.load(Relaxed)
+}
 
 /// The exact form of [`crate::cpu::watertight::Shear`]'s test: `(t, u, v)` of the
 /// triangle `t` (nine floats) for the ray `o + t d` sheared along the axes `k`, when
@@ -35,6 +58,7 @@ pub(crate) fn hit(
     tmax: f32,
     owned: bool,
 ) -> Option<(f32, f32, f32)> {
+    INTEGER_STAGE.fetch_add(1, Relaxed);
     // A non-finite coordinate (a hostile file's triangle) meets nothing, as in the
     // floating-point tests, whose comparisons with NaN fail.
     if !all_finite(&[&o, &d, t]) {
@@ -110,6 +134,7 @@ fn vertices(t: &[f32]) -> [[Big; 3]; 3] {
 #[cold]
 #[inline(never)]
 pub(crate) fn distance(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
+    INTEGER_STAGE.fetch_add(1, Relaxed);
     if !all_finite(&[&o, &d, t]) {
         return None;
     }
@@ -121,11 +146,34 @@ pub(crate) fn distance(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
     rounded_quotient(&num, &den)
 }
 
+/// The exact distance from `o` along `d` to the plane of triangle `t`, less `shift`
+/// (the sum of two `f32`: `shift.0 + shift.1`), correctly rounded to `f32`; `None` where
+/// the ray is parallel to the plane or the result is past `f32`'s range. What a walk
+/// re-originated `shift` along the ray measures a hit of the ray as given by, under the
+/// exact test: in the order of the exact distances, and as fine as the walk's own.
+#[cold]
+#[inline(never)]
+pub(crate) fn shifted_distance(o: [f32; 3], d: [f32; 3], t: &[f32], shift: (f32, f32)) -> Option<f32> {
+    INTEGER_STAGE.fetch_add(1, Relaxed);
+    if !all_finite(&[&o, &d, t, &[shift.0, shift.1]]) {
+        return None;
+    }
+    let [a, b, c] = vertices(t);
+    let (num, den) = distance_terms(&o.map(Big::of), &d.map(Big::of), [&a, &b, &c]);
+    if den.is_zero() {
+        return None;
+    }
+    // num / den - s = (num 2^149 - S den) / (den 2^149), with S = s 2^149 an integer.
+    let s = Big::of(shift.0).add(&Big::of(shift.1));
+    rounded_quotient(&num.shl(149).sub(&s.mul(&den)), &den.shl(149))
+}
+
 /// Compares the exact distances along the ray to the planes of triangles `a` and `b`
 /// (neither parallel to the ray; `Equal` where a coordinate is not finite).
 #[cold]
 #[inline(never)]
 pub(crate) fn compare_distances(o: [f32; 3], d: [f32; 3], a: &[f32], b: &[f32]) -> std::cmp::Ordering {
+    INTEGER_STAGE.fetch_add(1, Relaxed);
     if !all_finite(&[&o, &d, a, b]) {
         return std::cmp::Ordering::Equal;
     }

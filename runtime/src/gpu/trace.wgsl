@@ -846,6 +846,12 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
         if far.z == 0.0 {
             return wk;
         }
+        // The exact test decides on the ray as given, which the moved one is not (its
+        // origin rounded): the host's walk does so (walk.rs, `Far`).
+        if EXACT {
+            give_back();
+            return wk;
+        }
         wk.shift = far.xy;
         o = moved_origin(o0, d, far.xy);
         tmin = unshifted(tmin0, far.xy);
