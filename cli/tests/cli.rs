@@ -966,6 +966,10 @@ fn bench_checksums_are_the_standard_sets_traced() {
         assert_eq!(b["hits"].as_u64(), Some(records.len() as u64), "{set}");
         assert_eq!(b["sum_t"].as_f64(), Some(sum_t), "{set}");
         assert!(records.len() > 1000, "{set}: the cube is hit ({})", records.len());
+        // How often the exact test's filter could not decide: a count of its calls, at
+        // most a few per ray.
+        let stage = b["exact_stage_calls"].as_u64().unwrap_or_else(|| panic!("{set}: {b}"));
+        assert!(stage <= 4 * b["rays"].as_u64().unwrap(), "{set}: {b}");
     }
     // One shadow ray a primary hit; the cube is closed, so a ray from its surface
     // toward the light is either occluded by the cube itself or not, never more.

@@ -155,6 +155,9 @@ struct SetResult {
     occluded: Vec<bool>,
     /// Embree and octrace's one-ray calls, when the build has Embree.
     embree: Option<EmbreeFigures>,
+    /// Calls of the exact test's integer stage in one single-thread pass
+    /// ([`octrace_runtime::exact_stage_runs`]): how often the filter could not decide.
+    exact_stage: u64,
 }
 
 /// One thread, interleaved with octrace's batch runs: Embree one ray a call, in
@@ -307,14 +310,17 @@ fn measure(
     let (mut single, mut all, mut peer_runs) = (Vec::new(), Vec::new(), Vec::new());
     let mrays = |d: Duration| rays.len() as f64 / d.as_secs_f64().max(1e-9) / 1e6;
     let mut peer_sum = (0usize, 0.0f64);
+    let mut exact_stage = None;
     for _ in 0..args.runs {
         // Interleaved: octrace single, peer single, octrace all threads.
         let t = Instant::now();
-        if occlusion {
-            tracer.occluded_batch(rays, &mut occluded);
-        } else {
-            tracer.intersect_batch(rays, &mut hits);
-        }
+        first_counted(&mut exact_stage, || {
+            if occlusion {
+                tracer.occluded_batch(rays, &mut occluded);
+            } else {
+                tracer.intersect_batch(rays, &mut hits);
+            }
+        });
         single.push(mrays(t.elapsed()));
         #[cfg(feature = "obvhs")]
         if let Some(p) = peer {
@@ -350,7 +356,18 @@ fn measure(
         nearest: if occlusion { Vec::new() } else { hits },
         occluded: if occlusion { occluded } else { Vec::new() },
         embree: None,
+        exact_stage: exact_stage.unwrap_or(0),
     })
+}
+
+/// `f()`, and the calls of the exact test's integer stage it made
+/// ([`octrace_runtime::exact_stage_runs`]) into `count` if it holds none yet (the
+/// first of a query's passes: each pass makes the same calls).
+pub(crate) fn first_counted<T>(count: &mut Option<u64>, f: impl FnOnce() -> T) -> T {
+    let before = octrace_runtime::exact_stage_runs();
+    let out = f();
+    count.get_or_insert(octrace_runtime::exact_stage_runs() - before);
+    out
 }
 
 /// Mrays/s of `f`, which traces `rays` rays (or answers as many points).
@@ -391,6 +408,7 @@ fn report(
                     "obvhs_cwbvh_single": r.peer.map(|p| json!({ "mrays": p.0, "hits": p.1, "sum_t": p.2 })),
                     "ratio_single": r.ratio,
                     "embree_3_fast_single": r.embree,
+                    "exact_stage_calls": r.exact_stage,
                 })
             })
             .collect();
@@ -447,6 +465,16 @@ fn report(
             ratio,
             check,
             peer_check
+        );
+    }
+    if args_test(args) == TriangleTest::Exact {
+        let per_set: Vec<String> = results
+            .iter()
+            .map(|r| format!("{} {} ({:.4} %)", r.name, thousands(r.exact_stage), percent(r.exact_stage, r.rays)))
+            .collect();
+        crate::out!(
+            "exact test: the filter left to exact integer arithmetic, calls in one pass: {}",
+            per_set.join(", ")
         );
     }
     if results.iter().any(|r| r.embree.is_some()) {
@@ -521,6 +549,15 @@ fn report(
         crate::out!("{}", g.text());
     }
     Ok(())
+}
+
+/// `part` as a percentage of `whole` (zero of nothing).
+fn percent(part: u64, whole: usize) -> f64 {
+    if whole == 0 {
+        0.0
+    } else {
+        100.0 * part as f64 / whole as f64
+    }
 }
 
 /// A set's checksum in words: rays occluded for shadow rays, else hits and their sum of t.

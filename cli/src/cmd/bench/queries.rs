@@ -10,7 +10,7 @@ use octrace_runtime::reference::{InsideReference, Side};
 use octrace_runtime::{Ray, Scene, TriangleTest};
 use serde_json::json;
 
-use super::{median_ratio, mrays_of, Spread};
+use super::{first_counted, median_ratio, mrays_of, Spread};
 use crate::output::thousands;
 
 /// One query's figures.
@@ -25,6 +25,8 @@ pub(super) struct QueryRow {
     /// Embree on one thread, octrace / Embree (median of the runs' ratios), and how
     /// many answers differ from octrace's.
     peer: Option<(Spread, f64, usize)>,
+    /// Calls of the exact test's integer stage in one single-thread pass.
+    exact_stage: u64,
 }
 
 /// The queries' figures, and why inside/outside was left out where it was.
@@ -65,8 +67,9 @@ pub(super) fn measure(
     let (mut single, mut all, mut peer) = (Vec::new(), Vec::new(), Vec::new());
     let mut ours = Default::default();
     let mut theirs: Vec<u32> = Vec::new();
+    let mut stage = None;
     for _ in 0..runs {
-        single.push(mrays_of(n, &mut || ours = tracer.crossings_batch(rays, usize::MAX)));
+        single.push(first_counted(&mut stage, || mrays_of(n, &mut || ours = tracer.crossings_batch(rays, usize::MAX))));
         if let Some(e) = embree {
             peer.push(mrays_of(n, &mut || theirs = every_hit_counts(e, rays, true)));
         }
@@ -84,13 +87,15 @@ pub(super) fn measure(
         format!("{} crossings", thousands(ours.crossings.len() as u64)),
         &counts,
         &theirs,
+        stage,
     ));
 
     // Counts alone.
     let (mut single, mut all, mut peer) = (Vec::new(), Vec::new(), Vec::new());
     let mut counts = vec![CrossingCount::default(); n];
+    let mut stage = None;
     for _ in 0..runs {
-        single.push(mrays_of(n, &mut || tracer.count_crossings_batch(rays, &mut counts)));
+        single.push(first_counted(&mut stage, || mrays_of(n, &mut || tracer.count_crossings_batch(rays, &mut counts))));
         if let Some(e) = embree {
             peer.push(mrays_of(n, &mut || theirs = every_hit_counts(e, rays, false)));
         }
@@ -102,7 +107,7 @@ pub(super) fn measure(
     let sum: u64 = totals.iter().map(|&c| c as u64).sum();
     let entries: u64 = counts.iter().map(|c| c.entries as u64).sum();
     let checksum = format!("{} crossings, {} entering", thousands(sum), thousands(entries));
-    rows.push(row("counts", n, single, all, peer, checksum, &totals, &theirs));
+    rows.push(row("counts", n, single, all, peer, checksum, &totals, &theirs, stage));
 
     // Inside/outside and lengths: closed scenes only.
     let t = std::time::Instant::now();
@@ -119,8 +124,11 @@ pub(super) fn measure(
     let (mut single, mut all, mut peer) = (Vec::new(), Vec::new(), Vec::new());
     let mut inside = vec![false; points.len()];
     let mut parity: Vec<u32> = Vec::new();
+    let mut stage = None;
     for _ in 0..runs {
-        single.push(mrays_of(points.len(), &mut || tracer.contains_batch(solid, &points, &mut inside)));
+        single.push(first_counted(&mut stage, || {
+            mrays_of(points.len(), &mut || tracer.contains_batch(solid, &points, &mut inside))
+        }));
         if let Some(e) = embree {
             let rays: Vec<Ray> = points.iter().map(|&p| Ray::new(p.into(), COUNT_DIRECTION.into())).collect();
             peer.push(mrays_of(points.len(), &mut || parity = every_hit_counts(e, &rays, false)));
@@ -141,19 +149,24 @@ pub(super) fn measure(
         format!("{} inside", thousands(n_inside)),
         &ours,
         &theirs,
+        stage,
     ));
     let wrong = against_the_oracle(scene, &points, &ours, &theirs, threads)?;
 
     let (mut single, mut all) = (Vec::new(), Vec::new());
     let mut lengths = vec![0.0f32; n];
+    let mut stage = None;
     for _ in 0..runs {
-        single.push(mrays_of(n, &mut || tracer.length_inside_batch(solid, rays, &mut lengths)));
+        single.push(first_counted(&mut stage, || {
+            mrays_of(n, &mut || tracer.length_inside_batch(solid, rays, &mut lengths))
+        }));
         all.push(crate::with_threads(threads, || {
             mrays_of(n, &mut || tracer.par_length_inside(solid, rays, &mut lengths))
         })?);
     }
     let total: f64 = lengths.iter().map(|&l| l as f64).sum();
-    rows.push(row("length inside", n, single, all, Vec::new(), format!("total {total:.4}"), &[], &[]));
+    let checksum = format!("total {total:.4}");
+    rows.push(row("length inside", n, single, all, Vec::new(), checksum, &[], &[], stage));
     Ok(QueryReport { rows, skipped: None, wrong: Some(wrong), solid_s: Some(solid_s) })
 }
 
@@ -168,10 +181,12 @@ fn row(
     checksum: String,
     ours: &[u32],
     theirs: &[u32],
+    exact_stage: Option<u64>,
 ) -> QueryRow {
     let differ = ours.iter().zip(theirs).filter(|(a, b)| a != b).count();
     let peer = (!peer.is_empty()).then(|| (Spread::of(peer.clone()), median_ratio(&single, &peer), differ));
-    QueryRow { name, items, single: Spread::of(single), all: Spread::of(all), checksum, peer }
+    let exact_stage = exact_stage.unwrap_or(0);
+    QueryRow { name, items, single: Spread::of(single), all: Spread::of(all), checksum, peer, exact_stage }
 }
 
 /// Embree's hit counts of each ray (its every-hit filter; sorted as for a list when
@@ -226,7 +241,7 @@ impl QueryReport {
         json!({
             "rows": self.rows.iter().map(|r| json!({
                 "query": r.name, "items": r.items, "octrace_single": r.single, "octrace_all_threads": r.all,
-                "checksum": r.checksum,
+                "checksum": r.checksum, "exact_stage_calls": r.exact_stage,
                 "embree_3_single": r.peer.as_ref().map(|p| json!({ "mrays": p.0, "ratio": p.1, "differ": p.2 })),
             })).collect::<Vec<_>>(),
             "skipped": self.skipped,
@@ -265,6 +280,8 @@ impl QueryReport {
                 r.checksum
             ));
         }
+        let stage: Vec<String> = self.rows.iter().map(|r| format!("{} {}", r.name, thousands(r.exact_stage))).collect();
+        out.push_str(&format!("\nexact integer stage, calls in one pass (0 under other tests): {}", stage.join(", ")));
         if let Some(s) = &self.skipped {
             out.push_str(&format!("\n{s}"));
         }
