@@ -99,7 +99,12 @@ impl Far {
             true => self.shear.intersect_owned_exact(tri, self.tmin, self.tmax)?,
             false => self.shear.intersect_exact(tri, self.tmin, self.tmax)?,
         };
-        let moved = crate::exact::shifted_distance(self.shear.origin(), self.shear.direction(), tri, self.shift)?;
+        let moved = crate::cpu::watertight::shifted_distance_rounded(
+            self.shear.origin(),
+            self.shear.direction(),
+            tri,
+            self.shift,
+        )?;
         (moved >= tmin && moved <= tmax).then_some(((moved, u, v), t))
     }
 

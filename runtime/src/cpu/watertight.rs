@@ -372,6 +372,25 @@ pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32
     rounded_if_certain(num, den, spread_num, spread_den).or_else(|| crate::exact::distance(o, d, t))
 }
 
+/// [`plane_distance_rounded`] less `shift.0 + shift.1` (a re-originated walk's
+/// distance of a hit on the ray as given: `cpu::walk::Far`), correctly rounded: in
+/// `f64` where the error bound allows (the numerator `n.(a - o) - s n.d` adds `|s|`
+/// times the denominator's error and the rounding of the three products and
+/// differences, `4 u (|n.(a - o)| + |s n.d|)`, written as `0.25 g` times that), else
+/// exactly (`exact::shifted_distance`).
+#[inline(always)]
+pub(crate) fn shifted_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32], shift: (f32, f32)) -> Option<f32> {
+    let PlaneSums { num, den, ao, big } = plane_sums(o, d, t);
+    let d64 = d.map(f64::from);
+    let spread_num = ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2];
+    let spread_den = d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2];
+    let (hi, lo) = (shift.0 as f64 * den, shift.1 as f64 * den);
+    let moved = num - hi - lo;
+    let s = shift.0.abs() as f64 + shift.1.abs() as f64;
+    let spread_moved = spread_num + s * spread_den + 0.25 * (num.abs() + hi.abs() + lo.abs());
+    rounded_if_certain(moved, den, spread_moved, spread_den).or_else(|| crate::exact::shifted_distance(o, d, t, shift))
+}
+
 /// The `f32` that the quotient `num / den` of [`plane_distance_rounded`]'s sums
 /// rounds to, where their error bound leaves only one (`None` where it does not: the
 /// exact path decides). `spread_num` and `spread_den` are `sum |a - o|_i N_i` and
