@@ -338,6 +338,19 @@ struct PlaneSums {
     big: [f64; 3],
 }
 
+impl PlaneSums {
+    /// The error bound's `A = sum |a - o|_i N_i` and `B = sum |d_i| N_i`
+    /// ([`plane_distance_rounded`]) for the direction `d`.
+    #[inline(always)]
+    fn spreads(&self, d: [f32; 3]) -> (f64, f64) {
+        let (ao, big) = (self.ao, self.big);
+        let d = d.map(f64::from);
+        let spread_num = ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2];
+        let spread_den = d[0].abs() * big[0] + d[1].abs() * big[1] + d[2].abs() * big[2];
+        (spread_num, spread_den)
+    }
+}
+
 #[inline(always)]
 fn plane_sums(o: [f32; 3], d: [f32; 3], t: &[f32]) -> PlaneSums {
     let v = |i: usize| [t[3 * i] as f64, t[3 * i + 1] as f64, t[3 * i + 2] as f64];
@@ -365,11 +378,9 @@ fn plane_sums(o: [f32; 3], d: [f32; 3], t: &[f32]) -> PlaneSums {
 /// rounding.
 #[inline(always)]
 pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32> {
-    let PlaneSums { num, den, ao, big } = plane_sums(o, d, t);
-    let d64 = d.map(f64::from);
-    let spread_num = ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2];
-    let spread_den = d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2];
-    rounded_if_certain(num, den, spread_num, spread_den).or_else(|| crate::exact::distance(o, d, t))
+    let sums = plane_sums(o, d, t);
+    let (spread_num, spread_den) = sums.spreads(d);
+    rounded_if_certain(sums.num, sums.den, spread_num, spread_den).or_else(|| crate::exact::distance(o, d, t))
 }
 
 /// [`plane_distance_rounded`] less `shift.0 + shift.1` (a re-originated walk's
@@ -380,10 +391,9 @@ pub fn plane_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32]) -> Option<f32
 /// exactly (`exact::shifted_distance`).
 #[inline(always)]
 pub(crate) fn shifted_distance_rounded(o: [f32; 3], d: [f32; 3], t: &[f32], shift: (f32, f32)) -> Option<f32> {
-    let PlaneSums { num, den, ao, big } = plane_sums(o, d, t);
-    let d64 = d.map(f64::from);
-    let spread_num = ao[0].abs() * big[0] + ao[1].abs() * big[1] + ao[2].abs() * big[2];
-    let spread_den = d64[0].abs() * big[0] + d64[1].abs() * big[1] + d64[2].abs() * big[2];
+    let sums = plane_sums(o, d, t);
+    let (spread_num, spread_den) = sums.spreads(d);
+    let (num, den) = (sums.num, sums.den);
     let (hi, lo) = (shift.0 as f64 * den, shift.1 as f64 * den);
     let moved = num - hi - lo;
     let s = shift.0.abs() as f64 + shift.1.abs() as f64;

@@ -121,9 +121,8 @@ impl<const L: usize> Wide<L> {
         out
     }
 
-    /// Drops leading zero limbs (and the sign of zero), in place: the values are
-    /// hundreds of bytes, and moving them in and out was a third of the exact test's
-    /// time.
+    /// Drops leading zero limbs (and the sign of zero), in place (the values are
+    /// hundreds of bytes; a move in and out per operation is avoidable).
     fn trim(&mut self) {
         while self.len > 0 && self.mag[self.len - 1] == 0 {
             self.len -= 1;
