@@ -2,7 +2,9 @@
 //! 1 % of the box's diagonal from the surface; prints points a second (median of three
 //! batches) and the spread of one point's time. `CLOSEST_CHECK=k` first compares `k`
 //! points of each kind with the brute-force `f64` oracle; `CLOSEST_SLOW=1` prints the
-//! uniform points that take over a millisecond.
+//! uniform points that take over a millisecond; `CLOSEST_ONLY=uniform` (or `near`) times
+//! one pass over that set alone and prints its M points/s and distances' sum (for A/B
+//! runs of two builds).
 //!
 //! `cargo run --release -p octrace-runtime --example closest_timing -- scene.oct [points]`
 use std::time::Instant;
@@ -21,6 +23,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (uniform, near) = point_sets::point_sets(&view, n);
     let bounds = scene.surface_bounds();
     let tracer = scene.tracer();
+    if let Ok(which) = std::env::var("CLOSEST_ONLY") {
+        let pts = if which == "near" { &near } else { &uniform };
+        let mut out = vec![None; pts.len()];
+        let t = Instant::now();
+        tracer.closest_point_batch(bounds, pts, f32::INFINITY, &mut out);
+        let sum: f64 = out.iter().flatten().map(|c| c.distance as f64).sum();
+        println!("{:.5} {sum}", pts.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
+        return Ok(());
+    }
     for pts in [&uniform, &near] {
         let mut us: Vec<f64> = pts
             .iter()

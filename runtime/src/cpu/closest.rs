@@ -135,35 +135,77 @@ pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 /// the interval spans both (near an edge they differ by that edge's in-plane
 /// distance squared: a few roundings). Checked against exact arithmetic in the tests,
 /// near every feature and on slivers.
-#[inline]
+#[cfg(test)]
 pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
-    let v = [0, 3, 6].map(|o| [t[o] as f64, t[o + 1] as f64, t[o + 2] as f64]);
-    let r = v.map(|v| sub(p, v));
-    let m2 = dot(r[0], r[0]).max(dot(r[1], r[1])).max(dot(r[2], r[2])) * (1.0 + 8.0 * U);
+    match near_f64_within(p, t, f64::INFINITY) {
+        Some(near) => near,
+        None => unreachable!("nothing is farther than infinity"),
+    }
+}
+
+/// [`near_f64`], or `None` where the triangle is certainly farther than `within`
+/// (its exact squared distance above it), found before the segments are measured: the
+/// exact squared distance is the plane's plus the square of the in-plane distance from
+/// the projection to the triangle, which is at least the distance to the line of an
+/// edge the projection is certainly outside of, `-n.(e x r) / (|n| |e|)` (each term
+/// taken at the far end of its error bound). The segments measured are those of the
+/// edges the projection is not certainly inside of: the nearest point lies on them.
+#[inline]
+pub(crate) fn near_f64_within(p: [f64; 3], t: &[f32], within: f64) -> Option<Near> {
+    // Written out rather than mapped: this runs for every triangle a search measures.
+    let t = &t[..9];
+    let v = [
+        [t[0] as f64, t[1] as f64, t[2] as f64],
+        [t[3] as f64, t[4] as f64, t[5] as f64],
+        [t[6] as f64, t[7] as f64, t[8] as f64],
+    ];
+    let r = [sub(p, v[0]), sub(p, v[1]), sub(p, v[2])];
+    let rr = [dot(r[0], r[0]), dot(r[1], r[1]), dot(r[2], r[2])];
+    let m2 = rr[0].max(rr[1]).max(rr[2]) * (1.0 + 8.0 * U);
     let edges = [(0usize, 1usize), (1, 2), (2, 0)];
-    let e = edges.map(|(i, j)| sub(v[j], v[i]));
+    let e = [sub(v[1], v[0]), sub(v[2], v[1]), sub(v[0], v[2])];
     let n = cross(e[0], sub(v[2], v[0]));
     let nn = dot(n, n);
-    let e_len2 = e.map(|e| dot(e, e));
+    let e_len2 = [dot(e[0], e[0]), dot(e[1], e[1]), dot(e[2], e[2])];
 
     // The projection's side of each edge: +1 in, -1 out, 0 not certain.
     let mut inside = nn > 0.0;
     let mut outside = !inside;
     let mut k = f64::INFINITY;
     let mut side = [0.0f64; 3];
+    // The edges the projection is certainly inside of.
+    let mut inner = [false; 3];
     if inside {
         let n_len = nn.sqrt();
-        let eps = 7.0 * U * (e_len2[0] * dot(e[2], e[2])).sqrt();
+        let eps = 7.0 * U * (e_len2[0] * e_len2[2]).sqrt();
         k = eps / n_len;
         let slack = 12.0 * U * n_len + eps;
-        for (s, (i, _)) in side.iter_mut().zip(edges) {
+        // The largest squared in-plane distance, times |n|^2, to the line of an edge
+        // the projection is certainly outside of.
+        let mut beyond = 0.0f64;
+        for (i, s) in side.iter_mut().enumerate() {
             *s = dot(n, cross(e[i], r[i]));
-            let eta2 = e_len2[i] * dot(r[i], r[i]) * (1.0 + 8.0 * U) * slack * slack;
+            let eta2 = e_len2[i] * rr[i] * (1.0 + 8.0 * U) * slack * slack;
             if *s * *s <= eta2 {
                 inside = false;
             } else if *s < 0.0 {
                 inside = false;
                 outside = true;
+                let gap = -*s - eta2.sqrt() * (1.0 + 2.0 * U);
+                if gap > 0.0 {
+                    beyond = beyond.max(gap * gap / (e_len2[i] * (1.0 + 8.0 * U)));
+                }
+            } else {
+                inner[i] = true;
+            }
+        }
+        if within < f64::INFINITY {
+            let h = dot(n, r[0]);
+            let g = 2.0 * k + 4.0 * U;
+            let plane = (h * h / nn - m2 * (4.0 * k + 16.0 * U + g * g)).max(0.0);
+            let n_up = n_len * (1.0 + 4.0 * U) + eps;
+            if (plane + beyond / (n_up * n_up)) * (1.0 - 16.0 * U) > within {
+                return None;
             }
         }
     }
@@ -175,40 +217,42 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
         let q = [0, 1, 2].map(|c| v[0][c] + e[0][c] * u - e[2][c] * w);
         let g = 2.0 * k + 4.0 * U;
         let err = m2 * (4.0 * k + 16.0 * U + g * g);
-        return Near { d2: h * h / nn, err, q, u, v: w, thin: thin(m2, k, &v), on: On::Unknown };
+        return Some(Near { d2: h * h / nn, err, q, u, v: w, thin: thin(m2, k, &v), on: On::Unknown });
     }
 
-    // The segments: the least one's distance, point and (where certain) feature.
-    let mut seg = [(0.0f64, 0.0f64, On::Unknown); 3];
-    for (s, (i, j)) in seg.iter_mut().zip(edges) {
-        let along = dot(r[i], e[i]);
-        let ee = e_len2[i];
-        let mut tt = if ee > 0.0 { (along / ee).clamp(0.0, 1.0) } else { 0.0 };
+    // The segments: the least one's distance, point and (where certain) feature. An
+    // edge the projection is certainly inside of holds the nearest point at most at
+    // its ends, which the other edges hold. A feature is coded within the triangle:
+    // `0..3` a vertex, `3 + edge` an edge's inside.
+    let mut seg = [(f64::INFINITY, 0.0f64, 0usize); 3];
+    for (edge, &(i, j)) in edges.iter().enumerate() {
+        if inner[edge] {
+            continue;
+        }
+        let along = dot(r[i], e[edge]);
+        let ee = e_len2[edge];
         // The foot is certainly at an end where r.e is certainly <= 0 or >= e.e (and
         // the point is then that vertex, exactly).
-        let margin = 8.0 * U * (ee * dot(r[i], r[i])).sqrt();
-        let bits = |x: [f64; 3]| x.map(|c| c as f32);
-        let on = if along < -margin || ee == 0.0 {
-            tt = 0.0;
-            On::Vertex(bits(v[i]))
+        let margin = 8.0 * U * (ee * rr[i]).sqrt();
+        let (tt, code) = if along < -margin || ee == 0.0 {
+            (0.0, i)
         } else if along - ee > margin + 4.0 * U * ee {
-            tt = 1.0;
-            On::Vertex(bits(v[j]))
+            (1.0, j)
         } else {
-            let (a, b) = (bits(v[i]), bits(v[j]));
-            let key = |x: [f32; 3]| x.map(f32::to_bits);
-            if key(a) <= key(b) {
-                On::Segment(a, b)
-            } else {
-                On::Segment(b, a)
-            }
+            ((along / ee).clamp(0.0, 1.0), 3 + edge)
         };
-        let d = [0, 1, 2].map(|c| r[i][c] - tt * e[i][c]);
-        *s = (dot(d, d), tt, on);
+        let x = e[edge];
+        let d = [r[i][0] - tt * x[0], r[i][1] - tt * x[1], r[i][2] - tt * x[2]];
+        seg[edge] = (dot(d, d), tt, code);
     }
     let err_s = 32.0 * U * m2;
-    let best = (0..3).min_by(|&a, &b| seg[a].0.total_cmp(&seg[b].0)).unwrap_or(0);
-    let (s2, tt, _) = seg[best];
+    let mut best = 0;
+    for k in 1..3 {
+        if seg[k].0.total_cmp(&seg[best].0).is_lt() {
+            best = k;
+        }
+    }
+    let (s2, tt, code) = seg[best];
     let (i, j) = edges[best];
     let q = match tt {
         0.0 => v[i],
@@ -226,14 +270,22 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
     if outside {
         // Certain where every segment near the least agrees on a vertex, or it is one
         // segment alone.
-        let contenders = seg.iter().filter(|s| s.0 <= s2 + 2.0 * err_s);
-        let mut on = seg[best].2;
-        for c in contenders {
-            if c.2 != on {
-                on = On::Unknown;
+        let agree = seg.iter().filter(|s| s.0 <= s2 + 2.0 * err_s).all(|s| s.2 == code);
+        let bits = |x: [f64; 3]| x.map(|c| c as f32);
+        let on = match (agree, code) {
+            (false, _) => On::Unknown,
+            (true, 0..3) => On::Vertex(bits(v[code])),
+            (true, _) => {
+                let (a, b) = (bits(v[i]), bits(v[j]));
+                let key = |x: [f32; 3]| x.map(f32::to_bits);
+                if key(a) <= key(b) {
+                    On::Segment(a, b)
+                } else {
+                    On::Segment(b, a)
+                }
             }
-        }
-        return Near { d2: s2, err: err_s, q, u, v: w, thin: false, on };
+        };
+        return Some(Near { d2: s2, err: err_s, q, u, v: w, thin: false, on });
     }
     // Not certain which side: between the plane's distance and the segments'.
     let g = 2.0 * k + 4.0 * U;
@@ -241,7 +293,7 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
     let lo = h * h / nn - m2 * (4.0 * k + 16.0 * U + g * g);
     let hi = s2 + err_s;
     let lo = if lo.is_finite() { lo.min(hi) } else { 0.0 };
-    Near {
+    Some(Near {
         d2: 0.5 * (lo + hi),
         err: 0.5 * (hi - lo) * (1.0 + 4.0 * U),
         q,
@@ -249,7 +301,7 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
         v: w,
         thin: thin(m2, k, &v),
         on: On::Unknown,
-    }
+    })
 }
 
 /// Whether a nearest point found in `f64` may be off by more than `2^-32` of the
@@ -435,9 +487,22 @@ impl Tracer<'_> {
             if let Some(b) = best {
                 let mut gap2 = 0.0;
                 for k in 0..3 {
-                    let lo = t[k].min(t[k + 3]).min(t[k + 6]) as f64;
-                    let hi = t[k].max(t[k + 3]).max(t[k + 6]) as f64;
-                    let gap = (lo - pd[k]).max(pd[k] - hi).max(0.0);
+                    // Plain comparisons (a NaN coordinate gives some gap, which the
+                    // triangle's own measure, NaN, then could not beat anyway).
+                    let (a, b, c) = (t[k], t[k + 3], t[k + 6]);
+                    let lo = if a < b { a } else { b };
+                    let lo = if lo < c { lo } else { c } as f64;
+                    let hi = if a > b { a } else { b };
+                    let hi = if hi > c { hi } else { c } as f64;
+                    let below = lo - pd[k];
+                    let above = pd[k] - hi;
+                    let gap = if below > 0.0 {
+                        below
+                    } else if above > 0.0 {
+                        above
+                    } else {
+                        0.0
+                    };
                     gap2 += gap * gap;
                 }
                 if gap2 * (1.0 - 1e-9) > b.near.d2 + b.near.err {
@@ -445,7 +510,8 @@ impl Tracer<'_> {
                 }
             }
             let Some(&id) = v.triangle_ids.get(prim as usize) else { continue };
-            let near = near_f64(pd, t);
+            let within = best.map_or(f64::INFINITY, |b| b.near.d2 + b.near.err);
+            let Some(near) = near_f64_within(pd, t, within) else { continue };
             let Some(b) = *best else {
                 *best = Some(Best { near, prim, id, exact: None });
                 continue;
@@ -547,11 +613,12 @@ mod tests {
 
     /// The f64 bound holds against exact arithmetic on random triangles (slivers among
     /// them) and points placed near each of their features: faces, edges, vertices,
-    /// the regions' boundaries, far and near.
+    /// the regions' boundaries, far and near; the early "farther than" never says so
+    /// of a bound the exact distance is within.
     #[test]
     fn the_f64_error_bound_holds_against_exact_arithmetic() {
         let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
-        let (mut worst, mut certain) = (0.0f64, 0);
+        let (mut worst, mut certain, mut rejected) = (0.0f64, 0, 0);
         for case in 0..40_000 {
             let scale = [1e-3f32, 1.0, 1e3][case % 3];
             let mut t = [0f32; 9];
@@ -587,6 +654,16 @@ mod tests {
                 near.err
             );
             worst = worst.max((near.d2 - e).abs() / near.err.max(f64::MIN_POSITIVE));
+            // Never "farther than" a bound the exact distance is within; often so
+            // where it is not.
+            let pd = p.map(f64::from);
+            assert!(
+                near_f64_within(pd, &t, e * (1.0 + 1e-12) + f64::MIN_POSITIVE).is_some(),
+                "case {case}: called farther than its own distance, p {p:?}, t {t:?}"
+            );
+            if near_f64_within(pd, &t, e * 0.9).is_none() {
+                rejected += 1;
+            }
             // A certain feature is where the exact distance is.
             let on = match near.on {
                 On::Unknown => continue,
@@ -604,5 +681,6 @@ mod tests {
         // The bound is not loose by orders of magnitude, and features are certified.
         assert!(worst > 1e-4, "worst error {worst} of the bound");
         assert!(certain > 10_000, "{certain} certain features");
+        assert!(rejected > 10_000, "{rejected} triangles found farther than 0.9 of their distance early");
     }
 }

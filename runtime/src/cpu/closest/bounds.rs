@@ -35,7 +35,8 @@ impl NodeBound {
     /// across `m`): the first is at least the squared gap between `m.p` and the slab,
     /// the second at least `|P(p - c)| - R` squared (`c` the box's centre, `R` its half
     /// diagonal). Each term shrunk by its rounding.
-    /// Past `enough` (the nearest surface found so far) the box's alone is answered.
+    /// Past `enough` (the nearest surface found so far) a part of it is answered as
+    /// soon as it is past: the box's, or the gap across the slab's.
     #[inline]
     pub(super) fn distance2(&self, p: [f64; 3], enough: f64) -> f64 {
         if self.is_empty() {
@@ -58,6 +59,10 @@ impl NodeBound {
         let s = dot(m, p);
         let s_err = 4.0 * U * (m[0].abs() * p[0].abs() + m[1].abs() * p[1].abs() + m[2].abs() * p[2].abs());
         let gap = ((self.slab[0] as f64 - s).max(s - self.slab[1] as f64) - s_err).max(0.0);
+        let across = gap * gap / mm * (1.0 - 16.0 * U);
+        if across > enough {
+            return boxed.max(across);
+        }
         let w = sub(p, c);
         let along = dot(m, w) / mm;
         let perp = [w[0] - m[0] * along, w[1] - m[1] * along, w[2] - m[2] * along];
