@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Closest points, distances and signed distances: octrace beside Open3D, FCPW and
-libigl, on the same points, one core (run it under `taskset -c 0`: FCPW and libigl
+"""Closest points, distances and signed distances: octrace beside Open3D, FCPW,
+libigl and point-cloud-utils, on the same points, one core (run it under `taskset -c 0`: FCPW and libigl
 use every core they see), medians of three runs in one process.
 
 Points: uniform in 1.1x the mesh's box, and within 1 % of the box's diagonal from the
@@ -12,8 +12,8 @@ inside/outside (closed meshes).
 
     taskset -c 0 python3 bench/distances.py ../shared/meshes/dragon.obj --points 20000
 
-Needs numpy, octrace (`pip install ./python`) and open3d-cpu; FCPW (`fcpw`) and libigl
-(`libigl`) are timed where installed.
+Needs numpy, octrace (`pip install ./python`) and open3d-cpu; FCPW (`fcpw`), libigl
+(`libigl`) and point-cloud-utils (`point-cloud-utils`) are timed where installed.
 """
 
 import argparse
@@ -92,6 +92,11 @@ def main():
             peers["igl"] = igl
         except ImportError:
             pass
+        try:
+            import point_cloud_utils as pcu
+            peers["pcu"] = pcu
+        except ImportError:
+            pass
         print(f"octrace: closed {closed}; the search's bounds {bounds_s * 1e3:.0f} ms once")
 
         rows = []
@@ -122,6 +127,16 @@ def main():
                 r, _ = median_rate(n, lambda: f.find_closest_points(pf, radii, inter))
                 fd = np.array([i.d for i in inter])
                 rows.append((kind, "closest points", "FCPW", r, wrong_d(fd)))
+            if "pcu" in peers:
+                # Its tree is built in each call, as users call it: timed apart first.
+                pcu, vd = peers["pcu"], v.astype(np.float64)
+                pd = p.astype(np.float64)
+                t0 = time.perf_counter()
+                pcu.closest_points_on_mesh(pd[:1], vd, t)
+                pre = time.perf_counter() - t0
+                r, res = median_rate(n, lambda: pcu.closest_points_on_mesh(pd, vd, t))
+                rows.append((kind, f"closest points (its tree, {pre * 1e3:.0f} ms, built in the call)",
+                             "point-cloud-utils", r, wrong_d(res[0])))
             r, _ = median_rate(n, lambda: ours.compute_distance(p, nthreads=1))
             rows.append((kind, "distance", "octrace", r, 0))
             r, d = median_rate(n, lambda: o3d_scene.compute_distance(tensor, nthreads=1))
@@ -132,6 +147,11 @@ def main():
                 r, s = median_rate(n, lambda: o3d_scene.compute_signed_distance(tensor, nthreads=1))
                 rows.append((kind, "signed distance (1 vote)", "Open3D", r,
                              f"{wrong_d(np.abs(s.numpy()))} d, {wrong_sign(s.numpy())} signs"))
+                if "pcu" in peers:
+                    pcu, vd, pd = peers["pcu"], v.astype(np.float64), p.astype(np.float64)
+                    r, res = median_rate(n, lambda: pcu.signed_distance_to_mesh(pd, vd, t))
+                    rows.append((kind, "signed distance", "point-cloud-utils", r,
+                                 f"{wrong_d(np.abs(res[0]))} d, {wrong_sign(res[0])} signs"))
                 if "igl" in peers:
                     vd, td = v.astype(np.float64), t
                     pd = p.astype(np.float64)

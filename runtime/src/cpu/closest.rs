@@ -1,9 +1,13 @@
-//! The point of the surface nearest a query point, through the point-location tree.
+//! The point of the surface nearest a query point.
 //!
-//! A best-first search: the tree's cells in order of their distance from the point
-//! (a heap), each leaf's triangles measured in `f64`, until the next cell lies farther
-//! than the nearest triangle found. Every point of a triangle lies in some leaf that
-//! lists it, so no triangle nearer than the answer is skipped.
+//! A best-first search over the search's own tree ([`SurfaceBounds`]: the triangles
+//! the octree's leaves list, each once, in clusters of eight under nodes of eight,
+//! made once a scene): nodes in order of a lower bound on their distance from the
+//! point (a heap), each cluster's triangles measured in `f64`, until the next node lies
+//! farther than the nearest triangle found. Every triangle is in one cluster, under
+//! bounds that hold all of its points, so no triangle nearer than the answer is
+//! skipped. A triangle is dropped before it is measured where its box, or its plane
+//! and the line of an edge, put it certainly farther than the best so far.
 //!
 //! # What is exact
 //! Each triangle's squared distance is computed in `f64` with an error bound
@@ -19,11 +23,11 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use octrace_format::layout::{NodeRef, TRIANGLE_FLOATS};
 use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
 pub use bounds::SurfaceBounds;
+use bounds::{Kid, Tri};
 
 use crate::exact::distance::{point_on, squared_distance, Square};
 
@@ -150,7 +154,7 @@ pub(crate) fn near_f64(p: [f64; 3], t: &[f32]) -> Near {
 /// edge the projection is certainly outside of, `-n.(e x r) / (|n| |e|)` (each term
 /// taken at the far end of its error bound). The segments measured are those of the
 /// edges the projection is not certainly inside of: the nearest point lies on them.
-#[inline]
+#[inline(always)]
 pub(crate) fn near_f64_within(p: [f64; 3], t: &[f32], within: f64) -> Option<Near> {
     // Written out rather than mapped: this runs for every triangle a search measures.
     let t = &t[..9];
@@ -348,10 +352,6 @@ impl Ord for Pending {
     }
 }
 
-/// Stored triangles a search has measured lately, by the low bits of their index:
-/// a triangle listed by several leaves is measured once (mostly).
-const SEEN: usize = 64;
-
 /// What a search reuses from one point to the next (its heap).
 #[derive(Debug, Default)]
 pub struct ClosestScratch {
@@ -392,6 +392,19 @@ impl Tracer<'_> {
         p: [f32; 3],
         max_distance: f32,
     ) -> Option<ClosestPoint> {
+        self.closest_inline(bounds, scratch, p, max_distance)
+    }
+
+    /// The search, inlined where it is called: into [`Tracer::closest_point_with`] and
+    /// into the batch's loop compiled for x86-64-v3.
+    #[inline(always)]
+    fn closest_inline(
+        &self,
+        bounds: &SurfaceBounds,
+        scratch: &mut ClosestScratch,
+        p: [f32; 3],
+        max_distance: f32,
+    ) -> Option<ClosestPoint> {
         if !p.iter().all(|c| c.is_finite()) || max_distance.is_nan() || max_distance < 0.0 {
             return None;
         }
@@ -401,11 +414,10 @@ impl Tracer<'_> {
         let limit = max_distance as f64;
         let limit2 = limit * limit * (1.0 + 1e-6);
         let mut best: Option<Best> = None;
-        let mut seen = [u32::MAX; SEEN];
         let heap = &mut scratch.heap;
         heap.clear();
-        let root = self.view.root;
-        heap.push(Pending { d2: bounds.root().distance2(pd, f64::INFINITY), node: root });
+        let (root, word) = bounds.root();
+        heap.push(Pending { d2: root.distance2(pd, f64::INFINITY), node: word });
         let mut visits = 0usize;
         while let Some(next) = heap.pop() {
             let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
@@ -414,22 +426,17 @@ impl Tracer<'_> {
                 break;
             }
             visits += 1;
-            if visits > 2 * bounds.node_count() + 64 {
-                break; // a hostile file's cycle on the trusted path
+            if visits > bounds.node_count() + 64 {
+                break; // each is pushed once: a guard, not a limit
             }
-            match NodeRef::decode(next.node) {
-                NodeRef::Leaf(address) => self.closest_in_leaf(p, pd, address, &mut best, &mut seen),
-                NodeRef::Internal(index) => {
-                    let (Some(children), Some(near)) =
-                        (self.view.nodes.get(index as usize * 8..index as usize * 8 + 8), bounds.children(index))
-                    else {
-                        continue;
-                    };
+            match bounds.kid(next.node) {
+                None => {}
+                Some(Kid::Cluster(tris)) => self.closest_in_cluster(p, pd, tris, &mut best),
+                Some(Kid::Node(node)) => {
                     let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
-                    for (&node, near) in children.iter().zip(near) {
-                        let d2 = near.distance2(pd, bound);
+                    for (&word, d2) in node.kids.iter().zip(node.bounds.distance2(pd)) {
                         if d2 * (1.0 - 1e-9) <= bound {
-                            heap.push(Pending { d2, node });
+                            heap.push(Pending { d2, node: word });
                         }
                     }
                 }
@@ -454,35 +461,11 @@ impl Tracer<'_> {
         })
     }
 
-    /// The box of the cell at `level`, `cell`, rounded outwards to `f32`.
-    fn cell_box(&self, level: u32, cell: [u32; 3]) -> ([f32; 3], [f32; 3]) {
-        let size = self.frame.sizes[level.min(31) as usize] as f64;
-        let lo = [0, 1, 2].map(|k| self.frame.root_lo[k] as f64 + cell[k] as f64 * size);
-        (lo.map(|x| (x as f32).next_down()), lo.map(|x| ((x + size) as f32).next_up()))
-    }
-
-    /// Measures the triangles of the leaf at `address` against the best so far.
-    fn closest_in_leaf(
-        &self,
-        p: [f32; 3],
-        pd: [f64; 3],
-        address: u32,
-        best: &mut Option<Best>,
-        seen: &mut [u32; SEEN],
-    ) {
+    /// Measures the triangles of a cluster against the best so far.
+    #[inline(always)]
+    fn closest_in_cluster(&self, p: [f32; 3], pd: [f64; 3], tris: &[Tri], best: &mut Option<Best>) {
         let v = &self.view;
-        let Some(rec) = v.octree.get(address as usize..address as usize + 2) else { return };
-        let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
-        for &prim in refs {
-            let slot = &mut seen[prim as usize % SEEN];
-            if *slot == prim {
-                continue;
-            }
-            *slot = prim;
-            let Some(t) = v.triangles.get(prim as usize * TRIANGLE_FLOATS..).and_then(|t| t.get(..TRIANGLE_FLOATS))
-            else {
-                continue;
-            };
+        for &Tri { ref t, prim, id } in tris {
             // The triangle's box is a cheap first look.
             if let Some(b) = best {
                 let mut gap2 = 0.0;
@@ -509,7 +492,6 @@ impl Tracer<'_> {
                     continue;
                 }
             }
-            let Some(&id) = v.triangle_ids.get(prim as usize) else { continue };
             let within = best.map_or(f64::INFINITY, |b| b.near.d2 + b.near.err);
             let Some(near) = near_f64_within(pd, t, within) else { continue };
             let Some(b) = *best else {
@@ -570,9 +552,43 @@ impl Tracer<'_> {
         out: &mut [Option<ClosestPoint>],
     ) {
         assert_eq!(points.len(), out.len(), "one result slot a point");
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        if self.uses_x86_64_v3() {
+            // SAFETY: the processor has these features (`uses_x86_64_v3` is never true
+            // where it does not).
+            return unsafe { self.closest_batch_v3(bounds, points, max_distance, out) };
+        }
+        self.closest_batch_loop(bounds, points, max_distance, out)
+    }
+
+    /// [`Tracer::closest_point_batch`] compiled for x86-64-v3 (AVX2: a node's eight
+    /// bounds four lanes at a time). Rust does not fuse `a * b + c`: the same bits.
+    ///
+    /// # Safety
+    /// The processor must have the features.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    #[target_feature(enable = "avx2,bmi1,bmi2,fma,lzcnt,popcnt")]
+    unsafe fn closest_batch_v3(
+        &self,
+        bounds: &SurfaceBounds,
+        points: &[[f32; 3]],
+        max_distance: f32,
+        out: &mut [Option<ClosestPoint>],
+    ) {
+        self.closest_batch_loop(bounds, points, max_distance, out)
+    }
+
+    #[inline(always)]
+    fn closest_batch_loop(
+        &self,
+        bounds: &SurfaceBounds,
+        points: &[[f32; 3]],
+        max_distance: f32,
+        out: &mut [Option<ClosestPoint>],
+    ) {
         let mut scratch = ClosestScratch::default();
         for (p, o) in points.iter().zip(out) {
-            *o = self.closest_point_with(bounds, &mut scratch, *p, max_distance);
+            *o = self.closest_inline(bounds, &mut scratch, *p, max_distance);
         }
     }
 

@@ -1,10 +1,26 @@
-//! Where the surface lies inside each node of the point-location tree: the closest-point
-//! search's lower bounds.
+//! The closest-point search's own tree: the scene's triangles (those its leaves list,
+//! each once) in the Morton order of their centroids, grouped into clusters of at most
+//! [`LEAF`] (contiguous, with their stored and input indices beside them) under nodes of
+//! up to eight children, each child bounded by where its surface lies ([`NodeBound`]).
+//!
+//! The octree's leaves are cubes that list every triangle crossing them: a triangle is
+//! read again from each leaf it crosses, through an index, and a leaf's bound is its
+//! cube's share of the surface. Clusters hold each triangle once, side by side, and
+//! their bounds are as tight as their triangles: a search measures fewer triangles and
+//! reads them in order.
 
-use octrace_format::layout::{NodeRef, TRIANGLE_FLOATS};
+use rayon::prelude::*;
+
+use octrace_format::layout::TRIANGLE_FLOATS;
 
 use super::{cross, dot, sub, U};
 use crate::cpu::tracer::Tracer;
+
+/// At most this many triangles a cluster.
+pub(super) const LEAF: usize = 8;
+
+/// A child word's bit for a cluster (else an internal node's index).
+const CLUSTER: u32 = 1 << 31;
 
 const INF: f32 = f32::INFINITY;
 
@@ -95,6 +111,72 @@ impl NodeBound {
     }
 }
 
+/// Eight children's bounds side by side, by coordinate, so that one node's eight
+/// [`NodeBound::distance2`] run as one vector loop.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Bounds8 {
+    lo: [[f32; 8]; 3],
+    hi: [[f32; 8]; 3],
+    m: [[f32; 8]; 3],
+    slab: [[f32; 8]; 2],
+}
+
+impl Bounds8 {
+    fn of(b: &[NodeBound; 8]) -> Bounds8 {
+        // An empty child (or one whose box is NaN) reads as the empty bound.
+        let b = b.map(|b| if b.is_empty() { NodeBound::EMPTY } else { b });
+        Bounds8 {
+            lo: [0, 1, 2].map(|k| b.map(|b| b.lo[k])),
+            hi: [0, 1, 2].map(|k| b.map(|b| b.hi[k])),
+            m: [0, 1, 2].map(|k| b.map(|b| b.m[k])),
+            slab: [0, 1].map(|k| b.map(|b| b.slab[k])),
+        }
+    }
+
+    /// [`NodeBound::distance2`] of each child, every term computed (no early answer);
+    /// infinity for an empty child (its box's gap is infinite).
+    #[inline(always)]
+    pub(super) fn distance2(&self, p: [f64; 3]) -> [f64; 8] {
+        let mut out = [0.0f64; 8];
+        let p_abs = p.map(f64::abs);
+        for (l, out) in out.iter_mut().enumerate() {
+            let (mut boxed, mut r2) = (0.0f64, 0.0f64);
+            let mut c = [0.0f64; 3];
+            for k in 0..3 {
+                let (lo, hi) = (self.lo[k][l] as f64, self.hi[k][l] as f64);
+                let below = lo - p[k];
+                let above = p[k] - hi;
+                let gap = if below > above { below } else { above };
+                let gap = if gap > 0.0 { gap } else { 0.0 };
+                boxed += gap * gap;
+                c[k] = 0.5 * (lo + hi);
+                r2 += 0.25 * (hi - lo) * (hi - lo);
+            }
+            let m = [self.m[0][l] as f64, self.m[1][l] as f64, self.m[2][l] as f64];
+            let mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+            let s = m[0] * p[0] + m[1] * p[1] + m[2] * p[2];
+            let s_err = 4.0 * U * (m[0].abs() * p_abs[0] + m[1].abs() * p_abs[1] + m[2].abs() * p_abs[2]);
+            let below = self.slab[0][l] as f64 - s;
+            let above = s - self.slab[1][l] as f64;
+            let gap = (if below > above { below } else { above }) - s_err;
+            let gap = if gap > 0.0 { gap } else { 0.0 };
+            let w = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+            let along = (m[0] * w[0] + m[1] * w[1] + m[2] * w[2]) / mm;
+            let perp = [w[0] - m[0] * along, w[1] - m[1] * along, w[2] - m[2] * along];
+            let w_len = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+            let lateral = (perp[0] * perp[0] + perp[1] * perp[1] + perp[2] * perp[2]).sqrt()
+                - r2.sqrt() * (1.0 + 4.0 * U)
+                - 16.0 * U * w_len;
+            let lateral = if lateral > 0.0 { lateral } else { 0.0 };
+            let disk = (gap * gap / mm + lateral * lateral) * (1.0 - 16.0 * U);
+            // An empty child: its box's gap is infinite (its centre NaN, so the disk's
+            // NaN: the comparison keeps the box's).
+            *out = if disk > boxed { disk } else { boxed };
+        }
+        out
+    }
+}
+
 /// `x` rounded to an `f32` at most `x`.
 fn down(x: f64) -> f32 {
     let f = x as f32;
@@ -134,116 +216,200 @@ fn add_aligned(sum: &mut [f64; 3], n: [f64; 3], reference: [f64; 3]) {
     }
 }
 
-/// The bound of each node of the point-location tree: an internal node's eight
-/// children's side by side (what the search reads when it opens the node), and the
-/// root's. Empty leaves have empty bounds, so the search never opens them. Made once
-/// a scene from its leaves and triangles ([`crate::Scene`] keeps it).
+/// A triangle as the search reads it: its vertices, stored index and input index.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Tri {
+    pub t: [f32; TRIANGLE_FLOATS],
+    pub prim: u32,
+    pub id: u32,
+}
+
+/// An internal node: its children's bounds side by side (what the search reads when it
+/// opens the node) and their words (a cluster's index with [`CLUSTER`], else a node's;
+/// an unused child has an empty bound).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Node {
+    pub bounds: Bounds8,
+    pub kids: [u32; 8],
+}
+
+/// What a child word names.
+pub(super) enum Kid<'a> {
+    Cluster(&'a [Tri]),
+    Node(&'a Node),
+}
+
+/// The closest-point search's tree of a scene (see the module docs). Made once a
+/// scene from its leaves and triangles ([`crate::Scene`] keeps it): about 50 bytes a
+/// triangle.
 #[derive(Clone, Debug)]
 pub struct SurfaceBounds {
     root: NodeBound,
-    /// By internal node index, its children's.
-    children: Vec<[NodeBound; 8]>,
+    root_word: u32,
+    nodes: Vec<Node>,
+    /// Each cluster's range in `tris`.
+    clusters: Vec<(u32, u32)>,
+    tris: Vec<Tri>,
 }
 
-/// A node's bound and the (area-weighted, aligned) sum of its surface's normals.
-type Measured = (NodeBound, [f64; 3]);
-
 impl SurfaceBounds {
-    /// The bounds of `tracer`'s scene.
+    /// The tree of `tracer`'s scene: the triangles its leaves list.
     pub fn of(tracer: &Tracer<'_>) -> SurfaceBounds {
         let v = tracer.view();
-        let internal = v.nodes.len() / 8;
-        let mut bounds = SurfaceBounds { root: NodeBound::EMPTY, children: vec![[NodeBound::EMPTY; 8]; internal] };
-        // Each internal node's own bound once done (or under way: a hostile file's
-        // cycle reads it as empty); leaves are measured once.
-        let mut nodes: Vec<Option<Measured>> = vec![None; internal];
-        let mut leaves: Vec<Option<Measured>> = vec![None; v.leaf_count()];
-        let (root, _) = bounds.visit(tracer, v.root, 0, [0; 3], &mut nodes, &mut leaves);
-        bounds.root = root;
+        let count = v.triangles.len() / TRIANGLE_FLOATS;
+        let mut listed = vec![false; count];
+        for &prim in v.tri_refs {
+            if let Some(l) = listed.get_mut(prim as usize) {
+                *l = true;
+            }
+        }
+        let mut tris: Vec<Tri> = (0..count)
+            .filter(|&i| listed[i])
+            .filter_map(|i| {
+                let t = v.triangles.get(i * TRIANGLE_FLOATS..(i + 1) * TRIANGLE_FLOATS)?;
+                let id = *v.triangle_ids.get(i)?;
+                let mut copy = [0f32; TRIANGLE_FLOATS];
+                copy.copy_from_slice(t);
+                Some(Tri { t: copy, prim: i as u32, id })
+            })
+            .collect();
+        drop(listed);
+        let mut bounds = SurfaceBounds {
+            root: NodeBound::EMPTY,
+            root_word: CLUSTER,
+            nodes: Vec::new(),
+            clusters: Vec::new(),
+            tris: Vec::new(),
+        };
+        if tris.is_empty() {
+            bounds.clusters.push((0, 0));
+            return bounds;
+        }
+        // Morton order of the centroids, in the triangles' box.
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for tri in &tris {
+            for k in 0..3 {
+                let g = centroid(&tri.t, k);
+                lo[k] = lo[k].min(g);
+                hi[k] = hi[k].max(g);
+            }
+        }
+        let mut keyed: Vec<(u64, Tri)> =
+            tris.drain(..).map(|tri| (morton([0, 1, 2].map(|k| centroid(&tri.t, k)), lo, hi), tri)).collect();
+        keyed.par_sort_unstable_by_key(|(code, tri)| (*code, tri.prim));
+        let codes: Vec<u64> = keyed.iter().map(|k| k.0).collect();
+        bounds.tris = keyed.into_iter().map(|k| k.1).collect();
+        let (root, word) = bounds.build(&codes, 0, codes.len(), 0);
+        bounds.root = root.0;
+        bounds.root_word = word;
         bounds
     }
 
     /// The root's bound.
     #[inline]
-    pub(super) fn root(&self) -> &NodeBound {
-        &self.root
+    pub(super) fn root(&self) -> (&NodeBound, u32) {
+        (&self.root, self.root_word)
     }
 
-    /// The bounds of internal node `index`'s children.
+    /// What the child word `word` names (`None` for a word out of range).
     #[inline]
-    pub(super) fn children(&self, index: u32) -> Option<&[NodeBound; 8]> {
-        self.children.get(index as usize)
-    }
-
-    /// How many nodes there are (a bound on a search's steps).
-    pub(super) fn node_count(&self) -> usize {
-        self.children.len() * 9 + 1
-    }
-
-    fn visit(
-        &mut self,
-        tracer: &Tracer<'_>,
-        word: u32,
-        level: u32,
-        cell: [u32; 3],
-        nodes: &mut [Option<Measured>],
-        leaves: &mut [Option<Measured>],
-    ) -> Measured {
-        let empty = (NodeBound::EMPTY, [0.0; 3]);
-        match NodeRef::decode(word) {
-            NodeRef::Leaf(address) => {
-                let v = tracer.view();
-                let Some(rec) = v.octree.get(address as usize..address as usize + 3) else { return empty };
-                let b = rec[2] as usize;
-                match leaves.get(b) {
-                    None => return empty,
-                    Some(Some(done)) => return *done,
-                    Some(None) => {}
-                }
-                let refs = v.tri_refs.get(rec[1] as usize..rec[1] as usize + rec[0] as usize).unwrap_or_default();
-                let (lo, hi) = tracer.cell_box(level, cell);
-                let measured = leaf(v, refs, lo, hi);
-                leaves[b] = Some(measured);
-                measured
-            }
-            NodeRef::Internal(i) => {
-                let i = i as usize;
-                if i >= nodes.len() || level >= tracer.frame.max_depth {
-                    return empty;
-                }
-                if let Some(done) = nodes[i] {
-                    return done;
-                }
-                nodes[i] = Some(empty);
-                let v = tracer.view();
-                let mut kids = [empty; 8];
-                for (child, kid) in kids.iter_mut().enumerate() {
-                    let Some(&w) = v.nodes.get(8 * i + child) else { continue };
-                    let c = [0, 1, 2].map(|k| cell[k] * 2 + ((child >> k) & 1) as u32);
-                    *kid = self.visit(tracer, w, level + 1, c, nodes, leaves);
-                }
-                self.children[i] = kids.map(|k| k.0);
-                let measured = internal(&kids);
-                nodes[i] = Some(measured);
-                measured
-            }
+    pub(super) fn kid(&self, word: u32) -> Option<Kid<'_>> {
+        if word & CLUSTER != 0 {
+            let &(first, count) = self.clusters.get((word & !CLUSTER) as usize)?;
+            self.tris.get(first as usize..first as usize + count as usize).map(Kid::Cluster)
+        } else {
+            self.nodes.get(word as usize).map(Kid::Node)
         }
+    }
+
+    /// How many nodes and clusters there are (a bound on a search's steps).
+    pub(super) fn node_count(&self) -> usize {
+        self.nodes.len() + self.clusters.len()
+    }
+
+    /// The bound and word of `tris[start..end]`, whose Morton codes agree above bit
+    /// `63 - 3 level`; its descendants pushed to `nodes` and `clusters`.
+    fn build(&mut self, codes: &[u64], start: usize, end: usize, level: u32) -> (Measured, u32) {
+        if end - start <= LEAF {
+            let word = CLUSTER | self.clusters.len() as u32;
+            self.clusters.push((start as u32, (end - start) as u32));
+            let triangles = self.tris[start..end].iter().map(|tri| widen(&tri.t));
+            return (measure(triangles), word);
+        }
+        // The ranges of the (up to eight) children: by the next three bits, or, past
+        // the codes' last bits (many equal centroids), in equal parts.
+        let mut cuts = Vec::with_capacity(9);
+        let mut level = level;
+        while level < 21 {
+            let shift = 60 - 3 * level;
+            cuts.clear();
+            cuts.push(start);
+            for digit in 1..8u64 {
+                let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
+                if at > *cuts.last().unwrap_or(&start) && at < end {
+                    cuts.push(at);
+                }
+            }
+            cuts.push(end);
+            if cuts.len() > 2 {
+                break;
+            }
+            level += 1;
+        }
+        if level >= 21 {
+            cuts.clear();
+            let step = (end - start).div_ceil(8);
+            cuts.extend((start..end).step_by(step));
+            cuts.push(end);
+        }
+        let index = self.nodes.len();
+        self.nodes.push(Node { bounds: Bounds8::of(&[NodeBound::EMPTY; 8]), kids: [u32::MAX; 8] });
+        let mut kids = [(NodeBound::EMPTY, [0.0; 3]); 8];
+        let mut words = [u32::MAX; 8];
+        for (child, w) in cuts.windows(2).enumerate() {
+            (kids[child], words[child]) = self.build(codes, w[0], w[1], level + 1);
+        }
+        self.nodes[index] = Node { bounds: Bounds8::of(&kids.map(|k| k.0)), kids: words };
+        (internal(&kids), index as u32)
     }
 }
 
-/// A leaf's bound: its triangles' boxes clipped to its cell (`lo`, `hi`, rounded
-/// outwards), and their vertices' slab across their mean normal, clipped to the box's
-/// reach.
-fn leaf(v: &octrace_format::SceneView<'_>, refs: &[u32], lo: [f32; 3], hi: [f32; 3]) -> Measured {
-    let triangle = |prim: u32| {
-        v.triangles
-            .get(prim as usize * TRIANGLE_FLOATS..)
-            .and_then(|t| t.get(..TRIANGLE_FLOATS))
-            .map(|t| [0, 3, 6].map(|o| [t[o] as f64, t[o + 1] as f64, t[o + 2] as f64]))
-    };
+/// Coordinate `k` of a triangle's centroid.
+fn centroid(t: &[f32; TRIANGLE_FLOATS], k: usize) -> f64 {
+    (t[k] as f64 + t[3 + k] as f64 + t[6 + k] as f64) / 3.0
+}
+
+/// A triangle's vertices in `f64`.
+fn widen(t: &[f32; TRIANGLE_FLOATS]) -> [[f64; 3]; 3] {
+    [0, 3, 6].map(|o| [t[o] as f64, t[o + 1] as f64, t[o + 2] as f64])
+}
+
+/// The 63-bit Morton code of `g` in the box `lo..hi` (21 bits an axis).
+fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
+    let mut code = 0u64;
+    let cells = (1u64 << 21) as f64;
+    let q = [0, 1, 2].map(|k| {
+        let span = hi[k] - lo[k];
+        let f = if span > 0.0 { (g[k] - lo[k]) / span } else { 0.0 };
+        ((f * cells) as u64).min((1 << 21) - 1)
+    });
+    for bit in (0..21).rev() {
+        for axis in q {
+            code = code << 1 | (axis >> bit) & 1;
+        }
+    }
+    code
+}
+
+/// A node's bound and the (area-weighted, aligned) sum of its surface's normals.
+type Measured = (NodeBound, [f64; 3]);
+
+/// A cluster's bound: its triangles' box, and their vertices' slab across their mean
+/// normal, kept within the box's reach.
+fn measure(triangles: impl Iterator<Item = [[f64; 3]; 3]> + Clone) -> Measured {
     let mut bound = NodeBound::EMPTY;
     let (mut reference, mut largest) = ([0.0; 3], -1.0);
-    for t in refs.iter().filter_map(|&prim| triangle(prim)) {
+    for t in triangles.clone() {
         for corner in t {
             for k in 0..3 {
                 bound.lo[k] = bound.lo[k].min(corner[k] as f32);
@@ -255,20 +421,16 @@ fn leaf(v: &octrace_format::SceneView<'_>, refs: &[u32], lo: [f32; 3], hi: [f32;
             (reference, largest) = (n, dot(n, n));
         }
     }
-    for k in 0..3 {
-        bound.lo[k] = bound.lo[k].max(lo[k]);
-        bound.hi[k] = bound.hi[k].min(hi[k]);
-    }
     if bound.is_empty() {
         return (NodeBound::EMPTY, [0.0; 3]);
     }
     let mut sum = [0.0; 3];
-    for t in refs.iter().filter_map(|&prim| triangle(prim)) {
+    for t in triangles.clone() {
         add_aligned(&mut sum, cross(sub(t[1], t[0]), sub(t[2], t[0])), reference);
     }
     let m = direction(sum);
     let (mut s_lo, mut s_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for t in refs.iter().filter_map(|&prim| triangle(prim)) {
+    for t in triangles {
         for x in t {
             let s = dot(m, x);
             let err = 4.0 * U * (m[0].abs() * x[0].abs() + m[1].abs() * x[1].abs() + m[2].abs() * x[2].abs());
