@@ -336,42 +336,60 @@ impl SurfaceBounds {
             let triangles = self.tris[start..end].iter().map(|tri| widen(&tri.t));
             return (measure(triangles), word);
         }
-        // The ranges of the (up to eight) children: by the next three bits, or, past
-        // the codes' last bits (many equal centroids), in equal parts.
-        let mut cuts = Vec::with_capacity(9);
-        let mut level = level;
-        while level < 21 {
-            let shift = 60 - 3 * level;
-            cuts.clear();
-            cuts.push(start);
-            for digit in 1..8u64 {
-                let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
-                if at > *cuts.last().unwrap_or(&start) && at < end {
-                    cuts.push(at);
-                }
-            }
-            cuts.push(end);
-            if cuts.len() > 2 {
+        // The children: the next three bits' groups, the largest of them opened in
+        // turn while the node has room, so that nodes are full and the tree shallow.
+        let mut groups = split(codes, start, end, level);
+        while let Some(at) =
+            (0..groups.len()).filter(|&g| groups[g].1 - groups[g].0 > LEAF).max_by_key(|&g| groups[g].1 - groups[g].0)
+        {
+            let (s, e, l) = groups[at];
+            let inner = split(codes, s, e, l);
+            if groups.len() - 1 + inner.len() > 8 {
                 break;
             }
-            level += 1;
-        }
-        if level >= 21 {
-            cuts.clear();
-            let step = (end - start).div_ceil(8);
-            cuts.extend((start..end).step_by(step));
-            cuts.push(end);
+            groups.splice(at..at + 1, inner);
         }
         let index = self.nodes.len();
         self.nodes.push(Node { bounds: Bounds8::of(&[NodeBound::EMPTY; 8]), kids: [u32::MAX; 8] });
         let mut kids = [(NodeBound::EMPTY, [0.0; 3]); 8];
         let mut words = [u32::MAX; 8];
-        for (child, w) in cuts.windows(2).enumerate() {
-            (kids[child], words[child]) = self.build(codes, w[0], w[1], level + 1);
+        for (child, &(s, e, l)) in groups.iter().enumerate() {
+            (kids[child], words[child]) = self.build(codes, s, e, l);
         }
         self.nodes[index] = Node { bounds: Bounds8::of(&kids.map(|k| k.0)), kids: words };
         (internal(&kids), index as u32)
     }
+}
+
+/// The ranges of `codes[start..end]` (more than one code) by the first three bits
+/// below `63 - 3 level` in which they differ, each with the level of its own next
+/// bits; past the codes' last bits (many equal centroids), equal parts.
+fn split(codes: &[u64], start: usize, end: usize, level: u32) -> Vec<(usize, usize, u32)> {
+    let mut cuts = Vec::with_capacity(9);
+    let mut level = level;
+    while level < 21 {
+        let shift = 60 - 3 * level;
+        cuts.clear();
+        cuts.push(start);
+        for digit in 1..8u64 {
+            let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
+            if at > *cuts.last().unwrap_or(&start) && at < end {
+                cuts.push(at);
+            }
+        }
+        cuts.push(end);
+        if cuts.len() > 2 {
+            break;
+        }
+        level += 1;
+    }
+    if level >= 21 {
+        cuts.clear();
+        let step = (end - start).div_ceil(8).max(1);
+        cuts.extend((start..end).step_by(step));
+        cuts.push(end);
+    }
+    cuts.windows(2).map(|w| (w[0], w[1], level + 1)).collect()
 }
 
 /// Coordinate `k` of a triangle's centroid.
