@@ -436,6 +436,7 @@ impl Tracer<'_> {
                     let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
                     for (&word, d2) in node.kids.iter().zip(node.bounds.distance2(pd)) {
                         if d2 * (1.0 - 1e-9) <= bound {
+                            bounds.prefetch(word);
                             heap.push(Pending { d2, node: word });
                         }
                     }
