@@ -12,6 +12,7 @@
 use rayon::prelude::*;
 
 use octrace_format::layout::TRIANGLE_FLOATS;
+use octrace_format::memory::try_with_capacity;
 
 use super::{cross, dot, sub, U};
 use crate::cpu::tracer::Tracer;
@@ -346,6 +347,35 @@ impl SurfaceBounds {
                 }
             }
         }
+    }
+
+    /// The indices of `points` in the order of a Morton curve through the surface's
+    /// box (points outside it on its faces), or `None` for fewer than 64 points or
+    /// where the memory (12 bytes a point) cannot be had.
+    pub(super) fn curve_order(&self, points: &[[f32; 3]]) -> Option<Vec<u32>> {
+        if points.len() < 64 || points.len() > u32::MAX as usize || self.root.is_empty() {
+            return None;
+        }
+        let (lo, hi) = (self.root.lo.map(f64::from), self.root.hi.map(f64::from));
+        let scale = [0, 1, 2].map(|k| if hi[k] > lo[k] { 1023.0 / (hi[k] - lo[k]) } else { 0.0 });
+        // Ten bits an axis: cells of a thousandth of the box.
+        let spread = |x: u64| {
+            let mut x = x & 0x3ff;
+            x = (x | x << 16) & 0x0300_00ff;
+            x = (x | x << 8) & 0x0300_f00f;
+            x = (x | x << 4) & 0x030c_30c3;
+            (x | x << 2) & 0x0924_9249
+        };
+        let mut keyed: Vec<(u32, u32)> = try_with_capacity(points.len(), "closest points in curve order").ok()?;
+        keyed.extend(points.iter().enumerate().map(|(i, p)| {
+            // NaN and the infinities clamp to an end (their answers are None anyway).
+            let q = [0, 1, 2].map(|k| ((p[k] as f64 - lo[k]) * scale[k]).clamp(0.0, 1023.0) as u64);
+            ((spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2) as u32, i as u32)
+        }));
+        keyed.par_sort_unstable();
+        let mut order: Vec<u32> = try_with_capacity(points.len(), "closest points in curve order").ok()?;
+        order.extend(keyed.iter().map(|k| k.1));
+        Some(order)
     }
 
     /// How many nodes and clusters there are (a bound on a search's steps).
