@@ -586,7 +586,7 @@ fn not_finite(p: [f32; 3]) -> Option<Winding> {
 }
 
 /// The 63-bit Morton code of `g` in the box `lo..hi` (21 bits an axis).
-fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
+pub(crate) fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
     let mut code = 0u64;
     let cells = (1u64 << 21) as f64;
     let q = [0, 1, 2].map(|k| {

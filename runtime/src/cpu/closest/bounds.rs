@@ -16,6 +16,7 @@ use octrace_format::memory::try_with_capacity;
 
 use super::{cross, dot, sub, U};
 use crate::cpu::tracer::Tracer;
+use crate::winding::morton;
 
 /// At most this many triangles a cluster.
 pub(super) const LEAF: usize = 8;
@@ -456,23 +457,6 @@ fn centroid(t: &[f32; TRIANGLE_FLOATS], k: usize) -> f64 {
 /// A triangle's vertices in `f64`.
 fn widen(t: &[f32; TRIANGLE_FLOATS]) -> [[f64; 3]; 3] {
     [0, 3, 6].map(|o| [t[o] as f64, t[o + 1] as f64, t[o + 2] as f64])
-}
-
-/// The 63-bit Morton code of `g` in the box `lo..hi` (21 bits an axis).
-fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
-    let mut code = 0u64;
-    let cells = (1u64 << 21) as f64;
-    let q = [0, 1, 2].map(|k| {
-        let span = hi[k] - lo[k];
-        let f = if span > 0.0 { (g[k] - lo[k]) / span } else { 0.0 };
-        ((f * cells) as u64).min((1 << 21) - 1)
-    });
-    for bit in (0..21).rev() {
-        for axis in q {
-            code = code << 1 | (axis >> bit) & 1;
-        }
-    }
-    code
 }
 
 /// A node's bound and the (area-weighted, aligned) sum of its surface's normals.
