@@ -328,7 +328,7 @@ struct Best {
     exact: Option<Square>,
 }
 
-/// A node of the point-location tree waiting in the heap, nearest first.
+/// A node of the search's tree waiting in the heap, nearest first.
 #[derive(Clone, Copy, Debug)]
 struct Pending {
     d2: f64,
