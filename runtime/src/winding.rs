@@ -359,34 +359,10 @@ impl WindingTree {
         if end - start <= LEAF {
             return Cluster::of_triangles(&triangles[start..end], start as u32);
         }
-        // The ranges of the (up to eight) children: by the next three bits, or, past
-        // the codes' last bits (many equal centroids), in equal parts.
-        let mut bounds = Vec::with_capacity(9);
-        let mut level = level;
-        while level < 21 {
-            let shift = 60 - 3 * level;
-            bounds.clear();
-            bounds.push(start);
-            for digit in 1..8u64 {
-                let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
-                if at > *bounds.last().unwrap_or(&start) && at < end {
-                    bounds.push(at);
-                }
-            }
-            bounds.push(end);
-            if bounds.len() > 2 {
-                break;
-            }
-            level += 1;
-        }
-        if level >= 21 {
-            bounds.clear();
-            let step = (end - start).div_ceil(8);
-            bounds.extend((start..end).step_by(step));
-            bounds.push(end);
-        }
-        let children: Vec<Cluster> =
-            bounds.windows(2).map(|w| self.build(triangles, codes, w[0], w[1], level + 1)).collect();
+        let children: Vec<Cluster> = split(codes, start, end, level)
+            .into_iter()
+            .map(|(s, e, l)| self.build(triangles, codes, s, e, l))
+            .collect();
         let first = self.nodes.len() as u32;
         self.nodes.extend_from_slice(&children);
         Cluster::of_children(&children, first)
@@ -583,6 +559,38 @@ fn not_finite(p: [f32; 3]) -> Option<Winding> {
     } else {
         None
     }
+}
+
+/// The ranges of `codes[start..end]` (sorted, more than one) by the first three bits
+/// below `63 - 3 level` in which they differ, each with the level of its own next
+/// bits; past the codes' last bits (many equal centroids), equal parts. A tree's
+/// children (the winding numbers' clusters, the closest-point search's).
+pub(crate) fn split(codes: &[u64], start: usize, end: usize, level: u32) -> Vec<(usize, usize, u32)> {
+    let mut cuts = Vec::with_capacity(9);
+    let mut level = level;
+    while level < 21 {
+        let shift = 60 - 3 * level;
+        cuts.clear();
+        cuts.push(start);
+        for digit in 1..8u64 {
+            let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
+            if at > *cuts.last().unwrap_or(&start) && at < end {
+                cuts.push(at);
+            }
+        }
+        cuts.push(end);
+        if cuts.len() > 2 {
+            break;
+        }
+        level += 1;
+    }
+    if level >= 21 {
+        cuts.clear();
+        let step = (end - start).div_ceil(8).max(1);
+        cuts.extend((start..end).step_by(step));
+        cuts.push(end);
+    }
+    cuts.windows(2).map(|w| (w[0], w[1], level + 1)).collect()
 }
 
 /// The 63-bit Morton code of `g` in the box `lo..hi` (21 bits an axis).

@@ -417,8 +417,8 @@ impl Tracer<'_> {
         let mut best: Option<Best> = None;
         let heap = &mut scratch.heap;
         heap.clear();
-        let (root, word) = bounds.root();
-        heap.push(Pending { d2: root.distance2(pd, f64::INFINITY), node: word });
+        let (d2, word) = bounds.root(pd);
+        heap.push(Pending { d2, node: word });
         let mut visits = 0usize;
         while let Some(next) = heap.pop() {
             let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
@@ -556,18 +556,7 @@ impl Tracer<'_> {
         max_distance: f32,
         out: &mut [Option<ClosestPoint>],
     ) {
-        assert_eq!(points.len(), out.len(), "one result slot a point");
-        match (bounds.curve_order(points), try_with_capacity(points.len(), "closest points in curve order")) {
-            (Some(order), Ok(mut found)) => {
-                found.resize(points.len(), None);
-                self.closest_each(bounds, points, |k| order[k] as usize, max_distance, &mut found);
-                for (&i, f) in order.iter().zip(found) {
-                    out[i as usize] = f;
-                }
-            }
-            // Too few points to gain, or no memory for the order: as they come.
-            _ => self.closest_each(bounds, points, |k| k, max_distance, out),
-        }
+        self.batch(bounds, points, max_distance, out, false)
     }
 
     /// [`Tracer::closest_point_batch`] on all threads of the current rayon pool: the
@@ -579,23 +568,41 @@ impl Tracer<'_> {
         max_distance: f32,
         out: &mut [Option<ClosestPoint>],
     ) {
+        self.batch(bounds, points, max_distance, out, true)
+    }
+
+    /// The batches: in the curve's order where it can be had, on this thread or on the
+    /// pool's (runs of 1,024 points).
+    fn batch(
+        &self,
+        bounds: &SurfaceBounds,
+        points: &[[f32; 3]],
+        max_distance: f32,
+        out: &mut [Option<ClosestPoint>],
+        parallel: bool,
+    ) {
         use rayon::prelude::*;
         assert_eq!(points.len(), out.len(), "one result slot a point");
+        let runs =
+            |points: &[[f32; 3]], at: &(dyn Fn(usize, usize) -> usize + Sync), out: &mut [Option<ClosestPoint>]| {
+                if parallel {
+                    out.par_chunks_mut(1024)
+                        .enumerate()
+                        .for_each(|(run, o)| self.closest_each(bounds, points, |k| at(run * 1024, k), max_distance, o));
+                } else {
+                    self.closest_each(bounds, points, |k| at(0, k), max_distance, out);
+                }
+            };
         match (bounds.curve_order(points), try_with_capacity(points.len(), "closest points in curve order")) {
             (Some(order), Ok(mut found)) => {
                 found.resize(points.len(), None);
-                found
-                    .par_chunks_mut(1024)
-                    .zip(order.par_chunks(1024))
-                    .for_each(|(f, o)| self.closest_each(bounds, points, |k| o[k] as usize, max_distance, f));
+                runs(points, &|first, k| order[first + k] as usize, &mut found);
                 for (&i, f) in order.iter().zip(found) {
                     out[i as usize] = f;
                 }
             }
-            _ => points
-                .par_chunks(1024)
-                .zip(out.par_chunks_mut(1024))
-                .for_each(|(p, o)| self.closest_each(bounds, p, |k| k, max_distance, o)),
+            // Too few points to gain, or no memory for the order: as they come.
+            _ => runs(points, &|first, k| first + k, out),
         }
     }
 

@@ -16,7 +16,7 @@ use octrace_format::memory::try_with_capacity;
 
 use super::{cross, dot, sub, U};
 use crate::cpu::tracer::Tracer;
-use crate::winding::morton;
+use crate::winding::{morton, split};
 
 /// At most this many triangles a cluster.
 pub(super) const LEAF: usize = 8;
@@ -47,49 +47,6 @@ impl NodeBound {
         self.lo[0].is_nan() || self.hi[0].is_nan() || self.lo[0] > self.hi[0]
     }
 
-    /// A lower bound on the squared distance from `p` to the surface in the node
-    /// (infinity where it holds none): the larger of the box's and the slab's. For `x`
-    /// in both, `|p - x|^2 = (m.(p - x))^2 / m.m + |P(p - x)|^2` (`P` the projection
-    /// across `m`): the first is at least the squared gap between `m.p` and the slab,
-    /// the second at least `|P(p - c)| - R` squared (`c` the box's centre, `R` its half
-    /// diagonal). Each term shrunk by its rounding.
-    /// Past `enough` (the nearest surface found so far) a part of it is answered as
-    /// soon as it is past: the box's, or the gap across the slab's.
-    #[inline]
-    pub(super) fn distance2(&self, p: [f64; 3], enough: f64) -> f64 {
-        if self.is_empty() {
-            return f64::INFINITY;
-        }
-        let (mut boxed, mut r2) = (0.0, 0.0);
-        let mut c = [0.0; 3];
-        for k in 0..3 {
-            let (lo, hi) = (self.lo[k] as f64, self.hi[k] as f64);
-            let gap = (lo - p[k]).max(p[k] - hi).max(0.0);
-            boxed += gap * gap;
-            c[k] = 0.5 * (lo + hi);
-            r2 += 0.25 * (hi - lo) * (hi - lo);
-        }
-        if boxed > enough {
-            return boxed;
-        }
-        let m = [self.m[0] as f64, self.m[1] as f64, self.m[2] as f64];
-        let mm = dot(m, m);
-        let s = dot(m, p);
-        let s_err = 4.0 * U * (m[0].abs() * p[0].abs() + m[1].abs() * p[1].abs() + m[2].abs() * p[2].abs());
-        let gap = ((self.slab[0] as f64 - s).max(s - self.slab[1] as f64) - s_err).max(0.0);
-        let across = gap * gap / mm * (1.0 - 16.0 * U);
-        if across > enough {
-            return boxed.max(across);
-        }
-        let w = sub(p, c);
-        let along = dot(m, w) / mm;
-        let perp = [w[0] - m[0] * along, w[1] - m[1] * along, w[2] - m[2] * along];
-        let w_len = dot(w, w).sqrt();
-        let lateral = (dot(perp, perp).sqrt() - r2.sqrt() * (1.0 + 4.0 * U) - 16.0 * U * w_len).max(0.0);
-        let disk = (gap * gap / mm + lateral * lateral) * (1.0 - 16.0 * U);
-        boxed.max(disk)
-    }
-
     /// `m.x`'s least and greatest over the box, widened by their rounding.
     fn reach(&self, m: [f64; 3]) -> (f64, f64) {
         let (mut lo, mut hi, mut size) = (0.0, 0.0, 0.0);
@@ -114,7 +71,7 @@ impl NodeBound {
 }
 
 /// Eight children's bounds side by side, by coordinate, so that one node's eight
-/// [`NodeBound::distance2`] run as one vector loop.
+/// lower bounds run as one vector loop.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Bounds8 {
     lo: [[f32; 8]; 3],
@@ -135,8 +92,12 @@ impl Bounds8 {
         }
     }
 
-    /// [`NodeBound::distance2`] of each child, every term computed (no early answer);
-    /// infinity for an empty child (its box's gap is infinite).
+    /// For each child, a lower bound on the squared distance from `p` to the surface
+    /// in it (infinity where it holds none: its box's gap is infinite): the larger of
+    /// the box's and the slab's. For `x` in both, `|p - x|^2 = (m.(p - x))^2 / m.m +
+    /// |P(p - x)|^2` (`P` the projection across `m`): the first is at least the squared
+    /// gap between `m.p` and the slab, the second at least `|P(p - c)| - R` squared (`c`
+    /// the box's centre, `R` its half diagonal). Each term shrunk by its rounding.
     #[inline(always)]
     pub(super) fn distance2(&self, p: [f64; 3]) -> [f64; 8] {
         let mut out = [0.0f64; 8];
@@ -246,7 +207,8 @@ pub(super) enum Kid<'a> {
 /// triangle (and 75 while it is made).
 #[derive(Clone, Debug)]
 pub struct SurfaceBounds {
-    root: NodeBound,
+    /// The whole surface's bound, in lane 0 (the others empty).
+    root: Bounds8,
     root_word: u32,
     nodes: Vec<Node>,
     /// Each cluster's range in `tris`.
@@ -273,7 +235,7 @@ impl SurfaceBounds {
             Some(Tri { t: copy, prim: i as u32, id })
         };
         let mut bounds = SurfaceBounds {
-            root: NodeBound::EMPTY,
+            root: Bounds8::of(&[NodeBound::EMPTY; 8]),
             root_word: CLUSTER,
             nodes: Vec::new(),
             clusters: Vec::new(),
@@ -305,15 +267,18 @@ impl SurfaceBounds {
         let codes: Vec<u64> = keyed.iter().map(|k| k.0).collect();
         drop(keyed);
         let (root, word) = bounds.build(&codes, 0, codes.len(), 0);
-        bounds.root = root.0;
+        let mut top = [NodeBound::EMPTY; 8];
+        top[0] = root.0;
+        bounds.root = Bounds8::of(&top);
         bounds.root_word = word;
         bounds
     }
 
-    /// The root's bound.
+    /// The root's lower bound on the squared distance from `p` (as a node's children's)
+    /// and its word.
     #[inline]
-    pub(super) fn root(&self) -> (&NodeBound, u32) {
-        (&self.root, self.root_word)
+    pub(super) fn root(&self, p: [f64; 3]) -> (f64, u32) {
+        (self.root.distance2(p)[0], self.root_word)
     }
 
     /// What the child word `word` names (`None` for a word out of range).
@@ -354,10 +319,11 @@ impl SurfaceBounds {
     /// box (points outside it on its faces), or `None` for fewer than 64 points or
     /// where the memory (12 bytes a point) cannot be had.
     pub(super) fn curve_order(&self, points: &[[f32; 3]]) -> Option<Vec<u32>> {
-        if points.len() < 64 || points.len() > u32::MAX as usize || self.root.is_empty() {
+        let (lo, hi) = ([0, 1, 2].map(|k| self.root.lo[k][0] as f64), [0, 1, 2].map(|k| self.root.hi[k][0] as f64));
+        // (An empty surface's box is inverted.)
+        if points.len() < 64 || points.len() > u32::MAX as usize || lo[0] > hi[0] {
             return None;
         }
-        let (lo, hi) = (self.root.lo.map(f64::from), self.root.hi.map(f64::from));
         let scale = [0, 1, 2].map(|k| if hi[k] > lo[k] { 1023.0 / (hi[k] - lo[k]) } else { 0.0 });
         // Ten bits an axis: cells of a thousandth of the box.
         let spread = |x: u64| {
@@ -416,37 +382,6 @@ impl SurfaceBounds {
         self.nodes[index] = Node { bounds: Bounds8::of(&kids.map(|k| k.0)), kids: words };
         (internal(&kids), index as u32)
     }
-}
-
-/// The ranges of `codes[start..end]` (more than one code) by the first three bits
-/// below `63 - 3 level` in which they differ, each with the level of its own next
-/// bits; past the codes' last bits (many equal centroids), equal parts.
-fn split(codes: &[u64], start: usize, end: usize, level: u32) -> Vec<(usize, usize, u32)> {
-    let mut cuts = Vec::with_capacity(9);
-    let mut level = level;
-    while level < 21 {
-        let shift = 60 - 3 * level;
-        cuts.clear();
-        cuts.push(start);
-        for digit in 1..8u64 {
-            let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
-            if at > *cuts.last().unwrap_or(&start) && at < end {
-                cuts.push(at);
-            }
-        }
-        cuts.push(end);
-        if cuts.len() > 2 {
-            break;
-        }
-        level += 1;
-    }
-    if level >= 21 {
-        cuts.clear();
-        let step = (end - start).div_ceil(8).max(1);
-        cuts.extend((start..end).step_by(step));
-        cuts.push(end);
-    }
-    cuts.windows(2).map(|w| (w[0], w[1], level + 1)).collect()
 }
 
 /// Coordinate `k` of a triangle's centroid.
