@@ -36,6 +36,7 @@ def bake(
     max_memory: Optional[int] = None,
     max_instances: int = 2**20,
     max_triangles: int = 2**27,
+    distance: bool = False,
     compress: bool = False,
     level: int = 3,
     record_time: bool = False,
@@ -50,6 +51,7 @@ def bake_arrays(
     margin: float = 2**-20,
     threads: int = 0,
     max_memory: Optional[int] = None,
+    distance: bool = False,
     compress: bool = False,
     level: int = 3,
 ) -> dict[str, Any]: ...

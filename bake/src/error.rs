@@ -191,6 +191,9 @@ pub enum Error {
     /// Writing the baked file failed.
     #[error(transparent)]
     Format(#[from] octrace_format::Error),
+    /// Memory the bake needed could not be had (what, and how much).
+    #[error(transparent)]
+    Alloc(#[from] octrace_format::memory::AllocError),
 }
 
 /// The bake crate's result type.

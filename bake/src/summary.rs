@@ -52,8 +52,9 @@ pub fn json(
         "bytes": {
             "octree": b.octree, "triangles": b.triangles, "boxes": b.boxes,
             "cube_map": b.cube_map, "point_location": b.point_location, "shading": b.shading,
-            "total": b.total(),
+            "distance": b.distance, "total": b.total(),
         },
+        "distance": distance_json(v),
         "scene_data": {
             "materials": v.shading.materials.iter().map(material_json).collect::<Vec<_>>(),
             "parts": v.shading.parts.iter().zip(&surface.parts).map(|(p, edges)| {
@@ -111,6 +112,18 @@ pub fn json(
             "xxh3": format!("{:016x}", s.xxh3),
         })).collect::<Vec<_>>(),
     })
+}
+
+/// The closest-point search's tree baked into the scene (`bake --distance`), or null.
+fn distance_json(v: &SceneView<'_>) -> serde_json::Value {
+    match octrace_format::distance::Tree::parse(v.distance) {
+        Some(t) => json!({
+            "nodes": t.nodes.len(), "clusters": t.clusters(), "triangles": t.prims.len(),
+            "bytes": 4 * v.distance.len() as u64,
+            "bytes_per_triangle": 4.0 * v.distance.len() as f64 / t.prims.len().max(1) as f64,
+        }),
+        None => serde_json::Value::Null,
+    }
 }
 
 /// Whether the bake's depth is what `f32` precision allows at the scene's position and

@@ -27,7 +27,7 @@ fn bake_then_inspect_prints_exactly_this() {
     assert!(out.starts_with("baked cube.obj: 13 triangles (1 degenerate) -> "), "{out}");
     let text = ok(dir.path(), &["inspect", "cube.oct"]);
     let expected = "\
-cube.oct: octrace scene, format 9.0, 0.0 MB
+cube.oct: octrace scene, format 10.0, 0.0 MB
 triangles          12 stored, 1 degenerate left out, 13 in the input
 leaves             246 (246 before 2:1 balance, +0.0 %; 52 empty)
 depth histogram    2:38  3:208
@@ -36,7 +36,8 @@ overfull leaves    0 (at depth 3, the limit, with more than 16 triangles: 8 x th
 fans               none (no leaf of 256+ references has 24+ triangles around one vertex)
 neighbours / leaf  mean 5.46
 cube map           4 x 4 texels a face, level 2
-bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB; total 0.0 MB
+bytes              octree 0.0 MB, triangles 0.0 MB, boxes 0.0 MB, cube map 0.0 MB, point location 0.0 MB, shading 0.0 MB, distance 0.0 MB; total 0.0 MB
+distance           none (closest points make their tree on the first query; bake --distance stores it)
 bake               max depth 3, leaf size 2, margin 9.536743e-7 of the root edge; time not recorded (reproducible file)
 bounds             mesh [0.0, 0.0, 0.0] .. [1.0, 1.0, 1.0]; root cube at [0.0, 0.0, 0.0], edge 1
 surface            closed (18 edges, each in two triangles; all consistently oriented)
@@ -55,6 +56,33 @@ effects            none (primary rays only)
     assert_eq!(names, octrace_format::SECTION_NAMES);
     let bytes: u64 = sections.iter().map(|s| s["bytes"].as_u64().unwrap()).sum();
     assert_eq!(bytes + octrace_format::HEADER_LEN as u64, json["file_bytes"].as_u64().unwrap());
+    assert_eq!(json["distance"], serde_json::Value::Null);
+}
+
+/// `bake --distance` stores the closest-point tree: `inspect` gives its size, and the
+/// distances are those of the scene without it.
+#[test]
+fn bake_distance_stores_the_closest_point_tree() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(dir.path(), &["bake", "cube.obj", "-o", "plain.oct"]);
+    ok(dir.path(), &["bake", "cube.obj", "-o", "near.oct", "--distance"]);
+    let json: serde_json::Value = serde_json::from_str(&ok(dir.path(), &["inspect", "near.oct", "--json"])).unwrap();
+    let d = &json["distance"];
+    assert_eq!((d["triangles"].as_u64(), d["clusters"].as_u64(), d["nodes"].as_u64()), (Some(12), Some(2), Some(1)));
+    // 4 header words, root and one node of 96, 3 cluster starts, 12 triangles.
+    assert_eq!(d["bytes"].as_u64(), Some(4 * (4 + 2 * 96 + 3 + 12)));
+    assert_eq!(json["bytes"]["distance"], d["bytes"]);
+    assert!(ok(dir.path(), &["inspect", "near.oct"]).contains("distance           1 nodes, 2 clusters"));
+    ok(dir.path(), &["points", "plain.oct", "--count", "300", "-o", "p.bin"]);
+    for scene in ["plain", "near"] {
+        ok(dir.path(), &["distance", &format!("{scene}.oct"), "--points", "p.bin", "-o", &format!("{scene}.bin")]);
+    }
+    let (plain, near) =
+        (std::fs::read(dir.path().join("plain.bin")).unwrap(), std::fs::read(dir.path().join("near.bin")).unwrap());
+    assert_eq!(plain.len(), 300 * 28);
+    // Distance, point, triangle and barycentrics (28 bytes a point) alike.
+    assert_eq!(plain, near);
 }
 
 /// A disk fanned from its centre leaves a leaf at the depth limit holding every

@@ -426,6 +426,7 @@ pub(crate) fn view_of<'a>(
             &shading.textures,
             decoded,
         ),
+        distance: bytemuck::cast_slice(a.distance.as_slice()),
         root: a.root.to_native(),
         shading,
     }

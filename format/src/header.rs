@@ -5,7 +5,7 @@ use crate::error::{Error, Result, Version};
 /// The eight bytes every baked scene starts with.
 pub const MAGIC: [u8; 8] = *b"OCTRACE\0";
 /// The format version this build writes, and the newest it reads.
-pub const VERSION: Version = Version { major: 9, minor: 0 };
+pub const VERSION: Version = Version { major: 10, minor: 0 };
 /// Length of the fixed part of the header.
 pub const FIXED_HEADER_LEN: usize = 64;
 /// Length of one section-table entry: a 16-byte name, the length, the xxh3-64.
@@ -29,10 +29,11 @@ pub const SECTION_NAMES: [&str; SECTION_COUNT] = [
     "tangents",
     "texels",
     "images",
+    "distance",
     "root",
 ];
-/// Number of sections in a version 9.0 file (as in 8.0).
-pub const SECTION_COUNT: usize = 15;
+/// Number of sections in a version 10.0 file (15 in 8.0 and 9.0).
+pub const SECTION_COUNT: usize = 16;
 /// Header length in bytes, section table included; the archive starts right after it.
 pub const HEADER_LEN: usize = FIXED_HEADER_LEN + SECTION_COUNT * SECTION_ENTRY_LEN;
 /// Alignment of the archive within the file and in memory.
@@ -56,6 +57,7 @@ const SECTION_LABELS: [&str; SECTION_COUNT] = [
     "section tangents",
     "section texels",
     "section images",
+    "section distance",
     "section root",
 ];
 
@@ -341,7 +343,7 @@ mod tests {
     #[test]
     fn other_versions_name_both_versions() {
         for (major, minor) in
-            [(1u16, 0u16), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 0), (8, 0), (10, 0), (0, 9), (9, 1)]
+            [(1u16, 0u16), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 0), (8, 0), (9, 0), (11, 0), (0, 10), (10, 1)]
         {
             let mut b = sample().encode();
             b[8..10].copy_from_slice(&major.to_le_bytes());
@@ -349,7 +351,7 @@ mod tests {
             let err = Header::decode(&b, FILE_LEN).unwrap_err();
             let msg = err.to_string();
             assert!(matches!(err, Error::UnsupportedVersion { .. }), "{msg}");
-            assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("9.0"), "{msg}");
+            assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("10.0"), "{msg}");
         }
     }
 

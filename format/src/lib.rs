@@ -25,6 +25,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod distance;
 mod error;
 mod file;
 mod header;
@@ -126,6 +127,7 @@ pub mod testing {
             tangents: vec![],
             texels: vec![],
             images: vec![],
+            distance: vec![],
             root: 0,
             shading: Default::default(),
             decoded: Default::default(),
@@ -167,8 +169,9 @@ pub mod testing {
                     3 => poke_words(&mut s.tangents, &mut pick),
                     1 => poke_floats(&mut s.uvs, &mut pick),
                     2 => poke_words(&mut s.colors, &mut pick),
-                    _ => match pick(2) {
+                    _ => match pick(3) {
                         0 => poke_words(&mut s.texels, &mut pick),
+                        1 => poke_words(&mut s.distance, &mut pick),
                         _ => poke_words(&mut s.images, &mut pick),
                     },
                 },

@@ -100,6 +100,9 @@ pub struct BakedScene {
     /// The encoded images of the textures kept encoded ([`crate::Encoded`]), their
     /// bytes four to a word (little-endian, the last word padded with zeros), or empty.
     pub images: Vec<u32>,
+    /// The closest-point search's tree ([`crate::distance`]: `bake --distance`), or
+    /// empty (the runtime then makes it on the first closest-point query).
+    pub distance: Vec<u32>,
     /// The point-location tree's root reference.
     pub root: u32,
     /// Materials, lights, cameras and the effects the scene calls for.
@@ -140,6 +143,7 @@ impl BakedScene {
                 &self.shading.textures,
                 &self.decoded,
             ),
+            distance: &self.distance,
             root: self.root,
             shading: &self.shading,
         }

@@ -20,12 +20,14 @@ pub struct ArrayBytes {
     pub point_location: u64,
     /// The shading arrays: material ids, normals, texture coordinates, vertex colours, texels.
     pub shading: u64,
+    /// The closest-point search's tree ([`crate::distance`]; 0 where the scene has none).
+    pub distance: u64,
 }
 
 impl ArrayBytes {
     /// Sum of the arrays.
     pub fn total(&self) -> u64 {
-        self.octree + self.triangles + self.boxes + self.cube_map + self.point_location + self.shading
+        self.octree + self.triangles + self.boxes + self.cube_map + self.point_location + self.shading + self.distance
     }
 }
 
@@ -120,6 +122,7 @@ impl SceneStatistics {
                         + view.texels.stored().len()
                         + view.texels.images().len() / 4,
                 ),
+                distance: four(view.distance.len()),
             },
         })
     }

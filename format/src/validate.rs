@@ -52,11 +52,12 @@ impl SceneView<'_> {
             let index = self.index_tree()?;
             self.check_records(&index)?;
             self.check_leaves(&index, 0..leaves)?;
-            return self.check_cube_map(&index);
+            self.check_cube_map(&index)?;
+            return self.check_distance();
         }
         // A large file: the independent checks run side by side on two threads.
         std::thread::scope(|s| {
-            let ids = s.spawn(|| self.check_triangle_ids());
+            let ids = s.spawn(|| self.check_triangle_ids().and_then(|()| self.check_distance()));
             let index = &self.index_tree()?;
             self.check_records(index)?;
             std::thread::scope(|s| {
@@ -81,6 +82,12 @@ fn join(handle: std::thread::ScopedJoinHandle<'_, Result<()>>) -> Result<()> {
 }
 
 impl SceneView<'_> {
+    /// The closest-point tree, where the scene has one ([`crate::distance`]).
+    fn check_distance(&self) -> Result<()> {
+        crate::distance::check(self.distance, self.triangles)
+            .map_err(|why| Error::corrupt(format!("the distance section: {why}")))
+    }
+
     fn check_sizes(&self) -> Result<()> {
         let p = &self.params;
         if p.max_depth > MAX_LEVEL || p.cube_level > p.max_depth {

@@ -62,6 +62,8 @@ pub struct SceneView<'a> {
     /// Texels of the scene's textures (stored, and decoded from the encoded images
     /// when first read), or empty.
     pub texels: crate::Texels<'a>,
+    /// The closest-point search's tree ([`crate::distance`]), or empty.
+    pub distance: &'a [u32],
     /// Root reference of the point-location tree.
     pub root: u32,
     /// Materials, lights, cameras and effects.
@@ -97,7 +99,7 @@ impl LeafRecord<'_> {
 impl<'a> SceneView<'a> {
     /// The arrays as 32-bit words, in the file's section order (octree, tri_refs,
     /// triangles, triangle_ids, boxes, cube_map, nodes, material_ids, normals, uvs,
-    /// colors, tangents, texels, images):
+    /// colors, tangents, texels, images, distance):
     /// the sections before `root` hold exactly these bytes.
     pub fn section_words(&self) -> [&'a [u32]; crate::SECTION_COUNT - 1] {
         [
@@ -115,6 +117,7 @@ impl<'a> SceneView<'a> {
             self.tangents,
             self.texels.stored(),
             bytemuck::cast_slice(self.texels.images()),
+            self.distance,
         ]
     }
 

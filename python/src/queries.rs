@@ -397,7 +397,7 @@ impl Scene {
             on_threads(nthreads, || -> PyResult<_> {
                 let points = to_points(values)?;
                 let mut near = zeros(points.len(), "closest points")?;
-                let bounds = self.inner.surface_bounds();
+                let bounds = self.inner.surface_bounds().map_err(runtime_error)?;
                 self.inner.tracer().par_closest_point_batch(bounds, points, max_distance, &mut near);
                 Ok(near)
             })?
@@ -501,7 +501,7 @@ impl Scene {
                 };
                 let mut near = zeros(points.len(), "closest points")?;
                 self.inner.tracer().par_closest_point_batch(
-                    self.inner.surface_bounds(),
+                    self.inner.surface_bounds().map_err(runtime_error)?,
                     points,
                     max_distance,
                     &mut near,

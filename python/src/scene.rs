@@ -127,7 +127,7 @@ impl Scene {
         threads: Threads,
         max_memory: Option<u64>,
     ) -> PyResult<Scene> {
-        let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, threads)?;
+        let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, false, threads)?;
         let mesh = mesh_of_arrays(vertices, triangles)?;
         py.detach(|| {
             let baked = options.bake(&mesh)?;

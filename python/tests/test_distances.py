@@ -143,3 +143,19 @@ def test_raycasting_scene_answers_by_geometry():
     np.testing.assert_allclose(scene.compute_signed_distance(p).numpy(), [0.25, 0.5, np.sqrt(3.0)], rtol=1e-7)
     inside = np.array([[0.5, 0.5, 0.6]], np.float32)
     np.testing.assert_allclose(scene.compute_signed_distance(inside).numpy(), [-0.4], rtol=1e-6)
+
+
+def test_a_file_baked_with_its_distance_tree_answers_the_same(tmp_path, points):
+    v, t = cube_arrays()
+    v = LO + v * (HI - LO)
+    summaries = {}
+    for name, distance in (("plain", False), ("near", True)):
+        octrace.bake_arrays(v, t, tmp_path / f"{name}.oct", distance=distance)
+        summaries[name] = octrace.Scene(tmp_path / f"{name}.oct")
+    plain, near = summaries["plain"], summaries["near"]
+    assert plain.inspect()["distance"] is None
+    assert near.inspect()["distance"]["triangles"] == len(t)
+    a, b = plain.compute_closest_points(points), near.compute_closest_points(points)
+    for key in ("points", "primitive_ids", "primitive_uvs", "primitive_normals"):
+        np.testing.assert_array_equal(np.asarray(a[key]), np.asarray(b[key]), err_msg=key)
+    np.testing.assert_array_equal(plain.compute_signed_distance(points), near.compute_signed_distance(points))

@@ -21,7 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = Scene::open(&path)?;
     let view = scene.view();
     let (uniform, near) = point_sets::point_sets(&view, n);
-    let bounds = scene.surface_bounds();
+    let bounds = scene.surface_bounds()?;
     let tracer = scene.tracer();
     if let Ok(which) = std::env::var("CLOSEST_ONLY") {
         let pts = if which == "near" { &near } else { &uniform };

@@ -387,7 +387,9 @@ impl Scene {
     /// The point of the surface nearest `p`: the distance exact, correctly rounded to
     /// `f32`, the triangle the nearest (of equally near ones, the lowest input index),
     /// the point and its barycentrics rounded from `f64` ([`Tracer::closest_point`]).
-    /// `None` for a scene without triangles or a point that is not finite.
+    /// `None` for a scene without triangles or a point that is not finite (or where the
+    /// search's tree is to be made and its memory cannot be had: [`Scene::surface_bounds`]
+    /// says so, and [`Scene::closest_points_batch`] returns it as an error).
     ///
     /// # Example
     /// ```
@@ -400,21 +402,30 @@ impl Scene {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn closest_point(&self, p: [f32; 3]) -> Option<ClosestPoint> {
-        self.shared_tracer().closest_point(self.surface_bounds(), p, f32::INFINITY)
+        self.shared_tracer().closest_point(self.surface_bounds().ok()?, p, f32::INFINITY)
     }
 
     /// The closest-point search's tree ([`crate::cpu::SurfaceBounds`]: the triangles in
-    /// clusters, bounded): made on the first call, about 50 bytes a triangle (tens of
-    /// milliseconds for the bunny, a few hundred for the dragon's 871k triangles).
-    pub fn surface_bounds(&self) -> &crate::cpu::SurfaceBounds {
-        self.inner.bounds.get_or_init(|| crate::cpu::SurfaceBounds::of(self.shared_tracer()))
+    /// clusters, bounded): the scene's `distance` section where it was baked with one
+    /// (`bake --distance`: nothing to make), else made on the first call (15-40 bytes a
+    /// triangle; tens of milliseconds for the bunny, a few hundred for the dragon's
+    /// 871k triangles).
+    ///
+    /// # Errors
+    /// [`Error::Alloc`] where the memory for a tree to be made cannot be had.
+    pub fn surface_bounds(&self) -> Result<&crate::cpu::SurfaceBounds> {
+        if let Some(made) = self.inner.bounds.get() {
+            return Ok(made);
+        }
+        let made = crate::cpu::SurfaceBounds::of(self.shared_tracer())?;
+        Ok(self.inner.bounds.get_or_init(|| made))
     }
 
     /// [`Scene::closest_point`] if it lies at most `max_distance` from `p` (the rounded
     /// distance compared): a band around the surface, whose far points are answered
     /// `None` sooner.
     pub fn closest_point_within(&self, p: [f32; 3], max_distance: f32) -> Option<ClosestPoint> {
-        self.shared_tracer().closest_point(self.surface_bounds(), p, max_distance)
+        self.shared_tracer().closest_point(self.surface_bounds().ok()?, p, max_distance)
     }
 
     /// [`Scene::closest_point_within`] for many points, on all cores (`f32::INFINITY`
@@ -424,7 +435,7 @@ impl Scene {
     /// [`Error::Alloc`] where the answers' memory (40 bytes a point) cannot be had.
     pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<Option<ClosestPoint>>> {
         let mut out = octrace_format::memory::try_vec(points.len(), "closest points")?;
-        self.tracer().par_closest_point_batch(self.surface_bounds(), points, max_distance, &mut out);
+        self.tracer().par_closest_point_batch(self.surface_bounds()?, points, max_distance, &mut out);
         Ok(out)
     }
 

@@ -23,6 +23,10 @@ pub fn exercise(scene: &Scene, rays: &[Ray]) {
     let _ = scene.length_inside_batch(rays);
     let points: Vec<[f32; 3]> = rays.iter().map(|r| r.origin.to_array()).collect();
     let _ = scene.contains_batch(&points);
+    let _ = scene.closest_points_batch(&points, f32::INFINITY);
+    for p in &points {
+        let _ = scene.closest_point_within(*p, 0.5);
+    }
     for p in &points {
         let _ = tracer.contains_by_vote(*p, 3);
     }

@@ -37,6 +37,7 @@ use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
+use octrace_format::distance::{morton, split};
 use octrace_format::memory::{try_with_capacity, AllocError};
 
 use crate::cpu::{cross, dot, sub};
@@ -559,53 +560,4 @@ fn not_finite(p: [f32; 3]) -> Option<Winding> {
     } else {
         None
     }
-}
-
-/// The ranges of `codes[start..end]` (sorted, more than one) by the first three bits
-/// below `63 - 3 level` in which they differ, each with the level of its own next
-/// bits; past the codes' last bits (many equal centroids), equal parts. A tree's
-/// children (the winding numbers' clusters, the closest-point search's).
-pub(crate) fn split(codes: &[u64], start: usize, end: usize, level: u32) -> Vec<(usize, usize, u32)> {
-    let mut cuts = Vec::with_capacity(9);
-    let mut level = level;
-    while level < 21 {
-        let shift = 60 - 3 * level;
-        cuts.clear();
-        cuts.push(start);
-        for digit in 1..8u64 {
-            let at = start + codes[start..end].partition_point(|&c| (c >> shift) & 7 < digit);
-            if at > *cuts.last().unwrap_or(&start) && at < end {
-                cuts.push(at);
-            }
-        }
-        cuts.push(end);
-        if cuts.len() > 2 {
-            break;
-        }
-        level += 1;
-    }
-    if level >= 21 {
-        cuts.clear();
-        let step = (end - start).div_ceil(8).max(1);
-        cuts.extend((start..end).step_by(step));
-        cuts.push(end);
-    }
-    cuts.windows(2).map(|w| (w[0], w[1], level + 1)).collect()
-}
-
-/// The 63-bit Morton code of `g` in the box `lo..hi` (21 bits an axis).
-pub(crate) fn morton(g: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
-    let mut code = 0u64;
-    let cells = (1u64 << 21) as f64;
-    let q = [0, 1, 2].map(|k| {
-        let span = hi[k] - lo[k];
-        let f = if span > 0.0 { (g[k] - lo[k]) / span } else { 0.0 };
-        ((f * cells) as u64).min((1 << 21) - 1)
-    });
-    for bit in (0..21).rev() {
-        for axis in q {
-            code = code << 1 | (axis >> bit) & 1;
-        }
-    }
-    code
 }

@@ -45,11 +45,11 @@ pub fn bunny_scene() -> &'static Scene {
 }
 
 /// The shaded torus (`procedural::shaded_torus`: texture, mask, normals, texture
-/// coordinates, vertex colours), baked to depth 5 with four triangles a leaf: every
-/// section of the file holds bytes.
+/// coordinates, vertex colours), baked to depth 5 with four triangles a leaf and its
+/// closest-point tree (`distance`): every section of the file holds bytes.
 pub fn torus_scene() -> octrace_format::BakedScene {
     let mesh = octrace_bake::procedural::shaded_torus(16, 8);
-    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), ..BuildParams::auto() })
+    bake(&mesh, &BuildParams { max_depth: Some(5), leaf_size: Some(4), distance: true, ..BuildParams::auto() })
         .expect("the torus bakes")
 }
 

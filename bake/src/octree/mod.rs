@@ -34,6 +34,8 @@ pub enum BakeStage {
     Balance,
     /// Face links, cube map, arrays.
     Link,
+    /// The closest-point search's tree ([`BuildParams::distance`]).
+    Distance,
 }
 
 impl BakeStage {
@@ -44,6 +46,7 @@ impl BakeStage {
             BakeStage::Build => "subdividing",
             BakeStage::Balance => "balancing 2:1",
             BakeStage::Link => "linking neighbours",
+            BakeStage::Distance => "grouping triangles for closest points",
         }
     }
 }
@@ -188,6 +191,31 @@ pub fn degenerate_warning(scene: &BakedScene) -> Option<String> {
     Some(format!("{bad} of {n} triangles ({:.1} %) are degenerate and left out{cause}", 100.0 * share))
 }
 
+/// Puts the stored triangles in the order of the closest-point tree `words` made over
+/// them (its clusters' triangles side by side): `order` (input indices, by stored
+/// index) and the leaves' references `refs` follow, and the tree's own indices become
+/// `0, 1, 2, ...`. The leaves' lists keep their order (by input index).
+fn in_distance_order(words: &mut [u32], order: &mut Vec<u32>, refs: &mut [u32]) -> Result<()> {
+    use octrace_format::memory::try_vec;
+    let n = order.len();
+    if octrace_format::distance::Tree::parse(words).map(|t| t.prims.len()) != Some(n) {
+        return Ok(());
+    }
+    let prims_at = words.len() - n;
+    let mut now: Vec<u32> = try_vec(n, "triangles in the distance tree's order")?;
+    let mut moved: Vec<u32> = try_vec(n, "triangles in the distance tree's order")?;
+    for (new, prim) in words[prims_at..].iter_mut().enumerate() {
+        now[new] = order[*prim as usize];
+        moved[*prim as usize] = new as u32;
+        *prim = new as u32;
+    }
+    for r in refs {
+        *r = moved[*r as usize];
+    }
+    *order = now;
+    Ok(())
+}
+
 /// Bakes a mesh into a scene, reporting stages to `progress`.
 ///
 /// Runs on the current rayon pool; the result does not depend on its thread count.
@@ -266,13 +294,24 @@ fn bake_within(
     progress(BakeStage::Link);
     let flat = FlatTree::new(root);
     let cube = cube_level(flat.leaf_cells.len(), resolved.max_depth);
-    let arrays = flatten::arrays(&flat, mesh.triangles.len(), root_lo, root_size, cube, limits)?;
+    let mut arrays = flatten::arrays(&flat, mesh.triangles.len(), root_lo, root_size, cube, limits)?;
     drop(flat);
     debug_assert_eq!(arrays.tri_order.len(), kept, "every triangle lies in some leaf");
-    // Sized up front (a flat_map's collect grows by doubling: a copy and a quarter more
-    // at the peak).
-    let mut triangles = Vec::with_capacity(9 * arrays.tri_order.len());
-    triangles.extend(arrays.tri_order.iter().flat_map(|&t| mesh.triangles[t as usize].concat()));
+    let stored_triangles = |order: &[u32]| {
+        // Sized up front (a flat_map's collect grows by doubling: a copy and a quarter
+        // more at the peak).
+        let mut triangles = Vec::with_capacity(9 * order.len());
+        triangles.extend(order.iter().flat_map(|&t| mesh.triangles[t as usize].concat()));
+        triangles
+    };
+    let mut triangles = stored_triangles(&arrays.tri_order);
+    let mut distance = Vec::new();
+    if params.distance {
+        progress(BakeStage::Distance);
+        distance = octrace_format::distance::build(&triangles, |_| true)?;
+        in_distance_order(&mut distance, &mut arrays.tri_order, &mut arrays.tri_refs)?;
+        triangles = stored_triangles(&arrays.tri_order);
+    }
     // The stored order, as input indices.
     let triangle_ids: Vec<u32> = arrays.tri_order;
     // Per-triangle attributes follow the stored order, when the mesh has them.
@@ -346,6 +385,7 @@ fn bake_within(
         tangents,
         texels,
         images,
+        distance,
         root: arrays.root,
         shading,
         decoded: Default::default(),

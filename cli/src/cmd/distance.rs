@@ -107,7 +107,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let closed = scene.edges().is_closed();
     let (near, inside, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
         // The search's bounds (and the inside labels) are made once, before the clock.
-        scene.surface_bounds();
+        scene.surface_bounds()?;
         if args.signed && closed {
             scene.solid()?;
         } else if args.signed && args.vote.is_none() {

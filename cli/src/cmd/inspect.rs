@@ -159,15 +159,29 @@ impl<'a> Report<'a> {
             format!("neighbours / leaf  mean {:.2}", s.neighbours_per_leaf_mean),
             format!("cube map           {res} x {res} texels a face, level {}", v.params.cube_level),
             format!(
-                "bytes              octree {}, triangles {}, boxes {}, cube map {}, point location {}, shading {}; total {}",
+                "bytes              octree {}, triangles {}, boxes {}, cube map {}, point location {}, shading {}, \
+                 distance {}; total {}",
                 mb(b.octree),
                 mb(b.triangles),
                 mb(b.boxes),
                 mb(b.cube_map),
                 mb(b.point_location),
                 mb(b.shading),
+                mb(b.distance),
                 mb(b.total())
             ),
+            match octrace_format::distance::Tree::parse(v.distance) {
+                Some(t) => format!(
+                    "distance           {} nodes, {} clusters, {:.1} bytes a triangle (closest points: nothing to make \
+                     at open)",
+                    thousands(t.nodes.len() as u64),
+                    thousands(t.clusters() as u64),
+                    b.distance as f64 / t.prims.len().max(1) as f64
+                ),
+                None => "distance           none (closest points make their tree on the first query; \
+                         bake --distance stores it)"
+                    .to_string(),
+            },
             format!(
                 "bake               max depth {}{}, leaf size {}, margin {:e} of the root edge; time {}",
                 v.params.max_depth,

@@ -23,12 +23,13 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
+use octrace_format::distance::{Kid, Tree};
+use octrace_format::layout::TRIANGLE_FLOATS;
 use octrace_format::memory::try_with_capacity;
 use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
 pub use bounds::SurfaceBounds;
-use bounds::{Kid, Tri};
 
 use crate::exact::distance::{point_on, squared_distance, Square};
 
@@ -323,7 +324,6 @@ fn thin(m2: f64, k: f64, v: &[[f64; 3]; 3]) -> bool {
 struct Best {
     near: Near,
     prim: u32,
-    id: u32,
     /// Its exact squared distance, once asked.
     exact: Option<Square>,
 }
@@ -374,7 +374,7 @@ impl Tracer<'_> {
     /// use octrace_runtime::Scene;
     /// let scene = Scene::from_baked(bake(&procedural::grid(4, 1.0), &BuildParams::auto())?)?;
     /// let tracer = scene.tracer();
-    /// let bounds = SurfaceBounds::of(&tracer);
+    /// let bounds = SurfaceBounds::of(&tracer)?;
     /// let near = tracer.closest_point(&bounds, [0.3, 0.6, 0.25], f32::INFINITY).expect("a surface");
     /// assert_eq!(near.distance, 0.25);
     /// assert_eq!(near.point, [0.3, 0.6, 0.0]);
@@ -393,7 +393,7 @@ impl Tracer<'_> {
         p: [f32; 3],
         max_distance: f32,
     ) -> Option<ClosestPoint> {
-        self.closest_inline(bounds, scratch, p, max_distance)
+        self.closest_inline(&bounds.tree(&self.view)?, scratch, p, max_distance)
     }
 
     /// The search, inlined where it is called: into [`Tracer::closest_point_with`] and
@@ -401,7 +401,7 @@ impl Tracer<'_> {
     #[inline(always)]
     fn closest_inline(
         &self,
-        bounds: &SurfaceBounds,
+        tree: &Tree<'_>,
         scratch: &mut ClosestScratch,
         p: [f32; 3],
         max_distance: f32,
@@ -417,7 +417,7 @@ impl Tracer<'_> {
         let mut best: Option<Best> = None;
         let heap = &mut scratch.heap;
         heap.clear();
-        let (d2, word) = bounds.root(pd);
+        let (d2, word) = bounds::root(tree, pd);
         heap.push(Pending { d2, node: word });
         let mut visits = 0usize;
         while let Some(next) = heap.pop() {
@@ -427,17 +427,17 @@ impl Tracer<'_> {
                 break;
             }
             visits += 1;
-            if visits > bounds.node_count() + 64 {
+            if visits > bounds::node_count(tree) + 64 {
                 break; // each is pushed once: a guard, not a limit
             }
-            match bounds.kid(next.node) {
+            match tree.kid(next.node) {
                 None => {}
-                Some(Kid::Cluster(tris)) => self.closest_in_cluster(p, pd, tris, &mut best),
+                Some(Kid::Cluster(prims)) => self.closest_in_cluster(p, pd, prims, &mut best),
                 Some(Kid::Node(node)) => {
                     let bound = best.map_or(limit2, |b| b.near.d2 + b.near.err);
-                    for (&word, d2) in node.kids.iter().zip(node.bounds.distance2(pd)) {
+                    for (&word, d2) in node.kids.iter().zip(bounds::distance2(&node.bounds, pd)) {
                         if d2 * (1.0 - 1e-9) <= bound {
-                            bounds.prefetch(word);
+                            bounds::prefetch(tree, self.view.triangles, word);
                             heap.push(Pending { d2, node: word });
                         }
                     }
@@ -456,7 +456,7 @@ impl Tracer<'_> {
         Some(ClosestPoint {
             distance,
             point: q.map(|x| x as f32),
-            triangle: best.id,
+            triangle: self.input_id(best.prim),
             prim: best.prim,
             u: u as f32,
             v: v as f32,
@@ -465,9 +465,13 @@ impl Tracer<'_> {
 
     /// Measures the triangles of a cluster against the best so far.
     #[inline(always)]
-    fn closest_in_cluster(&self, p: [f32; 3], pd: [f64; 3], tris: &[Tri], best: &mut Option<Best>) {
+    fn closest_in_cluster(&self, p: [f32; 3], pd: [f64; 3], prims: &[u32], best: &mut Option<Best>) {
         let v = &self.view;
-        for &Tri { ref t, prim, id } in tris {
+        for &prim in prims {
+            let Some(t) = v.triangles.get(prim as usize * TRIANGLE_FLOATS..(prim as usize + 1) * TRIANGLE_FLOATS)
+            else {
+                continue;
+            };
             // The triangle's box is a cheap first look.
             if let Some(b) = best {
                 let mut gap2 = 0.0;
@@ -497,7 +501,7 @@ impl Tracer<'_> {
             let within = best.map_or(f64::INFINITY, |b| b.near.d2 + b.near.err);
             let Some(near) = near_f64_within(pd, t, within) else { continue };
             let Some(b) = *best else {
-                *best = Some(Best { near, prim, id, exact: None });
+                *best = Some(Best { near, prim, exact: None });
                 continue;
             };
             // Certainly farther, or certainly nearer.
@@ -505,14 +509,14 @@ impl Tracer<'_> {
                 continue;
             }
             if near.d2 + near.err < b.near.d2 - b.near.err {
-                *best = Some(Best { near, prim, id, exact: None });
+                *best = Some(Best { near, prim, exact: None });
                 continue;
             }
             // Certainly nearest at the same vertex or on the same segment: exactly as
             // near, the lower id wins (its exact distance, if known, is the same).
             if near.on != On::Unknown && near.on == b.near.on {
-                if id < b.id {
-                    *best = Some(Best { near, prim, id, exact: None });
+                if self.input_id(prim) < self.input_id(b.prim) {
+                    *best = Some(Best { near, prim, exact: None });
                 }
                 continue;
             }
@@ -521,12 +525,17 @@ impl Tracer<'_> {
             let this = squared_distance(p, v.triangle(StoredIndex(prim)));
             let wins = match this.cmp(&held) {
                 Ordering::Less => true,
-                Ordering::Equal => id < b.id,
+                Ordering::Equal => self.input_id(prim) < self.input_id(b.prim),
                 Ordering::Greater => false,
             };
-            *best =
-                Some(if wins { Best { near, prim, id, exact: Some(this) } } else { Best { exact: Some(held), ..b } });
+            *best = Some(if wins { Best { near, prim, exact: Some(this) } } else { Best { exact: Some(held), ..b } });
         }
+    }
+
+    /// The input index of stored triangle `prim` (read only where a tie or the answer
+    /// asks: one array fewer in the search's loop).
+    fn input_id(&self, prim: u32) -> u32 {
+        self.view.triangle_ids.get(prim as usize).copied().unwrap_or(u32::MAX)
     }
 
     /// The best triangle's distance, correctly rounded: from `f64` where its error
@@ -583,17 +592,22 @@ impl Tracer<'_> {
     ) {
         use rayon::prelude::*;
         assert_eq!(points.len(), out.len(), "one result slot a point");
+        let Some(tree) = bounds.tree(&self.view) else {
+            out.fill(None);
+            return;
+        };
+        let tree = &tree;
         let runs =
             |points: &[[f32; 3]], at: &(dyn Fn(usize, usize) -> usize + Sync), out: &mut [Option<ClosestPoint>]| {
                 if parallel {
                     out.par_chunks_mut(1024)
                         .enumerate()
-                        .for_each(|(run, o)| self.closest_each(bounds, points, |k| at(run * 1024, k), max_distance, o));
+                        .for_each(|(run, o)| self.closest_each(tree, points, |k| at(run * 1024, k), max_distance, o));
                 } else {
-                    self.closest_each(bounds, points, |k| at(0, k), max_distance, out);
+                    self.closest_each(tree, points, |k| at(0, k), max_distance, out);
                 }
             };
-        match (bounds.curve_order(points), try_with_capacity(points.len(), "closest points in curve order")) {
+        match (bounds::curve_order(tree, points), try_with_capacity(points.len(), "closest points in curve order")) {
             (Some(order), Ok(mut found)) => {
                 found.resize(points.len(), None);
                 runs(points, &|first, k| order[first + k] as usize, &mut found);
@@ -609,7 +623,7 @@ impl Tracer<'_> {
     /// `out[k]`: the answer for `points[at(k)]`, on this thread.
     fn closest_each(
         &self,
-        bounds: &SurfaceBounds,
+        tree: &Tree<'_>,
         points: &[[f32; 3]],
         at: impl Fn(usize) -> usize,
         max_distance: f32,
@@ -619,9 +633,9 @@ impl Tracer<'_> {
         if self.uses_x86_64_v3() {
             // SAFETY: the processor has these features (`uses_x86_64_v3` is never true
             // where it does not).
-            return unsafe { self.closest_each_v3(bounds, points, at, max_distance, out) };
+            return unsafe { self.closest_each_v3(tree, points, at, max_distance, out) };
         }
-        self.closest_each_loop(bounds, points, at, max_distance, out)
+        self.closest_each_loop(tree, points, at, max_distance, out)
     }
 
     /// [`Tracer::closest_each`] compiled for x86-64-v3 (AVX2: a node's eight bounds
@@ -633,19 +647,19 @@ impl Tracer<'_> {
     #[target_feature(enable = "avx2,bmi1,bmi2,fma,lzcnt,popcnt")]
     unsafe fn closest_each_v3(
         &self,
-        bounds: &SurfaceBounds,
+        tree: &Tree<'_>,
         points: &[[f32; 3]],
         at: impl Fn(usize) -> usize,
         max_distance: f32,
         out: &mut [Option<ClosestPoint>],
     ) {
-        self.closest_each_loop(bounds, points, at, max_distance, out)
+        self.closest_each_loop(tree, points, at, max_distance, out)
     }
 
     #[inline(always)]
     fn closest_each_loop(
         &self,
-        bounds: &SurfaceBounds,
+        tree: &Tree<'_>,
         points: &[[f32; 3]],
         at: impl Fn(usize) -> usize,
         max_distance: f32,
@@ -654,7 +668,7 @@ impl Tracer<'_> {
         let mut scratch = ClosestScratch::default();
         for (k, o) in out.iter_mut().enumerate() {
             let Some(&p) = points.get(at(k)) else { continue };
-            *o = self.closest_inline(bounds, &mut scratch, p, max_distance);
+            *o = self.closest_inline(tree, &mut scratch, p, max_distance);
         }
     }
 }

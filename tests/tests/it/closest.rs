@@ -53,7 +53,9 @@ fn check_exactly(name: &str, mesh: &Mesh, n: usize, near: f32) {
     let pts = points(mesh, &scene, n, near, 11);
     let view = scene.view();
     let stored: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
-    for (p, got) in pts.iter().zip(answers(&scene, &pts)) {
+    let got = answers(&scene, &pts);
+    same_with_the_baked_tree(name, mesh, &pts, &got);
+    for (p, got) in pts.iter().zip(got) {
         let got = got.unwrap_or_else(|| panic!("{name}: no closest point for {p:?}"));
         let (distance, triangle) = exact::closest(*p, &stored, view.triangle_ids).expect("triangles");
         assert_eq!(
@@ -68,6 +70,22 @@ fn check_exactly(name: &str, mesh: &Mesh, n: usize, near: f32) {
         assert!((at - Vec3::from(got.point)).length() <= 1e-5 * scale, "{name}: barycentrics of {p:?}");
         let said = (Vec3::from(got.point) - Vec3::from(*p)).length();
         assert!((said - distance).abs() <= 1e-5 * scale, "{name}: point of {p:?} at {said}, not {distance}");
+    }
+}
+
+/// The scene baked with its tree (`bake --distance`: stored triangles in the tree's
+/// order, the tree read from the validated file, nothing made at open) answers as the
+/// one that makes its tree: the same distance, triangle, point and barycentrics.
+fn same_with_the_baked_tree(name: &str, mesh: &Mesh, pts: &[[f32; 3]], want: &[Option<ClosestPoint>]) {
+    let baked = bake(mesh, &BuildParams { distance: true, ..BuildParams::auto() }).unwrap();
+    assert!(!baked.distance.is_empty(), "{name}: no distance section");
+    let file = octrace_format::SceneFile::from_bytes(&baked.to_file_bytes(0).unwrap()).expect("validates");
+    assert_eq!(file.view().distance, baked.distance.as_slice());
+    let scene = Scene::from_baked(baked).unwrap();
+    assert!(scene.surface_bounds().unwrap().is_baked(), "{name}: the tree was made, not read");
+    let without_prim = |c: &Option<ClosestPoint>| c.map(|c| ClosestPoint { prim: 0, ..c });
+    for (p, (a, b)) in pts.iter().zip(want.iter().zip(answers(&scene, pts))) {
+        assert_eq!(without_prim(a), without_prim(&b), "{name}: {p:?} with the baked tree");
     }
 }
 

@@ -38,7 +38,7 @@ fn wrong_magic_is_bad_magic() {
 #[test]
 fn older_and_newer_versions_name_both_versions() {
     for (major, minor) in
-        [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 0), (8, 0), (9, 8), (10, 0)]
+        [(1u16, 0u16), (0, 3), (2, 0), (3, 0), (4, 0), (5, 0), (6, 0), (7, 0), (8, 0), (9, 0), (10, 8), (11, 0)]
     {
         let mut bytes = scene().to_file_bytes(0).unwrap();
         bytes[8..10].copy_from_slice(&major.to_le_bytes());
@@ -46,7 +46,7 @@ fn older_and_newer_versions_name_both_versions() {
         let err = open(&bytes).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, Error::UnsupportedVersion { .. }), "{msg}");
-        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("9.0"), "{msg}");
+        assert!(msg.contains(&format!("{major}.{minor}")) && msg.contains("10.0"), "{msg}");
     }
 }
 
