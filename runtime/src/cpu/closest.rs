@@ -18,7 +18,9 @@
 //! the stored triangles (their `f32` vertices), correctly rounded to `f32`, and the
 //! triangle is the nearest one, the lowest input index among equally near ones. The
 //! nearest point and its barycentrics are rounded from `f64` (within a few `f64`
-//! roundings of the exact ones, and so as near as `f32` holds them).
+//! roundings of the exact ones, and so as near as `f32` holds them). A triangle with a
+//! vertex that is not finite (only in a file opened on the trusted path that breaks
+//! the format's rules) is never the answer.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -466,70 +468,81 @@ impl Tracer<'_> {
     /// Measures the triangles of a cluster against the best so far.
     #[inline(always)]
     fn closest_in_cluster(&self, p: [f32; 3], pd: [f64; 3], prims: &[u32], best: &mut Option<Best>) {
-        let v = &self.view;
+        let all = self.view.triangles;
         for &prim in prims {
-            let Some(t) = v.triangles.get(prim as usize * TRIANGLE_FLOATS..(prim as usize + 1) * TRIANGLE_FLOATS)
-            else {
-                continue;
-            };
-            // The triangle's box is a cheap first look.
-            if let Some(b) = best {
-                let mut gap2 = 0.0;
-                for k in 0..3 {
-                    // Plain comparisons (a NaN coordinate gives some gap, which the
-                    // triangle's own measure, NaN, then could not beat anyway).
-                    let (a, b, c) = (t[k], t[k + 3], t[k + 6]);
-                    let lo = if a < b { a } else { b };
-                    let lo = if lo < c { lo } else { c } as f64;
-                    let hi = if a > b { a } else { b };
-                    let hi = if hi > c { hi } else { c } as f64;
-                    let below = lo - pd[k];
-                    let above = pd[k] - hi;
-                    let gap = if below > 0.0 {
-                        below
-                    } else if above > 0.0 {
-                        above
-                    } else {
-                        0.0
-                    };
-                    gap2 += gap * gap;
-                }
-                if gap2 * (1.0 - 1e-9) > b.near.d2 + b.near.err {
-                    continue;
-                }
+            let at = prim as usize * TRIANGLE_FLOATS;
+            if let Some(t) = all.get(at..at + TRIANGLE_FLOATS) {
+                self.closest_in_triangle(p, pd, prim, t, best);
             }
-            let within = best.map_or(f64::INFINITY, |b| b.near.d2 + b.near.err);
-            let Some(near) = near_f64_within(pd, t, within) else { continue };
-            let Some(b) = *best else {
-                *best = Some(Best { near, prim, exact: None });
-                continue;
-            };
-            // Certainly farther, or certainly nearer.
-            if near.d2 - near.err > b.near.d2 + b.near.err {
-                continue;
-            }
-            if near.d2 + near.err < b.near.d2 - b.near.err {
-                *best = Some(Best { near, prim, exact: None });
-                continue;
-            }
-            // Certainly nearest at the same vertex or on the same segment: exactly as
-            // near, the lower id wins (its exact distance, if known, is the same).
-            if near.on != On::Unknown && near.on == b.near.on {
-                if self.input_id(prim) < self.input_id(b.prim) {
-                    *best = Some(Best { near, prim, exact: None });
-                }
-                continue;
-            }
-            // Too close to call in f64: exact arithmetic decides (ties to the lower id).
-            let held = b.exact.unwrap_or_else(|| squared_distance(p, v.triangle(StoredIndex(b.prim))));
-            let this = squared_distance(p, v.triangle(StoredIndex(prim)));
-            let wins = match this.cmp(&held) {
-                Ordering::Less => true,
-                Ordering::Equal => self.input_id(prim) < self.input_id(b.prim),
-                Ordering::Greater => false,
-            };
-            *best = Some(if wins { Best { near, prim, exact: Some(this) } } else { Best { exact: Some(held), ..b } });
         }
+    }
+
+    /// Measures stored triangle `prim` (its vertices `t`) against the best so far.
+    #[inline(always)]
+    fn closest_in_triangle(&self, p: [f32; 3], pd: [f64; 3], prim: u32, t: &[f32], best: &mut Option<Best>) {
+        let v = &self.view;
+        // The triangle's box is a cheap first look.
+        if let Some(b) = best {
+            let mut gap2 = 0.0;
+            for k in 0..3 {
+                // Plain comparisons (a NaN coordinate gives some gap, which the
+                // triangle's own measure, NaN, then could not beat anyway).
+                let (a, b, c) = (t[k], t[k + 3], t[k + 6]);
+                let lo = if a < b { a } else { b };
+                let lo = if lo < c { lo } else { c } as f64;
+                let hi = if a > b { a } else { b };
+                let hi = if hi > c { hi } else { c } as f64;
+                let below = lo - pd[k];
+                let above = pd[k] - hi;
+                let gap = if below > 0.0 {
+                    below
+                } else if above > 0.0 {
+                    above
+                } else {
+                    0.0
+                };
+                gap2 += gap * gap;
+            }
+            if gap2 * (1.0 - 1e-9) > b.near.d2 + b.near.err {
+                return;
+            }
+        }
+        let within = best.map_or(f64::INFINITY, |b| b.near.d2 + b.near.err);
+        let Some(near) = near_f64_within(pd, t, within) else { return };
+        // A vertex that is not finite (a file on the trusted path that breaks the
+        // format's rules): never the answer, and never handed to exact arithmetic.
+        if !near.d2.is_finite() {
+            return;
+        }
+        let Some(b) = *best else {
+            *best = Some(Best { near, prim, exact: None });
+            return;
+        };
+        // Certainly farther, or certainly nearer.
+        if near.d2 - near.err > b.near.d2 + b.near.err {
+            return;
+        }
+        if near.d2 + near.err < b.near.d2 - b.near.err {
+            *best = Some(Best { near, prim, exact: None });
+            return;
+        }
+        // Certainly nearest at the same vertex or on the same segment: exactly as
+        // near, the lower id wins (its exact distance, if known, is the same).
+        if near.on != On::Unknown && near.on == b.near.on {
+            if self.input_id(prim) < self.input_id(b.prim) {
+                *best = Some(Best { near, prim, exact: None });
+            }
+            return;
+        }
+        // Too close to call in f64: exact arithmetic decides (ties to the lower id).
+        let held = b.exact.unwrap_or_else(|| squared_distance(p, v.triangle(StoredIndex(b.prim))));
+        let this = squared_distance(p, v.triangle(StoredIndex(prim)));
+        let wins = match this.cmp(&held) {
+            Ordering::Less => true,
+            Ordering::Equal => self.input_id(prim) < self.input_id(b.prim),
+            Ordering::Greater => false,
+        };
+        *best = Some(if wins { Best { near, prim, exact: Some(this) } } else { Best { exact: Some(held), ..b } });
     }
 
     /// The input index of stored triangle `prim` (read only where a tie or the answer
