@@ -310,8 +310,9 @@ fn centroid(v: &[[f64; 3]; 3]) -> [f64; 3] {
 }
 
 /// The tree of the stored triangles `triangles` (nine `f32` each) for which `listed`
-/// holds, as the section's words. About 12 bytes a triangle (the nodes 7, `prims` 4),
-/// and 16 more while it is made (the Morton codes sorted with the indices).
+/// holds, as the section's words. About 24 bytes a triangle (the nodes 19, `prims` 4,
+/// the clusters' starts 1), and 16 more while it is made (the Morton codes sorted
+/// with the indices).
 ///
 /// # Errors
 /// [`AllocError`] where the memory cannot be had.

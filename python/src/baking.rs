@@ -154,10 +154,10 @@ fn write_scene(
 ///         may use).
 ///     max_instances: the most node placements a glTF scene may make.
 ///     max_triangles: the most triangles the mesh may hold once instanced.
-///     distance: bake the closest-point search's tree into the file (about 12-20
-///         bytes a triangle), so that the scene's first closest-point, distance or
+///     distance: bake the closest-point search's tree into the file (about 24 bytes
+///         a triangle), so that the scene's first closest-point, distance or
 ///         signed-distance query makes nothing (without it, the first query makes it:
-///         0.3-0.5 s for the dragon's 871k triangles).
+///         0.3-0.4 s for the dragon's 871k triangles).
 ///     compress: write the file zstd-compressed, at ``level`` (1-22).
 ///     record_time: record the bake's duration in the header (files then differ).
 ///

@@ -56,7 +56,8 @@ pub struct BuildParams {
     /// Bake the closest-point search's tree into the file (its `distance` section,
     /// [`octrace_format::distance`]; the stored triangles then follow its order), so
     /// that a scene answers its first closest-point query without making it: about
-    /// 12-20 bytes a triangle. Off: the runtime makes it on the first such query.
+    /// 24 bytes a triangle (the dragon's file 1.34x, its bake 1.34x as long). Off: the
+    /// runtime makes it on the first such query.
     pub distance: bool,
 }
 

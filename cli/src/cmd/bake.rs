@@ -77,9 +77,9 @@ pub(crate) struct Args {
     #[arg(long)]
     pub compress: bool,
     /// Bake the closest-point search's tree into the file (its `distance` section, about
-    /// 12-20 bytes a triangle; the dragon's bake takes about 1.3x as long), so that the
-    /// scene's first closest-point, distance or signed-distance query makes nothing
-    /// (without it, the first query makes the tree: 0.3-0.5 s for the dragon).
+    /// 24 bytes a triangle: the dragon's file 1.34x as large, its bake 1.34x as long), so
+    /// that the scene's first closest-point, distance or signed-distance query makes
+    /// nothing (without it, the first query makes the tree: 0.3-0.4 s for the dragon).
     #[arg(long)]
     pub distance: bool,
     /// zstd level for --compress (1-22).

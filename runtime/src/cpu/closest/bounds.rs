@@ -18,8 +18,8 @@ use super::U;
 use crate::cpu::tracer::Tracer;
 
 /// The closest-point search's tree of a scene (see the module docs): the scene's
-/// `distance` section, or one made from its triangles (some 15-40 bytes a triangle and
-/// 16 more while it is made: 0.3-0.5 s for the dragon's 871k triangles on one core).
+/// `distance` section, or one made from its triangles (about 24 bytes a triangle and
+/// 16 more while it is made: 0.3-0.4 s for the dragon's 871k triangles on one core).
 /// [`crate::Scene`] keeps it.
 #[derive(Clone, Debug)]
 pub struct SurfaceBounds {
