@@ -211,8 +211,8 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
-/// `x` rounded to an `f32` at most `x`.
-fn down(x: f64) -> f32 {
+/// `x` rounded to an `f32` at most `x` (NaN stays NaN).
+pub(crate) fn down(x: f64) -> f32 {
     let f = x as f32;
     if f as f64 > x {
         f.next_down()
@@ -221,8 +221,8 @@ fn down(x: f64) -> f32 {
     }
 }
 
-/// `x` rounded to an `f32` at least `x`.
-fn up(x: f64) -> f32 {
+/// `x` rounded to an `f32` at least `x` (NaN stays NaN).
+pub(crate) fn up(x: f64) -> f32 {
     let f = x as f32;
     if (f as f64) < x {
         f.next_up()

@@ -389,16 +389,8 @@ impl SceneView<'_> {
         let margin = self.params.margin as f64 * self.bounds.root_size as f64;
         // The enlarged cell in f32, rounded outwards: comparisons with the f32 vertices
         // can then only accept more, never refuse a triangle the bake kept.
-        let outward = |x: f64, up: bool| {
-            let f = x as f32;
-            match (f as f64).partial_cmp(&x) {
-                Some(std::cmp::Ordering::Less) if up => f.next_up(),
-                Some(std::cmp::Ordering::Greater) if !up => f.next_down(),
-                _ => f,
-            }
-        };
-        let lo: [f32; 3] = std::array::from_fn(|a| outward(cell[a] as f64 - margin, false));
-        let hi: [f32; 3] = std::array::from_fn(|a| outward(cell[a + 3] as f64 + margin, true));
+        let lo: [f32; 3] = std::array::from_fn(|a| crate::distance::down(cell[a] as f64 - margin));
+        let hi: [f32; 3] = std::array::from_fn(|a| crate::distance::up(cell[a + 3] as f64 + margin));
         let refs = &self.tri_refs[rec.tri_offset as usize..][..rec.tri_count as usize];
         // Descending input order (the walks' tie rule rests on it), which also rules
         // out a triangle listed twice.

@@ -304,14 +304,15 @@ fn bake_within(
         triangles.extend(order.iter().flat_map(|&t| mesh.triangles[t as usize].concat()));
         triangles
     };
-    let mut triangles = stored_triangles(&arrays.tri_order);
     let mut distance = Vec::new();
     if params.distance {
         progress(BakeStage::Distance);
-        distance = octrace_format::distance::build(&triangles, |_| true)?;
+        // Made over the triangles in the leaves' order (a copy dropped before they are
+        // put in its own), then stored in its order.
+        distance = octrace_format::distance::build(&stored_triangles(&arrays.tri_order), |_| true)?;
         in_distance_order(&mut distance, &mut arrays.tri_order, &mut arrays.tri_refs)?;
-        triangles = stored_triangles(&arrays.tri_order);
     }
+    let triangles = stored_triangles(&arrays.tri_order);
     // The stored order, as input indices.
     let triangle_ids: Vec<u32> = arrays.tri_order;
     // Per-triangle attributes follow the stored order, when the mesh has them.
