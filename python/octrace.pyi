@@ -10,6 +10,8 @@ import numpy.typing as npt
 __version__: str
 INVALID_ID: int
 """The id of "no triangle" and "no part" in the returned arrays (0xFFFFFFFF)."""
+HAS_GPU: bool
+"""Whether the module was built with the GPU (``Scene(..., device="gpu")``)."""
 
 _Path = Union[str, PathLike]
 _Rays = Union[npt.NDArray[np.float32], Sequence[Sequence[float]]]
@@ -23,6 +25,9 @@ class BakeError(ValueError):
 
 class NotClosedError(ValueError):
     """A query that needs an inside, on a scene that is not closed."""
+
+class GpuError(RuntimeError):
+    """The GPU cannot serve a scene opened with ``device="gpu"`` (the message says why)."""
 
 def bake(
     mesh: _Path,
@@ -57,7 +62,9 @@ def bake_arrays(
 ) -> dict[str, Any]: ...
 
 class Scene:
-    def __init__(self, path: _Path, *, mmap: bool = False, trusted: bool = False) -> None: ...
+    def __init__(
+        self, path: _Path, *, mmap: bool = False, trusted: bool = False, device: str = "cpu"
+    ) -> None: ...
     @staticmethod
     def from_arrays(
         vertices: npt.ArrayLike,
@@ -68,7 +75,12 @@ class Scene:
         margin: float = 2**-20,
         threads: int = 0,
         max_memory: Optional[int] = None,
+        device: str = "cpu",
     ) -> "Scene": ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def adapter(self) -> str: ...
     @property
     def triangle_count(self) -> int: ...
     @property

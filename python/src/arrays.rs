@@ -146,14 +146,21 @@ pub(crate) fn tuple(shape: &[usize]) -> String {
 pub(crate) const PIECE: usize = 1 << 18;
 
 /// Calls `trace(first, rays)` with the rays `[ox, oy, oz, dx, dy, dz]` of `values`
-/// over `[tmin, tmax]`, a piece of at most [`PIECE`] at a time (`first`: the index of
-/// the piece's first ray); a NaN anywhere is an error naming the ray, before any work.
-pub(crate) fn each_piece(values: &[f32], tmin: f32, tmax: f32, mut trace: impl FnMut(usize, &[Ray])) -> PyResult<()> {
+/// over `[tmin, tmax]`, a piece of at most `piece` at a time ([`PIECE`] on the CPU;
+/// `first`: the index of the piece's first ray), until one fails; a NaN anywhere is an
+/// error naming the ray, before any work.
+pub(crate) fn each_piece(
+    values: &[f32],
+    tmin: f32,
+    tmax: f32,
+    piece: usize,
+    mut trace: impl FnMut(usize, &[Ray]) -> PyResult<()>,
+) -> PyResult<()> {
     refuse_nan_rays(values)?;
-    let mut rays = Vec::new();
-    for (p, chunk) in values.chunks(6 * PIECE).enumerate() {
+    let mut rays = room(piece.min(values.len() / 6), "rays")?;
+    for (p, chunk) in values.chunks(6 * piece).enumerate() {
         chunk.par_chunks_exact(6).map(|r| ray_of(r, tmin, tmax)).collect_into_vec(&mut rays);
-        trace(p * PIECE, &rays);
+        trace(p * piece, &rays)?;
     }
     Ok(())
 }

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use pyo3::create_exception;
-use pyo3::exceptions::{PyMemoryError, PyOSError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
 create_exception!(
@@ -27,6 +27,15 @@ create_exception!(
     PyValueError,
     "A query that needs an inside (compute_occupancy, contains, length_inside) on a scene \
      that is not closed: some edge is used by an odd number of triangles."
+);
+
+create_exception!(
+    octrace,
+    GpuError,
+    PyRuntimeError,
+    "The GPU cannot serve a scene opened with device=\"gpu\": no Vulkan adapter, an adapter \
+     without 64-bit floats (the exact triangle test needs them), a scene larger than the \
+     adapter's buffers, a device lost; or a module built without the GPU."
 );
 
 /// An I/O error as Python's `OSError` subclass for its kind (`FileNotFoundError`,

@@ -8,6 +8,7 @@
 //!
 //! - `scene`: `octrace.Scene`, opening and what a scene holds, and its calls' faces;
 //! - `queries`: the calls' work (rays traced, points located, answers gathered);
+//! - `device`: where ray queries run, the CPU or (the `gpu` feature) the GPU;
 //! - `pinhole`: `Scene.create_rays_pinhole`, Open3D's cameras;
 //! - `baking`: `octrace.bake` and `octrace.bake_arrays`;
 //! - `arrays`: numpy in and out, the thread pools;
@@ -16,6 +17,7 @@
 
 mod arrays;
 mod baking;
+mod device;
 mod errors;
 mod pinhole;
 mod queries;
@@ -25,7 +27,7 @@ use pyo3::prelude::*;
 
 use crate::arrays::INVALID_ID;
 use crate::baking::{bake, bake_arrays};
-use crate::errors::{BakeError, FormatError, NotClosedError};
+use crate::errors::{BakeError, FormatError, GpuError, NotClosedError};
 use crate::scene::Scene;
 
 /// Bake meshes into octrace scenes and ask them exact ray queries from numpy.
@@ -45,5 +47,9 @@ fn octrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", py.get_type::<FormatError>())?;
     m.add("BakeError", py.get_type::<BakeError>())?;
     m.add("NotClosedError", py.get_type::<NotClosedError>())?;
+    m.add("GpuError", py.get_type::<GpuError>())?;
+    // Whether `Scene(..., device="gpu")` can be asked: the module was built with the
+    // `gpu` feature (README: "The GPU from Python").
+    m.add("HAS_GPU", cfg!(feature = "gpu"))?;
     Ok(())
 }

@@ -12,7 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 
-use crate::arrays::{array, each_piece, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID, PIECE};
+use crate::arrays::{array, each_piece, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
 use crate::errors::{collected, runtime_error, zeros, NotClosedError};
 use crate::scene::Scene;
 
@@ -72,7 +72,7 @@ impl Scene {
         let n = input.count();
         let answers = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                let tracer = self.inner.tracer();
+                let tracer = self.rays();
                 let mut out = Nearest {
                     t: zeros(n, "t_hit")?,
                     geometry: zeros(n, "geometry_ids")?,
@@ -81,11 +81,12 @@ impl Scene {
                     normals: zeros(3 * n, "primitive_normals")?,
                     surface: if surface { Some(Surface::new(n)?) } else { None },
                 };
-                let mut hits = vec![None; PIECE.min(n)];
-                each_piece(values, 0.0, f32::INFINITY, |first, rays| {
+                let mut hits = zeros(tracer.piece().min(n), "hits")?;
+                each_piece(values, 0.0, f32::INFINITY, tracer.piece(), |first, rays| {
                     let (hits, end) = (&mut hits[..rays.len()], first + rays.len());
-                    tracer.par_intersect_batch(rays, hits);
+                    tracer.intersect(rays, hits)?;
                     self.gather(&mut out, first, end, hits);
+                    Ok(())
                 })?;
                 Ok(out)
             })?
@@ -167,10 +168,10 @@ impl Scene {
         let (values, n) = (input.values(), input.count());
         let occluded = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                let tracer = self.inner.tracer();
+                let tracer = self.rays();
                 let mut occluded = zeros(n, "occlusions")?;
-                each_piece(values, tnear, tfar, |first, rays| {
-                    tracer.par_occluded_batch(rays, &mut occluded[first..first + rays.len()])
+                each_piece(values, tnear, tfar, tracer.piece(), |first, rays| {
+                    tracer.occluded(rays, &mut occluded[first..first + rays.len()])
                 })?;
                 Ok(occluded)
             })?
@@ -185,16 +186,17 @@ impl Scene {
         let (values, n) = (input.values(), input.count());
         let counts = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                let tracer = self.inner.tracer();
+                let tracer = self.rays();
                 let mut counts = zeros(n, "intersection counts")?;
-                let mut piece = vec![CrossingCount::default(); PIECE.min(n)];
-                each_piece(values, 0.0, f32::INFINITY, |first, rays| {
+                let mut piece = zeros::<CrossingCount>(tracer.piece().min(n), "crossing counts")?;
+                each_piece(values, 0.0, f32::INFINITY, tracer.piece(), |first, rays| {
                     let piece = &mut piece[..rays.len()];
-                    tracer.par_count_crossings_batch(rays, piece);
+                    tracer.count_crossings(rays, piece)?;
                     counts[first..first + rays.len()]
                         .par_iter_mut()
                         .zip(&*piece)
                         .for_each(|(out, c)| *out = c.total.min(i32::MAX as u32) as i32);
+                    Ok(())
                 })?;
                 Ok(counts)
             })?
@@ -217,7 +219,7 @@ impl Scene {
         let lists = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let rays = to_rays(values, 0.0, f32::INFINITY)?;
-                self.inner.crossings_batch_within(&rays, max_hits.unwrap_or(usize::MAX), budget).map_err(runtime_error)
+                self.rays().crossings(&rays, max_hits.unwrap_or(usize::MAX), budget)
             })?
         })?;
         let k = lists.crossings.len();
@@ -345,7 +347,8 @@ impl Scene {
         let values = input.values();
         let lengths = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                self.inner.length_inside_batch(&to_rays(values, 0.0, tmax)?).map_err(runtime_error)
+                let solid = self.inner.solid().map_err(runtime_error)?;
+                self.rays().length_inside(solid, &to_rays(values, 0.0, tmax)?)
             })?
         })?;
         array(py, lengths, input.shape(&[]))

@@ -53,6 +53,18 @@ def _mesh_arrays(mesh):
         "triangle.indices, or vertices and triangles); or pass vertex_positions and triangle_indices")
 
 
+def _device(device):
+    """``"cpu"`` or ``"gpu"`` from a name or an Open3D device (``CPU:0``, ``CUDA:0``)."""
+    if device is None:
+        return "cpu"
+    name = str(device).split(":")[0].strip().lower()
+    if name in ("cpu", "gpu"):
+        return name
+    if name in ("cuda", "sycl"):
+        return "gpu"
+    raise ValueError(f"device: {device!r}, expected 'cpu' or 'gpu' (or Open3D's CPU:0, CUDA:0, SYCL:0)")
+
+
 def make(Scene, invalid_id):
     """The ``RaycastingScene`` class over the extension's ``Scene``."""
 
@@ -71,8 +83,12 @@ def make(Scene, invalid_id):
 
         INVALID_ID = invalid_id
 
-        def __init__(self, nthreads=0):
+        def __init__(self, nthreads=0, device=None):
+            """``device``: where the ray queries run, ``"cpu"`` (the default) or
+            ``"gpu"`` (``octrace.Scene``'s ``device``); Open3D's devices are taken too,
+            ``CPU:0`` for the CPU and ``CUDA:0``/``SYCL:0`` for the GPU."""
             self._nthreads = nthreads
+            self._device = _device(device)
             self._vertices = []
             self._triangles = []
             self._scene = None
@@ -112,7 +128,8 @@ def make(Scene, invalid_id):
                     raise ValueError("the scene is empty: add_triangles first")
                 offsets = np.cumsum([0] + [len(v) for v in self._vertices])
                 triangles = np.concatenate([t + o for t, o in zip(self._triangles, offsets)])
-                self._scene = Scene.from_arrays(np.concatenate(self._vertices), triangles, threads=self._nthreads)
+                self._scene = Scene.from_arrays(np.concatenate(self._vertices), triangles, threads=self._nthreads,
+                                                 device=getattr(self, "_device", "cpu"))
                 self._first = np.cumsum([0] + [len(t) for t in self._triangles])
             return self._scene
 

@@ -3,12 +3,14 @@
 //! work is in `queries`).
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
 use crate::arrays::{array, Threads};
 use crate::baking::{mesh_of_arrays, BakeOptions};
+use crate::device::{Device, Rays};
 use crate::errors::{format_error, open_error, runtime_error};
 use crate::pinhole::pinhole;
 
@@ -32,12 +34,58 @@ use crate::pinhole::pinhole;
 ///     depth = scene.cast_rays(rays)["t_hit"]          # (480, 640), inf where missed
 #[pyclass(module = "octrace", frozen)]
 pub(crate) struct Scene {
-    pub(crate) inner: octrace_runtime::Scene,
+    pub(crate) inner: Arc<octrace_runtime::Scene>,
     /// The file's size on disk, for `inspect` (0 for a scene baked in memory).
     file_bytes: u64,
     /// The file and the options it was opened with, absolute (what a pickle holds);
     /// `None` for a scene baked in memory.
     opened: Option<(PathBuf, bool, bool)>,
+    /// Where the ray queries run.
+    device: Device,
+    /// The scene on the GPU, where `device` is `Gpu`.
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::device::gpu::OnGpu>,
+}
+
+impl Scene {
+    /// A scene whose ray queries run on `device`.
+    fn on(
+        inner: octrace_runtime::Scene,
+        device: Device,
+        file_bytes: u64,
+        opened: Option<(PathBuf, bool, bool)>,
+    ) -> PyResult<Scene> {
+        let inner = Arc::new(inner);
+        #[cfg(feature = "gpu")]
+        let gpu = match device {
+            Device::Gpu => Some(crate::device::gpu::OnGpu::new(&inner)?),
+            Device::Cpu => None,
+        };
+        #[cfg(not(feature = "gpu"))]
+        if device == Device::Gpu {
+            return Err(crate::errors::GpuError::new_err(
+                "this octrace module was built without the GPU: reinstall it with the gpu feature, \
+                 MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (README: The GPU from Python)",
+            ));
+        }
+        Ok(Scene {
+            inner,
+            file_bytes,
+            opened,
+            device,
+            #[cfg(feature = "gpu")]
+            gpu,
+        })
+    }
+
+    /// The tracer the ray queries go to: the CPU's, or the scene's on the GPU.
+    pub(crate) fn rays(&self) -> Rays<'_> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return Rays::Gpu(gpu.tracer());
+        }
+        Rays::Cpu(self.inner.tracer())
+    }
 }
 
 #[pymethods]
@@ -54,13 +102,27 @@ impl Scene {
     ///         or the format's rules: microseconds whatever the size, for files this
     ///         pipeline baked (implies ``mmap``). A damaged file then answers wrongly,
     ///         never crashes.
+    ///     device: where the ray queries (``cast_rays``, ``test_occlusions``,
+    ///         ``count_intersections``, ``list_intersections``, ``length_inside``) run:
+    ///         ``"cpu"``, or ``"gpu"`` (a module built with the GPU, ``HAS_GPU``; a
+    ///         Vulkan adapter with 64-bit floats), which answers as the CPU does, ray for
+    ///         ray, bit for bit: the same exact triangle test, the rays its filter
+    ///         cannot decide finished on the CPU. Point queries run on the CPU.
     ///
     /// Raises:
     ///     OSError: the file cannot be read.
     ///     FormatError: the file is not a valid octrace scene.
+    ///     GpuError: ``device="gpu"`` and the GPU cannot serve the scene (the message
+    ///         says why).
+    ///
+    /// Example::
+    ///
+    ///     scene = octrace.Scene("bunny.oct", device="gpu")
+    ///     scene.cast_rays(rays)["t_hit"]   # as Scene("bunny.oct"), bit for bit
     #[new]
-    #[pyo3(signature = (path, *, mmap=false, trusted=false))]
-    fn new(py: Python<'_>, path: PathBuf, mmap: bool, trusted: bool) -> PyResult<Scene> {
+    #[pyo3(signature = (path, *, mmap=false, trusted=false, device="cpu"))]
+    fn new(py: Python<'_>, path: PathBuf, mmap: bool, trusted: bool, device: &str) -> PyResult<Scene> {
+        let device = Device::parse(device)?;
         py.detach(|| {
             let inner = if trusted {
                 // SAFETY: the caller asked for a map and was told (above) that the
@@ -75,12 +137,12 @@ impl Scene {
             .map_err(|e| open_error(e, &path))?;
             let file_bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
             let absolute = std::path::absolute(&path).unwrap_or(path);
-            Ok(Scene { inner, file_bytes, opened: Some((absolute, mmap, trusted)) })
+            Scene::on(inner, device, file_bytes, Some((absolute, mmap, trusted)))
         })
     }
 
     /// What a pickle holds: the file's absolute path and the options it was opened
-    /// with, so that a worker process (``multiprocessing``, Dask, Ray) opens the same
+    /// with (``device`` too: a worker without the GPU raises ``GpuError``), so that a worker process (``multiprocessing``, Dask, Ray) opens the same
     /// file (mapped scenes share its pages through the page cache; ``trusted=True``
     /// opens in microseconds). A scene baked in memory (``from_arrays``) has no file:
     /// ``bake_arrays`` writes one to share.
@@ -97,6 +159,7 @@ impl Scene {
         let kwargs = PyDict::new(py);
         kwargs.set_item("mmap", mmap)?;
         kwargs.set_item("trusted", trusted)?;
+        kwargs.set_item("device", self.device.name())?;
         Ok((PyTuple::new(py, [path])?, kwargs))
     }
 
@@ -106,6 +169,7 @@ impl Scene {
     ///     vertices: ``(n, 3)`` vertex positions (any real dtype; stored as float32).
     ///     triangles: ``(m, 3)`` integer vertex indices.
     ///     max_depth, leaf_size, margin, threads, max_memory: as ``octrace.bake``.
+    ///     device: where the ray queries run, as ``Scene``'s.
     ///
     /// Example::
     ///
@@ -114,8 +178,8 @@ impl Scene {
     ///     scene.cast_rays(np.array([[0.2, 0.2, 1, 0, 0, -1]], np.float32))["t_hit"]  # [1.]
     #[staticmethod]
     #[pyo3(signature = (vertices, triangles, *, max_depth=None, leaf_size=octrace_bake::octree::DEFAULT_LEAF_SIZE,
-        margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=None),
-        text_signature = "(vertices, triangles, *, max_depth=None, leaf_size=16, margin=9.5367431640625e-07, threads=0, max_memory=None)")]
+        margin=octrace_bake::octree::DEFAULT_MARGIN, threads=0, max_memory=None, device="cpu"),
+        text_signature = "(vertices, triangles, *, max_depth=None, leaf_size=16, margin=9.5367431640625e-07, threads=0, max_memory=None, device='cpu')")]
     #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         py: Python<'_>,
@@ -126,7 +190,9 @@ impl Scene {
         margin: f32,
         threads: Threads,
         max_memory: Option<u64>,
+        device: &str,
     ) -> PyResult<Scene> {
+        let device = Device::parse(device)?;
         let options = BakeOptions::new(max_depth, leaf_size, margin, max_memory, false, threads)?;
         let mesh = mesh_of_arrays(vertices, triangles)?;
         py.detach(|| {
@@ -135,8 +201,25 @@ impl Scene {
             let bytes = baked.to_file_bytes(0).map_err(format_error)?;
             drop(baked);
             let inner = octrace_runtime::Scene::from_bytes(&bytes).map_err(runtime_error)?;
-            Ok(Scene { inner, file_bytes: 0, opened: None })
+            Scene::on(inner, device, 0, None)
         })
+    }
+
+    /// Where the ray queries run: ``"cpu"`` or ``"gpu"``.
+    #[getter]
+    fn device(&self) -> &'static str {
+        self.device.name()
+    }
+
+    /// What runs the ray queries: ``"cpu"``, or the GPU adapter's name, driver and kind
+    /// (lavapipe, Mesa's software Vulkan, says ``Cpu``).
+    #[getter]
+    fn adapter(&self) -> String {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return gpu.adapter().to_string();
+        }
+        "cpu".to_string()
     }
 
     /// Input triangles (degenerate ones included: they are never hit).
@@ -537,11 +620,12 @@ impl Scene {
     fn __repr__(&self) -> String {
         let v = self.inner.view();
         format!(
-            "octrace.Scene({} triangles, {} leaves, {} parts{})",
+            "octrace.Scene({} triangles, {} leaves, {} parts{}{})",
             v.stats.input_triangles,
             v.leaf_count(),
             self.inner.shading().parts.len(),
-            if self.inner.edges().is_closed() { ", closed" } else { "" }
+            if self.inner.edges().is_closed() { ", closed" } else { "" },
+            if self.device == Device::Gpu { ", on the gpu" } else { "" }
         )
     }
 }

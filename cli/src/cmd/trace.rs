@@ -126,20 +126,27 @@ pub(crate) fn inputs(args: &Args) -> anyhow::Result<(octrace_runtime::Scene, Vec
 /// ray: `trace_crossings::run`).
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let (scene, rays, to_stdout) = inputs(&args)?;
+    // Each ray's distance and triangle (a miss: `tmax`, `MISS`), as the file has them.
     let (hits, seconds, on) = if args.gpu {
+        use octrace_runtime::gpu::{Answers, GpuNearest};
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = gpu_tracer(&gpu, &scene)?;
-        let (hits, timings) = tracer.trace_timed(&rays, args.occluded)?;
+        // Distance and triangle come back, 8 bytes a ray: what the file holds.
+        let mut nearest = vec![GpuNearest::default(); rays.len()];
+        let timings = tracer.trace_into(&rays, args.occluded, Answers::Nearest(&mut nearest))?;
         // The device's own clock where it has timestamps, else the host's.
         let (kernel, clock) = match timings.kernel_device {
             Some(d) => (d, "GPU timestamps"),
             None => (timings.kernel, "host clock"),
         };
-        (hits, kernel.as_secs_f64(), format!("kernel only, {clock}, {}", gpu.describe()))
+        let hits =
+            nearest.iter().zip(&rays).map(|(h, r)| if h.triangle == MISS { (r.tmax, MISS) } else { (h.t, h.triangle) });
+        (hits.collect::<Vec<_>>(), kernel.as_secs_f64(), format!("kernel only, {clock}, {}", gpu.describe()))
     } else {
         let (hits, seconds) = trace_cpu(&scene, &rays, &args)?;
+        let hits = hits.iter().zip(&rays).map(|(h, r)| h.map_or((r.tmax, MISS), |h| (h.t, h.triangle)));
         (
-            hits,
+            hits.collect(),
             seconds,
             format!(
                 "tracing only, {}",
@@ -148,13 +155,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         )
     };
     let mut out = Vec::with_capacity(8 * rays.len());
-    for (r, h) in rays.iter().zip(&hits) {
-        let (t, id) = h.map_or((r.tmax, MISS), |h| (h.t, h.triangle));
+    for (t, id) in &hits {
         out.extend_from_slice(&t.to_le_bytes());
         out.extend_from_slice(&id.to_le_bytes());
     }
     crate::output::write_data(&args.out, &[&out])?;
-    let n = hits.iter().flatten().count();
+    let n = hits.iter().filter(|h| h.1 != MISS).count();
     let rate = rays.len() as f64 / seconds.max(1e-9) / 1e6;
     let what = if args.occluded { "occluded" } else { "hits" };
     if args.json {
