@@ -1181,6 +1181,12 @@ fn contains_answers_points_and_refuses_bad_input() {
         assert!(answers.iter().all(|&a| a <= 1));
         let piped = octrace(dir.path(), &["contains", "cube.oct", "--points", set, "--out", "-"]);
         assert!(piped.status.success() && piped.stdout == answers);
+        // On the GPU (lavapipe in CI): the same answers, checked.
+        let gpu = ["contains", "cube.oct", "--points", set, "--out", "gpu.bin", "--check", "--gpu"];
+        if let Some(out) = on_gpu(dir.path(), &gpu, "contains --gpu") {
+            assert!(out.contains("5,000 compared, 0 wrong") && out.contains("on the GPU"), "{out}");
+            assert!(std::fs::read(dir.path().join("gpu.bin")).unwrap() == answers, "{set}: contains --gpu");
+        }
     }
     ok(dir.path(), &["contains", "cube.oct", "--points", "near.bin", "--out", "ref.bin", "--reference"]);
     assert_eq!(std::fs::read(dir.path().join("ref.bin")).unwrap(), std::fs::read(dir.path().join("in.bin")).unwrap());

@@ -2,8 +2,9 @@
 //! in a module built with the `gpu` feature) in the GPU's kernels, with the CPU's exact
 //! triangle test so that both answer the same, ray for ray, bit for bit.
 //!
-//! Point queries (closest points, distances, inside/outside, winding numbers) run on
-//! the CPU whatever the device.
+//! Of the point queries, inside/outside (`contains`, `compute_occupancy` on a closed
+//! mesh) runs on the GPU too, the points its cells cannot decide finished on the CPU;
+//! closest points, distances and winding numbers run on the CPU whatever the device.
 
 use octrace_runtime::cpu::{BatchCrossings, CrossingCount};
 use octrace_runtime::{Hit, Ray, Tracer};
@@ -107,6 +108,20 @@ impl Rays<'_> {
             Rays::Cpu(t) => t.par_crossings_batch_within(rays, limit, max_bytes).map_err(runtime_error),
             #[cfg(feature = "gpu")]
             Rays::Gpu(t) => t.crossings_within(rays, limit, max_bytes).map_err(gpu::error),
+        }
+    }
+
+    /// Whether each point lies inside `solid` (on the GPU: the points in empty leaves,
+    /// the rest on the CPU).
+    pub(crate) fn contains(&self, solid: &octrace_runtime::cpu::Solid, points: &[[f32; 3]]) -> PyResult<Vec<bool>> {
+        match self {
+            Rays::Cpu(t) => {
+                let mut out = crate::errors::zeros(points.len(), "inside answers")?;
+                t.par_contains_batch(solid, points, &mut out);
+                Ok(out)
+            }
+            #[cfg(feature = "gpu")]
+            Rays::Gpu(t) => t.contains(solid, points).map_err(gpu::error),
         }
     }
 

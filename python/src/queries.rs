@@ -285,7 +285,8 @@ impl Scene {
         let values = input.values();
         let inside = query_points.py().detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                self.inner.contains_batch(to_points(values)?).map_err(runtime_error)
+                let solid = self.inner.solid().map_err(runtime_error)?;
+                self.rays().contains(solid, to_points(values)?)
             })?
         })?;
         Ok((inside, input.shape(&[])))

@@ -107,7 +107,9 @@ impl Scene {
     ///         ``"cpu"``, or ``"gpu"`` (a module built with the GPU, ``HAS_GPU``; a
     ///         Vulkan adapter with 64-bit floats), which answers as the CPU does, ray for
     ///         ray, bit for bit: the same exact triangle test, the rays its filter
-    ///         cannot decide finished on the CPU. Point queries run on the CPU.
+    ///         cannot decide finished on the CPU. Of the point queries, ``contains``
+    ///         (and ``compute_occupancy`` of a closed mesh) run there too, the points
+    ///         near the surface finished on the CPU; the others run on the CPU.
     ///
     /// Raises:
     ///     OSError: the file cannot be read.

@@ -1,7 +1,7 @@
-"""`Scene(..., device="gpu")` against the CPU's answers, bit for bit: every ray query,
+"""`Scene(..., device="gpu")` against the CPU's answers, bit for bit: every ray query
 on the bunny's standard sets and on rays through a cube's vertices and edges (the
 ties the exact test decides), with the occlusion interval, hit limits, surface data
-and pickling.
+and pickling; inside/outside of points on a closed torus.
 
 CI builds the module with the GPU (`MATURIN_PEP517_ARGS="--features gpu"`) and runs
 these on Mesa's software Vulkan (lavapipe) with OCTRACE_REQUIRE_GPU=1: there a module
@@ -159,6 +159,20 @@ def test_a_pickled_gpu_scene_opens_on_the_gpu(gpu_bunny, bunny, standard_set):
     assert again.device == "gpu"
     rays = some(standard_set[2], 4096)
     same_dicts(again.cast_rays(rays), bunny.cast_rays(rays), "unpickled")
+
+
+def test_inside_and_outside_on_the_gpu_are_the_cpus():
+    v, t = torus_arrays()
+    cpu = octrace.Scene.from_arrays(v, t)
+    gpu = on_gpu(lambda: octrace.Scene.from_arrays(v, t, device="gpu"))
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.6, 1.6, (1 << 15, 3)).astype(np.float32)
+    # Beside the surface, on it (the vertices) and on the triangles' edges.
+    points = np.concatenate([points, v, (v[t[:, 0]] + v[t[:, 1]]) / 2, v + 1e-6]).astype(np.float32)
+    inside = cpu.contains(points)
+    assert 0.1 < inside.mean() < 0.9
+    same_bits(gpu.contains(points), inside, "torus: contains")
+    same_bits(gpu.compute_occupancy(points), cpu.compute_occupancy(points), "torus: occupancy")
 
 
 def test_point_queries_on_a_gpu_scene_are_the_cpus(gpu_bunny, bunny):

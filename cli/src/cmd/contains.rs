@@ -58,6 +58,10 @@ pub(crate) struct Args {
     /// Compare with the exact oracle; fail on any difference.
     #[arg(long)]
     pub check: bool,
+    /// On the GPU (Vulkan): the kernel answers the points in empty leaves, the CPU those
+    /// near the surface; the same answers. Timed with the transfers.
+    #[arg(long, conflicts_with_all = ["vote", "reference"])]
+    pub gpu: bool,
     /// Threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -113,8 +117,23 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             }),
         );
     }
+    let mut how = "exact".to_string();
     let (inside, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
         match args.vote {
+            None if args.gpu => {
+                let solid = scene.solid()?;
+                let gpu = octrace_runtime::gpu::GpuContext::new()?;
+                let tracer = crate::cmd::trace::gpu_tracer(&gpu, &scene)?;
+                let t = Instant::now();
+                let inside = tracer.contains(solid, &points)?;
+                let seconds = t.elapsed().as_secs_f64();
+                how = format!(
+                    "exact, on the GPU with the transfers, {} of them finished on the CPU, {}",
+                    thousands(tracer.rays_finished_on_cpu()),
+                    gpu.describe()
+                );
+                Ok((inside, seconds))
+            }
             None => {
                 // The labels are made once, before the clock (a crossing count a group).
                 scene.solid().context("--vote K answers such a scene approximately")?;
@@ -134,10 +153,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let out: Vec<u8> = inside.iter().map(|&b| b as u8).collect();
     crate::output::write_data(&args.out, &[&out])?;
     let n_inside = inside.iter().filter(|&&b| b).count() as u64;
-    let how = match args.vote {
-        None => "exact".to_string(),
-        Some(k) => format!("approximate, majority of {}", counted(k as u64, "ray")),
-    };
+    if let Some(k) = args.vote {
+        how = format!("approximate, majority of {}", counted(k as u64, "ray"));
+    }
     let mut extra = json!({});
     if args.check {
         let triangles = stored_triangles(&scene);

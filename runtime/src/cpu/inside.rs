@@ -189,6 +189,14 @@ impl Solid {
         Ok(solid)
     }
 
+    /// Each leaf's label by box index, for the GPU's filter (`gpu::inside`): 0 an empty
+    /// leaf outside, 1 an empty leaf inside (its whole closed box on that side), above
+    /// 1 a leaf with triangles.
+    #[cfg(feature = "gpu")]
+    pub(crate) fn leaf_labels(&self) -> &[u8] {
+        &self.labels
+    }
+
     /// Connected groups of empty leaves (each labelled by one crossing count).
     pub fn groups(&self) -> usize {
         self.groups

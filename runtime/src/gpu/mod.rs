@@ -31,6 +31,7 @@
 mod buffers;
 mod crossings;
 mod device;
+mod inside;
 mod render;
 mod source;
 mod spirv;
@@ -142,7 +143,9 @@ struct Params {
     /// `FANS` constant says the same), then padding to the vectors' alignment.
     o_fans: u32,
     fans: u32,
-    pad: [u32; 2],
+    /// The leaf labels' count after the points (MODE 3, `inside`), then padding.
+    labels: u32,
+    pad: u32,
     root_lo: [f32; 4],
     root_hi: [f32; 4],
     box_lo: [f32; 4],
@@ -204,6 +207,8 @@ pub struct GpuTracer<'s> {
     compiler: spirv::Compiler,
     pipeline_layout: wgpu::PipelineLayout,
     crossing_kernels: std::sync::OnceLock<Result<[wgpu::ComputePipeline; 2], String>>,
+    /// The inside/outside kernel (`inside`), made on first use.
+    side_kernel: std::sync::OnceLock<Result<wgpu::ComputePipeline, String>>,
     layout: wgpu::BindGroupLayout,
     scene_buffers: Vec<wgpu::Buffer>,
     params: Params,
@@ -345,7 +350,8 @@ impl<'s> GpuTracer<'s> {
             ],
             o_fans: offsets.fans,
             fans: fans as u32,
-            pad: [0; 2],
+            labels: 0,
+            pad: 0,
             root_lo: [root_lo[0], root_lo[1], root_lo[2], b.root_size],
             root_hi: [root_hi[0], root_hi[1], root_hi[2], ((1u64 << max_depth) as f64 / b.root_size as f64) as f32],
             box_lo: [lo[0], lo[1], lo[2], rule.root as f32],
@@ -361,6 +367,7 @@ impl<'s> GpuTracer<'s> {
             compiler,
             pipeline_layout,
             crossing_kernels: std::sync::OnceLock::new(),
+            side_kernel: std::sync::OnceLock::new(),
             layout,
             scene_buffers,
             params,

@@ -48,7 +48,8 @@ struct Params {
     // The fans' words (cpu::FanIndex::gpu_words), and whether there are any.
     o_fans: u32,
     fans: u32,
-    pad0: u32,
+    // MODE 3: the leaf labels' count (a byte each, four a word, after the points).
+    labels: u32,
     pad1: u32,
     // xyz: the root cube's low corner; w: its edge.
     root_lo: vec4<f32>,
@@ -1107,6 +1108,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
     let r = ray_at(i);
     let r0 = r[0];
     let r1 = r[1];
+    if MODE == 3u {
+        var side = side_of(r0.xyz);
+        if over_budget {
+            side = UNDECIDED;
+        }
+        hits[i] = side;
+        return;
+    }
     if MODE == 0u {
         var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
         // A walk that ran out of loop budget: the host traces it again on the CPU.
@@ -1175,3 +1184,38 @@ fn ray_offset(n: u32, i: u32) -> u32 {
 
 // `HitOut::steps` of a walk that ran out of loop budget.
 const OVER_BUDGET: u32 = 0xFFFFFFFFu;
+
+// MODE 3, inside/outside of points (cpu::inside): 0 outside, 1 inside, UNDECIDED for
+// the host. A point outside the mesh box is outside; a point in an empty leaf takes
+// the leaf's label, which holds for its whole closed box (no triangle comes within the
+// bake's margin of it): the point is checked to lie in the box, so a location rounded
+// into a neighbour decides nothing. Points in leaves with triangles are the host's.
+const UNDECIDED: u32 = 2u;
+
+fn side_of(p: vec3<f32>) -> u32 {
+    if !(all(p >= params.box_lo.xyz) && all(p <= params.box_hi.xyz)) {
+        // Outside the (enlarged) mesh box, or NaN: outside, as on the CPU.
+        return 0u;
+    }
+    if any(p < params.root_lo.xyz) || any(p > params.root_hi.xyz) {
+        return UNDECIDED;
+    }
+    let leaf = descend(params.root_node, 0u, grid_coords(p));
+    let b = word(params.o_octree + leaf.x + 2u);
+    if b >= params.labels {
+        return UNDECIDED;
+    }
+    // The labels' words follow the points' (eight words a point).
+    let at = 8u * params.ray_count + b / 4u;
+    let label = (bitcast<u32>(rays[at / 4u][at % 4u]) >> (8u * (b % 4u))) & 0xFFu;
+    if label > 1u {
+        return UNDECIDED;
+    }
+    let o = params.o_boxes + 6u * b;
+    let lo = vec3<f32>(wordf(o), wordf(o + 1u), wordf(o + 2u));
+    let hi = vec3<f32>(wordf(o + 3u), wordf(o + 4u), wordf(o + 5u));
+    if all(p >= lo) && all(p <= hi) {
+        return label;
+    }
+    return UNDECIDED;
+}

@@ -107,3 +107,44 @@ fn gpu_crossings_equal_the_cpus_on_grid_vertex_and_edge_rays() {
         assert!(want.iter().filter(|&&l| l > 0.0).count() * 4 > want.len(), "{}: most segments go inside", solid.name);
     }
 }
+
+/// Inside/outside of points on the GPU (`GpuTracer::contains`): the CPU's exact
+/// answers, point for point, on the closed solids at the origin and far from it, for
+/// points uniform in the box, beside the surface, on the octree's cell planes, on the
+/// mesh's vertices, and on the corners and centres of the leaves' boxes (where the
+/// kernel's point location meets its box check); the kernel decides most points away
+/// from the surface itself.
+#[test]
+fn inside_outside_on_the_gpu_is_the_cpus() {
+    use octrace_bake::procedural::ClosedSolid;
+    let Some(gpu) = gpu("inside_outside_on_the_gpu_is_the_cpus") else { return };
+    let (mut points_in_all, mut decided) = (0, 0);
+    for (offset, scale) in [(0.0, 1.0), (1e4, 1.0), (-3e6, 100.0)] {
+        for solid in procedural::closed_solids() {
+            let solid: ClosedSolid = solid.moved(offset, scale);
+            let name = solid.label();
+            let scene = scene_of(&solid.mesh, &BuildParams::auto());
+            let near = (1e-6 * scale + 16.0 * f32::EPSILON as f64 * offset.abs()) as f32;
+            let mut points: Vec<[f32; 3]> =
+                crate::inside::points(&solid.mesh, &scene, 1000, near, 5).iter().map(|p| p.to_array()).collect();
+            points.extend(solid.mesh.triangles.iter().flatten().step_by(7).take(400));
+            let view = scene.view();
+            for bx in view.boxes.chunks_exact(6).step_by(5).take(400) {
+                points.push([bx[0], bx[1], bx[2]]);
+                points.push([bx[3], bx[4], bx[5]]);
+                points.push([0.5 * (bx[0] + bx[3]), 0.5 * (bx[1] + bx[4]), 0.5 * (bx[2] + bx[5])]);
+            }
+            let labels = scene.solid().unwrap();
+            let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+            let got = tracer.contains(labels, &points).unwrap();
+            let want = scene.contains_batch(&points).unwrap();
+            if let Some(i) = (0..points.len()).find(|&i| got[i] != want[i]) {
+                panic!("{name}: point {i} {:?}: CPU {}, GPU {}", points[i], want[i], got[i]);
+            }
+            points_in_all += points.len();
+            decided += points.len() - tracer.rays_finished_on_cpu() as usize;
+        }
+    }
+    eprintln!("inside/outside on the GPU: {decided} of {points_in_all} points decided by the kernel");
+    assert!(decided * 3 >= points_in_all, "the kernel decided {decided} of {points_in_all} points");
+}

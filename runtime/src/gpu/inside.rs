@@ -1,0 +1,109 @@
+//! Inside/outside of points on the GPU: the kernel (`MODE` 3, `side_of` in
+//! trace.wgsl) locates each point's leaf and answers where the leaf is empty, wholly on
+//! one side of the closed mesh (its label, from [`Solid`], in the points' binding);
+//! the points it leaves undecided (in leaves with triangles, near the surface) are
+//! answered by the CPU's exact [`crate::Tracer::contains`].
+
+use rayon::prelude::*;
+
+use super::{GpuResult, GpuTracer, Ray, RAYS_PER_DISPATCH};
+use crate::cpu::Solid;
+
+/// Bytes a point takes in the kernel's rays binding (a ray whose origin is the point).
+const POINT: u64 = std::mem::size_of::<Ray>() as u64;
+/// The kernel's answer for a point the host decides (`UNDECIDED` in trace.wgsl).
+const UNDECIDED: u32 = 2;
+
+impl GpuTracer<'_> {
+    /// Whether each point lies inside the closed mesh `solid` labels (made for this
+    /// tracer's scene: [`crate::Scene::solid`]): [`crate::Tracer::contains`], point
+    /// for point. The GPU answers the points in empty leaves, the CPU those in leaves
+    /// with triangles ([`GpuTracer::rays_finished_on_cpu`] counts them); a scene whose
+    /// labels do not fit a binding beside a dispatch of points is answered on the CPU.
+    ///
+    /// # Errors
+    /// [`super::GpuError::Device`] if the device is lost or a buffer cannot be read.
+    ///
+    /// # Example
+    /// ```no_run
+    /// use octrace_runtime::gpu::{GpuContext, GpuTracer};
+    /// use octrace_runtime::Scene;
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// let scene = Scene::open("skull.oct")?;
+    /// let gpu = GpuContext::new()?;
+    /// let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
+    /// let inside = tracer.contains(scene.solid()?, &[[0.0, 0.0, 0.0], [9.0, 9.0, 9.0]])?;
+    /// # Ok(()) }
+    /// ```
+    pub fn contains(&self, solid: &Solid, points: &[[f32; 3]]) -> GpuResult<Vec<bool>> {
+        let labels = solid.leaf_labels();
+        let words: Vec<u32> = labels.chunks(4).map(|c| c.iter().rev().fold(0, |w, &b| w << 8 | b as u32)).collect();
+        let label_bytes = (words.len() as u64 * 4).next_multiple_of(16);
+        let limits = self.device.limits();
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let room = max_binding.saturating_sub(label_bytes) / POINT;
+        let per_dispatch = (self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as u64).min(room) as usize;
+        let mut sides = vec![UNDECIDED; points.len()];
+        if per_dispatch >= 64 && labels.len() <= u32::MAX as usize {
+            for (part, out) in points.chunks(per_dispatch).zip(sides.chunks_mut(per_dispatch)) {
+                self.side_kernel(part, &words, labels.len() as u32, out)?;
+            }
+        }
+        let tracer = self.cpu_tracer();
+        self.finished_here(sides.par_iter().filter(|&&s| s == UNDECIDED).count());
+        Ok(sides
+            .par_iter()
+            .zip(points)
+            .map(|(&side, &p)| if side == UNDECIDED { tracer.contains(solid, p) } else { side == 1 })
+            .collect())
+    }
+
+    /// The kernel over `points` (one dispatch): each one's side into `out`.
+    fn side_kernel(&self, points: &[[f32; 3]], labels: &[u32], count: u32, out: &mut [u32]) -> GpuResult<()> {
+        use wgpu::BufferUsages as U;
+        let point_bytes = points.len() as u64 * POINT;
+        let label_bytes = (labels.len() as u64 * 4).next_multiple_of(16);
+        let input = self.buffer("octrace points", point_bytes + label_bytes, U::STORAGE | U::COPY_DST);
+        let sides = self.buffer("octrace sides", points.len() as u64 * 4, U::STORAGE | U::COPY_SRC);
+        let params_buffer =
+            self.buffer("octrace params", std::mem::size_of::<super::Params>() as u64, U::UNIFORM | U::COPY_DST);
+        let params = super::Params { ray_count: points.len() as u32, labels: count, ..self.params };
+        self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        let rays: Vec<Ray> =
+            points.par_iter().map(|&p| Ray { origin: p.into(), tmin: 0.0, dir: glam::Vec3::ZERO, tmax: 0.0 }).collect();
+        self.queue.write_buffer(&input, 0, bytemuck::cast_slice(&rays));
+        let mut padded = labels.to_vec();
+        padded.resize((label_bytes / 4) as usize, 0);
+        self.queue.write_buffer(&input, point_bytes, bytemuck::cast_slice(&padded));
+        let bind_group = self.bind_group(&params_buffer, &input, &sides);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(self.side_pipeline()?);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups((points.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
+        }
+        self.queue.submit([encoder.finish()]);
+        out.copy_from_slice(&self.read_back::<u32>(&sides, points.len() as u64 * 4)?);
+        Ok(())
+    }
+
+    /// The inside/outside kernel, built on first use.
+    fn side_pipeline(&self) -> GpuResult<&wgpu::ComputePipeline> {
+        self.side_kernel
+            .get_or_init(|| {
+                self.compiler
+                    .pipeline(
+                        &self.device,
+                        &self.pipeline_layout,
+                        &self.source(),
+                        "main",
+                        &[("MODE", 3.0), ("FANS", self.fans_constant()), ("EXACT", self.exact_constant())],
+                        "octrace inside",
+                    )
+                    .map_err(|e| e.to_string())
+            })
+            .as_ref()
+            .map_err(|e: &String| super::GpuError::Device(e.clone()))
+    }
+}
