@@ -1,8 +1,10 @@
 //! Inside/outside of points on the GPU: the kernel (`MODE` 3, `side_of` in
 //! trace.wgsl) locates each point's leaf and answers where the leaf is empty, wholly on
-//! one side of the closed mesh (its label, from [`Solid`], in the points' binding);
-//! the points it leaves undecided (in leaves with triangles, near the surface) are
-//! answered by the CPU's exact [`crate::Tracer::contains`].
+//! one side of the closed mesh (its label, from [`Solid`], in the points' binding), and
+//! under the exact test ([`super::GpuOptions::triangle_test`]) where the leaf has a
+//! reference point, by the crossings of the segment to it (what the exact test's
+//! filter leaves in doubt, and points on the surface, excepted); the points it leaves
+//! undecided are answered by the CPU's exact [`crate::Tracer::contains`].
 
 use rayon::prelude::*;
 
@@ -17,9 +19,11 @@ const UNDECIDED: u32 = 2;
 impl GpuTracer<'_> {
     /// Whether each point lies inside the closed mesh `solid` labels (made for this
     /// tracer's scene: [`crate::Scene::solid`]): [`crate::Tracer::contains`], point
-    /// for point. The GPU answers the points in empty leaves, the CPU those in leaves
-    /// with triangles ([`GpuTracer::rays_finished_on_cpu`] counts them); a scene whose
-    /// labels do not fit a binding beside a dispatch of points is answered on the CPU.
+    /// for point, exact whatever the tracer's test. The GPU answers the points in empty
+    /// leaves and, under the exact test, most of those in leaves with a reference
+    /// point; the CPU the rest ([`GpuTracer::rays_finished_on_cpu`] counts them); a
+    /// scene whose labels do not fit a binding beside a dispatch of points is answered
+    /// on the CPU.
     ///
     /// # Errors
     /// [`super::GpuError::Device`] if the device is lost or a buffer cannot be read.
@@ -49,7 +53,8 @@ impl GpuTracer<'_> {
                 self.side_kernel(part, &words, labels.len() as u32, out)?;
             }
         }
-        let tracer = self.cpu_tracer();
+        // The scene's own tracer, exact whatever the kernels' test.
+        let tracer = self.scene.tracer();
         self.finished_here(sides.par_iter().filter(|&&s| s == UNDECIDED).count());
         Ok(sides
             .par_iter()

@@ -944,7 +944,15 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
     wk.address = leaf.x;
     wk.level = leaf.y;
     wk.cell = q >> vec3<u32>(params.max_depth - leaf.y);
-    // The shear: kz the largest component, winding kept.
+    set_shear(&wk, d);
+    wk.t_best = tmax;
+    wk.done = false;
+    return wk;
+}
+
+// The watertight shear of direction d (cpu::watertight::Shear::new): kz the largest
+// component, winding kept.
+fn set_shear(wk: ptr<function, Walk>, d: vec3<f32>) {
     let ad = abs(d);
     var kz = 2u;
     if ad.x >= ad.y && ad.x >= ad.z {
@@ -960,11 +968,8 @@ fn begin(o0: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32) -> Walk {
         ky = t;
     }
     let dz = component(d, kz);
-    wk.k = vec3<u32>(kx, ky, kz);
-    wk.s = vec3<f32>(div(component(d, kx), dz), div(component(d, ky), dz), div(1.0, dz));
-    wk.t_best = tmax;
-    wk.done = false;
-    return wk;
+    (*wk).k = vec3<u32>(kx, ky, kz);
+    (*wk).s = vec3<f32>(div(component(d, kx), dz), div(component(d, ky), dz), div(1.0, dz));
 }
 
 // The nearest hit of a ray in [tmin, tmax] (with `any`, any hit), with the walk's
@@ -1188,9 +1193,13 @@ const OVER_BUDGET: u32 = 0xFFFFFFFFu;
 // MODE 3, inside/outside of points (cpu::inside): 0 outside, 1 inside, UNDECIDED for
 // the host. A point outside the mesh box is outside; a point in an empty leaf takes
 // the leaf's label, which holds for its whole closed box (no triangle comes within the
-// bake's margin of it): the point is checked to lie in the box, so a location rounded
-// into a neighbour decides nothing. Points in leaves with triangles are the host's.
+// bake's margin of it); a point in a leaf with a reference point counts the crossings
+// of the segment to it (`side_by_reference`). The point is checked to lie in the
+// leaf's box, so a location rounded into a neighbour decides nothing. The rest (leaves
+// with triangles and no reference point, decisions in doubt) are the host's.
 const UNDECIDED: u32 = 2u;
+// Leaf labels (cpu::inside): from REFERENCED on, REFERENCED + 2 * candidate + inside.
+const REFERENCED: u32 = 3u;
 
 fn side_of(p: vec3<f32>) -> u32 {
     if !(all(p >= params.box_lo.xyz) && all(p <= params.box_hi.xyz)) {
@@ -1208,14 +1217,63 @@ fn side_of(p: vec3<f32>) -> u32 {
     // The labels' words follow the points' (eight words a point).
     let at = 8u * params.ray_count + b / 4u;
     let label = (bitcast<u32>(rays[at / 4u][at % 4u]) >> (8u * (b % 4u))) & 0xFFu;
-    if label > 1u {
-        return UNDECIDED;
-    }
     let o = params.o_boxes + 6u * b;
     let lo = vec3<f32>(wordf(o), wordf(o + 1u), wordf(o + 2u));
     let hi = vec3<f32>(wordf(o + 3u), wordf(o + 4u), wordf(o + 5u));
-    if all(p >= lo) && all(p <= hi) {
+    if !(all(p >= lo) && all(p <= hi)) {
+        return UNDECIDED;
+    }
+    if label <= 1u {
         return label;
     }
+    if label >= REFERENCED && EXACT {
+        return side_by_reference(p, leaf.x, lo, hi, label);
+    }
     return UNDECIDED;
+}
+
+// A point in a leaf with a reference point (cpu::inside, contains_by_reference): the
+// reference point's side, flipped by the parity of the crossings of the segment from
+// the point to it over the leaf's triangles (the segment stays in the leaf's box,
+// whose triangles the leaf lists all), under the exact test's filter, which hands
+// back what it leaves in doubt. A crossing at a distance of zero (the point on the
+// surface, answered by the host's rule) is the host's too; any other crossing's
+// rounded distance has its exact sign. The reference point is clear of every plane of
+// the leaf's triangles, so no crossing lies near the segment's end.
+fn side_by_reference(p: vec3<f32>, address: u32, lo: vec3<f32>, hi: vec3<f32>, label: u32) -> u32 {
+    let i = (label - REFERENCED) / 2u;
+    let inside = (label - REFERENCED) % 2u;
+    // Candidate i of the box (cpu::inside, candidate): exact, the box's edge a power of two.
+    let f = vec3<f32>(candidate_at(i % 3u), candidate_at((i / 3u) % 3u), candidate_at(i / 9u));
+    let c = lo + (hi - lo) * f;
+    let d = c - p;
+    if all(d == vec3<f32>(0.0)) {
+        return inside;
+    }
+    var wk: Walk;
+    wk.o = p;
+    wk.d = d;
+    set_shear(&wk, d);
+    let count = word(params.o_octree + address);
+    let offset = word(params.o_octree + address + 1u);
+    var odd = 0u;
+    for (var j = 0u; j < count && tick(); j++) {
+        let tri = word(params.o_refs + offset + j);
+        let h = hit_triangle(&wk, params.o_tris + 9u * tri, -inf(), 1.0, true);
+        if over_budget || (h.w != 0.0 && h.x == 0.0) {
+            return UNDECIDED;
+        }
+        if h.w != 0.0 && h.x > 0.0 {
+            odd ^= 1u;
+        }
+    }
+    if over_budget {
+        return UNDECIDED;
+    }
+    return inside ^ odd;
+}
+
+// The fractions of a box's edge its reference candidates lie at: 1/2, 1/4, 3/4.
+fn candidate_at(k: u32) -> f32 {
+    return select(select(0.75, 0.25, k == 1u), 0.5, k == 0u);
 }
