@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Qualifies a GPU for octrace in one run: the GPU tests, `bench --gpu` on the bunny and the
-# dragon, and the CPU's answers against the GPU's on the standard ray sets and renders.
+# dragon, and the CPU's answers against the GPU's on the standard ray sets, the dragon's
+# inside/outside of a million points (uniform and near the surface) and renders.
 #
 #   scripts/gpu-check.sh pack [--bundle DIR]
 #       Here, with the Rust toolchain: builds the CLI (release) and the integration test
@@ -211,6 +212,12 @@ run() {
         compare_trace "$s" "$crossing_set" "every hit" --all-hits
     done
 
+    if [ -e "$work/dragon.oct" ]; then
+        echo "== inside/outside: CPU = GPU"
+        compare_contains dragon uniform
+        compare_contains dragon near
+    fi
+
     if [ "$large" -eq 1 ] && [ -e "$work/dragon.oct" ]; then
         echo "== bench --gpu: the dragon's primary set as a 16M-ray batch"
         if timeout "$step_timeout" "$octrace" bench "$work/dragon.oct" --set primary --gpu --gpu-repeat 16 --no-peer --no-queries --json --runs 5 >"$work/bench-dragon16.json" 2>"$work/bench-dragon16.err"; then
@@ -280,6 +287,30 @@ else:
     else:
         first = next((i for i, (x, y) in enumerate(zip(cpu, gpu)) if x != y), min(len(cpu), len(gpu)))
         print(f"differs\t{len(cpu):,} and {len(gpu):,} bytes, first difference at byte {first:,}; {figures}")
+EOF
+)
+    record "$name" "${verdict%%$'\t'*}" "${verdict#*$'\t'}"
+}
+
+# Inside/outside of a million points of a standard set (`octrace points`) of a closed
+# scene on the CPU and on the GPU (the kernel, the CPU finishing what it leaves): the
+# same bytes.
+compare_contains() {
+    local scene=$1 set=$2 name="contains $1 $2"
+    local points="$work/$scene-$set.points" tag="$work/$scene-$set-inside"
+    if ! "$octrace" points "$work/$scene.oct" --set "$set" --count 1000000 -o "$points" >/dev/null 2>"$tag.err" ||
+        ! timeout "$step_timeout" "$octrace" contains "$work/$scene.oct" --points "$points" -o "$tag.cpu" --json >"$tag.cpu.json" 2>>"$tag.err" ||
+        ! timeout "$step_timeout" "$octrace" contains "$work/$scene.oct" --points "$points" -o "$tag.gpu" --json --gpu >"$tag.gpu.json" 2>>"$tag.err"; then
+        record "$name" "failed" "$(tail -n 3 "$tag.err" | tr '\n' ' ')"
+        return
+    fi
+    local verdict
+    verdict=$(python3 - "$tag.cpu" "$tag.gpu" "$tag.cpu.json" "$tag.gpu.json" <<'EOF'
+import json, sys
+cpu, gpu = open(sys.argv[1], "rb").read(), open(sys.argv[2], "rb").read()
+c, g = json.load(open(sys.argv[3])), json.load(open(sys.argv[4]))
+figures = f"CPU {c['mpoints_per_s']:.1f} M points/s, GPU {g['mpoints_per_s']:.1f} ({g['answer']})"
+print(("same" if cpu == gpu else "differs") + f"\t{len(cpu):,} points; {figures}")
 EOF
 )
     record "$name" "${verdict%%$'\t'*}" "${verdict#*$'\t'}"
