@@ -49,7 +49,7 @@ fn octrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("NotClosedError", py.get_type::<NotClosedError>())?;
     m.add("GpuError", py.get_type::<GpuError>())?;
     // Whether `Scene(..., device="gpu")` can be asked: the module was built with the
-    // `gpu` feature (README: "The GPU from Python").
+    // `gpu` feature (README: "On a GPU", "From Python").
     m.add("HAS_GPU", cfg!(feature = "gpu"))?;
     Ok(())
 }

@@ -65,7 +65,7 @@ impl Scene {
         if device == Device::Gpu {
             return Err(crate::errors::GpuError::new_err(
                 "this octrace module was built without the GPU: reinstall it with the gpu feature, \
-                 MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (README: The GPU from Python)",
+                 MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (the README, \"On a GPU\")",
             ));
         }
         Ok(Scene {
@@ -144,9 +144,10 @@ impl Scene {
     }
 
     /// What a pickle holds: the file's absolute path and the options it was opened
-    /// with (``device`` too: a worker without the GPU raises ``GpuError``), so that a worker process (``multiprocessing``, Dask, Ray) opens the same
-    /// file (mapped scenes share its pages through the page cache; ``trusted=True``
-    /// opens in microseconds). A scene baked in memory (``from_arrays``) has no file:
+    /// with, ``device`` among them (a worker without the GPU raises ``GpuError``), so
+    /// that a worker process (``multiprocessing``, Dask, Ray) opens the same file
+    /// (mapped scenes share its pages through the page cache; ``trusted=True`` opens
+    /// in microseconds). A scene baked in memory (``from_arrays``) has no file:
     /// ``bake_arrays`` writes one to share.
     ///
     /// Raises:
