@@ -194,3 +194,20 @@ def test_without_the_gpu_the_error_says_how_to_build_it(bunny_oct):
         pytest.skip("the module has the GPU")
     with pytest.raises(octrace.GpuError, match="features gpu"):
         octrace.Scene(bunny_oct, device="gpu")
+
+
+def test_raycasting_scene_takes_open3ds_devices(bunny):
+    v, t = torus_arrays()
+    rays = np.concatenate([np.full((64, 3), 3.0), -np.ones((64, 3))], 1).astype(np.float32)
+    rays[:, :3] += np.linspace(-1, 1, 64, dtype=np.float32)[:, None] * [1, -1, 0]
+    want = octrace.RaycastingScene()
+    want.add_triangles(v, t)
+    assert np.isfinite(want.cast_rays(rays)["t_hit"].numpy()).sum() > 20
+    for device in ("gpu", "CUDA:0", "SYCL:0"):
+        scene = octrace.RaycastingScene(device=device)
+        scene.add_triangles(v, t)
+        got = on_gpu(lambda: scene.cast_rays(rays))
+        same_dicts({k: np.asarray(a) for k, a in got.items()},
+                   {k: np.asarray(a) for k, a in want.cast_rays(rays).items()}, f"RaycastingScene({device!r})")
+    with pytest.raises(ValueError, match="device"):
+        octrace.RaycastingScene(device="TPU:0")
