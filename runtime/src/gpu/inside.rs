@@ -8,11 +8,11 @@
 
 use rayon::prelude::*;
 
-use super::{GpuResult, GpuTracer, Ray, RAYS_PER_DISPATCH};
+use super::{GpuResult, GpuTracer, RAYS_PER_DISPATCH};
 use crate::cpu::Solid;
 
-/// Bytes a point takes in the kernel's rays binding (a ray whose origin is the point).
-const POINT: u64 = std::mem::size_of::<Ray>() as u64;
+/// Bytes a point takes in the kernel's rays binding: its three floats, as given.
+const POINT: u64 = 12;
 /// The kernel's answer for a point the host decides (`UNDECIDED` in trace.wgsl).
 const UNDECIDED: u32 = 2;
 
@@ -66,7 +66,8 @@ impl GpuTracer<'_> {
     /// The kernel over `points` (one dispatch): each one's side into `out`.
     fn side_kernel(&self, points: &[[f32; 3]], labels: &[u32], count: u32, out: &mut [u32]) -> GpuResult<()> {
         use wgpu::BufferUsages as U;
-        let point_bytes = points.len() as u64 * POINT;
+        // To a whole vec4: the labels start on one.
+        let point_bytes = (points.len() as u64 * POINT).next_multiple_of(16);
         let label_bytes = (labels.len() as u64 * 4).next_multiple_of(16);
         let input = self.buffer("octrace points", point_bytes + label_bytes, U::STORAGE | U::COPY_DST);
         let sides = self.buffer("octrace sides", points.len() as u64 * 4, U::STORAGE | U::COPY_SRC);
@@ -74,9 +75,7 @@ impl GpuTracer<'_> {
             self.buffer("octrace params", std::mem::size_of::<super::Params>() as u64, U::UNIFORM | U::COPY_DST);
         let params = super::Params { ray_count: points.len() as u32, labels: count, ..self.params };
         self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-        let rays: Vec<Ray> =
-            points.par_iter().map(|&p| Ray { origin: p.into(), tmin: 0.0, dir: glam::Vec3::ZERO, tmax: 0.0 }).collect();
-        self.queue.write_buffer(&input, 0, bytemuck::cast_slice(&rays));
+        self.queue.write_buffer(&input, 0, bytemuck::cast_slice(points));
         let mut padded = labels.to_vec();
         padded.resize((label_bytes / 4) as usize, 0);
         self.queue.write_buffer(&input, point_bytes, bytemuck::cast_slice(&padded));

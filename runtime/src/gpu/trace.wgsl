@@ -1110,17 +1110,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation
     if i >= params.ray_count {
         return;
     }
-    let r = ray_at(i);
-    let r0 = r[0];
-    let r1 = r[1];
     if MODE == 3u {
-        var side = side_of(r0.xyz);
+        var side = side_of(point_at(i));
         if over_budget {
             side = UNDECIDED;
         }
         hits[i] = side;
         return;
     }
+    let r = ray_at(i);
+    let r0 = r[0];
+    let r1 = r[1];
     if MODE == 0u {
         var out = trace(r0.xyz, r1.xyz, r0.w, r1.w, ANY_HIT);
         // A walk that ran out of loop budget: the host traces it again on the CPU.
@@ -1198,6 +1198,12 @@ const OVER_BUDGET: u32 = 0xFFFFFFFFu;
 // leaf's box, so a location rounded into a neighbour decides nothing. The rest (leaves
 // with triangles and no reference point, decisions in doubt) are the host's.
 const UNDECIDED: u32 = 2u;
+
+// Point i of MODE 3: three floats a point in the rays binding, 12 bytes as given.
+fn point_at(i: u32) -> vec3<f32> {
+    let w = 3u * i;
+    return vec3<f32>(rays[w / 4u][w % 4u], rays[(w + 1u) / 4u][(w + 1u) % 4u], rays[(w + 2u) / 4u][(w + 2u) % 4u]);
+}
 // Leaf labels (cpu::inside): from REFERENCED on, REFERENCED + 2 * candidate + inside.
 const REFERENCED: u32 = 3u;
 
@@ -1214,8 +1220,8 @@ fn side_of(p: vec3<f32>) -> u32 {
     if b >= params.labels {
         return UNDECIDED;
     }
-    // The labels' words follow the points' (eight words a point).
-    let at = 8u * params.ray_count + b / 4u;
+    // The labels' words follow the points' (three words a point, to a whole vec4).
+    let at = 4u * ((3u * params.ray_count + 3u) / 4u) + b / 4u;
     let label = (bitcast<u32>(rays[at / 4u][at % 4u]) >> (8u * (b % 4u))) & 0xFFu;
     let o = params.o_boxes + 6u * b;
     let lo = vec3<f32>(wordf(o), wordf(o + 1u), wordf(o + 2u));
