@@ -151,8 +151,10 @@ pub(crate) mod gpu {
 
     use crate::errors::GpuError;
 
-    /// Rays a piece on the GPU: four of the batch path's default chunks (2^21 rays).
-    pub(crate) const PIECE: usize = 1 << 23;
+    /// Rays a piece on the GPU: two of the batch path's default chunks (2^21 rays), so
+    /// that one's transfers overlap the other's kernel; a piece's rays, records and
+    /// hits take about 350 MB while it is traced.
+    pub(crate) const PIECE: usize = 1 << 22;
 
     /// A GPU error as Python's: memory as `MemoryError` (a budget passed, an allocation
     /// refused), the rest as [`GpuError`].
