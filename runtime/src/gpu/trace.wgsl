@@ -476,13 +476,16 @@ const FAN_PICKS: u32 = 64u;
 const FAN_STACK: u32 = 32u;
 // Beyond any finite f32 product here: a NaN or an infinity fails `< FAN_HUGE`.
 const FAN_HUGE: f32 = 3.0e38;
+// What `fan_pick` picks, for the leaf being tested: one array an invocation (a
+// function-scope array is zeroed at every leaf of every walk, 64 stores a leaf even in
+// scenes without fans). Only the entries `fan_pick` fills are read.
+var<private> picked: array<u32, FAN_PICKS>;
 
 fn with_fcomponent(v: vec3<f32>, i: u32, x: f32) -> vec3<f32> {
     return vec3<f32>(select(v.x, x, i == 0u), select(v.y, x, i == 1u), select(v.z, x, i == 2u));
 }
 
-fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
-            picked: ptr<function, array<u32, FAN_PICKS>>) -> u32 {
+fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32) -> u32 {
     let leaves = (params.o_cube - params.o_boxes) / 6u;
     if !FANS || EXACT || count < FAN_MIN_REFERENCES || (*wk).rule == RULE_EXACT || box_index >= leaves {
         return NO_FAN;
@@ -528,7 +531,7 @@ fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
     }
     var found = 0u;
     for (var i = 0u; i < n_rest; i++) {
-        (*picked)[found] = word(o_rest + i);
+        picked[found] = word(o_rest + i);
         found += 1u;
     }
     var stack: array<u32, FAN_STACK>;
@@ -562,7 +565,7 @@ fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
                     return NO_FAN;
                 }
                 for (var i = 0u; i < node_count; i++) {
-                    (*picked)[found] = word(o_arcs + first + i);
+                    picked[found] = word(o_arcs + first + i);
                     found += 1u;
                 }
             } else {
@@ -576,16 +579,16 @@ fn fan_pick(wk: ptr<function, Walk>, box_index: u32, offset: u32, count: u32,
     }
     // In the leaf's order (insertion sort: a few dozen at most).
     for (var i = 1u; i < found; i++) {
-        let key = (*picked)[i];
+        let key = picked[i];
         var j = i;
         loop {
-            if j == 0u || (*picked)[j - 1u] <= key {
+            if j == 0u || picked[j - 1u] <= key {
                 break;
             }
-            (*picked)[j] = (*picked)[j - 1u];
+            picked[j] = picked[j - 1u];
             j -= 1u;
         }
-        (*picked)[j] = key;
+        picked[j] = key;
     }
     return found;
 }
@@ -607,8 +610,7 @@ fn step(wk: ptr<function, Walk>, any: bool) {
     let ncount = word(rec + 3u);
     // 1. The leaf's triangles: keep the nearest in [tmin, t_best] (in a fan's leaf,
     // those its hierarchy picks).
-    var picked: array<u32, FAN_PICKS>;
-    let fan = fan_pick(wk, box_index, offset, count, &picked);
+    let fan = fan_pick(wk, box_index, offset, count);
     let tested = select(count, fan, fan != NO_FAN);
     (*wk).tests += tested;
     for (var j = 0u; j < tested && tick(); j++) {
@@ -1028,8 +1030,7 @@ fn cross(o: vec3<f32>, d: vec3<f32>, tmin0: f32, tmax0: f32, base: u32, capacity
             hi = max(l.t, select(lo, wk.tmin, first));
         }
         let leaf_start = total;
-        var picked: array<u32, FAN_PICKS>;
-        let fan = fan_pick(&wk, word(rec + 2u), offset, count, &picked);
+        let fan = fan_pick(&wk, word(rec + 2u), offset, count);
         let tested = select(count, fan, fan != NO_FAN);
         for (var j = 0u; j < tested && tick(); j++) {
             let tri = word(params.o_refs + offset + select(j, picked[min(j, FAN_PICKS - 1u)], fan != NO_FAN));
