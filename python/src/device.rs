@@ -1,6 +1,6 @@
 //! Where a scene's ray queries run: on the CPU's cores, or (`Scene(..., device="gpu")`,
-//! in a module built with the `gpu` feature) in the GPU's kernels, with the CPU's exact
-//! triangle test so that both answer the same, ray for ray, bit for bit.
+//! in a module built with the `gpu` feature) in the GPU's kernels, with the CPU
+//! tracer's triangle test so that both answer the same, ray for ray, bit for bit.
 //!
 //! Of the point queries, inside/outside (`contains`, `compute_occupancy` on a closed
 //! mesh) runs on the GPU too, the points its cells cannot decide finished on the CPU;
@@ -146,7 +146,7 @@ pub(crate) mod gpu {
     use std::sync::{Arc, Mutex};
 
     use octrace_runtime::gpu::{GpuContext, GpuError as Failure, GpuOptions, GpuTracer};
-    use octrace_runtime::{Scene, TriangleTest};
+    use octrace_runtime::Scene;
     use pyo3::prelude::*;
 
     use crate::errors::GpuError;
@@ -198,11 +198,12 @@ pub(crate) mod gpu {
     }
 
     impl OnGpu {
-        /// Uploads `scene` to the process's GPU, to be traced with the CPU's exact
-        /// triangle test.
+        /// Uploads `scene` to the process's GPU, to be traced with the triangle test of
+        /// the scene's CPU tracer (exact, or watertight where the scene has fans), so
+        /// that both answer alike.
         pub(crate) fn new(scene: &Arc<Scene>) -> PyResult<OnGpu> {
             let context = context()?;
-            let options = GpuOptions { triangle_test: TriangleTest::Exact, ..GpuOptions::default() };
+            let options = GpuOptions { triangle_test: scene.tracer().triangle_test(), ..GpuOptions::default() };
             // SAFETY: the reference is to the value the `Arc` kept in `_scene` owns; it is
             // neither moved nor dropped before `tracer`, which the struct drops first, and
             // `tracer()` hands the tracer out only for as long as `self` is borrowed.

@@ -106,8 +106,9 @@ impl Scene {
     ///         ``count_intersections``, ``list_intersections``, ``length_inside``) run:
     ///         ``"cpu"``, or ``"gpu"`` (a module built with the GPU, ``HAS_GPU``; a
     ///         Vulkan adapter with 64-bit floats), which answers as the CPU does, ray for
-    ///         ray, bit for bit: the same exact triangle test, the rays its filter
-    ///         cannot decide finished on the CPU. Of the point queries, ``contains``
+    ///         ray, bit for bit: the CPU's triangle test (exact; watertight in a
+    ///         scene with fans), the rays the exact test's filter cannot decide
+    ///         finished on the CPU. Of the point queries, ``contains``
     ///         (and ``compute_occupancy`` of a closed mesh) run there too, the points
     ///         near the surface finished on the CPU; the others run on the CPU.
     ///

@@ -211,3 +211,30 @@ def test_raycasting_scene_takes_open3ds_devices(bunny):
                    {k: np.asarray(a) for k, a in want.cast_rays(rays).items()}, f"RaycastingScene({device!r})")
     with pytest.raises(ValueError, match="device"):
         octrace.RaycastingScene(device="TPU:0")
+
+
+def fan_arrays(n=600):
+    """A closed double cone whose 2n triangles meet at its two apexes: the leaves there
+    list hundreds of triangles around one vertex (fans, which the CPU walks with the
+    watertight test)."""
+    a = np.arange(n) * 2 * np.pi / n
+    ring = np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)
+    v = np.concatenate([ring, [[0, 0, 1], [0, 0, -1]]]).astype(np.float32)
+    i, j = np.arange(n), (np.arange(n) + 1) % n
+    t = np.concatenate([np.stack([i, j, np.full(n, n)], 1), np.stack([j, i, np.full(n, n + 1)], 1)])
+    return v, t
+
+
+def test_a_scene_with_fans_answers_as_the_cpu_module():
+    v, t = fan_arrays()
+    cpu = octrace.Scene.from_arrays(v, t)
+    gpu = on_gpu(lambda: octrace.Scene.from_arrays(v, t, device="gpu"))
+    assert sum(cpu.inspect()["fans"].values()) > 0
+    # Rays at the apexes and beside them, from all around.
+    rng = np.random.default_rng(9)
+    targets = np.concatenate([np.tile([[0, 0, 1], [0, 0, -1]], (512, 1)), rng.normal(0, 1e-3, (1024, 3))])
+    targets[1024:, 2] += np.where(np.arange(1024) % 2 == 0, 1, -1)
+    dirs = rng.normal(size=(2048, 3))
+    rays = np.concatenate([targets - 3 * dirs, dirs], 1).astype(np.float32)
+    same_dicts(gpu.cast_rays(rays), cpu.cast_rays(rays), "fans: cast_rays")
+    same_dicts(gpu.list_intersections(rays), cpu.list_intersections(rays), "fans: lists")

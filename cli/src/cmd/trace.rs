@@ -83,15 +83,16 @@ pub(crate) struct Args {
     pub gpu: bool,
 }
 
-/// The GPU tracer of `trace --gpu`: the CPU's test, the exact one, where the adapter
-/// has `f64`; else the watertight one (`GpuOptions::triangle_test`).
+/// The GPU tracer of `trace --gpu`: the CPU tracer's test (the exact one; the
+/// watertight one in a scene with fans) where the adapter can run it (the exact one
+/// needs `f64`), else the watertight one (`GpuOptions::triangle_test`).
 pub(crate) fn gpu_tracer<'s>(
     gpu: &octrace_runtime::gpu::GpuContext,
     scene: &'s octrace_runtime::Scene,
 ) -> anyhow::Result<octrace_runtime::gpu::GpuTracer<'s>> {
     use octrace_runtime::gpu::{GpuError, GpuOptions, GpuTracer};
-    let exact = GpuOptions { triangle_test: octrace_runtime::TriangleTest::Exact, ..GpuOptions::default() };
-    match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, exact) {
+    let cpus = GpuOptions { triangle_test: scene.tracer().triangle_test(), ..GpuOptions::default() };
+    match GpuTracer::with_options(&gpu.device, &gpu.queue, scene, cpus) {
         Err(GpuError::Unsupported(_)) => Ok(GpuTracer::new(&gpu.device, &gpu.queue, scene)?),
         tracer => Ok(tracer?),
     }
