@@ -7,7 +7,7 @@
 //! closest points, distances and winding numbers run on the CPU whatever the device.
 
 use octrace_runtime::cpu::{BatchCrossings, CrossingCount};
-use octrace_runtime::{Hit, Ray, Tracer};
+use octrace_runtime::{Hit, Ray, Scene};
 use pyo3::prelude::*;
 #[cfg(feature = "gpu")]
 use rayon::prelude::*;
@@ -41,11 +41,10 @@ impl Device {
     }
 }
 
-/// The tracer a query's rays go to.
-// One a call, on the stack: the CPU tracer's size is no cost worth a box.
-#[allow(clippy::large_enum_variant)]
+/// Where a query's rays (and inside/outside's points) go: the scene's CPU tracer, or
+/// its GPU tracer.
 pub(crate) enum Rays<'a> {
-    Cpu(Tracer<'a>),
+    Cpu(&'a Scene),
     #[cfg(feature = "gpu")]
     Gpu(&'a octrace_runtime::gpu::GpuTracer<'a>),
 }
@@ -65,7 +64,7 @@ impl Rays<'_> {
     /// The nearest hit of each ray into `hits`.
     pub(crate) fn intersect(&self, rays: &[Ray], hits: &mut [Option<Hit>]) -> PyResult<()> {
         match self {
-            Rays::Cpu(t) => t.par_intersect_batch(rays, hits),
+            Rays::Cpu(s) => s.tracer().par_intersect_batch(rays, hits),
             #[cfg(feature = "gpu")]
             Rays::Gpu(t) => {
                 use octrace_runtime::gpu::{Answers, GpuHit};
@@ -80,7 +79,7 @@ impl Rays<'_> {
     /// Whether anything lies on each ray, into `occluded`.
     pub(crate) fn occluded(&self, rays: &[Ray], occluded: &mut [bool]) -> PyResult<()> {
         match self {
-            Rays::Cpu(t) => t.par_occluded_batch(rays, occluded),
+            Rays::Cpu(s) => s.tracer().par_occluded_batch(rays, occluded),
             #[cfg(feature = "gpu")]
             Rays::Gpu(t) => {
                 use octrace_runtime::gpu::Answers;
@@ -95,7 +94,7 @@ impl Rays<'_> {
     /// The crossings of each ray, counted, into `counts`.
     pub(crate) fn count_crossings(&self, rays: &[Ray], counts: &mut [CrossingCount]) -> PyResult<()> {
         match self {
-            Rays::Cpu(t) => t.par_count_crossings_batch(rays, counts),
+            Rays::Cpu(s) => s.tracer().par_count_crossings_batch(rays, counts),
             #[cfg(feature = "gpu")]
             Rays::Gpu(t) => counts.copy_from_slice(&t.count_crossings(rays).map_err(gpu::error)?),
         }
@@ -105,36 +104,28 @@ impl Rays<'_> {
     /// The first `limit` crossings of each ray, in at most `max_bytes`.
     pub(crate) fn crossings(&self, rays: &[Ray], limit: usize, max_bytes: u64) -> PyResult<BatchCrossings> {
         match self {
-            Rays::Cpu(t) => t.par_crossings_batch_within(rays, limit, max_bytes).map_err(runtime_error),
+            Rays::Cpu(s) => s.crossings_batch_within(rays, limit, max_bytes).map_err(runtime_error),
             #[cfg(feature = "gpu")]
             Rays::Gpu(t) => t.crossings_within(rays, limit, max_bytes).map_err(gpu::error),
         }
     }
 
-    /// Whether each point lies inside `solid` (on the GPU: the points in empty leaves,
-    /// the rest on the CPU).
-    pub(crate) fn contains(&self, solid: &octrace_runtime::cpu::Solid, points: &[[f32; 3]]) -> PyResult<Vec<bool>> {
+    /// Whether each point lies inside the scene, a closed mesh (on the GPU: the points
+    /// the kernel decides, the rest on the CPU).
+    pub(crate) fn contains(&self, points: &[[f32; 3]]) -> PyResult<Vec<bool>> {
         match self {
-            Rays::Cpu(t) => {
-                let mut out = crate::errors::zeros(points.len(), "inside answers")?;
-                t.par_contains_batch(solid, points, &mut out);
-                Ok(out)
-            }
+            Rays::Cpu(s) => s.contains_batch(points).map_err(runtime_error),
             #[cfg(feature = "gpu")]
-            Rays::Gpu(t) => t.contains(solid, points).map_err(gpu::error),
+            Rays::Gpu(t) => t.contains(t.scene().solid().map_err(runtime_error)?, points).map_err(gpu::error),
         }
     }
 
-    /// The length of each ray inside `solid`.
-    pub(crate) fn length_inside(&self, solid: &octrace_runtime::cpu::Solid, rays: &[Ray]) -> PyResult<Vec<f32>> {
+    /// The length of each ray inside the scene, a closed mesh.
+    pub(crate) fn length_inside(&self, rays: &[Ray]) -> PyResult<Vec<f32>> {
         match self {
-            Rays::Cpu(t) => {
-                let mut out = crate::errors::zeros(rays.len(), "lengths")?;
-                t.par_length_inside(solid, rays, &mut out);
-                Ok(out)
-            }
+            Rays::Cpu(s) => s.length_inside_batch(rays).map_err(runtime_error),
             #[cfg(feature = "gpu")]
-            Rays::Gpu(t) => t.length_inside(solid, rays).map_err(gpu::error),
+            Rays::Gpu(t) => t.length_inside(t.scene().solid().map_err(runtime_error)?, rays).map_err(gpu::error),
         }
     }
 }

@@ -283,12 +283,9 @@ impl Scene {
     ) -> PyResult<(Vec<bool>, Vec<usize>)> {
         let input = Floats::new(query_points, "query_points", 3)?;
         let values = input.values();
-        let inside = query_points.py().detach(|| {
-            on_threads(nthreads, || -> PyResult<_> {
-                let solid = self.inner.solid().map_err(runtime_error)?;
-                self.rays().contains(solid, to_points(values)?)
-            })?
-        })?;
+        let inside = query_points
+            .py()
+            .detach(|| on_threads(nthreads, || -> PyResult<_> { self.rays().contains(to_points(values)?) })?)?;
         Ok((inside, input.shape(&[])))
     }
 
@@ -347,10 +344,7 @@ impl Scene {
         let input = Floats::new(rays, "rays", 6)?;
         let values = input.values();
         let lengths = py.detach(|| {
-            on_threads(nthreads, || -> PyResult<_> {
-                let solid = self.inner.solid().map_err(runtime_error)?;
-                self.rays().length_inside(solid, &to_rays(values, 0.0, tmax)?)
-            })?
+            on_threads(nthreads, || -> PyResult<_> { self.rays().length_inside(&to_rays(values, 0.0, tmax)?) })?
         })?;
         array(py, lengths, input.shape(&[]))
     }

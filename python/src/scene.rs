@@ -84,7 +84,7 @@ impl Scene {
         if let Some(gpu) = &self.gpu {
             return Rays::Gpu(gpu.tracer());
         }
-        Rays::Cpu(self.inner.tracer())
+        Rays::Cpu(&self.inner)
     }
 }
 
