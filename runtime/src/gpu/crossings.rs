@@ -167,30 +167,10 @@ impl GpuTracer<'_> {
     /// The list kernel over `rays` (one dispatch), ray `i`'s records at
     /// `offsets[i]..offsets[i + 1]` of what comes back.
     fn list_kernel(&self, rays: &[Ray], offsets: &[u32]) -> GpuResult<Vec<HitOut>> {
-        use wgpu::BufferUsages as U;
-        let ray_bytes = rays.len() as u64 * RAY;
-        let offset_bytes = (offsets.len() as u64 * 4).next_multiple_of(16);
         let records = *offsets.last().unwrap_or(&0) as u64;
-        let ray_buffer = self.buffer("octrace crossing rays", ray_bytes + offset_bytes, U::STORAGE | U::COPY_DST);
-        let hit_buffer = self.buffer("octrace crossings", records.max(1) * RECORD, U::STORAGE | U::COPY_SRC);
-        let params_buffer =
-            self.buffer("octrace params", std::mem::size_of::<super::Params>() as u64, U::UNIFORM | U::COPY_DST);
         let params = super::Params { ray_count: rays.len() as u32, ..self.params };
-        self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-        self.queue.write_buffer(&ray_buffer, 0, bytemuck::cast_slice(rays));
-        let mut padded = offsets.to_vec();
-        padded.resize((offset_bytes / 4) as usize, 0);
-        self.queue.write_buffer(&ray_buffer, ray_bytes, bytemuck::cast_slice(&padded));
-        let bind_group = self.bind_group(&params_buffer, &ray_buffer, &hit_buffer);
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.crossing_kernels()?[1]);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups((rays.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
-        }
-        self.queue.submit([encoder.finish()]);
-        self.read_back::<HitOut>(&hit_buffer, records * RECORD)
+        let inputs = [bytemuck::cast_slice(rays), bytemuck::cast_slice(offsets)];
+        self.dispatch_with(&self.crossing_kernels()?[1], params, &inputs, records * RECORD)
     }
 
     /// The counting and listing kernels, built on first use.

@@ -45,7 +45,8 @@ impl GpuTracer<'_> {
         let label_bytes = (words.len() as u64 * 4).next_multiple_of(16);
         let limits = self.device.limits();
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let room = max_binding.saturating_sub(label_bytes) / POINT;
+        // The points rounded up to a vec4 before the labels.
+        let room = max_binding.saturating_sub(label_bytes + 16) / POINT;
         let per_dispatch = (self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as u64).min(room) as usize;
         let mut sides = vec![UNDECIDED; points.len()];
         if per_dispatch >= 64 && labels.len() <= u32::MAX as usize {
@@ -63,32 +64,17 @@ impl GpuTracer<'_> {
             .collect())
     }
 
-    /// The kernel over `points` (one dispatch): each one's side into `out`.
+    /// The kernel over `points` (one dispatch): each one's side into `out`. The labels
+    /// follow the points in the rays binding.
     fn side_kernel(&self, points: &[[f32; 3]], labels: &[u32], count: u32, out: &mut [u32]) -> GpuResult<()> {
-        use wgpu::BufferUsages as U;
-        // To a whole vec4: the labels start on one.
-        let point_bytes = (points.len() as u64 * POINT).next_multiple_of(16);
-        let label_bytes = (labels.len() as u64 * 4).next_multiple_of(16);
-        let input = self.buffer("octrace points", point_bytes + label_bytes, U::STORAGE | U::COPY_DST);
-        let sides = self.buffer("octrace sides", points.len() as u64 * 4, U::STORAGE | U::COPY_SRC);
-        let params_buffer =
-            self.buffer("octrace params", std::mem::size_of::<super::Params>() as u64, U::UNIFORM | U::COPY_DST);
         let params = super::Params { ray_count: points.len() as u32, labels: count, ..self.params };
-        self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-        self.queue.write_buffer(&input, 0, bytemuck::cast_slice(points));
-        let mut padded = labels.to_vec();
-        padded.resize((label_bytes / 4) as usize, 0);
-        self.queue.write_buffer(&input, point_bytes, bytemuck::cast_slice(&padded));
-        let bind_group = self.bind_group(&params_buffer, &input, &sides);
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(self.side_pipeline()?);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups((points.len() as u32).div_ceil(self.budget.workgroup), 1, 1);
-        }
-        self.queue.submit([encoder.finish()]);
-        out.copy_from_slice(&self.read_back::<u32>(&sides, points.len() as u64 * 4)?);
+        let inputs = [bytemuck::cast_slice(points), bytemuck::cast_slice(labels)];
+        out.copy_from_slice(&self.dispatch_with::<u32>(
+            self.side_pipeline()?,
+            params,
+            &inputs,
+            points.len() as u64 * 4,
+        )?);
         Ok(())
     }
 

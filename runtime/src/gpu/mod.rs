@@ -769,6 +769,47 @@ impl<'s> GpuTracer<'s> {
         })
     }
 
+    /// One dispatch of `pipeline` (made with the tracing layout) over `params.ray_count`
+    /// items: `inputs` written back to back into the rays binding, each starting on a
+    /// vec4 (16 bytes; the gaps are zeros), and `answer_bytes` of the hits binding read
+    /// back (the list and inside/outside kernels').
+    fn dispatch_with<T: bytemuck::Pod>(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        params: Params,
+        inputs: &[&[u8]],
+        answer_bytes: u64,
+    ) -> GpuResult<Vec<T>> {
+        use wgpu::BufferUsages as U;
+        let at: Vec<u64> = inputs
+            .iter()
+            .scan(0u64, |end, input| {
+                let start = *end;
+                *end += (input.len() as u64).next_multiple_of(16);
+                Some(start)
+            })
+            .collect();
+        let input_bytes = inputs.iter().map(|i| (i.len() as u64).next_multiple_of(16)).sum();
+        let input = self.buffer("octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST);
+        let answers = self.buffer("octrace kernel answers", answer_bytes, U::STORAGE | U::COPY_SRC);
+        let params_buffer =
+            self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+        self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        for (bytes, &offset) in inputs.iter().zip(&at) {
+            self.queue.write_buffer(&input, offset, bytes);
+        }
+        let bind_group = self.bind_group(&params_buffer, &input, &answers);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(params.ray_count.div_ceil(self.budget.workgroup), 1, 1);
+        }
+        self.queue.submit([encoder.finish()]);
+        self.read_back(&answers, answer_bytes)
+    }
+
     /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
         read_buffer(&self.device, &self.queue, buffer, bytes)
