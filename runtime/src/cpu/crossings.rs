@@ -136,6 +136,84 @@ impl Tracer<'_> {
         count
     }
 
+    /// The winding number of `p` about a closed mesh whose every edge is in two
+    /// triangles running it opposite ways, exactly: exits minus entries along one ray
+    /// from `p` to the mesh box's nearest face ([`CrossingCount::winding`], negated).
+    /// Under [`TriangleTest::Exact`] each crossing is decided by exact arithmetic and a
+    /// ray through an edge or vertex by the edge rule, which is the answer for the ray
+    /// moved aside by an infinitesimal (rasterisers' top-left rule): a crossing of the
+    /// surface is counted once with its side, a graze at a silhouette as a pair of
+    /// opposite sides, so the sum is the number of times the surface winds around `p`.
+    ///
+    /// On the surface, where the winding number is not defined, the crossings at
+    /// distance 0 count: the answer is the winding number of a point beside `p`, just
+    /// behind it along the ray. `None` for a tracer with another test and for a point
+    /// with a NaN; a point outside the mesh box winds 0.
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_bake::{bake, procedural, BuildParams, Mesh};
+    /// use octrace_runtime::Scene;
+    /// // Two spheres, one inside the other: 2 inside both.
+    /// let (a, b) = (procedural::sphere([0.0; 3], 1.0, 12, 16), procedural::sphere([0.0; 3], 0.5, 12, 16));
+    /// let both = Mesh::from_triangles(a.triangles.iter().chain(&b.triangles).copied().collect());
+    /// let scene = Scene::from_baked(bake(&both, &BuildParams::auto())?)?;
+    /// let tracer = scene.tracer();
+    /// assert_eq!([[0.1, 0.0, 0.0], [0.0, 0.7, 0.0], [0.0, 0.0, 0.99]].map(|p| tracer.winding_by_ray(p)), [Some(2), Some(1), Some(1)]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn winding_by_ray(&self, p: [f32; 3]) -> Option<i64> {
+        let bounds = super::mesh_box(self.view());
+        self.winding_by_ray_with(&mut LeafCrossings::default(), p, &bounds).map(|(n, _)| n)
+    }
+
+    /// [`Tracer::winding_by_ray`] of many points on all threads of the current rayon
+    /// pool, with whether a crossing lay at distance 0 (the point on the surface, or
+    /// within the distances' rounding of it).
+    pub(crate) fn par_winding_by_rays(&self, points: &[[f32; 3]], out: &mut [Option<(i64, bool)>]) {
+        use rayon::prelude::*;
+        assert_eq!(points.len(), out.len(), "one result slot a point");
+        let bounds = super::mesh_box(self.view());
+        points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| {
+            let mut buffer = LeafCrossings::default();
+            for (p, o) in p.iter().zip(o) {
+                *o = self.winding_by_ray_with(&mut buffer, *p, &bounds);
+            }
+        });
+    }
+
+    fn winding_by_ray_with(
+        &self,
+        buffer: &mut LeafCrossings,
+        p: [f32; 3],
+        (lo, hi): &([f32; 3], [f32; 3]),
+    ) -> Option<(i64, bool)> {
+        if self.triangle_test() != TriangleTest::Exact || p.iter().any(|x| x.is_nan()) {
+            return None;
+        }
+        if (0..3).any(|k| p[k] < lo[k] || p[k] > hi[k]) {
+            return Some((0, false));
+        }
+        // The shortest way out: along the axis to the nearest face.
+        let (mut axis, mut sign, mut gap) = (0, 1.0f32, f32::INFINITY);
+        for k in 0..3 {
+            for (s, g) in [(-1.0, p[k] - lo[k]), (1.0, hi[k] - p[k])] {
+                if g < gap {
+                    (axis, sign, gap) = (k, s, g);
+                }
+            }
+        }
+        let mut dir = [0.0f32; 3];
+        dir[axis] = sign;
+        let (mut winding, mut touched) = (0i64, false);
+        self.crossings_with(&Ray::new(p.into(), dir.into()), buffer, |c| {
+            touched |= c.t == 0.0;
+            winding += if c.enters { -1 } else { 1 };
+            ControlFlow::Continue(())
+        });
+        Some((winding, touched))
+    }
+
     /// [`Tracer::all_crossings`] by brute force: every stored triangle tested with the
     /// same test and edge rule, from the same (possibly moved) origin, sorted as the
     /// walk sorts (distance, the exact order of equal distances under the exact test,

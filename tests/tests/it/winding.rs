@@ -155,3 +155,97 @@ fn inside_by_winding_is_certain_on_open_meshes() {
     let ball = scene_of(&procedural::sphere([0.0; 3], 1.0, 8, 12));
     assert_eq!(ball.inside_by_winding(&[[0.0; 3], [2.0, 0.0, 0.0]]).unwrap(), [true, false]);
 }
+
+/// An octahedron with its vertices on the axes, wound outward.
+fn octahedron(centre: [f32; 3], r: f32) -> Vec<[[f32; 3]; 3]> {
+    let mut out = Vec::new();
+    for sx in [-1.0f32, 1.0] {
+        for sy in [-1.0f32, 1.0] {
+            for sz in [-1.0f32, 1.0] {
+                let v = |k: usize, s: f32| {
+                    let mut p = centre;
+                    p[k] += s * r;
+                    p
+                };
+                let t = [v(0, sx), v(1, sy), v(2, sz)];
+                // Counter-clockwise seen from outside where the octant's signs multiply to +1.
+                out.push(if sx * sy * sz > 0.0 { t } else { [t[0], t[2], t[1]] });
+            }
+        }
+    }
+    out
+}
+
+/// Whether `p` lies on a triangle, in `f64`: exact for the lattice's points (quarters
+/// within a few units) and the triangles below; off the lattice a point lies in no plane.
+fn on_surface_of(triangles: &[[[f32; 3]; 3]], p: [f32; 3]) -> bool {
+    let d = |a: [f32; 3], b: [f32; 3]| [0, 1, 2].map(|k| f64::from(b[k]) - f64::from(a[k]));
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    triangles.iter().any(|t| {
+        let n = cross(d(t[0], t[1]), d(t[0], t[2]));
+        dot(n, d(t[0], p)) == 0.0 && (0..3).all(|k| dot(cross(d(t[k], t[(k + 1) % 3]), d(t[k], p)), n) >= 0.0)
+    })
+}
+
+/// The signed crossings of one ray a point (`Tracer::winding_by_ray`, what
+/// `Scene::winding_numbers` answers closed meshes with) against the tree's guaranteed
+/// sum, which shares nothing with the tracer: shells nested, hollowed and turned inside
+/// out, their vertices and edges on a lattice whose points send axis rays exactly
+/// through vertices and edges, along faces and past silhouettes.
+#[test]
+fn one_rays_signed_crossings_wind_as_the_sum_says() {
+    let flip = |t: &[[f32; 3]; 3]| [t[0], t[2], t[1]];
+    let outer = procedural::cube([-2.0, -2.0, -2.0], [2.0, 2.0, 2.0], 4);
+    let inner = procedural::cube([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], 2);
+    let octa = octahedron([0.0; 3], 1.5);
+    let side = octahedron([1.0, 1.0, 0.0], 0.5);
+    let worlds: Vec<(&str, Vec<[[f32; 3]; 3]>)> = vec![
+        ("nested cubes", outer.triangles.iter().chain(&inner.triangles).copied().collect()),
+        ("hollow cube", outer.triangles.iter().copied().chain(inner.triangles.iter().map(flip)).collect()),
+        ("octahedron in a cube", outer.triangles.iter().copied().chain(octa.iter().copied()).collect()),
+        ("inside-out octahedra", octa.iter().map(flip).chain(side.iter().copied()).collect()),
+    ];
+    let mut rng = SplitMix(17);
+    for (name, triangles) in worlds {
+        let scene = scene_of(&Mesh::from_triangles(triangles.clone()));
+        assert!(scene.winds_exactly(), "{name}");
+        let tree = WindingTree::new(triangles.clone()).unwrap();
+        // Lattice points (quarters, on every vertex, edge and face plane) and some off it.
+        let mut pts: Vec<[f32; 3]> =
+            (0..1500).map(|_| [0; 3].map(|_: i32| (rng.unit() * 18.0).floor() * 0.25 - 2.25)).collect();
+        pts.extend((0..300).map(|_| [0; 3].map(|_: i32| rng.unit() * 4.4 - 2.2)));
+        let tracer = scene.tracer();
+        let (mut checked, mut on_surface) = (0, 0);
+        let answers = scene.winding_numbers(&pts, Accuracy::FAST).unwrap();
+        for (p, got) in pts.iter().zip(&answers) {
+            if on_surface_of(&triangles, *p) {
+                // Not defined there: the number of a point beside it, or none.
+                // Points in the eight octants around it, and along the six axes (a
+                // hair off them), as the ray goes.
+                let octants = (0..8).map(|o| [0, 1, 2].map(|k| if o >> k & 1 == 1 { 1e-3 } else { -1e-3 }));
+                let axes = (0..6).map(|a| [0, 1, 2].map(|k| if k == a / 2 { [-1e-3, 1e-3][a % 2] } else { 1e-5 }));
+                let beside: Vec<f64> = octants
+                    .chain(axes)
+                    .map(|o: [f32; 3]| {
+                        let q = [0, 1, 2].map(|k| p[k] + o[k] * (1.0 + 0.3 * k as f32));
+                        tree.winding_number(q, 0.1).value.round()
+                    })
+                    .collect();
+                let n = tracer.winding_by_ray(*p).unwrap();
+                assert!(beside.contains(&(n as f64)), "{name}: {p:?} on the surface: {n}, beside {beside:?}");
+                assert!(beside.contains(&got.value) && got.bound == 0.0, "{name}: {p:?} {got:?}, beside {beside:?}");
+                on_surface += 1;
+                continue;
+            }
+            let sum = tree.winding_number(*p, 0.1);
+            assert!((sum.value - sum.value.round()).abs() < 0.2, "{name}: {p:?} sum {sum:?}");
+            let want = sum.value.round() as i64;
+            assert_eq!(tracer.winding_by_ray(*p), Some(want), "{name}: {p:?} by the ray");
+            assert_eq!((got.value, got.bound), (want as f64, 0.0), "{name}: {p:?}");
+            checked += 1;
+        }
+        assert!(checked > 1000 && on_surface > 50, "{name}: {checked} checked, {on_surface} on the surface");
+    }
+}
