@@ -1,7 +1,8 @@
-//! Winding numbers on one thread: points uniform in 1.1x the mesh's box and points
+//! Winding numbers on one thread (the batch call): points uniform in 1.1x the mesh's box and points
 //! within 1 % of the box's diagonal from the surface, at several tolerances; prints
 //! points a second and, for the first `WINDING_CHECK` points (default 50), the largest
 //! error against the brute-force sum over every triangle, and the largest bound.
+//! `WINDING_ONLY=fast` times Barill's rule at `beta = 2` alone (for a profile).
 //!
 //! `cargo run --release -p octrace-runtime --example winding_timing -- scene.oct [points]`
 use std::time::Instant;
@@ -21,6 +22,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let view = scene.view();
     let (uniform, near) = point_sets::point_sets(&view, n);
     let triangles: Vec<[[f32; 3]; 3]> = view.stored_triangles().collect();
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let t = Instant::now();
     let tree = WindingTree::new(triangles.clone())?;
     println!("tree: {} triangles, {:.1} MB, {:.3} s", tree.len(), tree.bytes() as f64 / 1e6, t.elapsed().as_secs_f64());
@@ -32,21 +34,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 triangles.iter().map(|t| solid_angle(p, t)).sum::<f64>() / (4.0 * std::f64::consts::PI)
             })
             .collect();
-        for accuracy in [
+        let all = [
             Accuracy::Beta(2.0),
             Accuracy::Beta(3.0),
             Accuracy::Beta(4.0),
             Accuracy::Within(1e-1),
             Accuracy::Within(1e-2),
             Accuracy::Within(1e-3),
-        ] {
+        ];
+        let fast_only = std::env::var("WINDING_ONLY").is_ok_and(|s| s == "fast");
+        for accuracy in if fast_only { &all[..1] } else { &all[..] } {
+            let accuracy = *accuracy;
             let mut scratch = WindingScratch::default();
             let mut best = f64::INFINITY;
+            let mut out = vec![Default::default(); pts.len()];
             for _ in 0..3 {
                 let t = Instant::now();
-                for p in pts.iter() {
-                    std::hint::black_box(tree.winding_number_as(&mut scratch, *p, accuracy));
-                }
+                one.install(|| tree.winding_numbers(pts, accuracy, &mut out));
                 best = best.min(t.elapsed().as_secs_f64());
             }
             let (mut worst, mut worst_bound) = (0.0f64, 0.0f64);
@@ -61,9 +65,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 pts.len() as f64 / best / 1e6
             );
         }
+        if fast_only {
+            continue;
+        }
         let mut inside = vec![false; pts.len()];
         let t = Instant::now();
-        rayon::ThreadPoolBuilder::new().num_threads(1).build()?.install(|| tree.inside_batch(pts, &mut inside));
+        one.install(|| tree.inside_batch(pts, &mut inside));
         let wrong = pts.iter().zip(&exact).zip(&inside).filter(|((_, e), i)| (**e > 0.5) != **i).count();
         println!(
             "{name:8} w > 1/2, certain: {:.3} M points/s, {wrong} of {} wrong",

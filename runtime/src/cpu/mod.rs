@@ -17,7 +17,7 @@ mod closest;
 mod crossings;
 mod crossings_batch;
 pub(crate) mod fans;
-mod hw;
+pub(crate) mod hw;
 pub(crate) mod inside;
 mod locate;
 mod locate_grid;
