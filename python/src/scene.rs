@@ -517,7 +517,8 @@ impl Scene {
     ///
     /// On a closed mesh whose every edge is in two triangles running it opposite ways
     /// the answer is exact (an integer: 2 inside two nested shells, -1 inside an
-    /// inside-out one). Elsewhere: with ``tolerance``, within it of the exact
+    /// inside-out one), from the signed crossings of one ray under the exact test.
+    /// Elsewhere: with ``tolerance``, within it of the exact
     /// winding number of the triangles, guaranteed (a rigorous bound on the
     /// expansions, refined where largest); without, Barill et al.'s fast rule
     /// (``beta = 2``, as libigl's ``fast_winding_number``): errors measured below

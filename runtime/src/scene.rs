@@ -477,7 +477,7 @@ impl Scene {
 impl Scene {
     /// The stored triangles grouped for winding numbers ([`WindingTree`]), made on the
     /// first call (a sort of the triangles: some 20 ms for the bunny, 0.3 s for the
-    /// dragon; about 150 bytes a triangle). Scenes that [wind
+    /// dragon; about 210 bytes a triangle). Scenes that [wind
     /// exactly](Scene::winds_exactly) make it only where a ray cannot answer.
     ///
     /// # Errors

@@ -342,7 +342,7 @@ impl WindingTree {
     /// Groups `triangles` (each three vertices, counter-clockwise seen from outside).
     ///
     /// # Errors
-    /// Where the tree's memory (about 150 bytes a triangle) cannot be had.
+    /// Where the tree's memory (about 210 bytes a triangle) cannot be had.
     pub fn new(triangles: Vec<[[f32; 3]; 3]>) -> Result<WindingTree, AllocError> {
         let (lo, hi) = triangles.iter().flatten().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), v| {
             let v = wide(*v);
@@ -556,7 +556,34 @@ impl WindingTree {
     }
 
     /// Winding numbers of many points, on all cores.
+    ///
+    /// The points are taken along a space-filling curve (neighbours share the tree's
+    /// clusters in cache), the answers written where their points are.
     pub fn winding_numbers(&self, points: &[[f32; 3]], accuracy: Accuracy, out: &mut [Winding]) {
+        let order = self.root.and_then(|r| {
+            let (lo, hi) = (r.centre.map(|c| c - r.radius), r.centre.map(|c| c + r.radius));
+            crate::cpu::curve_order_in(lo, hi, points)
+        });
+        let sorted = order.as_ref().and_then(|order| {
+            let mut sorted: Vec<[f32; 3]> = try_with_capacity(points.len(), "points in curve order").ok()?;
+            sorted.extend(order.iter().map(|&i| points[i as usize]));
+            let mut found: Vec<Winding> = try_with_capacity(points.len(), "points in curve order").ok()?;
+            found.resize(points.len(), Winding::default());
+            Some((sorted, found))
+        });
+        match (order, sorted) {
+            (Some(order), Some((sorted, mut found))) => {
+                self.winding_numbers_as_they_come(&sorted, accuracy, &mut found);
+                for (&i, w) in order.iter().zip(found) {
+                    out[i as usize] = w;
+                }
+            }
+            // Too few points to gain, or no memory for the order: as they come.
+            _ => self.winding_numbers_as_they_come(points, accuracy, out),
+        }
+    }
+
+    fn winding_numbers_as_they_come(&self, points: &[[f32; 3]], accuracy: Accuracy, out: &mut [Winding]) {
         points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| match accuracy {
             Accuracy::Beta(beta) => self.beta_each(p, beta, o),
             Accuracy::Within(_) => {

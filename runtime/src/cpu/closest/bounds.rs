@@ -150,13 +150,19 @@ pub(super) fn prefetch(tree: &Tree<'_>, triangles: &[f32], word: u32) {
 /// where the memory (12 bytes a point) cannot be had.
 pub(super) fn curve_order(tree: &Tree<'_>, points: &[[f32; 3]]) -> Option<Vec<u32>> {
     let b = &tree.root.bounds;
-    let (lo, hi) = ([0, 1, 2].map(|k| b.lo[k][0] as f64), [0, 1, 2].map(|k| b.hi[k][0] as f64));
+    curve_order_in([0, 1, 2].map(|k| b.lo[k][0] as f64), [0, 1, 2].map(|k| b.hi[k][0] as f64), points)
+}
+
+/// The points' indices along a Morton curve through the box `lo..hi` (ten bits an
+/// axis: cells of a thousandth of the box; points outside clamp to its faces), so
+/// that neighbours come one after the other: `None` for fewer than 64 points, an
+/// inverted box, or where the order's memory cannot be had.
+pub(crate) fn curve_order_in(lo: [f64; 3], hi: [f64; 3], points: &[[f32; 3]]) -> Option<Vec<u32>> {
     // (An empty surface's box is inverted.)
-    if points.len() < 64 || points.len() > u32::MAX as usize || lo[0] > hi[0] {
+    if points.len() < 64 || points.len() > u32::MAX as usize || lo[0] > hi[0] || lo[0].is_nan() || hi[0].is_nan() {
         return None;
     }
     let scale = [0, 1, 2].map(|k| if hi[k] > lo[k] { 1023.0 / (hi[k] - lo[k]) } else { 0.0 });
-    // Ten bits an axis: cells of a thousandth of the box.
     let spread = |x: u64| {
         let mut x = x & 0x3ff;
         x = (x | x << 16) & 0x0300_00ff;
@@ -164,14 +170,14 @@ pub(super) fn curve_order(tree: &Tree<'_>, points: &[[f32; 3]]) -> Option<Vec<u3
         x = (x | x << 4) & 0x030c_30c3;
         (x | x << 2) & 0x0924_9249
     };
-    let mut keyed: Vec<(u32, u32)> = try_with_capacity(points.len(), "closest points in curve order").ok()?;
+    let mut keyed: Vec<(u32, u32)> = try_with_capacity(points.len(), "points in curve order").ok()?;
     keyed.extend(points.iter().enumerate().map(|(i, p)| {
-        // NaN and the infinities clamp to an end (their answers are None anyway).
+        // NaN and the infinities clamp to an end.
         let q = [0, 1, 2].map(|k| ((p[k] as f64 - lo[k]) * scale[k]).clamp(0.0, 1023.0) as u64);
         ((spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2) as u32, i as u32)
     }));
     keyed.par_sort_unstable();
-    let mut order: Vec<u32> = try_with_capacity(points.len(), "closest points in curve order").ok()?;
+    let mut order: Vec<u32> = try_with_capacity(points.len(), "points in curve order").ok()?;
     order.extend(keyed.iter().map(|k| k.1));
     Some(order)
 }
