@@ -500,9 +500,11 @@ impl Scene {
     /// fractions where the surface has holes.
     ///
     /// Where the scene [winds exactly](Scene::winds_exactly) the answer is exact, an
-    /// integer with [`Winding::bound`] 0: the signed crossings of one ray from the
-    /// point under the exact test ([`Tracer::winding_by_ray`]), checked against the
-    /// parity of the exact inside/outside ([`Scene::contains`]). Where that cannot
+    /// integer with [`Winding::bound`] 0: an empty leaf's inside/outside label where
+    /// the point lies in one and the groups of empty leaves wind as they are labelled
+    /// (no nested or inside-out shells around them), else the signed crossings of one
+    /// ray from the point under the exact test ([`Tracer::winding_by_ray`]), checked
+    /// against the parity of the exact inside/outside ([`Scene::contains`]). Where that cannot
     /// answer (a scene whose tracer has the watertight test, which has crowded fans)
     /// the tree's sum within 0.95 (guaranteed) rounded to the nearest integer of the
     /// inside/outside's parity: integers of one parity are 2 apart, so one lies within
@@ -532,20 +534,17 @@ impl Scene {
             self.winding_tree()?.winding_numbers(points, accuracy, &mut out);
             return Ok(out);
         }
-        // Exact: the signed crossings of one ray a point, checked against the exact
-        // inside/outside's parity; points the ray cannot answer (on the surface, or a
+        // Exact: an empty leaf's label, or the signed crossings of one ray checked
+        // against the exact inside/outside's parity; points neither can answer (a
         // scene whose tracer has not the exact test) from the tree's sum.
-        let inside = self.contains_batch(points)?;
-        let mut by_ray: Vec<Option<(i64, bool)>> = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
-        self.tracer().par_winding_by_rays(points, &mut by_ray);
+        let solid = self.solid()?;
+        let mut exact: Vec<Option<i64>> = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
+        self.tracer().par_exact_windings(solid, points, &mut exact);
         let mut rest = Vec::new();
-        for (i, (w, ray)) in out.iter_mut().zip(&by_ray).enumerate() {
-            match *ray {
-                // A crossing at distance 0: on the surface, a point beside it.
-                Some((n, touched)) if touched || n.rem_euclid(2) == inside[i] as i64 => {
-                    *w = Winding { value: n as f64, bound: 0.0 }
-                }
-                _ => rest.push(i),
+        for (i, (w, n)) in out.iter_mut().zip(&exact).enumerate() {
+            match *n {
+                Some(n) => *w = Winding { value: n as f64, bound: 0.0 },
+                None => rest.push(i),
             }
         }
         if rest.is_empty() {
@@ -553,12 +552,13 @@ impl Scene {
         }
         let tree = self.winding_tree()?;
         let left: Vec<[f32; 3]> = rest.iter().map(|&i| points[i]).collect();
+        let inside = self.contains_batch(&left)?;
         let mut sums = octrace_format::memory::try_vec(left.len(), "winding numbers")?;
         tree.winding_numbers(&left, Accuracy::Within(0.95), &mut sums);
-        for (&i, w) in rest.iter().zip(sums) {
+        for ((&i, w), inside) in rest.iter().zip(sums).zip(inside) {
             // The exact number is an integer of the parity `inside` says, within
             // 0.95 of the sum: the one.
-            let odd = inside[i] as i64;
+            let odd = inside as i64;
             let near = w.value.round() as i64;
             let value = if (near - odd).rem_euclid(2) == 0 {
                 near

@@ -167,17 +167,22 @@ impl Tracer<'_> {
         self.winding_by_ray_with(&mut LeafCrossings::default(), p, &bounds).map(|(n, _)| n)
     }
 
-    /// [`Tracer::winding_by_ray`] of many points on all threads of the current rayon
-    /// pool, with whether a crossing lay at distance 0 (the point on the surface, or
-    /// within the distances' rounding of it).
-    pub(crate) fn par_winding_by_rays(&self, points: &[[f32; 3]], out: &mut [Option<(i64, bool)>]) {
+    /// Exact winding numbers of many points of a closed oriented scene, on all
+    /// threads of the current rayon pool: an empty leaf's label where it answers
+    /// ([`Tracer::winding_by_label`]), else [`Tracer::winding_by_ray`] checked against
+    /// the parity of the exact inside/outside (on the surface, a crossing at distance
+    /// 0, the ray's answer). `None` where neither can answer.
+    pub(crate) fn par_exact_windings(&self, solid: &super::Solid, points: &[[f32; 3]], out: &mut [Option<i64>]) {
         use rayon::prelude::*;
         assert_eq!(points.len(), out.len(), "one result slot a point");
         let bounds = super::mesh_box(self.view());
         points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| {
             let mut buffer = LeafCrossings::default();
-            for (p, o) in p.iter().zip(o) {
-                *o = self.winding_by_ray_with(&mut buffer, *p, &bounds);
+            for (&p, o) in p.iter().zip(o) {
+                *o = self.winding_by_label(solid, p).or_else(|| {
+                    let (n, touched) = self.winding_by_ray_with(&mut buffer, p, &bounds)?;
+                    (touched || n.rem_euclid(2) == self.contains(solid, p) as i64).then_some(n)
+                });
             }
         });
     }

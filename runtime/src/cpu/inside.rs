@@ -82,6 +82,10 @@ pub struct Solid {
     /// Connected groups of empty leaves, and how many of them are inside.
     groups: usize,
     inside_groups: usize,
+    /// Whether every group's winding number is its label (0 outside, 1 inside: no
+    /// nested or inside-out shell around any), so that an empty leaf's label is the
+    /// winding number of its points ([`Tracer::winding_by_label`]).
+    plain: bool,
 }
 
 impl Solid {
@@ -152,10 +156,13 @@ impl Solid {
             side[b as usize] = (c.total % 2 == 1) as u8;
         }
         let inside_groups = side.iter().zip(&records).filter(|(s, r)| r.1 == 0 && **s == INSIDE).count();
+        // Exits minus entries to infinity: the group's winding number.
+        let plain = tracer.triangle_test() == TriangleTest::Exact
+            && counts.iter().all(|c| -c.winding() == (c.total % 2) as i64);
         let labels: Vec<u8> = (0..records.len())
             .map(|b| if records[b].1 != 0 { SURFACE } else { side[find(&mut parent, b as u32) as usize] })
             .collect();
-        let mut solid = Solid { labels, cells: Cells::default(), groups: roots.len(), inside_groups };
+        let mut solid = Solid { labels, cells: Cells::default(), groups: roots.len(), inside_groups, plain };
         // Reference points of the leaves with triangles, labelled by the walk.
         use rayon::prelude::*;
         let referenced: Vec<u8> = records
@@ -260,6 +267,28 @@ impl Tracer<'_> {
                 self.contains_by_reference(solid, p, address, box_index, i, inside)
             }
             None => false, // a hostile file on the trusted path
+        }
+    }
+
+    /// The winding number of `p` where its leaf answers it: the label of an empty
+    /// leaf (0 or 1) in a scene whose groups of empty leaves wind as they are
+    /// labelled (counted by the exact test; no nested or inside-out shells around
+    /// them), 0 outside the mesh box. `None` elsewhere: a leaf with triangles, or
+    /// another scene.
+    pub(crate) fn winding_by_label(&self, solid: &Solid, p: [f32; 3]) -> Option<i64> {
+        if !solid.plain || p.iter().any(|x| x.is_nan()) {
+            return None;
+        }
+        let b = self.view().bounds;
+        if !(0..3).all(|k| b.mesh_lo[k] <= p[k] && p[k] <= b.mesh_hi[k]) {
+            return Some(0);
+        }
+        let (address, _, _) = self.locate_cell(p);
+        let box_index = *self.view().octree.get(address as usize + 2)?;
+        match solid.labels.get(box_index as usize) {
+            Some(&OUTSIDE) => Some(0),
+            Some(&INSIDE) => Some(1),
+            _ => None,
         }
     }
 
