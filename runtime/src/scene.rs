@@ -538,9 +538,33 @@ impl Scene {
         // against the exact inside/outside's parity; points neither can answer (a
         // scene whose tracer has not the exact test) from the tree's sum.
         let solid = self.solid()?;
+        let tracer = self.tracer();
         let mut exact: Vec<Option<i64>> = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
-        self.tracer().par_exact_windings(solid, points, &mut exact);
-        let mut rest = Vec::new();
+        tracer.par_exact_windings(solid, points, false, &mut exact);
+        // The rays, along a space-filling curve: neighbours share leaves in cache.
+        let pending = exact.iter().filter(|w| w.is_none()).count();
+        let mut ray: Vec<u32> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
+        ray.extend((0..points.len() as u32).filter(|&i| exact[i as usize].is_none()));
+        let mut near: Vec<[f32; 3]> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
+        near.extend(ray.iter().map(|&i| points[i as usize]));
+        let b = self.view().bounds;
+        let order = match crate::cpu::curve_order_in(b.mesh_lo.map(f64::from), b.mesh_hi.map(f64::from), &near) {
+            Some(order) => order,
+            None => {
+                let mut order = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
+                order.extend(0..pending as u32);
+                order
+            }
+        };
+        let mut sorted: Vec<[f32; 3]> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
+        sorted.extend(order.iter().map(|&k| near[k as usize]));
+        let mut found: Vec<Option<i64>> = octrace_format::memory::try_vec(sorted.len(), "winding numbers")?;
+        tracer.par_exact_windings(solid, &sorted, true, &mut found);
+        for (&k, w) in order.iter().zip(found) {
+            exact[ray[k as usize] as usize] = w;
+        }
+        let mut rest: Vec<usize> =
+            octrace_format::memory::try_with_capacity(exact.iter().filter(|w| w.is_none()).count(), "winding numbers")?;
         for (i, (w, n)) in out.iter_mut().zip(&exact).enumerate() {
             match *n {
                 Some(n) => *w = Winding { value: n as f64, bound: 0.0 },
@@ -551,7 +575,8 @@ impl Scene {
             return Ok(out);
         }
         let tree = self.winding_tree()?;
-        let left: Vec<[f32; 3]> = rest.iter().map(|&i| points[i]).collect();
+        let mut left: Vec<[f32; 3]> = octrace_format::memory::try_with_capacity(rest.len(), "winding numbers")?;
+        left.extend(rest.iter().map(|&i| points[i]));
         let inside = self.contains_batch(&left)?;
         let mut sums = octrace_format::memory::try_vec(left.len(), "winding numbers")?;
         tree.winding_numbers(&left, Accuracy::Within(0.95), &mut sums);
