@@ -540,28 +540,20 @@ impl Scene {
         let solid = self.solid()?;
         let tracer = self.tracer();
         let mut exact: Vec<Option<i64>> = octrace_format::memory::try_vec(points.len(), "winding numbers")?;
-        tracer.par_exact_windings(solid, points, false, &mut exact);
+        tracer.par_windings_by_label(solid, points, &mut exact);
         // The rays, along a space-filling curve: neighbours share leaves in cache.
         let pending = exact.iter().filter(|w| w.is_none()).count();
         let mut ray: Vec<u32> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
         ray.extend((0..points.len() as u32).filter(|&i| exact[i as usize].is_none()));
         let mut near: Vec<[f32; 3]> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
         near.extend(ray.iter().map(|&i| points[i as usize]));
+        let mut found: Vec<Option<i64>> = octrace_format::memory::try_vec(pending, "winding numbers")?;
         let b = self.view().bounds;
-        let order = match crate::cpu::curve_order_in(b.mesh_lo.map(f64::from), b.mesh_hi.map(f64::from), &near) {
-            Some(order) => order,
-            None => {
-                let mut order = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
-                order.extend(0..pending as u32);
-                order
-            }
-        };
-        let mut sorted: Vec<[f32; 3]> = octrace_format::memory::try_with_capacity(pending, "winding numbers")?;
-        sorted.extend(order.iter().map(|&k| near[k as usize]));
-        let mut found: Vec<Option<i64>> = octrace_format::memory::try_vec(sorted.len(), "winding numbers")?;
-        tracer.par_exact_windings(solid, &sorted, true, &mut found);
-        for (&k, w) in order.iter().zip(found) {
-            exact[ray[k as usize] as usize] = w;
+        crate::cpu::along_curve(b.mesh_lo.map(f64::from), b.mesh_hi.map(f64::from), &near, &mut found, |p, o| {
+            tracer.par_windings_by_ray(solid, p, o)
+        });
+        for (&i, w) in ray.iter().zip(found) {
+            exact[i as usize] = w;
         }
         let mut rest: Vec<usize> =
             octrace_format::memory::try_with_capacity(exact.iter().filter(|w| w.is_none()).count(), "winding numbers")?;

@@ -31,7 +31,7 @@ use octrace_format::memory::try_with_capacity;
 use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
-pub(crate) use bounds::curve_order_in;
+pub(crate) use bounds::along_curve;
 pub use bounds::SurfaceBounds;
 
 use crate::exact::distance::{point_on, squared_distance, Square};

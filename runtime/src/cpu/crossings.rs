@@ -167,29 +167,26 @@ impl Tracer<'_> {
         self.winding_by_ray_with(&mut LeafCrossings::default(), p, &bounds).map(|(n, _)| n)
     }
 
-    /// Exact winding numbers of many points of a closed oriented scene, on all
-    /// threads of the current rayon pool: an empty leaf's label where it answers
-    /// ([`Tracer::winding_by_label`]), else (with `rays`) [`Tracer::winding_by_ray`]
-    /// checked against the parity of the exact inside/outside (on the surface, a
-    /// crossing at distance 0, the ray's answer). `None` where none can answer.
-    pub(crate) fn par_exact_windings(
-        &self,
-        solid: &super::Solid,
-        points: &[[f32; 3]],
-        rays: bool,
-        out: &mut [Option<i64>],
-    ) {
+    /// [`Tracer::winding_by_label`] of many points on all threads of the current
+    /// rayon pool.
+    pub(crate) fn par_windings_by_label(&self, solid: &super::Solid, points: &[[f32; 3]], out: &mut [Option<i64>]) {
+        use rayon::prelude::*;
+        assert_eq!(points.len(), out.len(), "one result slot a point");
+        points.par_iter().zip(out.par_iter_mut()).for_each(|(&p, o)| *o = self.winding_by_label(solid, p));
+    }
+
+    /// [`Tracer::winding_by_ray`] of many points of a closed oriented scene on all
+    /// threads of the current rayon pool, checked against the parity of the exact
+    /// inside/outside (on the surface, a crossing at distance 0, the ray's answer):
+    /// `None` where it cannot answer or the parity disagrees.
+    pub(crate) fn par_windings_by_ray(&self, solid: &super::Solid, points: &[[f32; 3]], out: &mut [Option<i64>]) {
         use rayon::prelude::*;
         assert_eq!(points.len(), out.len(), "one result slot a point");
         let bounds = super::mesh_box(self.view());
         points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| {
             let mut buffer = LeafCrossings::default();
             for (&p, o) in p.iter().zip(o) {
-                *o = self.winding_by_label(solid, p).or_else(|| {
-                    if !rays {
-                        return None;
-                    }
-                    let (n, touched) = self.winding_by_ray_with(&mut buffer, p, &bounds)?;
+                *o = self.winding_by_ray_with(&mut buffer, p, &bounds).and_then(|(n, touched)| {
                     (touched || n.rem_euclid(2) == self.contains(solid, p) as i64).then_some(n)
                 });
             }

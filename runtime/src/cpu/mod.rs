@@ -30,7 +30,7 @@ mod triangle;
 mod walk;
 pub mod watertight;
 
-pub(crate) use closest::curve_order_in;
+pub(crate) use closest::along_curve;
 pub(crate) use closest::{cross, dot, sub};
 pub use closest::{signed, ClosestPoint, ClosestScratch, SurfaceBounds};
 pub use crossings::{Crossing, CrossingCount};

@@ -27,7 +27,7 @@ use super::{solid_angle, Cluster, Sum, WindingTree};
 /// Lanes a group: a node has at most eight children.
 pub(super) const LANES: usize = 8;
 
-/// A lane's child is a leaf: its first triangle below this bit, `count` triangles.
+/// A lane's child is a leaf: its first block below this bit, `count` triangles.
 const LEAF_BIT: u32 = 1 << 31;
 /// A lane with no child.
 const EMPTY: u32 = u32::MAX;
@@ -108,6 +108,19 @@ pub(super) struct Block {
 }
 
 impl Block {
+    /// The block of up to eight `triangles`, the tree's from `first` on.
+    fn of(triangles: &[[[f32; 3]; 3]], first: u32) -> Block {
+        let mut b = Block { v: [[[0.0; LANES]; 3]; 3], first };
+        for (l, t) in triangles.iter().take(LANES).enumerate() {
+            for (v, vertex) in t.iter().enumerate() {
+                for c in 0..3 {
+                    b.v[v][c][l] = vertex[c];
+                }
+            }
+        }
+        b
+    }
+
     /// The solid angles at `p` of the block's first `count` triangles, summed with
     /// their bounds, and a mask of those to measure in `f64` instead.
     #[inline(always)]
@@ -343,15 +356,7 @@ impl Groups {
                 let block = LEAF_BIT | self.blocks.len() as u32;
                 let (first, count) = (child.first as usize, child.count as usize);
                 for (k, eight) in tree.triangles[first..first + count].chunks(LANES).enumerate() {
-                    let mut b = Block { v: [[[0.0; LANES]; 3]; 3], first: (first + k * LANES) as u32 };
-                    for (l, t) in eight.iter().enumerate() {
-                        for (v, vertex) in t.iter().enumerate() {
-                            for c in 0..3 {
-                                b.v[v][c][l] = vertex[c];
-                            }
-                        }
-                    }
-                    self.blocks.push(b);
+                    self.blocks.push(Block::of(eight, (first + k * LANES) as u32));
                 }
                 block
             } else {
@@ -411,16 +416,14 @@ impl Groups {
 mod tests {
     use super::*;
     use crate::winding::wide;
+    use octrace_bake::procedural::SplitMix;
 
     /// A lane's `f32` expansion agrees with [`Cluster::far`]'s `f64` one within the
     /// rounding term of its bound, far from the origin too.
     #[test]
     fn a_lane_is_the_clusters_expansion() {
-        let mut state = 7u64;
-        let mut unit = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = SplitMix(7);
+        let mut unit = move || rng.unit();
         for offset in [0.0f32, 1e5] {
             let triangles: Vec<[[f32; 3]; 3]> =
                 (0..200).map(|_| [0; 3].map(|_| [offset + unit(), unit(), unit()])).collect();
@@ -458,11 +461,8 @@ mod tests {
     /// quadrant, on the axes and at the origin.
     #[test]
     fn atan2_is_within_its_error() {
-        let mut state = 11u64;
-        let mut unit = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rng = SplitMix(11);
+        let mut unit = move || rng.unit() * 2.0 - 1.0;
         let mut cases: Vec<(f32, f32)> = (0..200_000).map(|_| (unit() * 1e3, unit() * 1e-2)).collect();
         cases.extend((0..200_000).map(|_| (unit(), unit())));
         cases.extend([(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (1.0, 1.0), (-1.0, -1.0), (0.0, 0.0)]);
@@ -478,23 +478,13 @@ mod tests {
     /// vertices, and far from the origin.
     #[test]
     fn a_blocks_solid_angles_hold_their_bounds() {
-        let mut state = 5u64;
-        let mut unit = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = SplitMix(5);
+        let mut unit = move || rng.unit();
         let (mut flagged, mut answered) = (0, 0);
         for offset in [0.0f32, 1e4] {
             let triangles: Vec<[[f32; 3]; 3]> =
                 (0..8).map(|_| [0; 3].map(|_| [offset + unit(), unit(), unit() * 0.1])).collect();
-            let mut block = Block { v: [[[0.0; LANES]; 3]; 3], first: 0 };
-            for (l, t) in triangles.iter().enumerate() {
-                for v in 0..3 {
-                    for c in 0..3 {
-                        block.v[v][c][l] = t[v][c];
-                    }
-                }
-            }
+            let block = Block::of(&triangles, 0);
             for k in 0..4000 {
                 let p = match k % 4 {
                     // Near a vertex, near an edge's middle, in or near the plane, anywhere.

@@ -37,7 +37,8 @@
 //! Barill et al.'s rule (a cluster farther than `beta` times its radius by its
 //! expansion, a nearer one opened) evaluates a node's children eight at a time in
 //! `f32` (`fast`: AVX2 where the processor has it), their rounding added to the
-//! bound; near leaves' triangles are summed in `f64`.
+//! bound; near leaves' triangles eight at a time in `f32` too, each bounded, and in
+//! `f64` where that bound is too large.
 
 use std::collections::BinaryHeap;
 
@@ -560,27 +561,11 @@ impl WindingTree {
     /// The points are taken along a space-filling curve (neighbours share the tree's
     /// clusters in cache), the answers written where their points are.
     pub fn winding_numbers(&self, points: &[[f32; 3]], accuracy: Accuracy, out: &mut [Winding]) {
-        let order = self.root.and_then(|r| {
-            let (lo, hi) = (r.centre.map(|c| c - r.radius), r.centre.map(|c| c + r.radius));
-            crate::cpu::curve_order_in(lo, hi, points)
-        });
-        let sorted = order.as_ref().and_then(|order| {
-            let mut sorted: Vec<[f32; 3]> = try_with_capacity(points.len(), "points in curve order").ok()?;
-            sorted.extend(order.iter().map(|&i| points[i as usize]));
-            let mut found: Vec<Winding> = try_with_capacity(points.len(), "points in curve order").ok()?;
-            found.resize(points.len(), Winding::default());
-            Some((sorted, found))
-        });
-        match (order, sorted) {
-            (Some(order), Some((sorted, mut found))) => {
-                self.winding_numbers_as_they_come(&sorted, accuracy, &mut found);
-                for (&i, w) in order.iter().zip(found) {
-                    out[i as usize] = w;
-                }
-            }
-            // Too few points to gain, or no memory for the order: as they come.
-            _ => self.winding_numbers_as_they_come(points, accuracy, out),
-        }
+        let Some(r) = self.root else {
+            return self.winding_numbers_as_they_come(points, accuracy, out);
+        };
+        let (lo, hi) = (r.centre.map(|c| c - r.radius), r.centre.map(|c| c + r.radius));
+        crate::cpu::along_curve(lo, hi, points, out, |p, o| self.winding_numbers_as_they_come(p, accuracy, o));
     }
 
     fn winding_numbers_as_they_come(&self, points: &[[f32; 3]], accuracy: Accuracy, out: &mut [Winding]) {

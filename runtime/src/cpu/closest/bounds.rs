@@ -157,7 +157,7 @@ pub(super) fn curve_order(tree: &Tree<'_>, points: &[[f32; 3]]) -> Option<Vec<u3
 /// axis: cells of a thousandth of the box; points outside clamp to its faces), so
 /// that neighbours come one after the other: `None` for fewer than 64 points, an
 /// inverted box, or where the order's memory cannot be had.
-pub(crate) fn curve_order_in(lo: [f64; 3], hi: [f64; 3], points: &[[f32; 3]]) -> Option<Vec<u32>> {
+fn curve_order_in(lo: [f64; 3], hi: [f64; 3], points: &[[f32; 3]]) -> Option<Vec<u32>> {
     // (An empty surface's box is inverted.)
     if points.len() < 64 || points.len() > u32::MAX as usize || lo[0] > hi[0] || lo[0].is_nan() || hi[0].is_nan() {
         return None;
@@ -180,6 +180,34 @@ pub(crate) fn curve_order_in(lo: [f64; 3], hi: [f64; 3], points: &[[f32; 3]]) ->
     let mut order: Vec<u32> = try_with_capacity(points.len(), "points in curve order").ok()?;
     order.extend(keyed.iter().map(|k| k.1));
     Some(order)
+}
+
+/// `answer(points, out)` with the points taken along [`curve_order_in`]'s curve
+/// (neighbours share a tree's nodes in cache), the answers written where their points
+/// are; as they come where the order or its copies' memory cannot be had.
+pub(crate) fn along_curve<T: Clone + Default>(
+    lo: [f64; 3],
+    hi: [f64; 3],
+    points: &[[f32; 3]],
+    out: &mut [T],
+    answer: impl FnOnce(&[[f32; 3]], &mut [T]),
+) {
+    let sorted = curve_order_in(lo, hi, points).and_then(|order| {
+        let mut sorted: Vec<[f32; 3]> = try_with_capacity(points.len(), "points in curve order").ok()?;
+        sorted.extend(order.iter().map(|&i| points[i as usize]));
+        let mut found: Vec<T> = try_with_capacity(points.len(), "points in curve order").ok()?;
+        found.resize(points.len(), T::default());
+        Some((order, sorted, found))
+    });
+    match sorted {
+        Some((order, sorted, mut found)) => {
+            answer(&sorted, &mut found);
+            for (&i, a) in order.iter().zip(found) {
+                out[i as usize] = a;
+            }
+        }
+        None => answer(points, out),
+    }
 }
 
 /// How many nodes and clusters `tree` has (a bound on a search's steps).
