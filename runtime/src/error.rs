@@ -35,6 +35,20 @@ pub enum Error {
         /// How to get the answers within it.
         advice: &'static str,
     },
+    /// A transform that cannot place an instance ([`crate::world::World::add`]).
+    #[error("cannot place an instance by {what}: {reason}")]
+    Transform {
+        /// The transform (its rows), or what was placed.
+        what: String,
+        /// Why not.
+        reason: &'static str,
+    },
+    /// An instance id the world does not hold (never added, or removed).
+    #[error("the world holds no instance {id} (never added, or removed)")]
+    NoInstance {
+        /// The id asked for.
+        id: u32,
+    },
     /// An image could not be written.
     #[error("{path}: cannot write image: {message}")]
     Image {

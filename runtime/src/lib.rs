@@ -57,6 +57,7 @@ pub mod surface;
 #[doc(hidden)]
 pub mod testing;
 pub mod winding;
+pub mod world;
 
 /// The vector type of the API (`Ray::new` takes `glam::Vec3`), re-exported so that a
 /// caller needs no `glam` of its own (or a matching version of it).

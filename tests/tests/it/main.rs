@@ -27,3 +27,4 @@ mod texcoords;
 mod trusted;
 mod unconstrained;
 mod winding;
+mod world;

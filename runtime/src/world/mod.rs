@@ -1,0 +1,414 @@
+//! Worlds of instances: baked scenes, each opened once and shared, placed many times
+//! by affine transforms, moved between frames and traced as one scene.
+//!
+//! A [`World`] holds instances of [`Scene`]s (`Arc`s: one file's arrays for all its
+//! instances) and a top level, a BVH over the instances' world boxes built by binned
+//! SAH. Edits (`add`, `set_transform`, `remove`) are staged; [`World::commit`] makes
+//! them visible to the queries at once: it refits the top level's boxes where only
+//! placements changed (rebuilding it when the refit tree's SAH cost passes twice its
+//! build's) and rebuilds it where instances came or went. Queries see the last
+//! commit, never a half-made edit.
+//!
+//! # What a query answers
+//! A ray is carried into an instance's space (origin and direction through the
+//! inverse transform in `f64`, each rounded once to `f32`; the direction is not
+//! normalised, so distances along the ray are the same numbers in both spaces) and
+//! traced there by the instance's own walk, with its guarantees (watertight, the
+//! exact test): within an instance, the answers are its scene's for that rounded
+//! ray. Against the same triangles placed and baked into one file, a nearest hit's
+//! distance differs by the rounding of the carried ray (some `f32` ulps of the
+//! origin's and the hit's coordinates, over the cosine of the angle of incidence),
+//! and a ray within that of a triangle's edge may hit the neighbouring triangle.
+//! Of hits at the same distance in two instances, the lower instance id is the
+//! nearest hit; where instances overlap, each answers for its own triangles (nothing
+//! is made watertight across them).
+//!
+//! ```
+//! use std::sync::Arc;
+//! use octrace_bake::{bake, procedural, BuildParams};
+//! use octrace_runtime::world::{Transform, World};
+//! use octrace_runtime::{glam::Vec3, Ray, Scene};
+//! let ball = Arc::new(Scene::from_baked(bake(&procedural::sphere([0.0; 3], 1.0, 16, 24), &BuildParams::auto())?)?);
+//! let mut world = World::new();
+//! let left = world.add(&ball, Transform::translation([-3.0, 0.0, 0.0]))?;
+//! let right = world.add(&ball, Transform::translation([3.0, 0.0, 0.0]))?;
+//! world.commit();
+//! let ray = Ray::new(Vec3::new(3.0, 0.0, -5.0), Vec3::Z);
+//! assert_eq!(world.intersect(&ray).map(|h| h.instance), Some(right));
+//! world.set_transform(left, Transform::translation([3.0, 0.0, -2.5]))?; // in front
+//! world.commit();
+//! assert_eq!(world.intersect(&ray).map(|h| h.instance), Some(left));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod top;
+mod transform;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+pub use transform::Transform;
+
+use crate::error::{Error, Result};
+use crate::ray::{Hit, Ray};
+use crate::surface::HitSurface;
+use crate::Scene;
+use top::{Aabb, Top};
+
+/// The rays [`World::intersect_batch`] takes on one thread at a time.
+pub const PIECE: usize = 4096;
+
+/// A nearest hit in a world: the instance, and the hit in its scene's terms
+/// (`hit.t` is the distance along the world's ray; `hit.triangle` and `hit.prim`
+/// index the instance's scene). [`World::surface`] gives the point and normals in
+/// world space, the part and the material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldHit {
+    /// The instance's id ([`World::add`]'s).
+    pub instance: u32,
+    /// The hit in the instance's scene.
+    pub hit: Hit,
+}
+
+/// An instance as the queries read it.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    scene: u32,
+    to_world: Transform,
+    to_local: Transform,
+    bounds: Aabb,
+}
+
+/// Baked scenes placed by transforms and traced as one (see the module's text).
+#[derive(Default)]
+pub struct World {
+    scenes: Vec<Arc<Scene>>,
+    /// Each scene's index in `scenes`, by its address.
+    scene_ids: HashMap<usize, u32>,
+    /// The committed instances, by id (`None`: removed).
+    placed: Vec<Option<Placed>>,
+    /// Their boxes (empty for removed ones), as the top level reads them.
+    boxes: Vec<Aabb>,
+    top: Top,
+    /// Edits since the last commit, in order.
+    staged: Vec<(u32, Option<Placed>)>,
+    /// Each id's scene as the edits leave it (`None`: removed).
+    latest: Vec<Option<u32>>,
+}
+
+impl std::fmt::Debug for World {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("World")
+            .field("scenes", &self.scenes.len())
+            .field("instances", &self.len())
+            .field("staged", &self.staged.len())
+            .finish()
+    }
+}
+
+impl World {
+    /// An empty world.
+    pub fn new() -> World {
+        World::default()
+    }
+
+    /// Places `scene` by `transform` (local to world); visible to queries after the
+    /// next [`World::commit`]. Returns the instance's id (ids are never reused).
+    ///
+    /// # Errors
+    /// [`Error::Transform`] where the transform cannot be inverted in `f64` or places
+    /// the scene's box beyond `f32`'s range.
+    pub fn add(&mut self, scene: &Arc<Scene>, transform: Transform) -> Result<u32> {
+        let key = Arc::as_ptr(scene) as usize;
+        let index = match self.scene_ids.get(&key) {
+            Some(&i) => i,
+            None => {
+                let i = self.scenes.len() as u32;
+                self.scenes.push(Arc::clone(scene));
+                self.scene_ids.insert(key, i);
+                i
+            }
+        };
+        let placed = self.place(index, transform)?;
+        let id = u32::try_from(self.latest.len()).ok().filter(|&id| id < u32::MAX).ok_or(Error::Transform {
+            what: "a new instance".into(),
+            reason: "a world holds at most 2^32 - 1 instances",
+        })?;
+        self.latest.push(Some(index));
+        self.staged.push((id, Some(placed)));
+        Ok(id)
+    }
+
+    /// Moves instance `id` to `transform`, at the next commit.
+    ///
+    /// # Errors
+    /// [`Error::NoInstance`] where the world holds no such instance; [`Error::Transform`]
+    /// as [`World::add`].
+    pub fn set_transform(&mut self, id: u32, transform: Transform) -> Result<()> {
+        let scene = self.latest.get(id as usize).copied().flatten().ok_or(Error::NoInstance { id })?;
+        let placed = self.place(scene, transform)?;
+        self.staged.push((id, Some(placed)));
+        Ok(())
+    }
+
+    /// Removes instance `id`, at the next commit.
+    ///
+    /// # Errors
+    /// [`Error::NoInstance`] where the world holds no such instance.
+    pub fn remove(&mut self, id: u32) -> Result<()> {
+        match self.latest.get_mut(id as usize) {
+            Some(slot @ Some(_)) => *slot = None,
+            _ => return Err(Error::NoInstance { id }),
+        }
+        self.staged.push((id, None));
+        Ok(())
+    }
+
+    /// Makes the staged edits visible: the top level refit where only placements
+    /// changed (rebuilt where that tree's SAH cost passes twice its build's), rebuilt
+    /// where instances came or went.
+    pub fn commit(&mut self) {
+        if self.staged.is_empty() {
+            return;
+        }
+        let mut rebuild = self.placed.is_empty();
+        for (id, edit) in self.staged.drain(..) {
+            let id = id as usize;
+            if id >= self.placed.len() {
+                self.placed.resize(id + 1, None);
+                self.boxes.resize(id + 1, Aabb::EMPTY);
+            }
+            rebuild |= self.placed[id].is_some() != edit.is_some();
+            self.boxes[id] = edit.map_or(Aabb::EMPTY, |p| p.bounds);
+            self.placed[id] = edit;
+        }
+        if rebuild || !self.top.refit(&self.boxes) {
+            let live = (0..self.placed.len() as u32).filter(|&id| self.placed[id as usize].is_some()).collect();
+            self.top = Top::build(&self.boxes, live);
+        }
+    }
+
+    /// The committed instances.
+    pub fn len(&self) -> usize {
+        self.placed.iter().flatten().count()
+    }
+
+    /// Whether no instance is committed.
+    pub fn is_empty(&self) -> bool {
+        self.placed.iter().all(Option::is_none)
+    }
+
+    /// Instance `id`'s scene and placement, as committed.
+    pub fn instance(&self, id: u32) -> Option<(&Arc<Scene>, Transform)> {
+        let p = self.placed.get(id as usize)?.as_ref()?;
+        Some((&self.scenes[p.scene as usize], p.to_world))
+    }
+
+    /// The bytes the world itself takes (its scenes' not counted: they are shared).
+    pub fn bytes(&self) -> usize {
+        self.placed.len() * (std::mem::size_of::<Option<Placed>>() + std::mem::size_of::<Aabb>())
+            + self.top.bytes()
+            + self.latest.len() * std::mem::size_of::<Option<u32>>()
+    }
+
+    /// The nearest hit of `ray` in `[tmin, tmax]` (see the module's text).
+    pub fn intersect(&self, ray: &Ray) -> Option<WorldHit> {
+        if !ray.is_traceable() {
+            return None;
+        }
+        let mut best: Option<WorldHit> = None;
+        let o = ray.origin.to_array();
+        let d = ray.dir.to_array();
+        self.top.walk(o, d, ray.tmin, ray.tmax, |id, _, tmax| {
+            let Some(p) = &self.placed[id as usize] else { return false };
+            let local = carried(p, ray, *tmax);
+            if let Some(hit) = self.scenes[p.scene as usize].intersect(&local) {
+                let nearer = best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance);
+                if nearer {
+                    best = Some(WorldHit { instance: id, hit });
+                    *tmax = hit.t;
+                }
+            }
+            false
+        });
+        best
+    }
+
+    /// Whether anything lies on `ray` in `[tmin, tmax]`.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        if !ray.is_traceable() {
+            return false;
+        }
+        let mut found = false;
+        self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, tmax| {
+            let Some(p) = &self.placed[id as usize] else { return false };
+            found = self.scenes[p.scene as usize].occluded(&carried(p, ray, *tmax));
+            found
+        });
+        found
+    }
+
+    /// [`World::intersect`] for many rays, on all cores, with the same answers: in
+    /// pieces of [`PIECE`] rays, each ray's instances (the boxes it enters, nearest
+    /// first) taken in rounds, a round's rays grouped by instance and walked by the
+    /// instance's batch walk (sixteen rays at a time), each ray's reach shortened by
+    /// its nearest hit so far.
+    pub fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<WorldHit>> {
+        let mut out = vec![None; rays.len()];
+        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.intersect_piece(rays, out));
+        out
+    }
+
+    /// [`World::intersect_batch`] on this thread, for one piece.
+    fn intersect_piece(&self, rays: &[Ray], out: &mut [Option<WorldHit>]) {
+        // Each ray's boxes, nearest first: `boxes[first[i]..first[i + 1]]`.
+        let mut boxes: Vec<(f32, u32)> = Vec::new();
+        let mut first = Vec::with_capacity(rays.len() + 1);
+        first.push(0u32);
+        for ray in rays {
+            let start = boxes.len();
+            if ray.is_traceable() {
+                self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, near, _| {
+                    boxes.push((near, id));
+                    false
+                });
+            }
+            boxes[start..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            first.push(boxes.len() as u32);
+        }
+        let mut round = 0u32;
+        let mut todo: Vec<(u32, u32)> = Vec::new(); // (instance, ray)
+        let (mut carried_rays, mut hits) = (Vec::new(), Vec::new());
+        loop {
+            todo.clear();
+            for (i, ray) in rays.iter().enumerate() {
+                let at = first[i] + round;
+                if at >= first[i + 1] {
+                    continue;
+                }
+                let (near, id) = boxes[at as usize];
+                let reach = out[i].map_or(ray.tmax, |h: WorldHit| h.hit.t);
+                // The walk's own test: a box entered past the best hit is skipped.
+                if near <= reach + reach.abs() * 4.0 * f32::EPSILON {
+                    todo.push((id, i as u32));
+                }
+            }
+            if todo.is_empty() && (0..rays.len()).all(|i| first[i] + round >= first[i + 1]) {
+                return;
+            }
+            todo.sort_unstable();
+            for group in todo.chunk_by(|a, b| a.0 == b.0) {
+                let id = group[0].0;
+                let Some(p) = &self.placed[id as usize] else { continue };
+                carried_rays.clear();
+                carried_rays.extend(group.iter().map(|&(_, i)| {
+                    let ray = &rays[i as usize];
+                    carried(p, ray, out[i as usize].map_or(ray.tmax, |h| h.hit.t))
+                }));
+                hits.clear();
+                hits.resize(carried_rays.len(), None);
+                self.scenes[p.scene as usize].tracer().intersect_batch(&carried_rays, &mut hits);
+                for (&(_, i), hit) in group.iter().zip(&hits) {
+                    let Some(hit) = *hit else { continue };
+                    let best = &mut out[i as usize];
+                    if best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance) {
+                        *best = Some(WorldHit { instance: id, hit });
+                    }
+                }
+            }
+            round += 1;
+        }
+    }
+
+    /// [`World::occluded`] for many rays, on all cores.
+    pub fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
+        rays.par_iter().with_min_len(256).map(|r| self.occluded(r)).collect()
+    }
+
+    /// The surface at `hit` in world space: the point carried by the instance's
+    /// transform (in `f64`, rounded once; `point_error` grows by the transform's
+    /// scale and that rounding), the normals by its inverse transpose (normalised;
+    /// the geometric normal is that of the placed triangle's vertices in order, so a
+    /// mirroring transform turns it), and the part and material of the instance's
+    /// scene; `None` where the world holds no such instance (removed since).
+    pub fn surface(&self, hit: &WorldHit) -> Option<HitSurface> {
+        let p = self.placed.get(hit.instance as usize).copied().flatten()?;
+        let mut s = self.scenes[p.scene as usize].surface(&hit.hit);
+        let wide = |v: Vec3| v.to_array().map(f64::from);
+        let point = p.to_world.point(wide(s.point));
+        let e = wide(s.point_error);
+        let rows = &p.to_world.rows;
+        s.point_error = Vec3::from_array(std::array::from_fn(|i| {
+            let carried = rows[i][0].abs() * e[0] + rows[i][1].abs() * e[1] + rows[i][2].abs() * e[2];
+            (carried + point[i].abs() * f64::from(f32::EPSILON)) as f32
+        }));
+        s.point = Vec3::from_array(point.map(|c| c as f32));
+        let flip = if p.to_world.determinant() < 0.0 { -1.0 } else { 1.0 };
+        let normal = |n: Vec3| {
+            let n = wide(n);
+            let m = &p.to_local.rows;
+            let w: [f64; 3] = std::array::from_fn(|i| m[0][i] * n[0] + m[1][i] * n[1] + m[2][i] * n[2]);
+            let len = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+            if len > 0.0 && len.is_finite() {
+                Vec3::from_array(w.map(|c| (c / len) as f32))
+            } else {
+                Vec3::ZERO
+            }
+        };
+        s.geometric_normal = normal(s.geometric_normal) * flip;
+        s.shading_normal = normal(s.shading_normal);
+        if s.shading_normal.dot(s.geometric_normal) < 0.0 {
+            s.shading_normal = -s.shading_normal;
+        }
+        Some(s)
+    }
+
+    /// Scene `scene` placed by `transform`: its inverse and its world box.
+    fn place(&self, scene: u32, to_world: Transform) -> Result<Placed> {
+        let to_local = to_world.inverse()?;
+        let view = self.scenes[scene as usize].view();
+        let (lo, hi) = crate::cpu::mesh_box(&view);
+        let (mut wlo, mut whi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for corner in 0..8 {
+            let c = [0, 1, 2].map(|k| f64::from(if corner >> k & 1 == 0 { lo[k] } else { hi[k] }));
+            let w = to_world.point(c);
+            for k in 0..3 {
+                wlo[k] = wlo[k].min(w[k]);
+                whi[k] = whi[k].max(w[k]);
+            }
+        }
+        // A margin for the rounding of the carried rays and of the corners' products.
+        let reach = (0..3).fold(0.0f64, |m, k| m.max(wlo[k].abs()).max(whi[k].abs()).max(whi[k] - wlo[k]));
+        let margin = reach * 1e-6;
+        let bounds = Aabb {
+            lo: wlo.map(|c| ((c - margin) as f32).next_down()),
+            hi: whi.map(|c| ((c + margin) as f32).next_up()),
+        };
+        if !bounds.lo.iter().chain(&bounds.hi).all(|c| c.is_finite()) {
+            return Err(Error::Transform {
+                what: format!("{:?}", to_world.rows),
+                reason: "it places the scene's box beyond f32's range",
+            });
+        }
+        Ok(Placed { scene, to_world, to_local, bounds })
+    }
+}
+
+/// `ray` in instance `p`'s space, over `[ray.tmin, tmax]`: the origin and direction
+/// through the inverse transform in `f64`, each rounded once (a direction past
+/// `f32`'s range makes a ray that hits nothing).
+#[inline]
+fn carried(p: &Placed, ray: &Ray, tmax: f32) -> Ray {
+    let wide = |v: Vec3| v.to_array().map(f64::from);
+    let o = p.to_local.point(wide(ray.origin));
+    let d = p.to_local.vector(wide(ray.dir));
+    Ray {
+        origin: Vec3::from_array(o.map(|c| c as f32)),
+        tmin: ray.tmin,
+        dir: Vec3::from_array(d.map(|c| c as f32)),
+        tmax,
+    }
+}

@@ -1,0 +1,276 @@
+//! Worlds of instances against the same triangles placed in `f64`, rounded, and
+//! baked into one file, and against the brute-force oracle over them.
+
+use std::sync::Arc;
+
+use octrace_bake::procedural::{self, SplitMix};
+use octrace_bake::{bake, BuildParams, Mesh};
+use octrace_runtime::glam::Vec3;
+use octrace_runtime::reference::{Agreement, Reference};
+use octrace_runtime::world::{Transform, World};
+use octrace_runtime::{Error, Ray, Scene};
+
+fn scene(mesh: &Mesh) -> Arc<Scene> {
+    Arc::new(Scene::from_baked(bake(mesh, &BuildParams::auto()).expect("bakes")).expect("opens"))
+}
+
+/// A closed sphere, a closed cube of 3x3 squares a face, an open grid.
+fn props() -> Vec<(Mesh, Arc<Scene>)> {
+    [
+        procedural::sphere([0.2, -0.1, 0.3], 1.0, 12, 18),
+        procedural::cube([-1.0; 3], [1.0; 3], 3),
+        procedural::grid(5, 2.0),
+    ]
+    .into_iter()
+    .map(|m| {
+        let s = scene(&m);
+        (m, s)
+    })
+    .collect()
+}
+
+/// A random placement: a rotation, a scale per axis (mirrored now and then) and a
+/// translation within `reach`.
+fn placement(rng: &mut SplitMix, reach: f64) -> Transform {
+    let mut u = || rng.unit() as f64;
+    let axis = [u() - 0.5, u() - 0.5, u() - 0.5];
+    let angle = std::f64::consts::TAU * u();
+    let mut scale = [0.4 + 1.6 * u(), 0.4 + 1.6 * u(), 0.4 + 1.6 * u()];
+    if u() < 0.2 {
+        scale[0] = -scale[0];
+    }
+    let at = [reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0)];
+    Transform::scaling(scale).then(&Transform::rotation(axis, angle)).then(&Transform::translation(at))
+}
+
+/// The world's triangles placed in `f64` and rounded, in instance order (removed ones
+/// skipped), and each live instance's first global index.
+fn placed_triangles(
+    world: &World,
+    meshes: &[(Mesh, Arc<Scene>)],
+    ids: &[u32],
+) -> (Vec<[[f32; 3]; 3]>, Vec<Option<u32>>) {
+    let mut all = Vec::new();
+    let mut first = Vec::new();
+    for &id in ids {
+        let Some((scene, transform)) = world.instance(id) else {
+            first.push(None);
+            continue;
+        };
+        first.push(Some(all.len() as u32));
+        let mesh = &meshes.iter().find(|(_, s)| Arc::ptr_eq(s, scene)).expect("a prop").0;
+        all.extend(mesh.triangles.iter().map(|t| t.map(|v| transform.point(v.map(f64::from)).map(|c| c as f32))));
+    }
+    (all, first)
+}
+
+fn rays(rng: &mut SplitMix, n: usize, reach: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|i| {
+            let mut u = || rng.unit();
+            let o = Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0) * reach * 1.3;
+            // Half of them aimed at the middle, so that they pass through crowds.
+            let target = if i % 2 == 0 {
+                Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0) * reach * 0.3
+            } else {
+                o + Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5)
+            };
+            let tmax = if i % 5 == 0 { reach * u() } else { f32::INFINITY };
+            Ray::segment(o, target - o, 0.0, tmax)
+        })
+        .collect()
+}
+
+/// Compares the world's nearest hits and occlusion with the oracle's and with the
+/// baked file's; returns how many rays hit.
+fn check(world: &World, props: &[(Mesh, Arc<Scene>)], ids: &[u32], rays: &[Ray]) -> usize {
+    let (triangles, first) = placed_triangles(world, props, ids);
+    let global = |instance: u32, triangle: u32| {
+        let at = ids.iter().position(|&id| id == instance).expect("a live instance");
+        first[at].expect("live") + triangle
+    };
+    let oracle = Reference::in_input_order(triangles.clone());
+    let baked = Scene::from_baked(bake(&Mesh::from_triangles(triangles.clone()), &BuildParams::auto()).expect("bakes"))
+        .expect("opens");
+    let (mut hits, mut ties) = (0, 0);
+    for (i, ray) in rays.iter().enumerate() {
+        let want = oracle.intersect(ray);
+        let got = world.intersect(ray).map(|h| (h.hit.t, global(h.instance, h.hit.triangle), h.hit.u, h.hit.v));
+        match oracle.compare_with(ray, want, got) {
+            Agreement::Same => {}
+            Agreement::Tie => ties += 1,
+            Agreement::Different => panic!("ray {i} {ray:?}: the world answers {got:?}, the oracle {want:?}"),
+        }
+        // The distance, where both name the same triangle and the ray does not graze
+        // it: within the rounding of the carried ray (a few f32 ulps of the origin's
+        // and the hit's coordinates, over the cosine).
+        if let (Some(g), Some(w)) = (got, want) {
+            hits += 1;
+            if g.1 == w.triangle {
+                let t = triangles[w.triangle as usize].map(Vec3::from_array);
+                let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+                let cos = n.dot(ray.dir.normalize()).abs();
+                if cos > 0.05 {
+                    let reach = (ray.origin.abs().max_element() + (ray.dir * w.t as f32).abs().max_element()) as f64;
+                    let bound = 64.0 * f32::EPSILON as f64 * reach / cos as f64 / ray.dir.length() as f64;
+                    assert!(
+                        (g.0 as f64 - w.t).abs() <= bound + w.t * 2.4e-7,
+                        "ray {i}: t {} against the oracle's {} (bound {bound})",
+                        g.0,
+                        w.t
+                    );
+                }
+            }
+        }
+        // The same triangles baked into one file: the same triangle, or a tie as the
+        // oracle sees it.
+        let one = baked.intersect(ray).map(|h| (h.t, h.triangle, h.u, h.v));
+        if got.map(|g| g.1) != one.map(|h| h.1) {
+            assert_ne!(oracle.compare_with(ray, want, one), Agreement::Different, "ray {i}: the baked file is off");
+            assert_ne!(oracle.compare_with(ray, want, got), Agreement::Same, "ray {i}: {got:?} against {one:?}");
+        }
+        let occluded = world.occluded(ray);
+        assert_ne!(
+            oracle.compare_occluded_with(ray, oracle.occluded(ray), occluded),
+            Agreement::Different,
+            "ray {i}: occluded {occluded}"
+        );
+    }
+    assert!(ties * 100 <= rays.len(), "{ties} ties in {} rays", rays.len());
+    hits
+}
+
+#[test]
+fn a_world_answers_as_its_triangles_placed_and_baked_into_one_file() {
+    let props = props();
+    let mut rng = SplitMix(51);
+    let reach = 12.0;
+    let mut world = World::new();
+    let mut ids = Vec::new();
+    for k in 0..240 {
+        let (_, s) = &props[k % props.len()];
+        ids.push(world.add(s, placement(&mut rng, reach)).expect("placed"));
+    }
+    // Nothing is visible before the commit.
+    let rays = rays(&mut rng, 1500, reach as f32);
+    assert!(rays.iter().all(|r| world.intersect(r).is_none()));
+    world.commit();
+    assert_eq!(world.len(), 240);
+    let hits = check(&world, &props, &ids, &rays);
+    assert!(hits > 500, "{hits} hits: the rays should meet the crowd");
+    let batch = world.intersect_batch(&rays);
+    assert_eq!(batch, rays.iter().map(|r| world.intersect(r)).collect::<Vec<_>>());
+    assert_eq!(world.occluded_batch(&rays), rays.iter().map(|r| world.occluded(r)).collect::<Vec<_>>());
+
+    // Moves alone: the top level refit.
+    for &id in ids.iter().step_by(2) {
+        world.set_transform(id, placement(&mut rng, reach)).expect("moved");
+    }
+    world.commit();
+    check(&world, &props, &ids, &rays);
+    // Instances gone and come: rebuilt.
+    for &id in ids.iter().skip(1).step_by(3) {
+        world.remove(id).expect("removed");
+    }
+    for k in 0..40 {
+        ids.push(world.add(&props[k % props.len()].1, placement(&mut rng, reach)).expect("placed"));
+    }
+    world.commit();
+    assert_eq!(world.len(), 240 - 80 + 40);
+    check(&world, &props, &ids, &rays);
+    // Everything moved far apart, one at a time: a refit that degrades the tree is
+    // rebuilt, and the answers stay right either way.
+    for &id in &ids {
+        if world.instance(id).is_some() {
+            world.set_transform(id, placement(&mut rng, 3.0 * reach)).expect("moved");
+        }
+    }
+    world.commit();
+    check(&world, &props, &ids, &rays);
+}
+
+#[test]
+fn many_instances_of_one_scene_share_it_and_name_their_hits() {
+    let ball = scene(&procedural::sphere([0.0; 3], 1.0, 16, 24));
+    let mut world = World::new();
+    let row: Vec<u32> = (0..10)
+        .map(|k| world.add(&ball, Transform::translation([3.0 * k as f64, 0.0, 0.0])).expect("placed"))
+        .collect();
+    world.commit();
+    for (k, &id) in row.iter().enumerate() {
+        let ray = Ray::new(Vec3::new(3.0 * k as f32, 0.1, -5.0), Vec3::Z);
+        let hit = world.intersect(&ray).expect("a hit");
+        assert_eq!(hit.instance, id);
+        let s = world.surface(&hit).expect("a live instance");
+        assert!((s.point.x - 3.0 * k as f32).abs() < 0.2 && (s.point.z + 1.0).abs() < 0.05, "{s:?}");
+        assert!(s.geometric_normal.z < -0.95, "{s:?}");
+        // Its scene's own hit, for the ray carried by hand.
+        let local = Ray::new(Vec3::new(0.0, 0.1, -5.0), Vec3::Z);
+        assert_eq!(ball.intersect(&local), Some(hit.hit));
+    }
+    // A ray along the row meets the first ball; tied distances go to the lower id.
+    let along = Ray::new(Vec3::new(-5.0, 0.0, 0.0), Vec3::X);
+    assert_eq!(world.intersect(&along).map(|h| h.instance), Some(row[0]));
+    // A larger ball whose surface passes through the first's nearest vertex (-1, 0, 0):
+    // the same distance in both, the lower id wins although the larger box is entered
+    // first; removed, the other answers.
+    let twin =
+        world.add(&ball, Transform::scaling([2.0; 3]).then(&Transform::translation([1.0, 0.0, 0.0]))).expect("placed");
+    world.commit();
+    assert_eq!(world.intersect(&along).map(|h| (h.instance, h.hit.t)), Some((row[0], 4.0)));
+    world.remove(row[0]).expect("removed");
+    world.commit();
+    assert_eq!(world.intersect(&along).map(|h| (h.instance, h.hit.t)), Some((twin, 4.0)));
+    world.remove(twin).expect("removed");
+    let first = world.add(&ball, Transform::IDENTITY).expect("placed");
+    let row = [first];
+    // A mirrored instance: its geometric normal still faces out of its triangles as placed.
+    world.set_transform(row[0], Transform::scaling([-1.0, 1.0, 1.0])).expect("moved");
+    world.commit();
+    let hit = world.intersect(&Ray::new(Vec3::new(0.0, 0.1, -5.0), Vec3::Z)).expect("a hit");
+    let n = world.surface(&hit).expect("live").geometric_normal;
+    let (scene, transform) = world.instance(hit.instance).expect("live");
+    let t = scene
+        .view()
+        .triangle(hit.hit.prim)
+        .map(|v| Vec3::from_array(transform.point(v.map(f64::from)).map(|c| c as f32)));
+    let placed = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+    assert!(n.dot(placed) > 0.999, "{n} against {placed}");
+    assert!(world.surface(&octrace_runtime::world::WorldHit { instance: twin, hit: hit.hit }).is_none());
+}
+
+#[test]
+fn bad_placements_and_ids_are_refused_by_name() {
+    let ball = scene(&procedural::sphere([0.0; 3], 1.0, 8, 12));
+    let mut world = World::new();
+    let flat = Transform::scaling([1.0, 0.0, 1.0]);
+    assert!(matches!(world.add(&ball, flat), Err(Error::Transform { .. })));
+    let nan = Transform::translation([f64::NAN, 0.0, 0.0]);
+    assert!(matches!(world.add(&ball, nan), Err(Error::Transform { .. })));
+    let huge = Transform::scaling([1e300, 1.0, 1.0]);
+    let err = world.add(&ball, huge).expect_err("beyond f32");
+    assert!(err.to_string().contains("f32"), "{err}");
+    let mut projective = [[0.0; 4]; 4];
+    (0..4).for_each(|k| projective[k][k] = 1.0);
+    projective[3][2] = 1.0;
+    assert!(matches!(Transform::from_matrix(projective), Err(Error::Transform { .. })));
+    assert!(matches!(world.set_transform(7, Transform::IDENTITY), Err(Error::NoInstance { id: 7 })));
+    let id = world.add(&ball, Transform::IDENTITY).expect("placed");
+    world.remove(id).expect("removed");
+    assert!(matches!(world.remove(id), Err(Error::NoInstance { .. })));
+    world.commit();
+    assert!(world.is_empty());
+    assert_eq!(world.intersect(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)), None);
+    // Inverses compose to the identity.
+    let mut rng = SplitMix(7);
+    for _ in 0..100 {
+        let m = placement(&mut rng, 100.0);
+        let back = m.then(&m.inverse().expect("invertible"));
+        for (i, row) in back.rows.iter().enumerate() {
+            for (j, x) in row.iter().enumerate() {
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((x - want).abs() < 1e-9 * if j == 3 { 100.0 } else { 1.0 }, "{back:?}");
+            }
+        }
+    }
+}
