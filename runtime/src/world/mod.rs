@@ -15,7 +15,10 @@
 //! normalised, so distances along the ray are the same numbers in both spaces) and
 //! traced there by the instance's own walk, with its guarantees (watertight, the
 //! exact test): within an instance, the answers are its scene's for that rounded
-//! ray. Against the same triangles placed and baked into one file, a nearest hit's
+//! ray. From far away (more than two of the instance box's diagonals), the origin is
+//! first moved along the ray to just before the box, in `f64`, and the hit's distance
+//! shifted back (rounded once): the carried origin then rounds at the instance's
+//! scale, not the distance's. Against the same triangles placed and baked into one file, a nearest hit's
 //! distance differs by the rounding of the carried ray (some `f32` ulps of the
 //! origin's and the hit's coordinates, over the cosine of the angle of incidence),
 //! and a ray within that of a triangle's edge may hit the neighbouring triangle.
@@ -225,7 +228,7 @@ impl World {
         self.top.walk(o, d, ray.tmin, ray.tmax, |id, _, tmax| {
             let Some(p) = &self.placed[id as usize] else { return false };
             let local = carried(p, ray, *tmax);
-            if let Some(hit) = self.scenes[p.scene as usize].intersect(&local) {
+            if let Some(hit) = self.scenes[p.scene as usize].intersect(&local.ray).and_then(|h| local.back(h, *tmax)) {
                 let nearer = best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance);
                 if nearer {
                     best = Some(WorldHit { instance: id, hit });
@@ -245,7 +248,14 @@ impl World {
         let mut found = false;
         self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, tmax| {
             let Some(p) = &self.placed[id as usize] else { return false };
-            found = self.scenes[p.scene as usize].occluded(&carried(p, ray, *tmax));
+            let local = carried(p, ray, *tmax);
+            let scene = &self.scenes[p.scene as usize];
+            // Any blocker within the carried ray's reach; where the one found lies in
+            // its margin past `tmax`, the nearest decides.
+            found = scene.tracer().occluder(&local.ray).is_some_and(|h| {
+                local.back(h, *tmax).is_some()
+                    || scene.intersect(&local.ray).and_then(|h| local.back(h, *tmax)).is_some()
+            });
             found
         });
         found
@@ -308,11 +318,14 @@ impl World {
                     let ray = &rays[i as usize];
                     carried(p, ray, out[i as usize].map_or(ray.tmax, |h| h.hit.t))
                 }));
+                let local: Vec<Ray> = carried_rays.iter().map(|c: &Carried| c.ray).collect();
                 hits.clear();
-                hits.resize(carried_rays.len(), None);
-                self.scenes[p.scene as usize].tracer().intersect_batch(&carried_rays, &mut hits);
-                for (&(_, i), hit) in group.iter().zip(&hits) {
-                    let Some(hit) = *hit else { continue };
+                hits.resize(local.len(), None);
+                self.scenes[p.scene as usize].tracer().intersect_batch(&local, &mut hits);
+                for ((&(_, i), hit), c) in group.iter().zip(&hits).zip(&carried_rays) {
+                    let ray = &rays[i as usize];
+                    let reach = out[i as usize].map_or(ray.tmax, |h| h.hit.t);
+                    let Some(hit) = hit.and_then(|h| c.back(h, reach)) else { continue };
                     let best = &mut out[i as usize];
                     if best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance) {
                         *best = Some(WorldHit { instance: id, hit });
@@ -397,18 +410,74 @@ impl World {
     }
 }
 
+/// A ray carried into an instance's space, and how far along the world's ray its
+/// origin was moved.
+#[derive(Clone, Copy, Debug)]
+struct Carried {
+    ray: Ray,
+    shift: f64,
+}
+
+impl Carried {
+    /// A hit of the carried ray as a hit of the world's: its distance shifted back
+    /// (in `f64`, rounded once), or `None` where that lies past `tmax`.
+    #[inline]
+    fn back(&self, hit: Hit, tmax: f32) -> Option<Hit> {
+        if self.shift == 0.0 {
+            return Some(hit);
+        }
+        let t = (self.shift + f64::from(hit.t)) as f32;
+        (t <= tmax).then_some(Hit { t, ..hit })
+    }
+}
+
 /// `ray` in instance `p`'s space, over `[ray.tmin, tmax]`: the origin and direction
 /// through the inverse transform in `f64`, each rounded once (a direction past
-/// `f32`'s range makes a ray that hits nothing).
+/// `f32`'s range makes a ray that hits nothing). An origin more than two box
+/// diagonals before the instance's box, where the ray's `tmin` lies before the box,
+/// is first moved along the ray to just before the box (in `f64`): near the
+/// instance, the carried origin's rounding is the instance's size rather than the
+/// distance's, and its walk is the batch walk's (the octree walks origins from far
+/// on a slower path of their own). The hit's distance is then shifted back.
 #[inline]
-fn carried(p: &Placed, ray: &Ray, tmax: f32) -> Ray {
+fn carried(p: &Placed, ray: &Ray, tmax: f32) -> Carried {
     let wide = |v: Vec3| v.to_array().map(f64::from);
-    let o = p.to_local.point(wide(ray.origin));
-    let d = p.to_local.vector(wide(ray.dir));
-    Ray {
-        origin: Vec3::from_array(o.map(|c| c as f32)),
-        tmin: ray.tmin,
-        dir: Vec3::from_array(d.map(|c| c as f32)),
-        tmax,
+    let (o, d) = (wide(ray.origin), wide(ray.dir));
+    let dir = Vec3::from_array(p.to_local.vector(d).map(|c| c as f32));
+    let plain = || Carried {
+        ray: Ray { origin: Vec3::from_array(p.to_local.point(o).map(|c| c as f32)), tmin: ray.tmin, dir, tmax },
+        shift: 0.0,
+    };
+    // Where the ray enters the instance's world box.
+    let (mut enter, mut extent2) = (f64::NEG_INFINITY, 0.0);
+    for k in 0..3 {
+        let (lo, hi) = (f64::from(p.bounds.lo[k]), f64::from(p.bounds.hi[k]));
+        extent2 += (hi - lo) * (hi - lo);
+        if d[k] != 0.0 {
+            let (t0, t1) = ((lo - o[k]) / d[k], (hi - o[k]) / d[k]);
+            enter = enter.max(t0.min(t1));
+        } else if o[k] < lo || o[k] > hi {
+            return plain();
+        }
+    }
+    let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let extent = extent2.sqrt();
+    // A hundredth of the box's diagonal before it.
+    let shift = enter - 0.01 * extent / length;
+    let far = shift * length > 2.0 * extent;
+    if !(far && shift.is_finite() && f64::from(ray.tmin) <= shift && shift < f64::from(tmax)) {
+        return plain();
+    }
+    let at = [0, 1, 2].map(|k| o[k] + shift * d[k]);
+    // Every local distance whose shifted-back one rounds to at most `tmax`.
+    let reach = if tmax == f32::INFINITY {
+        f32::INFINITY
+    } else {
+        let ulp = f64::from(tmax.abs()) * f64::from(f32::EPSILON);
+        ((f64::from(tmax) - shift + ulp) as f32).next_up()
+    };
+    Carried {
+        ray: Ray { origin: Vec3::from_array(p.to_local.point(at).map(|c| c as f32)), tmin: 0.0, dir, tmax: reach },
+        shift,
     }
 }

@@ -208,6 +208,27 @@ fn many_instances_of_one_scene_share_it_and_name_their_hits() {
         let local = Ray::new(Vec3::new(0.0, 0.1, -5.0), Vec3::Z);
         assert_eq!(ball.intersect(&local), Some(hit.hit));
     }
+    // From far away (the origin moved to just before the box, the distance shifted
+    // back): a segment ending exactly at the nearest hit still meets it, nearest and
+    // any hit alike; one ending an ulp before does not.
+    let mut rng = SplitMix(3);
+    let mut met = 0;
+    for _ in 0..200 {
+        let k = (rng.unit() * 10.0) as usize % 10;
+        let target = Vec3::new(3.0 * k as f32 + rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+        let origin = Vec3::new(40.0 * rng.unit() - 5.0, 30.0, -60.0);
+        let ray = Ray::new(origin, target - origin);
+        let Some(hit) = world.intersect(&ray) else { continue };
+        met += 1;
+        let up_to = Ray { tmax: hit.hit.t, ..ray };
+        assert_eq!(world.intersect(&up_to), Some(hit));
+        assert!(world.occluded(&up_to));
+        let short = Ray { tmax: hit.hit.t.next_down(), ..ray };
+        assert_eq!(world.intersect(&short), None, "{ray:?}");
+        assert!(!world.occluded(&short));
+        assert_eq!(world.intersect_batch(&[ray, up_to, short]), vec![Some(hit), Some(hit), None]);
+    }
+    assert!(met > 150, "{met} of 200 rays met a ball");
     // A ray along the row meets the first ball; tied distances go to the lower id.
     let along = Ray::new(Vec3::new(-5.0, 0.0, 0.0), Vec3::X);
     assert_eq!(world.intersect(&along).map(|h| h.instance), Some(row[0]));
