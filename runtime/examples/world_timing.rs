@@ -130,17 +130,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .flat_map(|p| local.iter().map(move |t| t.map(|v| p.point(v.map(f64::from)).map(|c| c as f32))))
         .collect();
     let t = Instant::now();
-    let baked = Scene::from_baked(bake(&Mesh::from_triangles(triangles), &BuildParams::auto())?)?;
+    let baked = bake(&Mesh::from_triangles(triangles), &BuildParams::auto())?;
     let bake_s = t.elapsed().as_secs_f64();
+    let file = std::env::temp_dir().join(format!("world_timing_{}.oct", std::process::id()));
+    let file_bytes = baked.write(&file, 0)?;
+    std::fs::remove_file(&file)?;
+    let baked = Scene::from_baked(baked)?;
     let bytes = baked.view().triangle_count();
     let (one_rate, one_hits) = time(&|| baked.intersect_batch(&rays).iter().flatten().count());
     let (ray_rate, _) = time(&|| rays.iter().filter_map(|r| baked.intersect(r)).count());
     println!(
-        "one file of the same {bytes} triangles (baked in {bake_s:.1} s): batch {one_rate:.3} Mrays/s ({one_hits} hits), \
-         ray by ray {ray_rate:.3}; world / batch {:.2}x, world / ray by ray {:.2}x",
+        "one file of the same {bytes} triangles ({:.1} MB, baked in {bake_s:.1} s): batch {one_rate:.3} Mrays/s \
+         ({one_hits} hits), ray by ray {ray_rate:.3}; world / batch {:.2}x, world / ray by ray {:.2}x",
+        file_bytes as f64 / 1e6,
         world_rate / one_rate,
         world_rate / ray_rate
     );
+    let (world_any, _) = time(&|| world.occluded_batch(&rays).iter().filter(|&&b| b).count());
+    let (one_any, _) = time(&|| baked.occluded_batch(&rays).iter().filter(|&&b| b).count());
+    println!("occluded_batch: world {world_any:.3}, one file {one_any:.3} Mrays/s ({:.2}x)", world_any / one_any);
     // Round twice, interleaved, for the noise.
     let (w2, _) = time(&|| world.intersect_batch(&rays).iter().flatten().count());
     let (o2, _) = time(&|| baked.intersect_batch(&rays).iter().flatten().count());

@@ -268,12 +268,21 @@ impl World {
     /// its nearest hit so far.
     pub fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<WorldHit>> {
         let mut out = vec![None; rays.len()];
-        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.intersect_piece(rays, out));
+        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece::<false>(rays, out));
         out
     }
 
-    /// [`World::intersect_batch`] on this thread, for one piece.
-    fn intersect_piece(&self, rays: &[Ray], out: &mut [Option<WorldHit>]) {
+    /// [`World::occluded`] for many rays, on all cores, with the same answers: as
+    /// [`World::intersect_batch`], each ray done at its first blocker.
+    pub fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
+        let mut out = vec![None; rays.len()];
+        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece::<true>(rays, out));
+        out.iter().map(Option::is_some).collect()
+    }
+
+    /// [`World::intersect_batch`] (or, `ANY`, a blocker for [`World::occluded_batch`])
+    /// on this thread, for one piece.
+    fn piece<const ANY: bool>(&self, rays: &[Ray], out: &mut [Option<WorldHit>]) {
         // Each ray's boxes, nearest first: `boxes[first[i]..first[i + 1]]`.
         let mut boxes: Vec<(f32, u32)> = Vec::new();
         let mut first = Vec::with_capacity(rays.len() + 1);
@@ -300,6 +309,9 @@ impl World {
                     continue;
                 }
                 let (near, id) = boxes[at as usize];
+                if ANY && out[i].is_some() {
+                    continue;
+                }
                 let reach = out[i].map_or(ray.tmax, |h: WorldHit| h.hit.t);
                 // The walk's own test: a box entered past the best hit is skipped.
                 if near <= reach + reach.abs() * 4.0 * f32::EPSILON {
@@ -321,11 +333,23 @@ impl World {
                 let local: Vec<Ray> = carried_rays.iter().map(|c: &Carried| c.ray).collect();
                 hits.clear();
                 hits.resize(local.len(), None);
-                self.scenes[p.scene as usize].tracer().intersect_batch(&local, &mut hits);
+                let scene = &self.scenes[p.scene as usize];
+                if ANY {
+                    scene.tracer().occluder_batch(&local, &mut hits);
+                } else {
+                    scene.tracer().intersect_batch(&local, &mut hits);
+                }
                 for ((&(_, i), hit), c) in group.iter().zip(&hits).zip(&carried_rays) {
                     let ray = &rays[i as usize];
                     let reach = out[i as usize].map_or(ray.tmax, |h| h.hit.t);
-                    let Some(hit) = hit.and_then(|h| c.back(h, reach)) else { continue };
+                    let raw = *hit;
+                    let mut hit = raw.and_then(|h| c.back(h, reach));
+                    if ANY && hit.is_none() && raw.is_some() {
+                        // The blocker found lies in the carried ray's margin past
+                        // `tmax`: the nearest decides, as in `occluded`.
+                        hit = scene.intersect(&c.ray).and_then(|h| c.back(h, reach));
+                    }
+                    let Some(hit) = hit else { continue };
                     let best = &mut out[i as usize];
                     if best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance) {
                         *best = Some(WorldHit { instance: id, hit });
@@ -334,11 +358,6 @@ impl World {
             }
             round += 1;
         }
-    }
-
-    /// [`World::occluded`] for many rays, on all cores.
-    pub fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
-        rays.par_iter().with_min_len(256).map(|r| self.occluded(r)).collect()
     }
 
     /// The surface at `hit` in world space: the point carried by the instance's
