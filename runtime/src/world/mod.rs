@@ -26,6 +26,11 @@
 //! nearest hit; where instances overlap, each answers for its own triangles (nothing
 //! is made watertight across them).
 //!
+//! The queries: nearest and any hit ([`World::intersect`], [`World::occluded`] and
+//! their batches), every crossing in order merged across instances
+//! ([`World::crossings`]) and their counts ([`World::count_crossings`]), and
+//! inside/outside ([`World::contains`]: inside some closed instance).
+//!
 //! ```
 //! use std::sync::Arc;
 //! use octrace_bake::{bake, procedural, BuildParams};
@@ -55,11 +60,23 @@ use rayon::prelude::*;
 
 pub use transform::Transform;
 
+use crate::cpu::{Crossing, CrossingCount};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 use crate::surface::HitSurface;
 use crate::Scene;
 use top::{Aabb, Top};
+
+/// A crossing of a world's triangles ([`World::crossings`]): the instance, and the
+/// crossing in its scene's terms (`t` along the world's ray, `enters` the placed
+/// triangle's side).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldCrossing {
+    /// The instance's id.
+    pub instance: u32,
+    /// The crossing.
+    pub crossing: Crossing,
+}
 
 /// The rays [`World::intersect_batch`] takes on one thread at a time.
 pub const PIECE: usize = 4096;
@@ -261,6 +278,96 @@ impl World {
         found
     }
 
+    /// Every crossing of `ray` with the world's triangles in `[tmin, tmax]`, in order
+    /// along it (of equal distances, the lower instance first), each instance's once
+    /// as its scene's [`Scene::crossings`] says; `enters` is the placed triangle's
+    /// (turned for a mirroring transform). Where instances overlap, each crosses on
+    /// its own: nothing is merged across them.
+    pub fn crossings(&self, ray: &Ray) -> Vec<WorldCrossing> {
+        let mut out = Vec::new();
+        if !ray.is_traceable() {
+            return out;
+        }
+        self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, _| {
+            let Some(p) = &self.placed[id as usize] else { return false };
+            let local = carried(p, ray, ray.tmax);
+            let mirrored = p.to_world.determinant() < 0.0;
+            for c in self.scenes[p.scene as usize].crossings(&local.ray) {
+                let Some(t) = local.back_t(c.t, ray.tmax) else { continue };
+                out.push(WorldCrossing { instance: id, crossing: Crossing { t, enters: c.enters != mirrored, ..c } });
+            }
+            false
+        });
+        // Stable: an instance's own crossings keep their order.
+        out.sort_by(|a, b| a.crossing.t.total_cmp(&b.crossing.t).then(a.instance.cmp(&b.instance)));
+        out
+    }
+
+    /// How many times `ray` crosses the world's triangles in `[tmin, tmax]`, and how
+    /// many of those arrive on a placed triangle's front ([`World::crossings`]).
+    pub fn count_crossings(&self, ray: &Ray) -> CrossingCount {
+        let mut count = CrossingCount::default();
+        if !ray.is_traceable() {
+            return count;
+        }
+        self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, _| {
+            let Some(p) = &self.placed[id as usize] else { return false };
+            let local = carried(p, ray, ray.tmax);
+            let scene = &self.scenes[p.scene as usize];
+            let mut c = if local.shift == 0.0 || ray.tmax == f32::INFINITY {
+                scene.tracer().count_crossings(&local.ray)
+            } else {
+                // A moved origin's reach has a margin past `tmax`: counted from the list.
+                let mut c = CrossingCount::default();
+                for x in scene.crossings(&local.ray) {
+                    if local.back_t(x.t, ray.tmax).is_some() {
+                        c.total += 1;
+                        c.entries += u32::from(x.enters);
+                    }
+                }
+                c
+            };
+            if p.to_world.determinant() < 0.0 {
+                c.entries = c.total - c.entries;
+            }
+            count.total += c.total;
+            count.entries += c.entries;
+            false
+        });
+        count
+    }
+
+    /// [`World::count_crossings`] for many rays, on all cores.
+    pub fn count_crossings_batch(&self, rays: &[Ray]) -> Vec<CrossingCount> {
+        rays.par_iter().with_min_len(64).map(|r| self.count_crossings(r)).collect()
+    }
+
+    /// Whether `p` lies inside some closed instance: its scene's exact
+    /// [`Scene::contains`] at `p` carried into the instance's space (in `f64`,
+    /// rounded once: a point within that rounding of an instance's surface may be
+    /// answered as the point beside it). Instances of scenes that are not closed
+    /// contain nothing.
+    pub fn contains(&self, p: [f32; 3]) -> bool {
+        if !p.iter().all(|c| c.is_finite()) {
+            return false;
+        }
+        let mut inside = false;
+        self.top.holding(p, |id| {
+            if inside {
+                return;
+            }
+            let Some(placed) = &self.placed[id as usize] else { return };
+            let local = placed.to_local.point(p.map(f64::from)).map(|c| c as f32);
+            inside = self.scenes[placed.scene as usize].contains(local).unwrap_or(false);
+        });
+        inside
+    }
+
+    /// [`World::contains`] for many points, on all cores.
+    pub fn contains_batch(&self, points: &[[f32; 3]]) -> Vec<bool> {
+        points.par_iter().with_min_len(256).map(|p| self.contains(*p)).collect()
+    }
+
     /// [`World::intersect`] for many rays, on all cores, with the same answers: in
     /// pieces of [`PIECE`] rays, each ray's instances (the boxes it enters, nearest
     /// first) taken in rounds, a round's rays grouped by instance and walked by the
@@ -445,8 +552,18 @@ impl Carried {
         if self.shift == 0.0 {
             return Some(hit);
         }
-        let t = (self.shift + f64::from(hit.t)) as f32;
-        (t <= tmax).then_some(Hit { t, ..hit })
+        Some(Hit { t: self.back_t(hit.t, tmax)?, ..hit })
+    }
+
+    /// A distance along the carried ray as one along the world's, or `None` past
+    /// `tmax`.
+    #[inline]
+    fn back_t(&self, t: f32, tmax: f32) -> Option<f32> {
+        if self.shift == 0.0 {
+            return Some(t);
+        }
+        let t = (self.shift + f64::from(t)) as f32;
+        (t <= tmax).then_some(t)
     }
 }
 

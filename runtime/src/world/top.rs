@@ -222,6 +222,27 @@ impl Top {
         }
     }
 
+    /// The instances whose boxes hold `p` (boundary included): `visit(id)` for each.
+    pub fn holding(&self, p: [f32; 3], mut visit: impl FnMut(u32)) {
+        let inside = |b: &Aabb| (0..3).all(|k| b.lo[k] <= p[k] && p[k] <= b.hi[k]);
+        let mut stack = Stack { fixed: [0; 64], len: 0, spill: Vec::new() };
+        if self.nodes.first().is_some_and(|n| inside(&n.bounds)) {
+            stack.push(0);
+        }
+        while let Some(at) = stack.pop() {
+            let node = self.nodes[at as usize];
+            if node.count > 0 {
+                self.refs[node.first as usize..(node.first + node.count) as usize].iter().for_each(|&id| visit(id));
+                continue;
+            }
+            for kid in [node.first, node.first + 1] {
+                if inside(&self.nodes[kid as usize].bounds) {
+                    stack.push(kid);
+                }
+            }
+        }
+    }
+
     /// The nodes, for the memory a world reports.
     pub fn bytes(&self) -> usize {
         self.nodes.len() * std::mem::size_of::<Node>() + self.refs.len() * 4

@@ -295,3 +295,68 @@ fn bad_placements_and_ids_are_refused_by_name() {
         }
     }
 }
+
+#[test]
+fn crossings_counts_and_inside_agree_with_the_baked_file_away_from_overlaps() {
+    let props: Vec<(Mesh, Arc<Scene>)> = props().into_iter().take(2).collect(); // the closed ones
+    let mut rng = SplitMix(52);
+    let mut world = World::new();
+    let mut ids = Vec::new();
+    // One instance a cell of a lattice, each within its cell: no two overlap.
+    let mut cells: Vec<usize> = (0..216).collect();
+    for k in 0..150 {
+        let at = cells.swap_remove(rng.next_u64() as usize % cells.len());
+        let centre = [at % 6, at / 6 % 6, at / 36].map(|c| 4.0 * c as f64 - 10.0);
+        let mut u = || rng.unit() as f64;
+        let scale = [0.4 + 0.7 * u(), 0.4 + 0.7 * u(), if u() < 0.25 { -1.0 } else { 1.0 } * (0.4 + 0.7 * u())];
+        let place = Transform::scaling(scale)
+            .then(&Transform::rotation([u() - 0.5, u() - 0.5, u() - 0.5], 6.0 * u()))
+            .then(&Transform::translation(centre));
+        ids.push(world.add(&props[k % 2].1, place).expect("placed"));
+    }
+    world.commit();
+    let (triangles, first) = placed_triangles(&world, &props, &ids);
+    let global = |instance: u32, triangle: u32| {
+        first[ids.iter().position(|&id| id == instance).expect("live")].expect("live") + triangle
+    };
+    let oracle = Reference::in_input_order(triangles.clone());
+    let baked =
+        Scene::from_baked(bake(&Mesh::from_triangles(triangles), &BuildParams::auto()).expect("bakes")).expect("opens");
+    let mut crossed = 0;
+    for (i, ray) in rays(&mut rng, 600, 12.0).iter().enumerate() {
+        let ours = world.crossings(ray);
+        let count = world.count_crossings(ray);
+        assert_eq!(count.total as usize, ours.len(), "ray {i}");
+        assert_eq!(count.entries as usize, ours.iter().filter(|c| c.crossing.enters).count(), "ray {i}");
+        assert!(ours.windows(2).all(|w| w[0].crossing.t <= w[1].crossing.t), "ray {i}: in order");
+        let mut mine: Vec<(u32, bool)> =
+            ours.iter().map(|c| (global(c.instance, c.crossing.triangle), c.crossing.enters)).collect();
+        let mut theirs: Vec<(u32, bool)> = baked.crossings(ray).iter().map(|c| (c.triangle, c.enters)).collect();
+        crossed += theirs.len();
+        mine.sort_unstable();
+        theirs.sort_unstable();
+        if mine != theirs {
+            // Only triangles the ray passes within rounding of an edge of may differ.
+            let odd = mine.iter().filter(|x| !theirs.contains(x)).chain(theirs.iter().filter(|x| !mine.contains(x)));
+            for &(id, _) in odd {
+                assert!(oracle.on_edge(ray, id), "ray {i} {ray:?}: triangle {id} crossed by one side only");
+            }
+        } else {
+            assert_eq!(count, baked.count_crossings_batch(&[*ray])[0], "ray {i}");
+        }
+    }
+    assert!(crossed > 300, "{crossed} crossings: the rays should pass through instances");
+    // Inside and outside: the baked file's exact answer, but within rounding of a surface.
+    let points: Vec<[f32; 3]> = (0..4000).map(|_| [0; 3].map(|_: i32| 24.0 * rng.unit() - 12.0)).collect();
+    let inside = world.contains_batch(&points);
+    let want = baked.contains_batch(&points).expect("closed");
+    let (ins, wants) = (inside.iter().filter(|&&x| x).count(), want.iter().filter(|&&x| x).count());
+    assert!(ins > 50, "{ins} points inside ({wants} in the baked file)");
+    for (k, p) in points.iter().enumerate() {
+        assert_eq!(world.contains(*p), inside[k]);
+        if inside[k] != want[k] {
+            let d = baked.closest_point(*p).expect("a surface").distance;
+            assert!(d < 1e-5, "point {k} {p:?}: inside {} against {}, {d} from the surface", inside[k], want[k]);
+        }
+    }
+}
