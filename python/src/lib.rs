@@ -9,6 +9,7 @@
 //! - `scene`: `octrace.Scene`, opening and what a scene holds, and its calls' faces;
 //! - `queries`: the calls' work (rays traced, points located, answers gathered);
 //! - `device`: where ray queries run, the CPU or (the `gpu` feature) the GPU;
+//! - `world`: `octrace.World`, scenes placed by transforms and traced as one;
 //! - `pinhole`: `Scene.create_rays_pinhole`, Open3D's cameras;
 //! - `baking`: `octrace.bake` and `octrace.bake_arrays`;
 //! - `arrays`: numpy in and out, the thread pools;
@@ -22,6 +23,7 @@ mod errors;
 mod pinhole;
 mod queries;
 mod scene;
+mod world;
 
 use pyo3::prelude::*;
 
@@ -29,6 +31,7 @@ use crate::arrays::INVALID_ID;
 use crate::baking::{bake, bake_arrays};
 use crate::errors::{BakeError, FormatError, GpuError, NotClosedError};
 use crate::scene::Scene;
+use crate::world::World;
 
 /// Bake meshes into octrace scenes and ask them exact ray queries from numpy.
 #[pymodule(name = "octrace")]
@@ -37,6 +40,7 @@ fn octrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("INVALID_ID", INVALID_ID)?;
     m.add_class::<Scene>()?;
+    m.add_class::<World>()?;
     // Open3D's `RaycastingScene`, in Python over `Scene` (`raycasting_scene.py`).
     let code = std::ffi::CString::new(include_str!("raycasting_scene.py")).expect("no NUL in the source");
     let open3d = PyModule::from_code(py, &code, c"raycasting_scene.py", c"octrace._raycasting_scene")?;

@@ -1,0 +1,238 @@
+//! `octrace.World`: scenes placed many times by transforms, moved and traced as one
+//! (the runtime's `world`), with Open3D's ray calls and answers.
+
+use octrace_runtime::world::Transform;
+use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rayon::prelude::*;
+
+use crate::arrays::{array, numpy_of, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
+use crate::errors::zeros;
+use crate::scene::Scene;
+
+/// Baked scenes placed by transforms and traced as one: each ``Scene`` opened once and
+/// shared by all its instances, which are added, moved and removed, then committed.
+///
+/// Edits (``add``, ``set_transform``, ``remove``) are staged; ``commit()`` makes them
+/// visible to the queries at once (the top level over the instances' boxes refit
+/// where only placements changed, rebuilt where instances came or went). A ray is
+/// carried into each instance's space in double precision and traced there by the
+/// instance's own exact walk; answers are those of the same triangles placed and baked
+/// into one file, within the rounding of the carried rays (a ray within that of an
+/// edge may hit the neighbouring triangle). The ray calls are Open3D's
+/// ``RaycastingScene``'s, with ``geometry_ids`` the instances' ids and
+/// ``primitive_ids`` the triangles of the instance's scene.
+///
+/// Example::
+///
+///     import numpy as np, octrace
+///     bunny = octrace.Scene("bunny.oct")
+///     world = octrace.World()
+///     first = world.add(bunny)                    # the identity
+///     moved = np.eye(4); moved[0, 3] = 0.3        # 0.3 along x
+///     second = world.add(bunny, moved)
+///     world.commit()
+///     ans = world.cast_rays(rays)   # t_hit, geometry_ids (instance ids), primitive_ids, ...
+///     moved[1, 3] = 0.1; world.set_transform(second, moved); world.commit()
+#[pyclass(module = "octrace")]
+pub(crate) struct World {
+    inner: octrace_runtime::world::World,
+}
+
+/// A 4x4 (last row `0 0 0 1`) or 3x4 placement from anything numpy reads.
+fn transform(obj: &Bound<'_, PyAny>) -> PyResult<Transform> {
+    let np = obj.py().import("numpy")?;
+    let m = np.call_method1("asarray", (numpy_of(obj, "transform")?, np.getattr("float64")?))?;
+    let shape: Vec<usize> = m.getattr("shape")?.extract()?;
+    let rows: Vec<Vec<f64>> = m
+        .call_method0("tolist")?
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("transform: shape {shape:?}, expected (4, 4) or (3, 4)")))?;
+    let row = |i: usize| -> [f64; 4] { [rows[i][0], rows[i][1], rows[i][2], rows[i][3]] };
+    match shape.as_slice() {
+        [4, 4] => Transform::from_matrix([row(0), row(1), row(2), row(3)]).map_err(placement_error),
+        [3, 4] => Ok(Transform::from_rows([row(0), row(1), row(2)])),
+        _ => Err(PyValueError::new_err(format!("transform: shape {shape:?}, expected (4, 4) or (3, 4)"))),
+    }
+}
+
+fn placement_error(e: octrace_runtime::Error) -> PyErr {
+    match e {
+        octrace_runtime::Error::NoInstance { .. } => PyKeyError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+#[pymethods]
+impl World {
+    /// An empty world.
+    #[new]
+    fn new() -> World {
+        World { inner: octrace_runtime::world::World::new() }
+    }
+
+    /// Places ``scene`` by ``transform`` (a 4x4 matrix whose last row is ``0 0 0 1``,
+    /// or 3x4; local to world; the identity by default), visible after the next
+    /// ``commit()``. Returns the instance's id (ids are never reused).
+    ///
+    /// Raises:
+    ///     ValueError: the transform has the wrong shape, is not affine, cannot be
+    ///         inverted, or places the scene beyond float32's range.
+    #[pyo3(signature = (scene, transform=None))]
+    fn add(&mut self, scene: &Scene, transform: Option<&Bound<'_, PyAny>>) -> PyResult<u32> {
+        let place = transform.map_or(Ok(Transform::IDENTITY), self::transform)?;
+        self.inner.add(&scene.inner, place).map_err(placement_error)
+    }
+
+    /// Moves instance ``id`` to ``transform``, at the next ``commit()``.
+    ///
+    /// Raises:
+    ///     KeyError: no such instance; ValueError: as ``add``.
+    fn set_transform(&mut self, id: u32, transform: &Bound<'_, PyAny>) -> PyResult<()> {
+        let place = self::transform(transform)?;
+        self.inner.set_transform(id, place).map_err(placement_error)
+    }
+
+    /// Removes instance ``id``, at the next ``commit()``.
+    ///
+    /// Raises:
+    ///     KeyError: no such instance.
+    fn remove(&mut self, id: u32) -> PyResult<()> {
+        self.inner.remove(id).map_err(placement_error)
+    }
+
+    /// Makes the staged edits visible to the queries.
+    fn commit(&mut self, py: Python<'_>) {
+        let inner = &mut self.inner;
+        py.detach(|| inner.commit());
+    }
+
+    /// The committed instances.
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// Instance ``id``'s committed placement, a 4x4 float64 array.
+    fn transform<'py>(&self, py: Python<'py>, id: u32) -> PyResult<Bound<'py, PyAny>> {
+        let (_, t) = self.inner.instance(id).ok_or_else(|| PyKeyError::new_err(format!("no instance {id}")))?;
+        let mut m: Vec<f64> = t.rows.iter().flatten().copied().collect();
+        m.extend([0.0, 0.0, 0.0, 1.0]);
+        array(py, m, vec![4, 4])
+    }
+
+    /// Nearest hits, as ``Scene.cast_rays``: ``t_hit``, ``geometry_ids`` (the
+    /// instance), ``primitive_ids`` (the triangle of the instance's scene),
+    /// ``primitive_uvs`` and ``primitive_normals`` (the placed triangle's unit normal,
+    /// world space); a miss is ``inf`` and ``INVALID_ID``.
+    #[pyo3(signature = (rays, nthreads=0))]
+    fn cast_rays<'py>(&self, rays: &Bound<'py, PyAny>, nthreads: Threads) -> PyResult<Bound<'py, PyDict>> {
+        let py = rays.py();
+        let input = Floats::new(rays, "rays", 6)?;
+        let values = input.values();
+        let n = input.count();
+        let world = &self.inner;
+        let (t, geometry, primitive, uvs, normals) = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let rays = to_rays(values, 0.0, f32::INFINITY)?;
+                let hits = world.intersect_batch(&rays);
+                let (mut t, mut g, mut p) = (zeros(n, "t_hit")?, zeros(n, "geometry_ids")?, zeros(n, "primitive_ids")?);
+                let (mut uv, mut normal) = (zeros(2 * n, "primitive_uvs")?, zeros(3 * n, "primitive_normals")?);
+                t.par_iter_mut()
+                    .zip(&mut g)
+                    .zip(&mut p)
+                    .zip(uv.par_chunks_mut(2))
+                    .zip(normal.par_chunks_mut(3))
+                    .zip(&hits)
+                    .for_each(|(((((t, g), p), uv), normal), hit)| match hit {
+                        Some(h) => {
+                            *t = h.hit.t;
+                            *g = h.instance;
+                            *p = h.hit.triangle;
+                            uv.copy_from_slice(&[h.hit.u, h.hit.v]);
+                            if let Some(s) = world.surface(h) {
+                                normal.copy_from_slice(&s.geometric_normal.to_array());
+                            }
+                        }
+                        None => {
+                            *t = f32::INFINITY;
+                            *g = INVALID_ID;
+                            *p = INVALID_ID;
+                        }
+                    });
+                Ok((t, g, p, uv, normal))
+            })?
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("t_hit", array(py, t, input.shape(&[]))?)?;
+        d.set_item("geometry_ids", array(py, geometry, input.shape(&[]))?)?;
+        d.set_item("primitive_ids", array(py, primitive, input.shape(&[]))?)?;
+        d.set_item("primitive_uvs", array(py, uvs, input.shape(&[2]))?)?;
+        d.set_item("primitive_normals", array(py, normals, input.shape(&[3]))?)?;
+        Ok(d)
+    }
+
+    /// Whether anything lies on each ray within ``[tnear, tfar]``, as
+    /// ``Scene.test_occlusions``.
+    #[pyo3(signature = (rays, tnear=0.0, tfar=f32::INFINITY, nthreads=0))]
+    fn test_occlusions<'py>(
+        &self,
+        rays: &Bound<'py, PyAny>,
+        tnear: f32,
+        tfar: f32,
+        nthreads: Threads,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let py = rays.py();
+        let input = Floats::new(rays, "rays", 6)?;
+        let values = input.values();
+        let world = &self.inner;
+        let occluded = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> { Ok(world.occluded_batch(&to_rays(values, tnear, tfar)?)) })?
+        })?;
+        array(py, occluded, input.shape(&[]))
+    }
+
+    /// How many times each ray crosses the world's triangles (every instance's), as
+    /// ``Scene.count_intersections``.
+    #[pyo3(signature = (rays, nthreads=0))]
+    fn count_intersections<'py>(&self, rays: &Bound<'py, PyAny>, nthreads: Threads) -> PyResult<Bound<'py, PyAny>> {
+        let py = rays.py();
+        let input = Floats::new(rays, "rays", 6)?;
+        let values = input.values();
+        let world = &self.inner;
+        let counts = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let counts = world.count_crossings_batch(&to_rays(values, 0.0, f32::INFINITY)?);
+                Ok(counts.iter().map(|c| c.total.min(i32::MAX as u32) as i32).collect::<Vec<i32>>())
+            })?
+        })?;
+        array(py, counts, input.shape(&[]))
+    }
+
+    /// Whether each point lies inside some closed instance (exactly, as
+    /// ``Scene.contains``, at the point carried into the instance's space), as
+    /// Open3D's ``compute_occupancy``: 1.0 inside, 0.0 outside. Instances of scenes
+    /// that are not closed contain nothing.
+    #[pyo3(signature = (query_points, nthreads=0))]
+    fn compute_occupancy<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let py = query_points.py();
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let world = &self.inner;
+        let inside = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let inside = world.contains_batch(to_points(values)?);
+                Ok(inside.iter().map(|&b| if b { 1.0f32 } else { 0.0 }).collect::<Vec<f32>>())
+            })?
+        })?;
+        array(py, inside, input.shape(&[]))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("octrace.World({} instances)", self.inner.len())
+    }
+}

@@ -1,0 +1,103 @@
+"""octrace.World: scenes placed by transforms against the same triangles placed in
+double precision and baked into one scene."""
+
+import numpy as np
+import pytest
+
+import octrace
+from conftest import cube_arrays
+
+
+def rotation(axis, angle):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def placements(n, seed=5):
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        m = np.eye(4)
+        scale = rng.uniform(0.5, 1.5, 3) * (-1 if i % 4 == 3 else 1)  # some mirrored
+        m[:3, :3] = rotation(rng.normal(size=3), rng.uniform(0, 6.3)) @ np.diag(scale)
+        m[:3, 3] = [3.0 * (i % 4), 3.0 * (i // 4), 0.0]  # each in its own cell
+        out.append(m)
+    return out
+
+
+def placed(v, t, transforms):
+    """The triangles of every placement, in double precision, then rounded."""
+    vs, ts = [], []
+    for k, m in enumerate(transforms):
+        vs.append((v.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+        ts.append(t + k * len(v))
+    return np.vstack(vs), np.vstack(ts)
+
+
+def rays(n, seed=6):
+    rng = np.random.default_rng(seed)
+    o = rng.uniform([-3, -3, -6], [12, 9, -5], (n, 3))
+    target = rng.uniform([-1, -1, -1], [10, 7, 1], (n, 3))
+    return np.hstack([o, target - o]).astype(np.float32)
+
+
+def test_a_world_answers_as_its_triangles_baked_into_one_scene():
+    v, t = cube_arrays(-1.0, 1.0)
+    cube = octrace.Scene.from_arrays(v, t)
+    transforms = placements(12)
+    world = octrace.World()
+    ids = [world.add(cube, m) for m in transforms]
+    assert len(world) == 0  # not committed yet
+    world.commit()
+    assert len(world) == 12 and ids == list(range(12))
+    np.testing.assert_allclose(world.transform(ids[5]), transforms[5])
+    one = octrace.Scene.from_arrays(*placed(v, t, transforms))
+    r = rays(4000)
+    ours, theirs = world.cast_rays(r), one.cast_rays(r)
+    hit = np.isfinite(theirs["t_hit"])
+    assert hit.sum() > 1000
+    same = ours["geometry_ids"] * len(t) + ours["primitive_ids"] == theirs["primitive_ids"]
+    # The same triangle but for rays within rounding of an edge.
+    assert (same | ~hit).mean() > 0.995
+    assert (np.isfinite(ours["t_hit"]) == hit).mean() > 0.995
+    both = same & hit
+    np.testing.assert_allclose(ours["t_hit"][both], theirs["t_hit"][both], rtol=1e-5)
+    np.testing.assert_allclose(ours["primitive_normals"][both], theirs["primitive_normals"][both], atol=1e-5)
+    assert (ours["geometry_ids"][~np.isfinite(ours["t_hit"])] == octrace.INVALID_ID).all()
+    agree = world.test_occlusions(r) == one.test_occlusions(r)
+    assert agree.mean() > 0.995
+    assert (world.count_intersections(r) == one.count_intersections(r)).mean() > 0.995
+    points = np.random.default_rng(7).uniform([-2, -2, -2], [11, 8, 2], (5000, 3)).astype(np.float32)
+    inside = world.compute_occupancy(points)
+    assert inside.sum() > 200
+    assert (inside == one.compute_occupancy(points)).mean() > 0.999
+
+
+def test_moves_and_removals_are_seen_after_commit():
+    v, t = cube_arrays(-1.0, 1.0)
+    cube = octrace.Scene.from_arrays(v, t)
+    world = octrace.World()
+    a = world.add(cube)  # the identity
+    b = world.add(cube, np.hstack([np.eye(3), [[5.0], [0.0], [0.0]]]))  # 3x4
+    world.commit()
+    ray = np.array([[5, 0, -5, 0, 0, 1]], np.float32)
+    assert world.cast_rays(ray)["geometry_ids"][0] == b
+    assert world.cast_rays(ray)["t_hit"][0] == 4.0
+    world.remove(b)
+    assert world.cast_rays(ray)["geometry_ids"][0] == b  # staged, not seen yet
+    world.commit()
+    assert world.cast_rays(ray)["geometry_ids"][0] == octrace.INVALID_ID
+    moved = np.eye(4)
+    moved[0, 3] = 5.0
+    world.set_transform(a, moved)
+    world.commit()
+    assert world.cast_rays(ray)["geometry_ids"][0] == a
+    with pytest.raises(KeyError):
+        world.remove(b)
+    with pytest.raises(ValueError, match="singular"):
+        world.add(cube, np.diag([1.0, 0.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match="0 0 0 1"):
+        world.add(cube, np.ones((4, 4)))
+    with pytest.raises(ValueError, match="shape"):
+        world.add(cube, np.eye(3))
