@@ -21,6 +21,9 @@ type Geometry = *mut c_void;
 /// `RTC_GEOMETRY_TYPE_TRIANGLE`, `RTC_BUFFER_TYPE_INDEX` / `_VERTEX`,
 /// `RTC_FORMAT_UINT3` / `_FLOAT3`, `RTC_INVALID_GEOMETRY_ID`.
 const GEOMETRY_TRIANGLE: u32 = 0;
+/// `RTC_GEOMETRY_TYPE_INSTANCE`, `RTC_FORMAT_FLOAT3X4_ROW_MAJOR`.
+const GEOMETRY_INSTANCE: u32 = 121;
+const FORMAT_FLOAT3X4_ROW_MAJOR: u32 = 0x9134;
 const BUFFER_INDEX: u32 = 0;
 const BUFFER_VERTEX: u32 = 1;
 const FORMAT_UINT3: u32 = 0x5003;
@@ -179,6 +182,8 @@ extern "C" {
     fn rtcAttachGeometry(scene: Scene, geometry: Geometry) -> u32;
     fn rtcReleaseGeometry(geometry: Geometry);
     fn rtcCommitScene(scene: Scene);
+    fn rtcSetGeometryInstancedScene(geometry: Geometry, scene: Scene);
+    fn rtcSetGeometryTransform(geometry: Geometry, time_step: u32, format: u32, xfm: *const c_void);
     fn rtcIntersect1(scene: Scene, context: *mut IntersectContext, rayhit: *mut RtcRayHit);
     fn rtcOccluded1(scene: Scene, context: *mut IntersectContext, ray: *mut RtcRay);
     fn rtcIntersect16(valid: *const Valid16, scene: Scene, context: *mut IntersectContext, rayhit: *mut RtcRayHit16);
@@ -188,6 +193,8 @@ extern "C" {
 pub(crate) struct Embree {
     device: Device,
     scene: Scene,
+    /// For a scene of instances ([`Embree::instanced`]): the scene they place.
+    placed: Option<Scene>,
     pub build_time: Duration,
 }
 
@@ -249,9 +256,45 @@ impl Embree {
         let build_time = t.elapsed();
         // SAFETY: the device is valid.
         let error = unsafe { rtcGetDeviceError(device) };
-        let embree = Embree { device, scene, build_time };
+        let embree = Embree { device, scene, placed: None, build_time };
         anyhow::ensure!(error == 0, "Embree: the build failed (error {error})");
         Ok(embree)
+    }
+
+    /// A scene of instances of this one (Embree's one level of instancing: an
+    /// `RTC_GEOMETRY_TYPE_INSTANCE` a placement, each with its 3x4 row-major
+    /// transform), built with the default quality; `build_time` is the instances'
+    /// build alone. Hits' `prim_id` are then the placed scene's triangles.
+    pub(crate) fn instanced(mut self, transforms: &[[[f32; 4]; 3]]) -> anyhow::Result<Embree> {
+        let t = Instant::now();
+        // SAFETY: the device and the scene to place are valid; every geometry is
+        // checked; the transform is read during the call (12 floats, row-major).
+        let top = unsafe {
+            let top = rtcNewScene(self.device);
+            anyhow::ensure!(!top.is_null(), "Embree: cannot make the scene of instances");
+            for m in transforms {
+                let geometry = rtcNewGeometry(self.device, GEOMETRY_INSTANCE);
+                if geometry.is_null() {
+                    rtcReleaseScene(top);
+                    anyhow::bail!("Embree: cannot make an instance (error {})", rtcGetDeviceError(self.device));
+                }
+                rtcSetGeometryInstancedScene(geometry, self.scene);
+                rtcSetGeometryTransform(geometry, 0, FORMAT_FLOAT3X4_ROW_MAJOR, m.as_ptr().cast());
+                rtcCommitGeometry(geometry);
+                rtcAttachGeometry(top, geometry);
+                rtcReleaseGeometry(geometry);
+            }
+            rtcCommitScene(top);
+            top
+        };
+        let build_time = t.elapsed();
+        // SAFETY: the device is valid.
+        let error = unsafe { rtcGetDeviceError(self.device) };
+        let placed = std::mem::replace(&mut self.scene, top);
+        self.placed = Some(placed);
+        self.build_time = build_time;
+        anyhow::ensure!(error == 0, "Embree: the instances' build failed (error {error})");
+        Ok(self)
     }
 
     /// Whether Embree takes `r`: a ray octrace traces, whose origin and direction
@@ -365,9 +408,13 @@ impl Embree {
 
 impl Drop for Embree {
     fn drop(&mut self) {
-        // SAFETY: both were made by `build` and are released once.
+        // SAFETY: all were made by `build` (and `instanced`) and are released once,
+        // the scene of instances before the scene it places.
         unsafe {
             rtcReleaseScene(self.scene);
+            if let Some(placed) = self.placed {
+                rtcReleaseScene(placed);
+            }
             rtcReleaseDevice(self.device);
         }
     }

@@ -963,6 +963,33 @@ fn help_of_mapping_commands_warns_about_files_rewritten_in_place() {
     }
 }
 
+/// `bench --instances`: the scene placed in a lattice and traced as a world of
+/// instances; in a build with Embree, Embree's instances of it hit the same rays but
+/// for a few grazing ones.
+#[test]
+fn bench_instances_traces_a_world_and_embrees_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let out = ok(d, &["bench", "cube.oct", "--instances", "27", "--runs", "5", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(json["instances"].as_u64(), Some(27));
+    assert_eq!(json["world_triangles"].as_u64(), json["scene_triangles"].as_u64().map(|t| 27 * t));
+    let (rays, hits) = (json["rays"].as_u64().unwrap(), json["octrace_hits"].as_u64().unwrap());
+    assert!(hits > rays / 10 && hits < rays, "{json}");
+    for figure in ["octrace_batch", "octrace_one_ray"] {
+        assert!(json[figure]["median"].as_f64().unwrap() > 0.0, "{json}");
+    }
+    assert_eq!(json.get("embree").is_some(), cfg!(feature = "embree"), "{json}");
+    if let Some(e) = json.get("embree") {
+        assert!(e["hits"].as_u64().unwrap().abs_diff(hits) <= rays / 1000, "{json}");
+        assert!(e["packets"]["median"].as_f64().unwrap() > 0.0, "{json}");
+    }
+    let text = ok(d, &["bench", "cube.oct", "--instances", "8", "--runs", "5"]);
+    assert!(text.contains("world: 8 instances") && text.contains("octrace world, batch"), "{text}");
+}
+
 /// `bench`'s checksums are those of the standard sets traced by `rays` and `trace`
 /// (rays that hit, and the sum of their distances in ray order), its figures are
 /// there for every set, and in a build with Embree its one-thread and all-threads

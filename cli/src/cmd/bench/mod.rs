@@ -70,6 +70,13 @@ pub(crate) struct Args {
     /// inside), which run with the incoherent set.
     #[arg(long)]
     pub no_queries: bool,
+    /// Instead of the standard sets: the scene placed this many times in a lattice
+    /// (1.2 of its extents apart, each turned about y) and traced as a world of
+    /// instances (`octrace_runtime::world`), the standard camera's rays of the
+    /// world's box on one thread; the world's add and commit times; Embree 3's
+    /// instances of the scene beside it in a build with the `embree` feature.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub instances: Option<u32>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -219,6 +226,9 @@ fn test_name(test: TriangleTest) -> &'static str {
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.runs >= 5, "--runs must be at least 5 (medians of fewer are noise)");
     let loaded = load(&args.input)?;
+    if let Some(n) = args.instances {
+        return world::run(loaded, n as usize, &args);
+    }
     let view = loaded.scene.view();
     let frame = Frame::from_bounds(view.bounds.mesh_lo, view.bounds.mesh_hi);
     let test = args_test(&args);
@@ -573,3 +583,4 @@ fn checksum(set: &str, hits: usize, sum_t: f64) -> String {
 mod embree_runs;
 mod gpu;
 mod queries;
+mod world;
