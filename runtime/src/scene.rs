@@ -257,6 +257,11 @@ impl Scene {
         self.shared_tracer().occluded(ray)
     }
 
+    /// A hit that occludes `ray` ([`Tracer::occluder`]), on the scene's own tracer.
+    pub(crate) fn shared_occluder(&self, ray: &Ray) -> Option<Hit> {
+        self.shared_tracer().occluder(ray)
+    }
+
     /// Nearest hits of many rays, on all cores: each core walks sixteen rays at a time
     /// (eight a vector where the processor has AVX2), so that their loads overlap:
     /// faster than [`Scene::intersect`] ray by ray, with the same answers. (The calls

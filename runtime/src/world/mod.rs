@@ -65,6 +65,7 @@ use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 use crate::surface::HitSurface;
 use crate::Scene;
+use octrace_format::StoredIndex;
 use top::{Aabb, Top};
 
 /// A crossing of a world's triangles ([`World::crossings`]): the instance, and the
@@ -77,6 +78,17 @@ pub struct WorldCrossing {
     /// The crossing.
     pub crossing: Crossing,
 }
+
+/// The boxes a ray's batch rounds take at most ([`World::intersect_batch`]); a ray
+/// whose walk enters more is finished by the one-ray walk within its nearest hit.
+const FIRST_BOXES: usize = 8;
+
+/// Where only whether there is a hit counts.
+const NO_HIT: Hit = Hit { t: 0.0, triangle: u32::MAX, u: 0.0, v: 0.0, leaf: 0, prim: StoredIndex(u32::MAX) };
+
+/// Groups of fewer rays than this (a round's rays for one instance) are walked one at
+/// a time: the batch walk's set-up does not pay for them.
+const SMALL_GROUP: usize = 8;
 
 /// The rays [`World::intersect_batch`] takes on one thread at a time.
 pub const PIECE: usize = 4096;
@@ -236,13 +248,22 @@ impl World {
 
     /// The nearest hit of `ray` in `[tmin, tmax]` (see the module's text).
     pub fn intersect(&self, ray: &Ray) -> Option<WorldHit> {
+        self.intersect_from(ray, None, &[])
+    }
+
+    /// [`World::intersect`] given the nearest hit `best` among the instances `asked`
+    /// (skipped): the same answer.
+    fn intersect_from(&self, ray: &Ray, mut best: Option<WorldHit>, asked: &[u32]) -> Option<WorldHit> {
         if !ray.is_traceable() {
             return None;
         }
-        let mut best: Option<WorldHit> = None;
         let o = ray.origin.to_array();
         let d = ray.dir.to_array();
-        self.top.walk(o, d, ray.tmin, ray.tmax, |id, _, tmax| {
+        let reach = best.map_or(ray.tmax, |b| b.hit.t);
+        self.top.walk(o, d, ray.tmin, reach, |id, _, tmax| {
+            if asked.contains(&id) {
+                return false;
+            }
             let Some(p) = &self.placed[id as usize] else { return false };
             let local = carried(p, ray, *tmax);
             if let Some(hit) = self.scenes[p.scene as usize].intersect(&local.ray).and_then(|h| local.back(h, *tmax)) {
@@ -259,11 +280,19 @@ impl World {
 
     /// Whether anything lies on `ray` in `[tmin, tmax]`.
     pub fn occluded(&self, ray: &Ray) -> bool {
+        self.occluded_from(ray, &[])
+    }
+
+    /// [`World::occluded`] but for the instances `asked` (found not to occlude it).
+    fn occluded_from(&self, ray: &Ray, asked: &[u32]) -> bool {
         if !ray.is_traceable() {
             return false;
         }
         let mut found = false;
         self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, tmax| {
+            if asked.contains(&id) {
+                return false;
+            }
             let Some(p) = &self.placed[id as usize] else { return false };
             let local = carried(p, ray, *tmax);
             let scene = &self.scenes[p.scene as usize];
@@ -369,10 +398,11 @@ impl World {
     }
 
     /// [`World::intersect`] for many rays, on all cores, with the same answers: in
-    /// pieces of [`PIECE`] rays, each ray's instances (the boxes it enters, nearest
-    /// first) taken in rounds, a round's rays grouped by instance and walked by the
-    /// instance's batch walk (sixteen rays at a time), each ray's reach shortened by
-    /// its nearest hit so far.
+    /// pieces of [`PIECE`] rays, each ray's first instances (the first eight boxes its
+    /// walk enters, nearest first) taken in rounds, a round's rays grouped by
+    /// instance and walked by the instance's batch walk (sixteen rays at a time),
+    /// each ray's reach shortened by its nearest hit so far; a ray whose walk enters
+    /// more boxes is finished by the one-ray walk within that reach.
     pub fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<WorldHit>> {
         let mut out = vec![None; rays.len()];
         out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece::<false>(rays, out));
@@ -390,21 +420,45 @@ impl World {
     /// [`World::intersect_batch`] (or, `ANY`, a blocker for [`World::occluded_batch`])
     /// on this thread, for one piece.
     fn piece<const ANY: bool>(&self, rays: &[Ray], out: &mut [Option<WorldHit>]) {
-        // Each ray's boxes, nearest first: `boxes[first[i]..first[i + 1]]`.
+        // Each ray's first boxes in the walk's order (at most `FIRST_BOXES`), nearest
+        // first: `boxes[first[i]..first[i + 1]]`; `more[i]` where the walk had more.
         let mut boxes: Vec<(f32, u32)> = Vec::new();
         let mut first = Vec::with_capacity(rays.len() + 1);
+        let mut more = vec![false; rays.len()];
         first.push(0u32);
-        for ray in rays {
+        for (ray, more) in rays.iter().zip(&mut more) {
             let start = boxes.len();
             if ray.is_traceable() {
                 self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, near, _| {
-                    boxes.push((near, id));
-                    false
+                    *more = boxes.len() - start == FIRST_BOXES;
+                    if !*more {
+                        boxes.push((near, id));
+                    }
+                    *more
                 });
             }
             boxes[start..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             first.push(boxes.len() as u32);
         }
+        self.rounds::<ANY>(rays, &boxes, &first, out);
+        // The rays whose walks enter more boxes: the one-ray walk within the nearest
+        // hit so far, the instances already asked skipped.
+        for (i, ray) in rays.iter().enumerate() {
+            if !more[i] || ANY && out[i].is_some() {
+                continue;
+            }
+            let asked: Vec<u32> = boxes[first[i] as usize..first[i + 1] as usize].iter().map(|b| b.1).collect();
+            out[i] = if ANY {
+                self.occluded_from(ray, &asked).then_some(WorldHit { instance: u32::MAX, hit: NO_HIT })
+            } else {
+                self.intersect_from(ray, out[i], &asked)
+            };
+        }
+    }
+
+    /// [`World::piece`]'s rounds over each ray's boxes (`boxes[first[i]..first[i +
+    /// 1]]`, nearest first).
+    fn rounds<const ANY: bool>(&self, rays: &[Ray], boxes: &[(f32, u32)], first: &[u32], out: &mut [Option<WorldHit>]) {
         let mut round = 0u32;
         let mut todo: Vec<(u32, u32)> = Vec::new(); // (instance, ray)
         let (mut carried_rays, mut hits) = (Vec::new(), Vec::new());
@@ -441,7 +495,12 @@ impl World {
                 hits.clear();
                 hits.resize(local.len(), None);
                 let scene = &self.scenes[p.scene as usize];
-                if ANY {
+                if local.len() < SMALL_GROUP {
+                    // Too few for the batch walk's set-up to pay: one at a time.
+                    for (ray, hit) in local.iter().zip(hits.iter_mut()) {
+                        *hit = if ANY { scene.shared_occluder(ray) } else { scene.intersect(ray) };
+                    }
+                } else if ANY {
                     scene.tracer().occluder_batch(&local, &mut hits);
                 } else {
                     scene.tracer().intersect_batch(&local, &mut hits);
