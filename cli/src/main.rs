@@ -17,6 +17,7 @@ mod cmd;
 mod memory;
 mod open;
 mod output;
+mod world_file;
 // Bindings to a C library, behind its feature (the other unsafe code: mapping files in
 // `open`, the allocator's setting in `memory`).
 #[cfg(feature = "embree")]
@@ -91,6 +92,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bake(a) => cmd::bake::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Trace(a) if world_file::is_description(&a.scene) => cmd::trace::run_world(a),
         Command::Trace(a) if a.along() => cmd::trace_crossings::run(a),
         Command::Trace(a) => cmd::trace::run(a),
         Command::Rays(a) => cmd::rays::run(a),

@@ -1778,3 +1778,71 @@ fn bake_names_a_folder_and_a_baked_scene() {
         assert!(stderr.contains(says), "{input}: {stderr}");
     }
 }
+
+/// A scene description (JSON: scenes placed by transforms) traced and inspected where a
+/// `.oct` is taken: each ray's nearest hit names its instance and the triangle of that
+/// instance's scene, as the scene alone answers the ray moved by hand; bad
+/// descriptions are refused naming what and where.
+#[test]
+fn trace_and_inspect_take_a_scene_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    std::fs::create_dir(d.join("props")).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "props/cube.oct"]);
+    let description = r#"{"scenes": {"cube": "props/cube.oct"}, "instances": [
+        {"scene": "cube"},
+        {"scene": "cube", "transform": [[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, 0]]},
+        {"scene": "cube", "transform": [2, 0, 0, 6, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1]}]}"#;
+    std::fs::write(d.join("world.json"), description).unwrap();
+    let ray = |x: f32, y: f32| -> Vec<u8> {
+        [x, y, -5.0, 0.0, 0.0, 0.0, 1.0, f32::INFINITY].iter().flat_map(|v| v.to_le_bytes()).collect()
+    };
+    let rays: Vec<u8> = [ray(0.5, 0.3), ray(3.5, 0.3), ray(7.0, 1.5), ray(5.0, 0.5)].concat();
+    std::fs::write(d.join("rays.bin"), &rays).unwrap();
+    ok(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "hits.bin"]);
+    let hits = std::fs::read(d.join("hits.bin")).unwrap();
+    assert_eq!(hits.len(), 4 * 12);
+    let record = |i: usize| {
+        let r = &hits[12 * i..12 * i + 12];
+        let word = |k: usize| u32::from_le_bytes(r[4 * k..4 * k + 4].try_into().unwrap());
+        (f32::from_bits(word(0)), word(1), word(2))
+    };
+    assert_eq!(record(0).0, 5.0);
+    assert_eq!((record(0).1, record(1).1, record(2).1), (0, 1, 2));
+    assert_eq!(record(1).0, 5.0);
+    assert_eq!(record(3), (f32::INFINITY, u32::MAX, u32::MAX));
+    // The cube alone, the ray moved into instance 1's space by hand: the same triangle.
+    std::fs::write(d.join("one.bin"), ray(0.5, 0.3)).unwrap();
+    ok(d, &["trace", "props/cube.oct", "--rays", "one.bin", "-o", "one_hits.bin"]);
+    let one = std::fs::read(d.join("one_hits.bin")).unwrap();
+    assert_eq!(u32::from_le_bytes(one[4..8].try_into().unwrap()), record(1).2);
+    ok(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "occluded.bin", "--occluded"]);
+    let occluded: Vec<u8> = std::fs::read(d.join("occluded.bin")).unwrap();
+    assert_eq!(occluded, [1u32, 1, 1, 0].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+    ok(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "counts.bin", "--counts"]);
+    let counts = std::fs::read(d.join("counts.bin")).unwrap();
+    assert_eq!(&counts[..8], [2u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+    let text = ok(d, &["inspect", "world.json"]);
+    assert!(text.contains("3 instances of 1 scenes, 36 triangles placed"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "world.json", "--json"])).unwrap();
+    assert_eq!(json["instances"].as_u64(), Some(3));
+    for (bad, says) in [
+        (r#"{"scenes": {}, "instances": [{"scene": "cube"}]}"#, "instance 0 names scene \"cube\""),
+        (r#"{"scenes": {"cube": "props/cube.oct"}, "instances": [], "lights": 1}"#, "unknown field"),
+        (
+            r#"{"scenes": {"cube": "props/cube.oct"}, "instances": [{"scene": "cube", "transform": [1, 2]}]}"#,
+            "instance 0's transform",
+        ),
+        (
+            r#"{"scenes": {"cube": "props/cube.oct"}, "instances": [{"scene": "cube"}, {"scene": "cube", "transform": [[1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0]]}]}"#,
+            "singular",
+        ),
+        (r#"{"scenes": {"cube": "missing.oct"}, "instances": []}"#, "scene \"cube\""),
+    ] {
+        std::fs::write(d.join("bad.json"), bad).unwrap();
+        fails_saying(d, &["trace", "bad.json", "--rays", "rays.bin", "-o", "bad.bin"], says);
+        fails_saying(d, &["inspect", "bad.json"], says);
+    }
+    fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--all-hits"], "take a .oct");
+}

@@ -11,7 +11,7 @@ use crate::output::{counted, mb, thousands};
 #[derive(clap::Args, Debug)]
 #[command(after_long_help = mapped_scene_help!())]
 pub(crate) struct Args {
-    /// The .oct file.
+    /// The .oct file, or a scene description (.json: `octrace trace --help`).
     pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -19,6 +19,9 @@ pub(crate) struct Args {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
+    if crate::world_file::is_description(&args.file) {
+        return world(&args);
+    }
     let scene = crate::open::open_scene(&args.file)?;
     let file = scene.file().expect("opened from a file");
     let report = Report::new(&scene.view(), file.header(), std::fs::metadata(&args.file)?.len())?;
@@ -334,4 +337,52 @@ fn texture_uses(materials: &[octrace_format::Material], index: u32) -> String {
         n if n <= 3 => format!("; {}", uses.join(", ")),
         n => format!("; {} and {} more", uses[..3].join(", "), n - 3),
     }
+}
+
+/// `inspect` of a scene description: its scenes and instances, validated.
+fn world(args: &Args) -> anyhow::Result<()> {
+    let (world, scenes) = crate::world_file::open_world(&args.file)?;
+    let mut triangles = 0u64;
+    let mut used = std::collections::BTreeMap::new();
+    let ids: Vec<u32> = (0..u32::MAX).take_while(|&id| world.instance(id).is_some()).collect();
+    for &id in &ids {
+        if let Some((scene, _)) = world.instance(id) {
+            triangles += scene.view().triangle_count() as u64;
+            let name = scenes.iter().find(|(_, s)| std::sync::Arc::ptr_eq(s, scene)).map(|(n, _)| n.clone());
+            *used.entry(name.unwrap_or_default()).or_insert(0u64) += 1;
+        }
+    }
+    let scene_rows: Vec<serde_json::Value> = scenes
+        .iter()
+        .map(|(name, s)| {
+            serde_json::json!({
+                "name": name, "triangles": s.view().triangle_count(), "instances": used.get(name).copied().unwrap_or(0),
+            })
+        })
+        .collect();
+    if args.json {
+        let j = serde_json::json!({
+            "instances": world.len(), "placed_triangles": triangles, "world_bytes": world.bytes(), "scenes": scene_rows,
+        });
+        crate::out!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        let mut text = format!(
+            "{}: a scene description, {} instances of {} scenes, {} triangles placed; the world takes {} KB beside its scenes\n",
+            crate::show(&args.file),
+            crate::output::thousands(world.len() as u64),
+            scenes.len(),
+            crate::output::thousands(triangles),
+            world.bytes() / 1000
+        );
+        for row in &scene_rows {
+            text += &format!(
+                "  {:<16} {:>12} triangles, {:>8} instances\n",
+                row["name"].as_str().unwrap_or(""),
+                row["triangles"],
+                row["instances"]
+            );
+        }
+        crate::out!("{}", text.trim_end());
+    }
+    Ok(())
 }
