@@ -1824,7 +1824,7 @@ fn trace_and_inspect_take_a_scene_description() {
     let counts = std::fs::read(d.join("counts.bin")).unwrap();
     assert_eq!(&counts[..8], [2u32, 1].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
     let text = ok(d, &["inspect", "world.json"]);
-    assert!(text.contains("3 instances of 1 scenes, 36 triangles placed"), "{text}");
+    assert!(text.contains("3 instances of 1 scene, 36 triangles placed"), "{text}");
     let json: serde_json::Value = serde_json::from_str(&ok(d, &["inspect", "world.json", "--json"])).unwrap();
     assert_eq!(json["instances"].as_u64(), Some(3));
     for (bad, says) in [

@@ -367,12 +367,12 @@ fn world(args: &Args) -> anyhow::Result<()> {
         crate::out!("{}", serde_json::to_string_pretty(&j)?);
     } else {
         let mut text = format!(
-            "{}: a scene description, {} instances of {} scenes, {} triangles placed; the world takes {} KB beside its scenes\n",
+            "{}: a scene description, {} of {}, {} triangles placed; the world takes {} bytes beside its scenes\n",
             crate::show(&args.file),
-            crate::output::thousands(world.len() as u64),
-            scenes.len(),
+            crate::output::counted(world.len() as u64, "instance"),
+            crate::output::counted(scenes.len() as u64, "scene"),
             crate::output::thousands(triangles),
-            world.bytes() / 1000
+            crate::output::thousands(world.bytes() as u64)
         );
         for row in &scene_rows {
             text += &format!(
