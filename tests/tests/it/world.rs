@@ -360,3 +360,28 @@ fn crossings_counts_and_inside_agree_with_the_baked_file_away_from_overlaps() {
         }
     }
 }
+
+/// Thousands of small instances, crowded and overlapping, against the oracle and the
+/// one baked file, nearest and any hit, one ray at a time and in batches.
+#[test]
+fn thousands_of_random_instances_answer_as_the_placed_triangles() {
+    let props: Vec<(Mesh, Arc<Scene>)> =
+        [procedural::sphere([0.0; 3], 1.0, 6, 8), procedural::cube([-1.0; 3], [1.0; 3], 1), procedural::grid(2, 1.5)]
+            .into_iter()
+            .map(|m| {
+                let s = scene(&m);
+                (m, s)
+            })
+            .collect();
+    let mut rng = SplitMix(53);
+    let reach = 30.0;
+    let mut world = World::new();
+    let ids: Vec<u32> =
+        (0..3000).map(|k| world.add(&props[k % 3].1, placement(&mut rng, reach)).expect("placed")).collect();
+    world.commit();
+    let rays = rays(&mut rng, 500, reach as f32);
+    let hits = check(&world, &props, &ids, &rays);
+    assert!(hits > 250, "{hits} hits");
+    assert_eq!(world.intersect_batch(&rays), rays.iter().map(|r| world.intersect(r)).collect::<Vec<_>>());
+    assert_eq!(world.occluded_batch(&rays), rays.iter().map(|r| world.occluded(r)).collect::<Vec<_>>());
+}
