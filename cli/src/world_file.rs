@@ -27,9 +27,10 @@ use anyhow::Context;
 use octrace_runtime::world::{Transform, World};
 
 /// The largest description read (a million instances take about 100 MB of JSON).
-const MAX_BYTES: u64 = 1 << 30;
-/// The most instances a description may place.
-const MAX_INSTANCES: usize = 1 << 24;
+const MAX_BYTES: u64 = 256 << 20;
+/// The most instances a description may place (the world takes about 300 bytes an
+/// instance: 300 MB at most).
+const MAX_INSTANCES: usize = 1 << 20;
 
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
