@@ -1845,4 +1845,11 @@ fn trace_and_inspect_take_a_scene_description() {
         fails_saying(d, &["inspect", "bad.json"], says);
     }
     fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--all-hits"], "take a .oct");
+    // Past the instances' budget: refused before any is placed.
+    let many = format!(
+        r#"{{"scenes": {{"cube": "props/cube.oct"}}, "instances": [{}]}}"#,
+        vec![r#"{"scene":"cube"}"#; (1 << 20) + 1].join(",")
+    );
+    std::fs::write(d.join("many.json"), many).unwrap();
+    fails_saying(d, &["inspect", "many.json"], "1048577 instances, past the 1048576");
 }
