@@ -9,7 +9,8 @@
 //! With the `gpu` feature (on by default), `gpu::GpuTracer` runs the same walk in a
 //! wgpu compute kernel on Vulkan, from the same bytes, with the same answers, and
 //! `gpu::GpuRenderer` renders the effects of [`render::effects`] there, shading
-//! included.
+//! included. [`world::World`] places scenes many times by transforms, moves them
+//! between frames and traces them as one.
 //!
 //! # Example
 //! A scene baked by `octrace bake` (or `octrace_bake`), opened and traced with this
