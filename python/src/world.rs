@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use rayon::prelude::*;
 
 use crate::arrays::{array, numpy_of, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
-use crate::errors::zeros;
+use crate::errors::{collected, zeros};
 use crate::scene::Scene;
 
 /// Baked scenes placed by transforms and traced as one: each ``Scene`` opened once and
@@ -207,6 +207,96 @@ impl World {
             })?
         })?;
         array(py, counts, input.shape(&[]))
+    }
+
+    /// Every crossing of each ray at ``t >= 0`` with every instance's triangles, in
+    /// order along it (of equal distances, the lower instance first), as
+    /// ``Scene.list_intersections``: ``ray_splits``, ``ray_ids``, ``geometry_ids``
+    /// (the instances), ``primitive_ids`` (the triangles of their scenes),
+    /// ``primitive_uvs``, ``t_hit`` and ``enters`` (the placed triangle's side).
+    ///
+    /// Args:
+    ///     max_hits: keep at most this many crossings a ray (its first ones).
+    ///     max_memory: the most bytes the lists may take while they are found (24 a
+    ///         crossing). Default: a quarter of the memory this process may use.
+    ///
+    /// Raises:
+    ///     MemoryError: the lists pass ``max_memory`` (pass ``max_hits``, or fewer
+    ///         rays), or memory cannot be had.
+    #[pyo3(signature = (rays, nthreads=0, max_hits=None, max_memory=None))]
+    fn list_intersections<'py>(
+        &self,
+        rays: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_hits: Option<usize>,
+        max_memory: Option<u64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let py = rays.py();
+        let input = Floats::new(rays, "rays", 6)?;
+        let values = input.values();
+        let budget = max_memory.unwrap_or_else(|| octrace_format::memory::share(4));
+        let keep = max_hits.unwrap_or(usize::MAX);
+        let world = &self.inner;
+        let lists = py.detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let rays = to_rays(values, 0.0, f32::INFINITY)?;
+                let mut lists: Vec<Vec<octrace_runtime::world::WorldCrossing>> = Vec::new();
+                let mut bytes = 0u64;
+                for piece in rays.chunks(4096) {
+                    let found: Vec<_> = piece
+                        .par_iter()
+                        .map(|r| {
+                            let mut c = world.crossings(r);
+                            c.truncate(keep);
+                            c
+                        })
+                        .collect();
+                    bytes += found.iter().map(|c| c.len() as u64).sum::<u64>() * 24;
+                    if bytes > budget {
+                        return Err(pyo3::exceptions::PyMemoryError::new_err(format!(
+                            "the crossings take at least {bytes} bytes, past max_memory {budget}: pass max_hits, or \
+                             fewer rays a call"
+                        )));
+                    }
+                    lists.extend(found);
+                }
+                Ok(lists)
+            })?
+        })?;
+        let k: usize = lists.iter().map(Vec::len).sum();
+        if k > u32::MAX as usize {
+            return Err(PyValueError::new_err(format!(
+                "{k} crossings do not fit ray_splits' uint32: pass max_hits, or fewer rays a call"
+            )));
+        }
+        let all = || lists.iter().flatten();
+        let mut at = 0u32;
+        let splits = collected(
+            lists.len() + 1,
+            "ray_splits",
+            std::iter::once(0).chain(lists.iter().map(|l| {
+                at += l.len() as u32;
+                at
+            })),
+        )?;
+        let ray_ids = collected(
+            k,
+            "ray_ids",
+            lists.iter().enumerate().flat_map(|(i, l)| std::iter::repeat_n(i as u32, l.len())),
+        )?;
+        let d = PyDict::new(py);
+        d.set_item("ray_splits", array(py, splits, vec![lists.len() + 1])?)?;
+        d.set_item("ray_ids", array(py, ray_ids, vec![k])?)?;
+        d.set_item("geometry_ids", array(py, collected(k, "geometry_ids", all().map(|c| c.instance))?, vec![k])?)?;
+        d.set_item(
+            "primitive_ids",
+            array(py, collected(k, "primitive_ids", all().map(|c| c.crossing.triangle))?, vec![k])?,
+        )?;
+        let uvs = collected(2 * k, "primitive_uvs", all().flat_map(|c| [c.crossing.u, c.crossing.v]))?;
+        d.set_item("primitive_uvs", array(py, uvs, vec![k, 2])?)?;
+        d.set_item("t_hit", array(py, collected(k, "t_hit", all().map(|c| c.crossing.t))?, vec![k])?)?;
+        d.set_item("enters", array(py, collected(k, "enters", all().map(|c| c.crossing.enters))?, vec![k])?)?;
+        Ok(d)
     }
 
     /// Whether each point lies inside some closed instance (exactly, as

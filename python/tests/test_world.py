@@ -68,6 +68,20 @@ def test_a_world_answers_as_its_triangles_baked_into_one_scene():
     agree = world.test_occlusions(r) == one.test_occlusions(r)
     assert agree.mean() > 0.995
     assert (world.count_intersections(r) == one.count_intersections(r)).mean() > 0.995
+    lists, theirs_lists = world.list_intersections(r), one.list_intersections(r)
+    np.testing.assert_array_equal(np.diff(lists["ray_splits"]), world.count_intersections(r))
+    ids = lists["geometry_ids"].astype(np.int64) * len(t) + lists["primitive_ids"]
+    agree = 0
+    for i in range(len(r)):
+        a, b = lists["ray_splits"][i:i + 2]
+        c, d = theirs_lists["ray_splits"][i:i + 2]
+        agree += sorted(ids[a:b]) == sorted(theirs_lists["primitive_ids"][c:d])
+        assert (np.diff(lists["t_hit"][a:b]) >= 0).all()
+    assert agree >= 0.995 * len(r)
+    first = world.list_intersections(r, max_hits=1)
+    np.testing.assert_array_equal(np.diff(first["ray_splits"]), np.minimum(np.diff(lists["ray_splits"]), 1))
+    with pytest.raises(MemoryError, match="max_memory"):
+        world.list_intersections(r, max_memory=1000)
     points = np.random.default_rng(7).uniform([-2, -2, -2], [11, 8, 2], (5000, 3)).astype(np.float32)
     inside = world.compute_occupancy(points)
     assert inside.sum() > 200
