@@ -105,6 +105,15 @@ pub struct WorldHit {
     pub hit: Hit,
 }
 
+impl WorldHit {
+    /// Whether this hit is the nearer of it and `best`: the lower distance, and of
+    /// equal ones the lower instance id (the one rule every query keeps).
+    #[inline]
+    fn beats(&self, best: Option<WorldHit>) -> bool {
+        best.is_none_or(|b| self.hit.t < b.hit.t || self.hit.t == b.hit.t && self.instance < b.instance)
+    }
+}
+
 /// An instance as the queries read it.
 #[derive(Clone, Copy, Debug)]
 struct Placed {
@@ -267,9 +276,9 @@ impl World {
             let Some(p) = &self.placed[id as usize] else { return false };
             let local = carried(p, ray, *tmax);
             if let Some(hit) = self.scenes[p.scene as usize].intersect(&local.ray).and_then(|h| local.back(h, *tmax)) {
-                let nearer = best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance);
-                if nearer {
-                    best = Some(WorldHit { instance: id, hit });
+                let this = WorldHit { instance: id, hit };
+                if this.beats(best) {
+                    best = Some(this);
                     *tmax = hit.t;
                 }
             }
@@ -516,9 +525,9 @@ impl World {
                         hit = scene.intersect(&c.ray).and_then(|h| c.back(h, reach));
                     }
                     let Some(hit) = hit else { continue };
-                    let best = &mut out[i as usize];
-                    if best.is_none_or(|b| hit.t < b.hit.t || hit.t == b.hit.t && id < b.instance) {
-                        *best = Some(WorldHit { instance: id, hit });
+                    let this = WorldHit { instance: id, hit };
+                    if this.beats(out[i as usize]) {
+                        out[i as usize] = Some(this);
                     }
                 }
             }
