@@ -1,8 +1,12 @@
 //! `octrace.World`: scenes placed many times by transforms, moved and traced as one
 //! (the runtime's `world`), with Open3D's ray calls and answers.
 
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
 use octrace_runtime::world::Transform;
-use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::exceptions::{PyKeyError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
@@ -32,12 +36,16 @@ use crate::scene::Scene;
 ///     first = world.add(bunny)                    # the identity
 ///     moved = np.eye(4); moved[0, 3] = 0.3        # 0.3 along x
 ///     second = world.add(bunny, moved)
+///     third = world.add("dragon.oct", moved)      # a file, opened once
+///     fourth = world.add_triangles(v, t)          # numpy arrays, baked in memory
 ///     world.commit()
 ///     ans = world.cast_rays(rays)   # t_hit, geometry_ids (instance ids), primitive_ids, ...
 ///     moved[1, 3] = 0.1; world.set_transform(second, moved); world.commit()
 #[pyclass(module = "octrace")]
 pub(crate) struct World {
     inner: octrace_runtime::world::World,
+    /// The files added by path, each opened once (by absolute path).
+    files: HashMap<PathBuf, Arc<octrace_runtime::Scene>>,
 }
 
 /// A 4x4 (last row `0 0 0 1`) or 3x4 placement from anything numpy reads.
@@ -57,6 +65,30 @@ fn transform(obj: &Bound<'_, PyAny>) -> PyResult<Transform> {
     }
 }
 
+impl World {
+    /// The scene `obj` names: a `Scene`'s own, or the file at a path, opened (as
+    /// `octrace.Scene(path)` opens it) the first time this world sees the path.
+    fn scene_of(&mut self, obj: &Bound<'_, PyAny>) -> PyResult<Arc<octrace_runtime::Scene>> {
+        if let Ok(scene) = obj.extract::<PyRef<'_, Scene>>() {
+            return Ok(Arc::clone(&scene.inner));
+        }
+        let Ok(path) = obj.extract::<PathBuf>() else {
+            let kind = obj.get_type().name()?;
+            return Err(PyTypeError::new_err(format!(
+                "scene: expected an octrace.Scene or the path of a .oct file, got {kind}"
+            )));
+        };
+        let key = std::path::absolute(&path).unwrap_or_else(|_| path.clone());
+        if let Some(scene) = self.files.get(&key) {
+            return Ok(Arc::clone(scene));
+        }
+        let opened = obj.py().get_type::<Scene>().call1((path,))?;
+        let scene = Arc::clone(&opened.extract::<PyRef<'_, Scene>>()?.inner);
+        self.files.insert(key, Arc::clone(&scene));
+        Ok(scene)
+    }
+}
+
 fn placement_error(e: octrace_runtime::Error) -> PyErr {
     match e {
         octrace_runtime::Error::NoInstance { .. } => PyKeyError::new_err(e.to_string()),
@@ -69,20 +101,54 @@ impl World {
     /// An empty world.
     #[new]
     fn new() -> World {
-        World { inner: octrace_runtime::world::World::new() }
+        World { inner: octrace_runtime::world::World::new(), files: HashMap::new() }
     }
 
     /// Places ``scene`` by ``transform`` (a 4x4 matrix whose last row is ``0 0 0 1``,
     /// or 3x4; local to world; the identity by default), visible after the next
     /// ``commit()``. Returns the instance's id (ids are never reused).
     ///
+    /// ``scene`` is an ``octrace.Scene`` or the path of a ``.oct`` file (``str`` or
+    /// ``os.PathLike``), read and validated as ``octrace.Scene(path)`` does the first
+    /// time this world is given it and shared by every instance of it after that.
+    ///
     /// Raises:
     ///     ValueError: the transform has the wrong shape, is not affine, cannot be
     ///         inverted, or places the scene beyond float32's range.
+    ///     TypeError: ``scene`` is neither a ``Scene`` nor a path.
+    ///     OSError, FormatError: the path's file cannot be read, or is not a valid
+    ///         octrace scene.
     #[pyo3(signature = (scene, transform=None))]
-    fn add(&mut self, scene: &Scene, transform: Option<&Bound<'_, PyAny>>) -> PyResult<u32> {
+    fn add(&mut self, scene: &Bound<'_, PyAny>, transform: Option<&Bound<'_, PyAny>>) -> PyResult<u32> {
         let place = transform.map_or(Ok(Transform::IDENTITY), self::transform)?;
-        self.inner.add(&scene.inner, place).map_err(placement_error)
+        let scene = self.scene_of(scene)?;
+        self.inner.add(&scene, place).map_err(placement_error)
+    }
+
+    /// Bakes a mesh given as numpy arrays in memory (as ``Scene.from_arrays``, with
+    /// its defaults) and places it as ``add`` does: Open3D's ``add_triangles``, with a
+    /// placement. Returns the instance's id. To place one mesh many times, bake it
+    /// once (``Scene.from_arrays``) and ``add`` that scene.
+    ///
+    /// Args:
+    ///     vertex_positions: ``(n, 3)`` vertex positions (stored as float32).
+    ///     triangle_indices: ``(m, 3)`` integer vertex indices.
+    ///     transform: as ``add``'s.
+    ///
+    /// Raises:
+    ///     ValueError: bad arrays or transform, as ``Scene.from_arrays`` and ``add``.
+    #[pyo3(signature = (vertex_positions, triangle_indices, transform=None))]
+    fn add_triangles(
+        &mut self,
+        vertex_positions: &Bound<'_, PyAny>,
+        triangle_indices: &Bound<'_, PyAny>,
+        transform: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<u32> {
+        let place = transform.map_or(Ok(Transform::IDENTITY), self::transform)?;
+        let py = vertex_positions.py();
+        let scene = py.get_type::<Scene>().call_method1("from_arrays", (vertex_positions, triangle_indices))?;
+        let scene = Arc::clone(&scene.extract::<PyRef<'_, Scene>>()?.inner);
+        self.inner.add(&scene, place).map_err(placement_error)
     }
 
     /// Moves instance ``id`` to ``transform``, at the next ``commit()``.

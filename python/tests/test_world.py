@@ -115,3 +115,53 @@ def test_moves_and_removals_are_seen_after_commit():
         world.add(cube, np.ones((4, 4)))
     with pytest.raises(ValueError, match="shape"):
         world.add(cube, np.eye(3))
+
+
+def test_files_and_arrays_are_added_as_scenes_are(tmp_path):
+    v, t = cube_arrays(-1.0, 1.0)
+    path = tmp_path / "cube.oct"
+    octrace.bake_arrays(v, t, str(path))
+    transforms = placements(6)
+    by_scene, by_file, by_arrays = octrace.World(), octrace.World(), octrace.World()
+    cube = octrace.Scene(str(path))
+    for i, m in enumerate(transforms):
+        by_scene.add(cube, m)
+        # A path as str or pathlib.Path: the file read once, shared by its instances.
+        by_file.add(path if i % 2 else str(path), m)
+        by_arrays.add_triangles(v, t, m)
+    r = rays(3000)
+    answers = []
+    for world in (by_scene, by_file, by_arrays):
+        world.commit()
+        assert len(world) == 6
+        answers.append(world.cast_rays(r))
+    assert np.isfinite(answers[0]["t_hit"]).sum() > 500
+    for other in answers[1:]:
+        for key in ("t_hit", "geometry_ids", "primitive_ids", "primitive_uvs", "primitive_normals"):
+            np.testing.assert_array_equal(other[key], answers[0][key], err_msg=key)
+    # The file was read once: rewriting it now changes no instance of it.
+    octrace.bake_arrays(v * 2, t, str(path))
+    by_file.add(path, transforms[0])
+    by_file.commit()
+    again = by_file.cast_rays(r)
+    # Placed where instance 0 is, the same cube: every hit as before (ties go to the
+    # lower id); the doubled cube would have been hit first by many rays.
+    np.testing.assert_array_equal(again["t_hit"], answers[1]["t_hit"])
+    np.testing.assert_array_equal(again["geometry_ids"], answers[1]["geometry_ids"])
+
+
+def test_what_is_not_a_scene_is_refused_by_name(tmp_path):
+    world = octrace.World()
+    with pytest.raises(TypeError, match="expected an octrace.Scene or the path of a .oct file, got int"):
+        world.add(3)
+    with pytest.raises(OSError):
+        world.add(str(tmp_path / "missing.oct"))
+    (tmp_path / "junk.oct").write_bytes(b"not a scene")
+    with pytest.raises(octrace.FormatError):
+        world.add(tmp_path / "junk.oct")
+    v, t = cube_arrays(-1.0, 1.0)
+    with pytest.raises(ValueError):
+        world.add_triangles(v, t, np.eye(3))
+    assert len(world) == 0
+    world.commit()
+    assert len(world) == 0
