@@ -370,7 +370,7 @@ fn votes(nsamples: usize) -> PyResult<()> {
 }
 
 /// `max_distance`, checked: not NaN, not negative.
-fn band(max_distance: f32) -> PyResult<f32> {
+pub(crate) fn band(max_distance: f32) -> PyResult<f32> {
     if max_distance.is_nan() || max_distance < 0.0 {
         return Err(PyValueError::new_err(format!(
             "max_distance: {max_distance}, expected a distance >= 0 (inf for no limit)"

@@ -5,14 +5,15 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use octrace_runtime::world::Transform;
+use octrace_runtime::world::{Transform, WorldClosest};
 use pyo3::exceptions::{PyKeyError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 
 use crate::arrays::{array, numpy_of, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
-use crate::errors::{collected, zeros};
+use crate::errors::{collected, runtime_error, zeros};
+use crate::queries::band;
 use crate::scene::Scene;
 
 /// Baked scenes placed by transforms and traced as one: each ``Scene`` opened once and
@@ -388,7 +389,165 @@ impl World {
         array(py, inside, input.shape(&[]))
     }
 
+    /// The nearest point of the world's surface to each query point (Open3D's
+    /// ``compute_closest_points``), through every instance: each searched in its own
+    /// space by its scene's exact search, the point carried back in double precision
+    /// (``Scene.compute_closest_points``' answers, within the rounding of the carried
+    /// point). Placements must scale distances evenly (rotations, mirrors, uniform
+    /// scales, translations).
+    ///
+    /// Returns:
+    ///     ``Scene.compute_closest_points``' dict, with ``geometry_ids`` the
+    ///     instances' ids, ``primitive_ids`` the triangles of the instance's scene and
+    ///     ``primitive_normals`` the placed triangles' unit normals.
+    ///
+    /// Raises:
+    ///     ValueError: an instance's placement stretches distances unevenly (named);
+    ///         points not float32 ``(..., 3)`` or NaN; ``max_distance`` NaN or negative.
+    #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
+    fn compute_closest_points<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let py = query_points.py();
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let n = near.len();
+        let mut points = zeros(3 * n, "points")?;
+        let mut geometry = zeros(n, "geometry_ids")?;
+        let mut primitive = zeros(n, "primitive_ids")?;
+        let mut uvs = zeros(2 * n, "primitive_uvs")?;
+        let mut normals = zeros(3 * n, "primitive_normals")?;
+        let arrays = points
+            .par_chunks_mut(3)
+            .zip(&mut geometry)
+            .zip(&mut primitive)
+            .zip(uvs.par_chunks_mut(2))
+            .zip(normals.par_chunks_mut(3))
+            .zip(&near);
+        arrays.for_each(|(((((point, g), p), uv), normal), near)| match near {
+            Some(c) => {
+                point.copy_from_slice(&c.closest.point);
+                *g = c.instance;
+                *p = c.closest.triangle;
+                uv.copy_from_slice(&[c.closest.u, c.closest.v]);
+                normal.copy_from_slice(&self.placed_normal(c));
+            }
+            None => {
+                point.fill(f32::NAN);
+                *g = INVALID_ID;
+                *p = INVALID_ID;
+            }
+        });
+        let d = PyDict::new(py);
+        let at = |k: &[usize]| [shape.as_slice(), k].concat();
+        d.set_item("points", array(py, points, at(&[3]))?)?;
+        d.set_item("geometry_ids", array(py, geometry, at(&[]))?)?;
+        d.set_item("primitive_ids", array(py, primitive, at(&[]))?)?;
+        d.set_item("primitive_uvs", array(py, uvs, at(&[2]))?)?;
+        d.set_item("primitive_normals", array(py, normals, at(&[3]))?)?;
+        Ok(d)
+    }
+
+    /// The distance from each query point to the world's surface (Open3D's
+    /// ``compute_distance``), as ``compute_closest_points`` finds it: float32 of the
+    /// points' leading shape, ``inf`` past ``max_distance``.
+    ///
+    /// Raises:
+    ///     ValueError: as ``compute_closest_points``.
+    #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
+    fn compute_distance<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let d =
+            collected(near.len(), "distances", near.iter().map(|c| c.map_or(f32::INFINITY, |c| c.closest.distance)))?;
+        array(query_points.py(), d, shape)
+    }
+
+    /// The signed distance from each query point to the world's surface, negative
+    /// inside some closed instance (Open3D's ``compute_signed_distance``): the
+    /// distance ``compute_distance``'s, the sign ``compute_occupancy``'s (exact;
+    /// instances of scenes that are not closed contain nothing); ``+-inf`` past
+    /// ``max_distance``; ``0.0`` on the surface.
+    ///
+    /// Raises:
+    ///     ValueError: as ``compute_closest_points``.
+    #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
+        text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
+    fn compute_signed_distance<'py>(
+        &self,
+        query_points: &Bound<'py, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let world = &self.inner;
+        let signed = query_points.py().detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                let inside = world.contains_batch(to_points(values)?);
+                collected(
+                    near.len(),
+                    "signed distances",
+                    near.iter().zip(inside).map(|(c, inside)| {
+                        octrace_runtime::cpu::signed(c.map_or(f32::INFINITY, |c| c.closest.distance), inside)
+                    }),
+                )
+            })?
+        })?;
+        array(query_points.py(), signed, shape)
+    }
+
     fn __repr__(&self) -> String {
         format!("octrace.World({} instances)", self.inner.len())
+    }
+}
+
+impl World {
+    /// Each query point's closest point of the world (`None` past `max_distance`),
+    /// and the points' leading shape.
+    fn closest(
+        &self,
+        query_points: &Bound<'_, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+    ) -> PyResult<(Vec<Option<WorldClosest>>, Vec<usize>)> {
+        let max_distance = band(max_distance)?;
+        let input = Floats::new(query_points, "query_points", 3)?;
+        let values = input.values();
+        let world = &self.inner;
+        let near = query_points.py().detach(|| {
+            on_threads(nthreads, || -> PyResult<_> {
+                world.closest_points_batch(to_points(values)?, max_distance).map_err(|e| match e {
+                    e @ octrace_runtime::Error::Stretched { .. } => PyValueError::new_err(e.to_string()),
+                    e => runtime_error(e),
+                })
+            })?
+        })?;
+        Ok((near, input.shape(&[])))
+    }
+
+    /// The unit normal of the placed triangle a closest point lies on (its corners
+    /// carried to the world in `f64`).
+    fn placed_normal(&self, c: &WorldClosest) -> [f32; 3] {
+        let Some((scene, t)) = self.inner.instance(c.instance) else { return [0.0; 3] };
+        let tri = scene.view().triangle(octrace_format::StoredIndex(c.closest.prim));
+        let [a, b, d] = tri.map(|v| t.point(v.map(f64::from)));
+        let (e, f) = ([0, 1, 2].map(|k| b[k] - a[k]), [0, 1, 2].map(|k| d[k] - a[k]));
+        let n = [e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0]];
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if len > 0.0 && len.is_finite() {
+            n.map(|x| (x / len) as f32)
+        } else {
+            [0.0; 3]
+        }
     }
 }

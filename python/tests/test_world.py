@@ -165,3 +165,63 @@ def test_what_is_not_a_scene_is_refused_by_name(tmp_path):
     assert len(world) == 0
     world.commit()
     assert len(world) == 0
+
+
+def even_placements(n, seed=7):
+    """Rotations, one scale each (some mirrored), translations: distances kept in ratio."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        m = np.eye(4)
+        s = rng.uniform(0.5, 1.5)
+        m[:3, :3] = rotation(rng.normal(size=3), rng.uniform(0, 6.3)) * s
+        if i % 4 == 3:
+            m[:3, 0] = -m[:3, 0]  # mirrored
+        m[:3, 3] = [3.0 * (i % 4), 3.0 * (i // 4), 0.0]
+        out.append(m)
+    return out
+
+
+def test_closest_points_and_distances_through_a_world_are_the_baked_scenes():
+    v, t = cube_arrays(-1.0, 1.0)
+    cube = octrace.Scene.from_arrays(v, t)
+    transforms = even_placements(8)
+    world = octrace.World()
+    for m in transforms:
+        world.add(cube, m)
+    world.commit()
+    one = octrace.Scene.from_arrays(*placed(v, t, transforms))
+    rng = np.random.default_rng(8)
+    points = rng.uniform([-3, -3, -2], [12, 6, 2], (3000, 3)).astype(np.float32)
+    ours, theirs = world.compute_closest_points(points), one.compute_closest_points(points)
+    distance = np.linalg.norm(theirs["points"] - points, axis=1)
+    np.testing.assert_allclose(np.linalg.norm(ours["points"] - points, axis=1), distance, rtol=1e-5, atol=1e-5)
+    same = ours["geometry_ids"] * len(t) + ours["primitive_ids"] == theirs["primitive_ids"]
+    assert same.mean() > 0.97  # the rest: equally near triangles within the rounding
+    np.testing.assert_allclose(ours["points"][same], theirs["points"][same], atol=1e-5)
+    np.testing.assert_allclose(ours["primitive_normals"][same], theirs["primitive_normals"][same], atol=1e-5)
+    d = world.compute_distance(points)
+    np.testing.assert_allclose(d, one.compute_distance(points), rtol=1e-5, atol=1e-5)
+    signed = world.compute_signed_distance(points)
+    np.testing.assert_array_equal(signed < 0, world.compute_occupancy(points) == 1.0)
+    np.testing.assert_allclose(signed, one.compute_signed_distance(points), rtol=1e-5, atol=1e-5)
+    assert (signed < 0).sum() > 100
+    # A band: points farther than 0.1 answer inf and INVALID_ID.
+    band = world.compute_closest_points(points, max_distance=0.1)
+    far = d > 0.1
+    assert far.sum() > 100 and (~far).sum() > 10
+    assert (band["geometry_ids"][far] == octrace.INVALID_ID).all() and np.isnan(band["points"][far]).all()
+    assert np.isinf(world.compute_distance(points, max_distance=0.1)[far]).all()
+
+
+def test_a_stretched_placement_is_named_by_the_distance_calls():
+    v, t = cube_arrays(-1.0, 1.0)
+    world = octrace.World()
+    world.add_triangles(v, t)
+    stretched = world.add_triangles(v, t, np.diag([1.0, 2.0, 1.0, 1.0]))
+    world.commit()
+    with pytest.raises(ValueError, match=f"instance {stretched} scales them by 1.000000 to 2.000000"):
+        world.compute_distance(np.zeros((1, 3), np.float32))
+    world.remove(stretched)
+    world.commit()
+    assert world.compute_distance(np.zeros((1, 3), np.float32))[0] == 1.0

@@ -1,6 +1,7 @@
 //! Worlds of instances, timed: 10,000 instances of a scene added and committed, a
-//! frame that moves 1,000 of them, and primary rays through 100 instances against
-//! the same triangles placed and baked into one file, on one thread.
+//! frame that moves 1,000 of them, and primary rays and closest points through 100
+//! instances against the same triangles placed and baked into one file, on one
+//! thread.
 //!
 //! `cargo run --release -p octrace-runtime --example world_timing -- bunny.oct`
 //! (`WORLD_SIDE=512` sets the image's side; `WORLD_NO_BAKE=1` skips the baked file.)
@@ -149,6 +150,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (world_any, _) = time(&|| world.occluded_batch(&rays).iter().filter(|&&b| b).count());
     let (one_any, _) = time(&|| baked.occluded_batch(&rays).iter().filter(|&&b| b).count());
     println!("occluded_batch: world {world_any:.3}, one file {one_any:.3} Mrays/s ({:.2}x)", world_any / one_any);
+    // Closest points: 100,000 points uniform in the lattice's box (the search trees
+    // made before the clock starts: best of three).
+    let mut rng = SplitMix(7);
+    let points: Vec<[f32; 3]> = (0..100_000)
+        .map(|_| std::array::from_fn(|k| (wlo[k] + (whi[k] - wlo[k]) * rng.unit() as f64) as f32))
+        .collect();
+    let time_points = |f: &(dyn Fn() -> usize + Sync)| {
+        let best = (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                one.install(f);
+                t.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min);
+        points.len() as f64 / best / 1e6
+    };
+    let (world_near, one_near) = (
+        time_points(&|| world.closest_points_batch(&points, f32::INFINITY).expect("even").len()),
+        time_points(&|| baked.closest_points_batch(&points, f32::INFINITY).expect("memory").len()),
+    );
+    println!(
+        "closest points, 100,000 uniform: world {world_near:.3}, one file {one_near:.3} M points/s ({:.2}x)",
+        world_near / one_near
+    );
     // Round twice, interleaved, for the noise.
     let (w2, _) = time(&|| world.intersect_batch(&rays).iter().flatten().count());
     let (o2, _) = time(&|| baked.intersect_batch(&rays).iter().flatten().count());

@@ -433,6 +433,11 @@ impl Scene {
         self.shared_tracer().closest_point(self.surface_bounds().ok()?, p, max_distance)
     }
 
+    /// [`Scene::closest_point_within`], its search tree's allocation failure said.
+    pub(crate) fn closest_point_checked(&self, p: [f32; 3], max_distance: f32) -> Result<Option<ClosestPoint>> {
+        Ok(self.shared_tracer().closest_point(self.surface_bounds()?, p, max_distance))
+    }
+
     /// [`Scene::closest_point_within`] for many points, on all cores (`f32::INFINITY`
     /// for no limit).
     ///

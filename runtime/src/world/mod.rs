@@ -28,8 +28,10 @@
 //!
 //! The queries: nearest and any hit ([`World::intersect`], [`World::occluded`] and
 //! their batches), every crossing in order merged across instances
-//! ([`World::crossings`]) and their counts ([`World::count_crossings`]), and
-//! inside/outside ([`World::contains`]: inside some closed instance).
+//! ([`World::crossings`]) and their counts ([`World::count_crossings`]),
+//! inside/outside ([`World::contains`]: inside some closed instance), and closest
+//! points ([`World::closest_point`]: each instance searched in its own space, for
+//! placements that scale distances evenly).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -60,7 +62,7 @@ use rayon::prelude::*;
 
 pub use transform::Transform;
 
-use crate::cpu::{Crossing, CrossingCount};
+use crate::cpu::{ClosestPoint, Crossing, CrossingCount};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, Ray};
 use crate::surface::HitSurface;
@@ -114,6 +116,17 @@ impl WorldHit {
     }
 }
 
+/// A closest point in a world ([`World::closest_point`]): the instance, and the
+/// closest point in world terms (`closest.point` and `closest.distance` in the
+/// world; `triangle`, `prim`, `u` and `v` of the instance's scene).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldClosest {
+    /// The instance's id.
+    pub instance: u32,
+    /// The closest point.
+    pub closest: ClosestPoint,
+}
+
 /// An instance as the queries read it.
 #[derive(Clone, Copy, Debug)]
 struct Placed {
@@ -121,6 +134,28 @@ struct Placed {
     to_world: Transform,
     to_local: Transform,
     bounds: Aabb,
+    /// Bounds on the factor the placement scales lengths by (`stretch_of`).
+    stretch: [f64; 2],
+}
+
+/// A placement scales distances evenly where its least and greatest factors on
+/// lengths are this close (relative): a rotation given in `f32` (orthogonal to about
+/// `1e-7`) is one.
+const EVEN: f64 = 1e-6;
+
+/// Bounds on the factors by which `t` scales lengths (its linear part's singular
+/// values): Gershgorin's disks of `LᵀL`, exact for a diagonal `L` and tight for a
+/// rotation times a uniform scale.
+fn stretch_of(t: &Transform) -> [f64; 2] {
+    let l = |i: usize, j: usize| t.rows[i][j];
+    let m = |a: usize, b: usize| (0..3).map(|i| l(i, a) * l(i, b)).sum::<f64>();
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for a in 0..3 {
+        let off: f64 = (0..3).filter(|&b| b != a).map(|b| m(a, b).abs()).sum();
+        lo = lo.min(m(a, a) - off);
+        hi = hi.max(m(a, a) + off);
+    }
+    [lo.max(0.0).sqrt(), hi.sqrt()]
 }
 
 /// Baked scenes placed by transforms and traced as one (see the module's text).
@@ -136,6 +171,8 @@ pub struct World {
     top: Top,
     /// Edits since the last commit, in order.
     staged: Vec<(u32, Option<Placed>)>,
+    /// The first committed instance whose placement scales distances unevenly.
+    stretched: Option<u32>,
     /// Each id's scene as the edits leave it (`None`: removed).
     latest: Vec<Option<u32>>,
 }
@@ -230,6 +267,7 @@ impl World {
             let live = (0..self.placed.len() as u32).filter(|&id| self.placed[id as usize].is_some()).collect();
             self.top = Top::build(&self.boxes, live);
         }
+        self.stretched = self.placed.iter().position(|p| p.is_some_and(|p| !p.even())).map(|id| id as u32);
     }
 
     /// The committed instances.
@@ -404,6 +442,97 @@ impl World {
     /// [`World::contains`] for many points, on all cores.
     pub fn contains_batch(&self, points: &[[f32; 3]]) -> Vec<bool> {
         points.par_iter().with_min_len(256).map(|p| self.contains(*p)).collect()
+    }
+
+    /// The point of the world's surface closest to `p`, of every instance's triangles
+    /// (see [`World::closest_point_within`]).
+    ///
+    /// # Errors
+    /// As [`World::closest_point_within`].
+    pub fn closest_point(&self, p: [f32; 3]) -> Result<Option<WorldClosest>> {
+        self.closest_point_within(p, f32::INFINITY)
+    }
+
+    /// The closest point of the world's surface to `p` if it lies at most
+    /// `max_distance` away: instances taken nearest box first, each searched in its
+    /// own space (`p` carried there in `f64`, rounded once) by its scene's exact
+    /// search ([`Scene::closest_point_within`]) within the best distance so far, the
+    /// point carried back to the world in `f64` and its distance measured there
+    /// (rounded once). Of equally near points the lower instance id's. Against the
+    /// same triangles placed and baked into one file, the distance differs by the
+    /// rounding of the carried point (`f32` ulps of its local coordinates, times the
+    /// placement's scale), and of two triangles as near as that either may answer.
+    /// `None` for a point that is not finite, an empty world, or nothing within
+    /// `max_distance`.
+    ///
+    /// # Errors
+    /// [`Error::Stretched`] where an instance's placement scales distances unevenly
+    /// (a closest point in its space is then not the closest in the world's): the
+    /// placements must be rotations, mirrors, uniform scales and translations.
+    /// [`Error::Alloc`] where a scene's search tree cannot be made.
+    pub fn closest_point_within(&self, p: [f32; 3], max_distance: f32) -> Result<Option<WorldClosest>> {
+        self.even_placements()?;
+        if !p.iter().all(|c| c.is_finite()) || max_distance.is_nan() {
+            return Ok(None);
+        }
+        let pw = p.map(f64::from);
+        let mut best: Option<WorldClosest> = None;
+        let mut failed = None;
+        self.top.nearest(p, f64::from(max_distance), |id, _| {
+            let bound = best.map_or(max_distance, |b| b.closest.distance);
+            let Some(placed) = &self.placed[id as usize] else { return f64::from(bound) };
+            let local = placed.to_local.point(pw).map(|c| c as f32);
+            // Every point of the instance within `bound` of p in the world lies within
+            // bound / (least scale) of p's carried point, less its rounding.
+            let rounding = local.iter().fold(0.0f64, |m, c| m.max(f64::from(c.abs()))) * f64::from(f32::EPSILON);
+            let reach = (f64::from(bound) / placed.stretch[0] * (1.0 + 1e-5) + 2.0 * rounding) as f32;
+            let found = match self.scenes[placed.scene as usize].closest_point_checked(local, reach.next_up()) {
+                Ok(found) => found,
+                Err(e) => {
+                    failed.get_or_insert(e);
+                    None
+                }
+            };
+            if let Some(c) = found {
+                let at = placed.to_world.point(c.point.map(f64::from));
+                let distance = (0..3).map(|k| (at[k] - pw[k]).powi(2)).sum::<f64>().sqrt() as f32;
+                let nearer = best
+                    .is_none_or(|b| distance < b.closest.distance || distance == b.closest.distance && id < b.instance);
+                if distance <= max_distance && nearer {
+                    let closest = ClosestPoint { distance, point: at.map(|x| x as f32), ..c };
+                    best = Some(WorldClosest { instance: id, closest });
+                }
+            }
+            f64::from(best.map_or(max_distance, |b| b.closest.distance))
+        });
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(best),
+        }
+    }
+
+    /// [`World::closest_point_within`] for many points, on all cores.
+    ///
+    /// # Errors
+    /// As [`World::closest_point_within`]; [`Error::Alloc`] where the answers' memory
+    /// cannot be had.
+    pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<Option<WorldClosest>>> {
+        self.even_placements()?;
+        let mut out = octrace_format::memory::try_vec(points.len(), "closest points")?;
+        out.par_iter_mut().zip(points.par_iter()).with_min_len(64).try_for_each(|(o, p)| {
+            *o = self.closest_point_within(*p, max_distance)?;
+            Ok::<(), Error>(())
+        })?;
+        Ok(out)
+    }
+
+    /// [`Error::Stretched`] naming the first committed instance whose placement
+    /// scales distances unevenly.
+    fn even_placements(&self) -> Result<()> {
+        match self.stretched.and_then(|id| self.placed[id as usize].map(|p| (id, p))) {
+            Some((instance, p)) => Err(Error::Stretched { instance, low: p.stretch[0], high: p.stretch[1] }),
+            None => Ok(()),
+        }
     }
 
     /// [`World::intersect`] for many rays, on all cores, with the same answers: in
@@ -600,7 +729,14 @@ impl World {
                 reason: "it places the scene's box beyond f32's range",
             });
         }
-        Ok(Placed { scene, to_world, to_local, bounds })
+        Ok(Placed { scene, to_world, to_local, bounds, stretch: stretch_of(&to_world) })
+    }
+}
+
+impl Placed {
+    /// Whether the placement scales distances evenly ([`EVEN`]).
+    fn even(&self) -> bool {
+        self.stretch[1] <= self.stretch[0] * (1.0 + EVEN)
     }
 }
 

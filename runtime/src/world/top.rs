@@ -243,6 +243,44 @@ impl Top {
         }
     }
 
+    /// The instances whose boxes lie within `reach` of `p`, nearest box first:
+    /// `visit(id, near)` for each (`near` a lower bound on the distance from `p` to
+    /// the box, in `f64`), which returns the reach from then on (boxes past it are
+    /// skipped).
+    pub fn nearest(&self, p: [f32; 3], mut reach: f64, mut visit: impl FnMut(u32, f64) -> f64) {
+        // The distance to a box from f32 corners, in f64: within a few ulps of exact,
+        // which the relative margin takes off, so that it stays a lower bound.
+        let near = |b: &Aabb| {
+            let d2: f64 = (0..3)
+                .map(|k| {
+                    let (x, lo, hi) = (f64::from(p[k]), f64::from(b.lo[k]), f64::from(b.hi[k]));
+                    let g = (lo - x).max(x - hi).max(0.0);
+                    g * g
+                })
+                .sum();
+            d2.sqrt() * (1.0 - 1e-12)
+        };
+        let Some(root) = self.nodes.first() else { return };
+        let mut stack: Vec<(u32, f64)> = vec![(0, near(&root.bounds))];
+        while let Some((at, lower)) = stack.pop() {
+            if lower > reach {
+                continue;
+            }
+            let node = self.nodes[at as usize];
+            if node.count > 0 {
+                for &id in &self.refs[node.first as usize..(node.first + node.count) as usize] {
+                    reach = visit(id, lower);
+                }
+                continue;
+            }
+            let (a, b) = (node.first, node.first + 1);
+            let (da, db) = (near(&self.nodes[a as usize].bounds), near(&self.nodes[b as usize].bounds));
+            // The nearer child popped first.
+            let (first, second) = if da <= db { ((a, da), (b, db)) } else { ((b, db), (a, da)) };
+            stack.extend([second, first].into_iter().filter(|&(_, d)| d <= reach));
+        }
+    }
+
     /// The nodes, for the memory a world reports.
     pub fn bytes(&self) -> usize {
         self.nodes.len() * std::mem::size_of::<Node>() + self.refs.len() * 4

@@ -385,3 +385,87 @@ fn thousands_of_random_instances_answer_as_the_placed_triangles() {
     assert_eq!(world.intersect_batch(&rays), rays.iter().map(|r| world.intersect(r)).collect::<Vec<_>>());
     assert_eq!(world.occluded_batch(&rays), rays.iter().map(|r| world.occluded(r)).collect::<Vec<_>>());
 }
+
+/// A placement that scales distances evenly: a rotation, one scale (mirrored now
+/// and then) and a translation within `reach`.
+fn even_placement(rng: &mut SplitMix, reach: f64) -> Transform {
+    let mut u = || rng.unit() as f64;
+    let axis = [u() - 0.5, u() - 0.5, u() - 0.5];
+    let angle = std::f64::consts::TAU * u();
+    let s = 0.4 + 1.6 * u();
+    let mirror = if u() < 0.2 { -1.0 } else { 1.0 };
+    let at = [reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0)];
+    Transform::scaling([mirror * s, s, s]).then(&Transform::rotation(axis, angle)).then(&Transform::translation(at))
+}
+
+/// Closest points through a world against the brute-force oracle over the placed
+/// triangles: the distance within the rounding of the carried point, the triangle
+/// the oracle's or one as near within that; the batch the one-point call's, bit for
+/// bit; the band's limit kept; a placement that stretches distances unevenly refused
+/// by name until it is gone.
+#[test]
+fn closest_points_agree_with_the_oracle_over_the_placed_triangles() {
+    let props = props();
+    let mut rng = SplitMix(51);
+    let mut world = World::new();
+    let reach = 12.0;
+    let ids: Vec<u32> = (0..240)
+        .map(|i| world.add(&props[i % props.len()].1, even_placement(&mut rng, reach)).expect("placed"))
+        .collect();
+    world.commit();
+    let (triangles, first) = placed_triangles(&world, &props, &ids);
+    let global = |instance: u32, triangle: u32| first[instance as usize].expect("live") + triangle;
+    let oracle = Reference::in_input_order(triangles.clone());
+    // Points all around, and points just off the placed triangles.
+    let mut points: Vec<[f32; 3]> =
+        (0..300).map(|_| [0; 3].map(|_| (2.0 * rng.unit() - 1.0) * reach as f32 * 1.3)).collect();
+    for _ in 0..300 {
+        let t = triangles[(rng.next_u64() % triangles.len() as u64) as usize].map(Vec3::from_array);
+        let (a, b) = (rng.unit(), rng.unit());
+        let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
+        let off = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.02;
+        points.push((t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + off).to_array());
+    }
+    let batch = world.closest_points_batch(&points, f32::INFINITY).expect("even placements");
+    let mut ties = 0;
+    for (i, p) in points.iter().enumerate() {
+        let got = world.closest_point(*p).expect("even placements").expect("a surface");
+        assert_eq!(batch[i], Some(got), "point {i}: the batch's answer");
+        let want = oracle.closest_point(*p).expect("triangles");
+        let scale = p.iter().fold(0.0f64, |m, c| m.max(f64::from(c.abs()))) + reach;
+        let bound = 16.0 * f64::from(f32::EPSILON) * scale;
+        let d = f64::from(got.closest.distance);
+        assert!((d - want.distance).abs() <= bound, "point {i}: distance {d} against the oracle's {}", want.distance);
+        let at = Vec3::from_array(got.closest.point).as_dvec3();
+        let measured = (at - Vec3::from_array(*p).as_dvec3()).length();
+        assert!((measured - d).abs() <= bound, "point {i}: the point lies {measured} away, the distance says {d}");
+        let triangle = global(got.instance, got.closest.triangle);
+        if triangle != want.triangle {
+            let theirs = oracle.distance_to(*p, triangle).expect("a triangle");
+            assert!((theirs - want.distance).abs() <= bound, "point {i}: triangle {triangle} is {theirs} away");
+            ties += 1;
+        }
+        // The band: nothing within half the distance, the point within a little more.
+        if want.distance > 1e-3 {
+            let half = world.closest_point_within(*p, (want.distance * 0.5) as f32).expect("even");
+            assert_eq!(half, None, "point {i}");
+            let more = world.closest_point_within(*p, (want.distance * 1.01) as f32).expect("even");
+            assert_eq!(more, Some(got), "point {i}");
+        }
+    }
+    assert!(ties * 50 <= points.len(), "{ties} ties in {} points", points.len());
+    // A stretched placement is refused by name, until it is removed.
+    let stretched = world.add(&props[0].1, Transform::scaling([1.0, 2.0, 1.0])).expect("placed");
+    world.commit();
+    let err = world.closest_point([0.0; 3]).expect_err("stretched");
+    assert!(
+        matches!(err, Error::Stretched { instance, low, high } if instance == stretched && low == 1.0 && high == 2.0),
+        "{err}"
+    );
+    assert!(err.to_string().contains("instance 240 scales them by 1.000000 to 2.000000"), "{err}");
+    world.remove(stretched).expect("there");
+    world.commit();
+    assert_eq!(world.closest_point(points[0]).expect("even again"), batch[0]);
+    assert_eq!(World::new().closest_point([0.0; 3]).expect("empty"), None);
+    assert_eq!(world.closest_point([f32::NAN, 0.0, 0.0]).expect("not finite"), None);
+}
