@@ -1853,3 +1853,47 @@ fn trace_and_inspect_take_a_scene_description() {
     std::fs::write(d.join("many.json"), many).unwrap();
     fails_saying(d, &["inspect", "many.json"], "1048577 instances, past the 1048576");
 }
+
+/// `contains` and `distance` take a scene description where they take a `.oct`: inside
+/// any closed instance, and the nearest point of every instance with its instance id
+/// (32 bytes a point); what a description cannot answer is refused by name.
+#[test]
+fn contains_and_distance_take_a_scene_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    // The unit cube [0, 1]^3 as it is, and doubled about the origin then moved to x = 5.
+    let description = r#"{"scenes": {"cube": "cube.oct"}, "instances": [
+        {"scene": "cube"},
+        {"scene": "cube", "transform": [[2, 0, 0, 5], [0, 2, 0, 0], [0, 0, 2, 0]]}]}"#;
+    std::fs::write(d.join("world.json"), description).unwrap();
+    let points: Vec<[f32; 3]> = vec![[0.5, 0.5, 0.5], [6.0, 1.0, 1.0], [3.0, 0.5, 0.5], [6.0, 1.0, 4.0]];
+    std::fs::write(d.join("points.bin"), points.iter().flatten().flat_map(|c| c.to_le_bytes()).collect::<Vec<u8>>())
+        .unwrap();
+    ok(d, &["contains", "world.json", "--points", "points.bin", "-o", "inside.bin"]);
+    assert_eq!(std::fs::read(d.join("inside.bin")).unwrap(), [1, 1, 0, 0]);
+    let text = ok(d, &["distance", "world.json", "--points", "points.bin", "-o", "near.bin", "--signed"]);
+    assert!(text.contains("4 points, 4 within reach, 2 inside, 2 instances"), "{text}");
+    let near = std::fs::read(d.join("near.bin")).unwrap();
+    assert_eq!(near.len(), 4 * 32);
+    let record = |i: usize| {
+        let word = |k: usize| u32::from_le_bytes(near[32 * i + 4 * k..32 * i + 4 * k + 4].try_into().unwrap());
+        let f = |k: usize| f32::from_bits(word(k));
+        (f(0), [f(1), f(2), f(3)], word(4))
+    };
+    // Inside the first cube, 0.5 from each face; inside the second, 1 from its faces.
+    assert_eq!((record(0).0, record(0).2), (-0.5, 0));
+    assert_eq!((record(1).0, record(1).2), (-1.0, 1));
+    // Between them: 2 from the first cube's face x = 1 (the second's is at x = 5).
+    assert_eq!((record(2).0, record(2).1[0], record(2).2), (2.0, 1.0, 0));
+    // Above the second cube (top at z = 2): 2 away, the point on its top.
+    assert_eq!(record(3), (2.0, [6.0, 1.0, 2.0], 1));
+    fails_saying(d, &["distance", "world.json", "--points", "points.bin", "-o", "x.bin", "--check"], "take a .oct");
+    fails_saying(d, &["contains", "world.json", "--points", "points.bin", "-o", "x.bin", "--vote", "3"], "take a .oct");
+    // A stretched placement: distances through it are refused, naming the instance.
+    let stretched = r#"{"scenes": {"cube": "cube.oct"}, "instances": [
+        {"scene": "cube"}, {"scene": "cube", "transform": [[1, 0, 0, 5], [0, 3, 0, 0], [0, 0, 1, 0]]}]}"#;
+    std::fs::write(d.join("stretched.json"), stretched).unwrap();
+    fails_saying(d, &["distance", "stretched.json", "--points", "points.bin", "-o", "x.bin"], "instance 1 scales them");
+}

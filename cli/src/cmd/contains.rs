@@ -39,7 +39,8 @@ decide, are counted apart. The oracle is much slower than the octree.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene.
+    /// The .oct scene, or a scene description (.json: baked scenes placed by
+    /// transforms, as `trace` takes; inside any closed instance).
     pub scene: PathBuf,
     /// Input points (12 bytes each).
     #[arg(long)]
@@ -221,6 +222,42 @@ pub(crate) fn stored_triangles(scene: &Scene) -> Vec<[[f32; 3]; 3]> {
 
 /// Prints the summary line (or JSON, with `extra`'s fields).
 #[allow(clippy::too_many_arguments)]
+/// `contains` of a scene description (a world of instances, `crate::world_file`):
+/// inside some closed instance, exactly (each closed instance's own inside/outside at
+/// the point carried into its space); instances of open scenes contain nothing.
+pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.vote.is_none() && !args.reference && !args.check && !args.gpu,
+        "{}: a scene description answers inside its closed instances, exactly (--vote, --reference, --check \
+         and --gpu take a .oct)",
+        args.scene.display()
+    );
+    crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.points])?;
+    let to_stdout = crate::output::is_stdout(&args.out);
+    let (world, scenes) = crate::world_file::open_world(&args.scene)?;
+    let points = read_points(&args.points)?;
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    let (inside, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
+        // The closed scenes' labels are made once, before the clock.
+        for scene in scenes.values().filter(|s| s.edges().is_closed()) {
+            scene.solid()?;
+        }
+        let t = Instant::now();
+        let inside = world.contains_batch(&points);
+        Ok((inside, t.elapsed().as_secs_f64()))
+    })??;
+    let out: Vec<u8> = inside.iter().map(|&b| b as u8).collect();
+    crate::output::write_data(&args.out, &[&out])?;
+    let n_inside = inside.iter().filter(|&&b| b).count() as u64;
+    let closed = scenes.values().filter(|s| s.edges().is_closed()).count();
+    let how = format!(
+        "exact, inside a closed instance: {}, {closed} of {} closed",
+        counted(world.len() as u64, "instance"),
+        counted(scenes.len() as u64, "scene")
+    );
+    summary(&args, to_stdout, points.len(), n_inside, seconds, threads, &how, json!({ "instances": world.len() }))
+}
+
 fn summary(
     args: &Args,
     to_stdout: bool,

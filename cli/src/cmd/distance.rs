@@ -23,6 +23,13 @@ inside), f32 `x y z` of the nearest point (NaN for none), u32 input triangle
 (4294967295 for none), f32 `u v`, the point's barycentrics on the triangle's second
 and third vertices.
 
+A scene description (a .json file, as `trace` takes) in place of the .oct answers
+through its world of instances: each instance searched in its own space, the point
+carried back in f64 (the distance within the rounding of the carried point); OUT then
+has 32 bytes a point, the instance (u32, 4294967295 for none) before the triangle.
+--signed signs by the exact inside of its closed instances; its placements must scale
+distances evenly (rotations, mirrors, uniform scales, translations).
+
 The distance is exact: the distance from the point to the stored (f32) triangles,
 correctly rounded to f32; the triangle is the nearest, the lowest input index of
 equally near ones. --signed takes the sign from the exact inside/outside of a closed
@@ -39,7 +46,8 @@ approximate). The oracle is much slower: a few thousand points for a large mesh.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene.
+    /// The .oct scene, or a scene description (.json: baked scenes placed by
+    /// transforms, as `trace` takes; see below).
     pub scene: PathBuf,
     /// Input points (12 bytes each).
     #[arg(long)]
@@ -189,6 +197,77 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             "{} points answered unlike the oracle; the first, point {i} {:?}: {why}",
             thousands(check.as_ref().map_or(0, |c| c.wrong.len()) as u64),
             points[*i]
+        );
+    }
+    Ok(())
+}
+
+/// `distance` of a scene description (a world of instances, `crate::world_file`):
+/// 32 bytes a point (distance, point, instance, triangle, `u v`).
+pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.vote.is_none() && !args.check,
+        "{}: a scene description is answered exactly, signed by its closed instances (--vote and --check take \
+         a .oct)",
+        args.scene.display()
+    );
+    crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.points])?;
+    anyhow::ensure!(
+        args.max_distance >= 0.0,
+        "--max-distance must be a distance, not negative or NaN: {}",
+        args.max_distance
+    );
+    let to_stdout = crate::output::is_stdout(&args.out);
+    let (world, scenes) = crate::world_file::open_world(&args.scene)?;
+    let points = read_points(&args.points)?;
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    let (near, inside, seconds) = crate::with_threads(args.threads, || -> anyhow::Result<_> {
+        // The scenes' search trees (and the closed ones' labels) are made once, before
+        // the clock.
+        for scene in scenes.values() {
+            scene.surface_bounds()?;
+            if args.signed && scene.edges().is_closed() {
+                scene.solid()?;
+            }
+        }
+        let t = Instant::now();
+        let near = world.closest_points_batch(&points, args.max_distance)?;
+        let inside = args.signed.then(|| world.contains_batch(&points));
+        Ok((near, inside, t.elapsed().as_secs_f64()))
+    })??;
+    let mut out: Vec<[u32; 8]> = Vec::with_capacity(points.len());
+    let mut inside_count = 0u64;
+    for (i, c) in near.iter().enumerate() {
+        let d = c.map_or(f32::INFINITY, |c| c.closest.distance);
+        let d = inside.as_ref().map_or(d, |inside| octrace_runtime::cpu::signed(d, inside[i]));
+        inside_count += u64::from(d.is_sign_negative());
+        let r = record(&c.map(|c| c.closest), d);
+        let instance = c.map_or(u32::MAX, |c| c.instance);
+        out.push([r[0], r[1], r[2], r[3], instance, r[4], r[5], r[6]]);
+    }
+    crate::output::write_data(&args.out, &[bytemuck::cast_slice(&out)])?;
+    let answered = near.iter().filter(|c| c.is_some()).count() as u64;
+    let rate = points.len() as f64 / seconds.max(1e-9) / 1e6;
+    let how = if args.signed { "signed by the closed instances, exact" } else { "unsigned" };
+    if args.json {
+        let mut j = json!({
+            "points": points.len(), "answered": answered, "seconds": seconds, "mpoints_per_s": rate,
+            "threads": threads, "answer": how, "instances": world.len(),
+            "max_distance": if args.max_distance.is_finite() { json!(args.max_distance) } else { json!("inf") },
+        });
+        if args.signed {
+            j["inside"] = json!(inside_count);
+        }
+        crate::report!(to_stdout, "{j}");
+    } else {
+        let signed = if args.signed { format!(", {} inside", thousands(inside_count)) } else { String::new() };
+        crate::report!(
+            to_stdout,
+            "{}, {} within reach{signed}, {} instances, {rate:.3} M points/s ({how}; {})",
+            counted(points.len() as u64, "point"),
+            thousands(answered),
+            thousands(world.len() as u64),
+            counted(threads as u64, "thread")
         );
     }
     Ok(())
