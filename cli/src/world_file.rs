@@ -1,5 +1,5 @@
 //! Scene descriptions: a JSON file naming baked scenes and placing them by transforms,
-//! which `trace`, `contains`, `distance` and `inspect` take where they take a `.oct` (a world of instances,
+//! which `trace`, `render`, `contains`, `distance` and `inspect` take where they take a `.oct` (a world of instances,
 //! `octrace_runtime::world`). Validated as strictly as a file: unknown keys, missing
 //! scenes, transforms of the wrong size, not finite, not affine or not invertible are
 //! refused, each naming where.

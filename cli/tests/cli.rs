@@ -1897,3 +1897,29 @@ fn contains_and_distance_take_a_scene_description() {
     std::fs::write(d.join("stretched.json"), stretched).unwrap();
     fails_saying(d, &["distance", "stretched.json", "--points", "points.bin", "-o", "x.bin"], "instance 1 scales them");
 }
+
+/// `render` takes a scene description: the effects renderer through the world, from
+/// the standard camera of the world's box; what it cannot do (the GPU, the
+/// diagnostic modes, a scene's cameras) is refused by name.
+#[test]
+fn render_takes_a_scene_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("cube.obj"), CUBE_OBJ).unwrap();
+    ok(d, &["bake", "cube.obj", "-o", "cube.oct"]);
+    let description = r#"{"scenes": {"cube": "cube.oct"}, "instances": [
+        {"scene": "cube"}, {"scene": "cube", "transform": [[0, -1, 0, 3], [1, 0, 0, 0], [0, 0, 1, 0]]}]}"#;
+    std::fs::write(d.join("world.json"), description).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(d, &["render", "world.json", "-o", "w.png", "--width", "64", "--json"])).unwrap();
+    assert_eq!((json["instances"].as_u64(), json["width"].as_u64()), (Some(2), Some(64)));
+    assert_eq!(json["rays"]["primary"].as_u64(), Some(64 * 64));
+    assert!(std::fs::read(d.join("w.png")).unwrap().starts_with(b"\x89PNG"));
+    for extra in [&["--gpu"][..], &["--mode", "cells"], &["--camera", "0"]] {
+        let mut args = vec!["render", "world.json", "-o", "x.png", "--width", "16"];
+        args.extend_from_slice(extra);
+        fails_saying(d, &args, "take a .oct");
+    }
+    std::fs::write(d.join("empty.json"), r#"{"scenes": {"cube": "cube.oct"}, "instances": []}"#).unwrap();
+    fails_saying(d, &["render", "empty.json", "-o", "x.png"], "places no instance");
+}

@@ -221,7 +221,6 @@ pub(crate) fn stored_triangles(scene: &Scene) -> Vec<[[f32; 3]; 3]> {
 }
 
 /// Prints the summary line (or JSON, with `extra`'s fields).
-#[allow(clippy::too_many_arguments)]
 /// `contains` of a scene description (a world of instances, `crate::world_file`):
 /// inside some closed instance, exactly (each closed instance's own inside/outside at
 /// the point carried into its space); instances of open scenes contain nothing.
@@ -258,6 +257,7 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     summary(&args, to_stdout, points.len(), n_inside, seconds, threads, &how, json!({ "instances": world.len() }))
 }
 
+#[allow(clippy::too_many_arguments)]
 fn summary(
     args: &Args,
     to_stdout: bool,

@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::DVec3;
-use octrace_format::{Effect, Shading};
+use octrace_format::Effect;
 use octrace_runtime::gpu::GpuRenderer;
 use octrace_runtime::raysets::{Camera, Frame};
 use octrace_runtime::render::effects::{
-    render_effects, EffectSet, Environment, RayCounts, RayKind, RenderOptions, Sky,
+    render_effects, render_effects_world, EffectSet, Environment, RayCounts, RayKind, RenderOptions, Sky,
 };
 use octrace_runtime::render::{render, RenderMode};
 use octrace_runtime::Scene;
@@ -33,7 +33,9 @@ refraction, alpha); --json prints the same as JSON.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene.
+    /// The .oct scene, or a scene description (.json: baked scenes placed by
+    /// transforms, as `trace` takes), rendered shaded on the CPU from the standard
+    /// camera of its box or --eye/--target.
     pub scene: PathBuf,
     /// The PNG to write; `-` writes it to standard output (the summary then goes to
     /// standard error). Never the scene itself.
@@ -133,8 +135,7 @@ fn parse_vec3(s: &str) -> Result<DVec3, String> {
 
 /// The effects to run: the scene's, less those `spec` turns off. Returns the set and
 /// one line per effect turned off or asked for but absent.
-pub(crate) fn effect_set(shading: &Shading, spec: Option<&str>) -> anyhow::Result<(EffectSet, Vec<String>)> {
-    let scene = EffectSet::of(shading);
+pub(crate) fn effect_set(scene: EffectSet, spec: Option<&str>) -> anyhow::Result<(EffectSet, Vec<String>)> {
     let mut set = scene;
     let mut notes = Vec::new();
     for word in spec.unwrap_or("").split(',').map(str::trim).filter(|w| !w.is_empty()) {
@@ -204,6 +205,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if let Some(fov) = args.fov {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
     }
+    if crate::world_file::is_description(&args.scene) {
+        return run_world(&args, to_stdout);
+    }
     let scene = crate::open::open_scene(&args.scene)?;
     // The images kept encoded are decoded before the clock starts (and a damaged one
     // refused by name rather than rendered white).
@@ -211,7 +215,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let camera = camera(&scene, &args)?;
     // A scene camera's aspect ratio sets the height: checked again.
     check_size(camera.width, camera.height)?;
-    let (effects, notes) = effect_set(scene.shading(), args.effects.as_deref())?;
+    let (effects, notes) = effect_set(EffectSet::of(scene.shading()), args.effects.as_deref())?;
     anyhow::ensure!(args.effects.is_none() || args.mode == Mode::Shaded, "--effects applies to --mode shaded");
     for n in &notes {
         eprintln!("effects: {n}");
@@ -323,6 +327,69 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `render` of a scene description (a world of instances, `crate::world_file`): the
+/// effects renderer through the world, on the CPU, from the standard camera of the
+/// world's box (or `--eye`, `--target`, ...); the effects those of all its scenes.
+fn run_world(args: &Args, to_stdout: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !args.gpu && args.mode == Mode::Shaded && args.camera.is_none(),
+        "{}: a scene description renders shaded, on the CPU, from the standard camera or --eye/--target \
+         (--gpu, --mode and --camera take a .oct)",
+        crate::show(&args.scene)
+    );
+    let (world, scenes) = crate::world_file::open_world(&args.scene)?;
+    for scene in scenes.values() {
+        scene.decode_textures()?;
+    }
+    let (lo, hi) = world.bounds().ok_or_else(|| {
+        anyhow::anyhow!("{}: the description places no instance: nothing to render", crate::show(&args.scene))
+    })?;
+    let camera = camera_in(&Frame::from_bounds(lo, hi), &[], args)?;
+    check_size(camera.width, camera.height)?;
+    let all =
+        scenes.values().fold(EffectSet::NONE, |set, s| EffectSet::of(s.shading()).iter().fold(set, EffectSet::with));
+    let (effects, notes) = effect_set(all, args.effects.as_deref())?;
+    for n in &notes {
+        eprintln!("effects: {n}");
+    }
+    let options = RenderOptions {
+        effects,
+        max_depth: args.max_depth,
+        soft_samples: args.soft_samples.max(1),
+        environment: args.environment,
+    };
+    let t = Instant::now();
+    let bar = RowsBar::new(camera.height);
+    let (radiance, counts) = render_effects_world(&world, &camera, &options, &|rows| bar.set(rows));
+    bar.finish();
+    let secs = t.elapsed().as_secs_f64();
+    crate::output::write_data(&args.output, &[&radiance.to_image().png_bytes()?])?;
+    let effect_names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+    if args.json {
+        let j = serde_json::json!({
+            "scene": crate::show(&args.scene), "output": crate::show(&args.output),
+            "width": camera.width, "height": camera.height, "mode": crate::output::choice(args.mode),
+            "seconds": secs, "gpu": false, "notes": notes, "instances": world.len(),
+            "effects": effect_names, "rays": rays_json(&counts),
+        });
+        crate::report!(to_stdout, "{}", serde_json::to_string_pretty(&j)?);
+        return Ok(());
+    }
+    let listed = if effect_names.is_empty() { "none".to_string() } else { effect_names.join(", ") };
+    crate::report!(
+        to_stdout,
+        "rendered {} ({} x {}, shaded, {}; effects: {listed}): {} rays, {:.3} s -> {}",
+        crate::show(&args.scene),
+        camera.width,
+        camera.height,
+        crate::output::counted(world.len() as u64, "instance"),
+        thousands(counts.total()),
+        secs,
+        crate::show(&args.output)
+    );
+    Ok(())
+}
+
 /// What a render reports.
 enum Summary {
     Effects(RayCounts),
@@ -369,8 +436,11 @@ impl RowsBar {
 
 fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     let b = scene.view().bounds;
-    let frame = Frame::from_bounds(b.mesh_lo, b.mesh_hi);
-    let cameras = &scene.shading().cameras;
+    camera_in(&Frame::from_bounds(b.mesh_lo, b.mesh_hi), &scene.shading().cameras, args)
+}
+
+/// The camera `args` ask for in `frame` (the standard one by default), or of `cameras`.
+fn camera_in(frame: &Frame, cameras: &[octrace_runtime::format::Camera], args: &Args) -> anyhow::Result<Camera> {
     let from_file = match args.camera {
         Some(n) => Some(
             cameras.iter().enumerate().find(|(i, c)| c.number(*i) as usize == n).map(|(_, c)| c).ok_or_else(|| {
@@ -394,9 +464,9 @@ fn camera(scene: &Scene, args: &Args) -> anyhow::Result<Camera> {
     }
     let height = args.height.unwrap_or(args.width);
     if (args.eye, args.target, args.fov, args.hfov, args.up) == (None, None, None, None, None) {
-        return Ok(Camera::standard_sized(&frame, args.width, height));
+        return Ok(Camera::standard_sized(frame, args.width, height));
     }
-    let eye = args.eye.unwrap_or(Camera::standard(&frame).eye);
+    let eye = args.eye.unwrap_or(Camera::standard(frame).eye);
     let mut camera = Camera::look_at(eye, args.target.unwrap_or(frame.c), args.fov.unwrap_or(45.0), args.width, height);
     if let Some(up) = args.up {
         // As a scene camera's up: the image's x axis is up x backward.

@@ -15,11 +15,13 @@ use octrace_format::{Effect, Light, Material, SceneView, Shading, StoredIndex, V
 use rayon::prelude::*;
 
 use super::lighting::{self, Emitters, PLAIN};
+use super::stage::{SceneStage, Stage, WorldStage};
 use super::Image;
 use crate::raysets::Camera;
 use crate::scene::Scene;
 use crate::spawn::{face_normal, spawn, SpawnPoint};
-use crate::{Hit, Ray, Tracer};
+use crate::world::World;
+use crate::{Hit, Ray};
 
 /// A set of [`Effect`]s.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -302,8 +304,8 @@ impl Radiance {
 
 /// What lights the scene: its punctual lights and emissive triangles, or, when it has
 /// neither, a headlight at the camera that casts no shadows.
-struct Context<'a> {
-    view: SceneView<'a>,
+struct Context<'a, S: Stage> {
+    stage: &'a S,
     camera: &'a Camera,
     options: RenderOptions,
     emitters: Emitters,
@@ -358,13 +360,6 @@ struct ShadowTask {
     layers: u32,
 }
 
-/// The nearest hits of a wave of rays (the CPU's batch walk).
-fn intersect(tracer: &Tracer<'_>, rays: &[Ray]) -> Vec<Option<Hit>> {
-    let mut out = vec![None; rays.len()];
-    tracer.intersect_batch(rays, &mut out);
-    out
-}
-
 /// Rows a CPU work item renders.
 const TILE_ROWS: u32 = 8;
 
@@ -394,8 +389,51 @@ pub fn render_effects(
     options: &RenderOptions,
     progress: &(dyn Fn(u32) + Sync),
 ) -> (Radiance, RayCounts) {
-    let ctx = Context::new(scene.view(), camera, options);
-    let tracer = super::renderers_tracer(scene);
+    let stage = SceneStage { view: scene.view(), tracer: super::renderers_tracer(scene) };
+    render_stage(&stage, camera, options, progress)
+}
+
+/// [`render_effects`] of a world of instances: each hit's corners, normals and
+/// tangents carried to the world, its materials and textures its own scene's; lit by
+/// the instances' punctual lights and emissive triangles, placed with them, else by
+/// the environment or the headlight as a scene is. The same effects as a scene
+/// (`options`).
+///
+/// # Example
+/// ```
+/// use std::sync::Arc;
+/// use octrace_runtime::raysets::{Camera, Frame};
+/// use octrace_runtime::render::effects::{render_effects_world, RayKind, RenderOptions};
+/// use octrace_runtime::world::{Transform, World};
+/// let mesh = octrace_bake::procedural::sphere([0.0; 3], 1.0, 8, 12);
+/// let ball = Arc::new(octrace_runtime::Scene::from_baked(octrace_bake::bake(&mesh, &Default::default())?)?);
+/// let mut world = World::new();
+/// world.add(&ball, Transform::translation([-1.5, 0.0, 0.0]))?;
+/// world.add(&ball, Transform::translation([1.5, 0.0, 0.0]))?;
+/// world.commit();
+/// let camera = Camera::standard_sized(&Frame::from_bounds([-2.5, -1.0, -1.0], [2.5, 1.0, 1.0]), 32, 16);
+/// let (radiance, counts) = render_effects_world(&world, &camera, &RenderOptions::for_scene(ball.shading()), &|_| {});
+/// assert_eq!(counts.get(RayKind::Primary), 32 * 16);
+/// radiance.to_image();
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn render_effects_world(
+    world: &World,
+    camera: &Camera,
+    options: &RenderOptions,
+    progress: &(dyn Fn(u32) + Sync),
+) -> (Radiance, RayCounts) {
+    render_stage(&WorldStage::new(world), camera, options, progress)
+}
+
+/// The effects render of `stage`, tiles on all cores.
+fn render_stage<S: Stage>(
+    stage: &S,
+    camera: &Camera,
+    options: &RenderOptions,
+    progress: &(dyn Fn(u32) + Sync),
+) -> (Radiance, RayCounts) {
+    let ctx = Context::new(stage, camera, options);
     let rows_done = AtomicU32::new(0);
     let tiles: Vec<(Vec<Vec3>, RayCounts)> = (0..camera.height.div_ceil(TILE_ROWS))
         .into_par_iter()
@@ -403,7 +441,7 @@ pub fn render_effects(
             let rows = tile * TILE_ROWS..((tile + 1) * TILE_ROWS).min(camera.height);
             let n = rows.len() as u32;
             let pixels = rows.start * camera.width..rows.end * camera.width;
-            let out = ctx.run(&tracer, pixels);
+            let out = ctx.run(pixels);
             progress(rows_done.fetch_add(n, Ordering::Relaxed) + n);
             out
         })
@@ -443,37 +481,51 @@ pub(crate) fn render_pixels(
     options: &RenderOptions,
     pixels: &[u32],
 ) -> (Vec<Vec3>, RayCounts) {
-    let ctx = Context::new(scene.view(), camera, options);
-    let tracer = super::renderers_tracer(scene);
-    let done: Vec<(Vec3, RayCounts)> =
-        pixels.par_iter().map(|&p| ctx.run(&tracer, p..p + 1)).map(|(r, c)| (r[0], c)).collect();
+    let stage = SceneStage { view: scene.view(), tracer: super::renderers_tracer(scene) };
+    let ctx = Context::new(&stage, camera, options);
+    let done: Vec<(Vec3, RayCounts)> = pixels.par_iter().map(|&p| ctx.run(p..p + 1)).map(|(r, c)| (r[0], c)).collect();
     let counts = done.iter().fold(RayCounts::default(), |a, (_, c)| a.merge(*c));
     (done.into_iter().map(|(r, _)| r).collect(), counts)
 }
 
-impl<'a> Context<'a> {
-    fn new(view: SceneView<'a>, camera: &'a Camera, options: &RenderOptions) -> Context<'a> {
-        let emitters = Emitters::of(&view);
-        let (headlight, environment) = options.environment.resolve(&view.shading.lights, &emitters);
-        let culling = culls(view.shading);
-        Context { view, camera, options: *options, emitters, headlight, environment, culling }
+impl<'a, S: Stage> Context<'a, S> {
+    fn new(stage: &'a S, camera: &'a Camera, options: &RenderOptions) -> Context<'a, S> {
+        let emitters = stage.emitters();
+        let (headlight, environment) = options.environment.resolve(stage.lights(), &emitters);
+        let culling = stage.culls();
+        Context { stage, camera, options: *options, emitters, headlight, environment, culling }
+    }
+
+    /// The arrays of `instance`'s scene.
+    fn view(&self, instance: u32) -> &'a SceneView<'a> {
+        self.stage.view(instance)
+    }
+
+    /// The front's normal of the hit triangle, from its corners in the stage's space
+    /// (turned where the instance mirrors: its corners then run the other way).
+    fn front_normal(&self, instance: u32, prim: StoredIndex) -> Vec3 {
+        let n = face_normal(&self.stage.triangle(instance, prim));
+        if self.stage.mirrored(instance) {
+            -n
+        } else {
+            n
+        }
     }
 
     /// Whether `hit` is on the back of a single-sided surface, seen along `dir`: the
     /// view meets the triangle against its winding (the geometric normal, from the
     /// stored corners, along `dir`). A camera ray looks along its direction; a shadow
     /// ray is the light's view the other way.
-    fn culled(&self, hit: &Hit, dir: Vec3) -> bool {
-        self.culling
-            && !self.material(hit.prim).double_sided
-            && face_normal(&self.view.triangle(hit.prim)).dot(dir) > 0.0
+    fn culled(&self, h: &S::Hit, dir: Vec3) -> bool {
+        let (instance, prim) = (S::instance(h), S::hit(h).prim);
+        self.culling && !self.material(instance, prim).double_sided && self.front_normal(instance, prim).dot(dir) > 0.0
     }
 
     /// Carries camera rays (and the alpha rays that continue them) past the backs of
     /// single-sided surfaces: each such hit is traced again from beyond it, the same
     /// ray (not counted again), up to [`MAX_CULLED_LAYERS`] times, after which the ray
     /// sees nothing.
-    fn pass_back_faces(&self, tracer: &Tracer<'_>, wave: &[Task], hits: &mut [Option<Hit>]) {
+    fn pass_back_faces(&self, wave: &[Task], hits: &mut [Option<S::Hit>]) {
         if !self.culling {
             return;
         }
@@ -491,8 +543,9 @@ impl<'a> Context<'a> {
                     break;
                 }
                 layers += 1;
-                let at = SpawnPoint::new(&self.view.triangle(h.prim), &h);
-                *hit = tracer.intersect(&at.ray(task.ray.dir, f32::INFINITY));
+                let (instance, hit_) = (S::instance(&h), S::hit(&h));
+                let at = SpawnPoint::new(&self.stage.triangle(instance, hit_.prim), &hit_);
+                *hit = self.stage.intersect(&at.ray(task.ray.dir, f32::INFINITY));
             }
         }
     }
@@ -507,7 +560,7 @@ impl<'a> Context<'a> {
     }
 
     /// Renders pixels `pixels` (row-major indices) wave by wave.
-    fn run(&self, tracer: &Tracer<'_>, pixels: std::ops::Range<u32>) -> (Vec<Vec3>, RayCounts) {
+    fn run(&self, pixels: std::ops::Range<u32>) -> (Vec<Vec3>, RayCounts) {
         let first = pixels.start;
         let mut out = vec![LightSum::default(); pixels.len()];
         let mut counts = RayCounts::default();
@@ -526,8 +579,8 @@ impl<'a> Context<'a> {
                 counts.add(t.kind, 1);
             }
             let rays: Vec<Ray> = wave.iter().map(|t| t.ray).collect();
-            let mut hits = intersect(tracer, &rays);
-            self.pass_back_faces(tracer, &wave, &mut hits);
+            let mut hits = self.stage.intersect_batch(&rays);
+            self.pass_back_faces(&wave, &mut hits);
             let (mut next, mut shadows) = (Vec::new(), Vec::new());
             for (task, hit) in wave.iter().zip(hits) {
                 let sum = &mut out[(task.pixel - first) as usize];
@@ -539,10 +592,10 @@ impl<'a> Context<'a> {
                 // is its pixels' and one chunk's (the sums are exact and commute, so
                 // the image does not depend on where a chunk ends).
                 if shadows.len() >= SHADOW_CHUNK {
-                    self.trace_shadows(tracer, std::mem::take(&mut shadows), &mut out, first, &mut counts);
+                    self.trace_shadows(std::mem::take(&mut shadows), &mut out, first, &mut counts);
                 }
             }
-            self.trace_shadows(tracer, shadows, &mut out, first, &mut counts);
+            self.trace_shadows(shadows, &mut out, first, &mut counts);
             wave = next;
         }
         (out.iter().map(LightSum::radiance).collect(), counts)
@@ -551,22 +604,14 @@ impl<'a> Context<'a> {
     /// Traces shadow rays and adds the light of those that get through. With the alpha
     /// or refraction effects, a shadow ray that meets a cut-out, blended or
     /// transmissive surface goes on past it, dimmed by what the surface lets through.
-    fn trace_shadows(
-        &self,
-        tracer: &Tracer<'_>,
-        mut shadows: Vec<ShadowTask>,
-        out: &mut [LightSum],
-        first: u32,
-        counts: &mut RayCounts,
-    ) {
+    fn trace_shadows(&self, mut shadows: Vec<ShadowTask>, out: &mut [LightSum], first: u32, counts: &mut RayCounts) {
         while !shadows.is_empty() {
             for s in &shadows {
                 counts.add(s.kind, 1);
             }
             let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
             if !self.has(Effect::Alpha) && !self.has(Effect::Refraction) && !self.culling {
-                let mut blocked = vec![false; rays.len()];
-                tracer.occluded_batch(&rays, &mut blocked);
+                let blocked = self.stage.occluded_batch(&rays);
                 for (s, blocked) in shadows.iter().zip(blocked) {
                     if !blocked {
                         out[(s.pixel - first) as usize].add(s.value);
@@ -575,17 +620,17 @@ impl<'a> Context<'a> {
                 return;
             }
             let mut next = Vec::new();
-            for (s, hit) in shadows.iter().zip(intersect(tracer, &rays)) {
-                let Some(hit) = hit else {
+            for (s, hit) in shadows.iter().zip(self.stage.intersect_batch(&rays)) {
+                let Some(h) = hit else {
                     out[(s.pixel - first) as usize].add(s.value);
                     continue;
                 };
                 // A single-sided surface whose back the light sees casts no shadow
                 // (seen from the light, the ray runs the other way).
-                let pass =
-                    if self.culled(&hit, -s.ray.dir) { Vec3::ONE } else { self.shadow_pass(&self.surface(&hit)) };
+                let pass = if self.culled(&h, -s.ray.dir) { Vec3::ONE } else { self.shadow_pass(&self.surface(&h)) };
                 if pass.max_element() > 0.0 && s.layers < MAX_SHADOW_LAYERS {
-                    let tri = self.view.triangle(hit.prim);
+                    let hit = S::hit(&h);
+                    let tri = self.stage.triangle(S::instance(&h), hit.prim);
                     let ray = spawn(&tri, &hit, s.ray.dir, s.ray.tmax - hit.t);
                     next.push(ShadowTask { ray, value: s.value * pass, layers: s.layers + 1, ..*s });
                 }
@@ -602,22 +647,24 @@ impl<'a> Context<'a> {
         Vec3::splat(1.0 - coverage) + coverage * transmitted
     }
 
-    fn material(&self, prim: StoredIndex) -> &'a Material {
-        self.view.material(prim).unwrap_or(&PLAIN)
+    fn material(&self, instance: u32, prim: StoredIndex) -> &'a Material {
+        self.view(instance).material(prim).unwrap_or(&PLAIN)
     }
 
     /// The material at `hit`, its base colour taken where the hit is (times its
     /// texture and the vertex colour there, when there are), its emission (times its
     /// emissive texture there) and its metallic and roughness (times its
     /// metallic-roughness texture there).
-    fn surface(&self, hit: &Hit) -> Cow<'a, Material> {
-        let m = self.material(hit.prim);
+    fn surface(&self, h: &S::Hit) -> Cow<'a, Material> {
+        let (instance, hit) = (S::instance(h), S::hit(h));
+        let m = self.material(instance, hit.prim);
+        let view = self.view(instance);
         let textured =
             m.base_color_texture.is_some() || m.emissive_texture.is_some() || m.metallic_roughness_texture.is_some();
-        if !textured && self.view.colors.is_empty() {
+        if !textured && view.colors.is_empty() {
             return Cow::Borrowed(m);
         }
-        let (view, (prim, u, v)) = (&self.view, (hit.prim, hit.u, hit.v));
+        let (prim, u, v) = (hit.prim, hit.u, hit.v);
         let base_color = view.base_color_at(m, prim, u, v);
         let emissive = view.emissive_at(m, prim, u, v);
         let (metallic, roughness) = view.metallic_roughness_at(m, prim, u, v);
@@ -626,10 +673,12 @@ impl<'a> Context<'a> {
 
     /// Adds to `sum` the light `task` receives from its hit that needs no further ray,
     /// and queues the rays that bring the rest.
-    fn shade(&self, task: &Task, hit: &Hit, sum: &mut LightSum, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) {
+    fn shade(&self, task: &Task, h: &S::Hit, sum: &mut LightSum, next: &mut Vec<Task>, shadows: &mut Vec<ShadowTask>) {
+        let (instance, hit) = (S::instance(h), &S::hit(h));
+        let view = self.view(instance);
         // The hit point, normal and offset, once for every ray that leaves this hit.
-        let at = SpawnPoint::new(&self.view.triangle(hit.prim), hit);
-        let surface = self.surface(hit);
+        let at = SpawnPoint::new(&self.stage.triangle(instance, hit.prim), hit);
+        let surface = self.surface(h);
         let m = &*surface;
         let dir = task.ray.dir.normalize();
         let mut ng = at.normal();
@@ -637,7 +686,7 @@ impl<'a> Context<'a> {
         if !entering {
             ng = -ng;
         }
-        let n = self.shading_normal(hit, ng, m);
+        let n = self.shading_normal(instance, hit, ng, m);
         let can_continue = task.depth < self.options.max_depth;
         let coverage = if self.has(Effect::Alpha) { m.coverage() } else { 1.0 };
         if coverage < 1.0 && can_continue {
@@ -664,13 +713,13 @@ impl<'a> Context<'a> {
         if let Some(sky) = self.environment {
             // The sky, all around: an ambient term for the shading normal, darkened by
             // the occlusion texture as the headlight's is.
-            let occlusion = self.view.occlusion_at(m, hit.prim, hit.u, hit.v);
+            let occlusion = view.occlusion_at(m, hit.prim, hit.u, hit.v);
             sum.add(weight * lighting::albedo(m, transmits) * (sky.received(n) * occlusion));
         }
         if self.headlight {
             let (ambient, direct) = HEADLIGHT;
             // The occlusion texture darkens the ambient part, the light from all around.
-            let ambient = ambient * self.view.occlusion_at(m, hit.prim, hit.u, hit.v);
+            let ambient = ambient * view.occlusion_at(m, hit.prim, hit.u, hit.v);
             sum.add(weight * lighting::albedo(m, transmits) * (ambient + direct * n.dot(v).abs()));
         } else {
             let mut light = |to: Vec3, tmax: f32, incident: Vec3, kind: RayKind| {
@@ -692,7 +741,7 @@ impl<'a> Context<'a> {
                 }
             };
             let p = at.point();
-            for l in &self.view.shading.lights {
+            for l in self.stage.lights() {
                 if let Some((to, tmax, incident)) = lighting::punctual(l, p) {
                     light(to, tmax, incident, RayKind::Shadow);
                 }
@@ -716,18 +765,18 @@ impl<'a> Context<'a> {
         let grid = lighting::grid_side(samples);
         for s in 0..samples {
             let [along, across] = lighting::stratified2(task.pixel, task.depth, s, samples, grid);
-            let (prim, emitted, within) = self.emitters.pick(along);
+            let (instance, prim, emitted, within) = self.emitters.pick(along);
             // The sample's weight: the total power over the samples and this emitter's
             // strength (its area is in the density too).
             let weight = scale / lighting::strength(emitted);
-            let tri = self.view.triangle(StoredIndex(prim));
+            let tri = self.stage.triangle(instance, StoredIndex(prim));
             let [a, b, c] = tri.map(Vec3::from);
             let (y, [bu, bv]) =
                 if soft { lighting::point_on(&tri, within, across) } else { ((a + b + c) / 3.0, [1.0 / 3.0; 2]) };
             // The emission where the point is, through the material's emissive texture.
-            let m = self.material(StoredIndex(prim));
+            let m = self.material(instance, StoredIndex(prim));
             let emitted = if m.emissive_texture.is_some() {
-                Vec3::from(self.view.emissive_at(m, StoredIndex(prim), bu, bv))
+                Vec3::from(self.view(instance).emissive_at(m, StoredIndex(prim), bu, bv))
             } else {
                 emitted
             };
@@ -797,17 +846,17 @@ impl<'a> Context<'a> {
     /// The interpolated shading normal on the side of `ng`, or `ng` when the scene has
     /// no normals (or they are degenerate there); perturbed by `m`'s normal map when it
     /// has one.
-    fn shading_normal(&self, hit: &Hit, ng: Vec3, m: &Material) -> Vec3 {
-        let n = self.interpolated_normal(hit, ng);
-        match m.normal_texture.and_then(|t| self.view.shading.textures.get(t as usize)) {
-            Some(texture) => self.mapped_normal(hit, n, ng, texture, m),
+    fn shading_normal(&self, instance: u32, hit: &Hit, ng: Vec3, m: &Material) -> Vec3 {
+        let n = self.interpolated_normal(instance, hit, ng);
+        match m.normal_texture.and_then(|t| self.view(instance).shading.textures.get(t as usize)) {
+            Some(texture) => self.mapped_normal(instance, hit, n, ng, texture, m),
             None => n,
         }
     }
 
     /// The corners' normals mixed at the hit and turned to `ng`'s side, else `ng`.
-    fn interpolated_normal(&self, hit: &Hit, ng: Vec3) -> Vec3 {
-        let Some(corners) = self.view.corner_normals(hit.prim) else { return ng };
+    fn interpolated_normal(&self, instance: u32, hit: &Hit, ng: Vec3) -> Vec3 {
+        let Some(corners) = self.stage.corner_normals(instance, hit.prim) else { return ng };
         let [n0, n1, n2] = corners.map(Vec3::from);
         let n = (n0 * (1.0 - hit.u - hit.v) + n1 * hit.u + n2 * hit.v).normalize_or_zero();
         if !n.is_finite() || n == Vec3::ZERO {
@@ -831,15 +880,26 @@ impl<'a> Context<'a> {
     /// reversed, as that viewer does. `n` itself where there is no tangent or the
     /// result is not a direction on `ng`'s side. The GPU kernel computes the same
     /// operations in the same order.
-    fn mapped_normal(&self, hit: &Hit, n: Vec3, ng: Vec3, texture: &octrace_format::Texture, m: &Material) -> Vec3 {
+    fn mapped_normal(
+        &self,
+        instance: u32,
+        hit: &Hit,
+        n: Vec3,
+        ng: Vec3,
+        texture: &octrace_format::Texture,
+        m: &Material,
+    ) -> Vec3 {
+        let view = self.view(instance);
         let scale = m.normal_scale;
         let channel = m.uv_channel(4);
-        let Some([uv0, uv1, uv2]) = self.view.corner_uvs_in(hit.prim, channel) else { return n };
-        let [p0, p1, p2] = self.view.triangle(hit.prim).map(Vec3::from);
+        let Some([uv0, uv1, uv2]) = view.corner_uvs_in(hit.prim, channel) else { return n };
+        let [p0, p1, p2] = self.stage.triangle(instance, hit.prim).map(Vec3::from);
         let (e1, e2) = (p1 - p0, p2 - p0);
-        let back = n.dot(e1.cross(e2)) < 0.0;
+        // A mirroring instance's corners run the other way round its front.
+        let front_side = if self.stage.mirrored(instance) { -e1.cross(e2) } else { e1.cross(e2) };
+        let back = n.dot(front_side) < 0.0;
         let front = if back { -n } else { n };
-        let (t, sign) = match self.view.corner_tangents(hit.prim) {
+        let (t, sign) = match self.stage.corner_tangents(instance, hit.prim) {
             Some(corners) => {
                 let [t0, t1, t2] = corners.map(|c| Vec3::new(c[0], c[1], c[2]));
                 let w = corners[0][3] * (1.0 - hit.u - hit.v) + corners[1][3] * hit.u + corners[2][3] * hit.v;
@@ -859,7 +919,7 @@ impl<'a> Context<'a> {
             return n;
         }
         let b = front.cross(t) * sign;
-        let texel = texture.sample(self.view.texels.get(), self.view.uv_at_in(hit.prim, channel, hit.u, hit.v));
+        let texel = texture.sample(view.texels.get(), view.uv_at_in(hit.prim, channel, hit.u, hit.v));
         let (x, y, z) = ((texel[0] * 2.0 - 1.0) * scale, (texel[1] * 2.0 - 1.0) * scale, texel[2] * 2.0 - 1.0);
         let mapped = (t * x + b * y + front * z).normalize_or_zero();
         let mapped = if back { -mapped } else { mapped };

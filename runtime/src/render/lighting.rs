@@ -192,6 +192,8 @@ pub(crate) struct Emitters {
     /// Stored triangle index and emitted radiance of each emitter (the material's
     /// factor: a texture's colour is sampled where a point of the triangle is).
     triangles: Vec<(u32, Vec3)>,
+    /// Each emitter's instance, in a world (empty in a scene: all 0).
+    instances: Vec<u32>,
     /// Running sum of the powers (each area times strength in `f64`, summed in `f64`,
     /// each sum rounded to `f32`, the GPU's copy), ending at the total.
     cumulative: Vec<f32>,
@@ -223,7 +225,31 @@ impl Emitters {
                 cumulative.push(total as f32);
             }
         }
-        Emitters { triangles, cumulative, untextured }
+        Emitters { triangles, instances: Vec::new(), cumulative, untextured }
+    }
+
+    /// The emissive triangles of a world's instances: each scene's ([`Emitters::of`],
+    /// found once a scene), placed, their powers from the placed triangles' areas.
+    pub(crate) fn of_world(stage: &super::stage::WorldStage<'_>) -> Emitters {
+        use super::stage::Stage;
+        let own: Vec<Emitters> = stage.views.iter().map(Emitters::of).collect();
+        let mut e =
+            Emitters { triangles: Vec::new(), instances: Vec::new(), cumulative: Vec::new(), untextured: false };
+        let mut total = 0.0f64;
+        for (instance, scene) in stage.world.placed_scenes() {
+            let of_scene = &own[scene as usize];
+            e.untextured |= of_scene.untextured;
+            for &(prim, emitted) in &of_scene.triangles {
+                let area = area(&stage.triangle(instance, StoredIndex(prim)));
+                if area > 0.0 {
+                    total += f64::from(area) * f64::from(strength(emitted));
+                    e.triangles.push((prim, emitted));
+                    e.instances.push(instance);
+                    e.cumulative.push(total as f32);
+                }
+            }
+        }
+        e
     }
 
     /// Whether a scene with `lights` and these emitters is lit by the headlight
@@ -252,16 +278,16 @@ impl Emitters {
     }
 
     /// The emitter that `u` in `[0, 1)` falls on when the emitters are laid end to
-    /// end by power: its triangle and radiance, and where `u` falls within it, in
+    /// end by power: its instance (0 in a scene), triangle and radiance, and where `u` falls within it, in
     /// `[0, 1]` (so one number both picks the emitter and places the point along it,
     /// and points evenly spread in `u` stay evenly spread over the emitters' power).
-    pub(crate) fn pick(&self, u: f32) -> (u32, Vec3, f32) {
+    pub(crate) fn pick(&self, u: f32) -> (u32, u32, Vec3, f32) {
         let target = u * self.total();
         let i = self.cumulative.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
         let (lo, hi) = (if i == 0 { 0.0 } else { self.cumulative[i - 1] }, self.cumulative[i]);
         let within = if hi > lo { ((target - lo) / (hi - lo)).clamp(0.0, 1.0) } else { 0.5 };
         let (prim, emitted) = self.triangles[i];
-        (prim, emitted, within)
+        (self.instances.get(i).copied().unwrap_or(0), prim, emitted, within)
     }
 
     /// Each emitter's triangle, radiance and running power sum, in pick order.

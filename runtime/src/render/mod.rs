@@ -5,6 +5,7 @@
 
 pub mod effects;
 pub(crate) mod lighting;
+pub(crate) mod stage;
 
 use std::path::Path;
 

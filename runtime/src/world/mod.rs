@@ -286,6 +286,32 @@ impl World {
         Some((&self.scenes[p.scene as usize], p.to_world))
     }
 
+    /// The box of the committed instances' world boxes (each rounded outward), or
+    /// `None` for an empty world.
+    pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
+        let live = self.placed.iter().flatten();
+        live.map(|p| (p.bounds.lo, p.bounds.hi)).reduce(|(lo, hi), (l, h)| {
+            (std::array::from_fn(|k| lo[k].min(l[k])), std::array::from_fn(|k| hi[k].max(h[k])))
+        })
+    }
+
+    /// Instance `id`'s scene (its index in [`World::scenes`]) and its placement both
+    /// ways, as committed.
+    pub(crate) fn placement(&self, id: u32) -> Option<(u32, Transform, Transform)> {
+        let p = self.placed.get(id as usize)?.as_ref()?;
+        Some((p.scene, p.to_world, p.to_local))
+    }
+
+    /// The scenes the world has held (by index, as [`World::placed_scenes`] names them).
+    pub(crate) fn scenes(&self) -> &[Arc<Scene>] {
+        &self.scenes
+    }
+
+    /// Each committed instance's id and its scene's index in [`World::scenes`].
+    pub(crate) fn placed_scenes(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        self.placed.iter().enumerate().filter_map(|(id, p)| p.map(|p| (id as u32, p.scene)))
+    }
+
     /// The bytes the world itself takes (its scenes' not counted: they are shared).
     pub fn bytes(&self) -> usize {
         self.placed.len() * (std::mem::size_of::<Option<Placed>>() + std::mem::size_of::<Aabb>())

@@ -469,3 +469,51 @@ fn closest_points_agree_with_the_oracle_over_the_placed_triangles() {
     assert_eq!(World::new().closest_point([0.0; 3]).expect("empty"), None);
     assert_eq!(world.closest_point([f32::NAN, 0.0, 0.0]).expect("not finite"), None);
 }
+
+/// The effects renderer through a world: the effects scene placed once by the
+/// identity renders as the scene itself (every light, material, texture and ray kind
+/// the same, the radiance within the ulps of the triangle tests); moved by a translation and seen from a camera moved with
+/// it, the image is the scene's but for the rounding of the carried rays and
+/// corners; a mirrored copy beside it adds its own light and shade.
+#[test]
+fn a_world_renders_as_its_scenes_placed() {
+    use octrace_runtime::raysets::Camera;
+    use octrace_runtime::render::effects::{render_effects, render_effects_world, RayKind, RenderOptions};
+    let fx = scene(&procedural::effects_scene());
+    let options = RenderOptions::for_scene(fx.shading());
+    let at = |eye: [f64; 3], target: [f64; 3]| {
+        let v = |p: [f64; 3]| octrace_runtime::glam::DVec3::from_array(p);
+        Camera::look_at(v(eye), v(target), 50.0, 96, 72)
+    };
+    let camera = at([0.0, 2.0, 6.0], [0.0, 0.0, 0.0]);
+    let (alone, alone_rays) = render_effects(&fx, &camera, &options, &|_| {});
+    let mut world = World::new();
+    world.add(&fx, Transform::IDENTITY).expect("placed");
+    world.commit();
+    let (placed, placed_rays) = render_effects_world(&world, &camera, &options, &|_| {});
+    // The world walks each scene with its own (exact) triangle test, the scene's
+    // render the watertight one: the same surfaces, barycentrics within ulps, and now
+    // and then a ray within ulps of an edge on the other triangle (5 of these pixels).
+    let off = placed.pixels.iter().zip(&alone.pixels).filter(|(p, q)| (**p - **q).abs().max_element() > 1e-5).count();
+    let worst = placed.pixels.iter().zip(&alone.pixels).map(|(p, q)| (*p - *q).abs().max_element()).fold(0.0, f32::max);
+    assert!(off * 200 <= alone.pixels.len() && worst < 0.02, "the identity placement: {off} pixels off, worst {worst}");
+    let (a, b) = (placed.to_image(), alone.to_image());
+    let same = a.rgb.iter().zip(&b.rgb).filter(|(x, y)| x == y).count();
+    assert!(same * 1000 >= a.rgb.len() * 998, "{same} of {} bytes the same", a.rgb.len());
+    assert_eq!(placed_rays, alone_rays);
+    assert!(alone_rays.get(RayKind::SoftShadow) > 0 && alone_rays.get(RayKind::Refraction) > 0, "{alone_rays:?}");
+    // Moved by (40, 0, -8), and the camera with it.
+    world.set_transform(0, Transform::translation([40.0, 0.0, -8.0])).expect("live");
+    world.commit();
+    let (moved, _) = render_effects_world(&world, &at([40.0, 2.0, -2.0], [40.0, 0.0, -8.0]), &options, &|_| {});
+    let (a, b) = (moved.to_image(), alone.to_image());
+    let same = a.rgb.iter().zip(&b.rgb).filter(|(x, y)| x == y).count();
+    assert!(same * 100 >= a.rgb.len() * 95, "{same} of {} bytes the same", a.rgb.len());
+    assert!(a.mean_abs_diff(&b).expect("same size") < 1.0, "{:?}", a.mean_abs_diff(&b));
+    // A mirrored copy beside it: the image changes, and stays finite.
+    world.add(&fx, Transform::scaling([-1.0, 1.0, 1.0]).then(&Transform::translation([46.0, 0.0, -8.0]))).expect("ok");
+    world.commit();
+    let (two, _) = render_effects_world(&world, &at([43.0, 4.0, 4.0], [43.0, 0.0, -8.0]), &options, &|_| {});
+    assert!(two.pixels.iter().all(|p| p.is_finite()));
+    assert_ne!(two.to_image().rgb, moved.to_image().rgb);
+}

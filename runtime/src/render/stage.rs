@@ -1,0 +1,236 @@
+//! What the effects renderer traces and reads: one baked scene, or a world of
+//! instances (each hit's geometry carried to the world, its materials and textures
+//! its own scene's).
+
+use glam::Vec3;
+use octrace_format::{Light, SceneView, StoredIndex};
+
+use super::lighting::Emitters;
+use crate::world::{Transform, World, WorldHit};
+use crate::{Hit, Ray, Tracer};
+
+/// The renderer's view of what it draws. A hit names an instance (`0` in a scene)
+/// and a stored triangle of that instance's scene; geometry comes back in the
+/// stage's space, materials and textures from the instance's scene.
+pub(crate) trait Stage: Sync {
+    /// A hit as the stage's walk answers it.
+    type Hit: Copy + Send + Sync;
+
+    /// The hit in its scene's terms (`t` along the stage's ray).
+    fn hit(h: &Self::Hit) -> Hit;
+    /// The hit's instance (`0` in a scene).
+    fn instance(h: &Self::Hit) -> u32;
+    /// The nearest hits of `rays`.
+    fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<Self::Hit>>;
+    /// The nearest hit of `ray`.
+    fn intersect(&self, ray: &Ray) -> Option<Self::Hit>;
+    /// Whether something blocks each ray.
+    fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool>;
+    /// The arrays of instance `instance`'s scene.
+    fn view(&self, instance: u32) -> &SceneView<'_>;
+    /// Stored triangle `prim` of `instance`, its corners in the stage's space.
+    fn triangle(&self, instance: u32, prim: StoredIndex) -> [[f32; 3]; 3];
+    /// Whether `instance`'s placement mirrors (its triangles' corners then turn the
+    /// other way round their front).
+    fn mirrored(&self, instance: u32) -> bool;
+    /// The corners' normals of `prim`, in the stage's space.
+    fn corner_normals(&self, instance: u32, prim: StoredIndex) -> Option<[[f32; 3]; 3]>;
+    /// The corners' tangents of `prim` (`x y z` in the stage's space, `w` the sign).
+    fn corner_tangents(&self, instance: u32, prim: StoredIndex) -> Option<[[f32; 4]; 3]>;
+    /// The punctual lights.
+    fn lights(&self) -> &[Light];
+    /// The emissive triangles.
+    fn emitters(&self) -> Emitters;
+    /// Whether some material is single-sided.
+    fn culls(&self) -> bool;
+}
+
+/// One scene, traced by the renderers' tracer.
+pub(crate) struct SceneStage<'a> {
+    pub view: SceneView<'a>,
+    pub tracer: Tracer<'a>,
+}
+
+impl Stage for SceneStage<'_> {
+    type Hit = Hit;
+
+    #[inline]
+    fn hit(h: &Hit) -> Hit {
+        *h
+    }
+
+    #[inline]
+    fn instance(_: &Hit) -> u32 {
+        0
+    }
+
+    fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
+        let mut out = vec![None; rays.len()];
+        self.tracer.intersect_batch(rays, &mut out);
+        out
+    }
+
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.tracer.intersect(ray)
+    }
+
+    fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
+        let mut blocked = vec![false; rays.len()];
+        self.tracer.occluded_batch(rays, &mut blocked);
+        blocked
+    }
+
+    #[inline]
+    fn view(&self, _: u32) -> &SceneView<'_> {
+        &self.view
+    }
+
+    #[inline]
+    fn triangle(&self, _: u32, prim: StoredIndex) -> [[f32; 3]; 3] {
+        self.view.triangle(prim)
+    }
+
+    #[inline]
+    fn mirrored(&self, _: u32) -> bool {
+        false
+    }
+
+    #[inline]
+    fn corner_normals(&self, _: u32, prim: StoredIndex) -> Option<[[f32; 3]; 3]> {
+        self.view.corner_normals(prim)
+    }
+
+    #[inline]
+    fn corner_tangents(&self, _: u32, prim: StoredIndex) -> Option<[[f32; 4]; 3]> {
+        self.view.corner_tangents(prim)
+    }
+
+    fn lights(&self) -> &[Light] {
+        &self.view.shading.lights
+    }
+
+    fn emitters(&self) -> Emitters {
+        Emitters::of(&self.view)
+    }
+
+    fn culls(&self) -> bool {
+        super::effects::culls(self.view.shading)
+    }
+}
+
+/// A world of instances: rays traced through it, each hit's corners carried to the
+/// world in `f64` (rounded once), normals by the inverse transpose, tangents by the
+/// linear part; each instance's punctual lights placed with it.
+pub(crate) struct WorldStage<'a> {
+    pub world: &'a World,
+    /// The world's scenes' arrays, by scene index.
+    pub views: Vec<SceneView<'a>>,
+    /// The instances' lights, placed.
+    lights: Vec<Light>,
+}
+
+impl<'a> WorldStage<'a> {
+    /// The stage of `world`.
+    pub fn new(world: &'a World) -> WorldStage<'a> {
+        let views: Vec<SceneView<'a>> = world.scenes().iter().map(|s| s.view()).collect();
+        let mut lights = Vec::new();
+        for (id, scene) in world.placed_scenes() {
+            let Some((_, to_world, _)) = world.placement(id) else { continue };
+            for l in &views[scene as usize].shading.lights {
+                let position = to_world.point(l.position.map(f64::from)).map(|c| c as f32);
+                let direction = carry(&to_world, l.direction, false).normalize_or_zero().to_array();
+                lights.push(Light { position, direction, ..l.clone() });
+            }
+        }
+        WorldStage { world, views, lights }
+    }
+}
+
+/// `v` through `t`'s linear part (`inverse_transpose`: through the transpose of
+/// `t`'s own, which for `to_local` is the inverse transpose of `to_world`'s).
+fn carry(t: &Transform, v: [f32; 3], inverse_transpose: bool) -> Vec3 {
+    let v = v.map(f64::from);
+    let r = &t.rows;
+    let w: [f64; 3] = if inverse_transpose {
+        std::array::from_fn(|i| r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2])
+    } else {
+        std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
+    };
+    Vec3::from_array(w.map(|c| c as f32))
+}
+
+impl WorldStage<'_> {
+    /// A live instance's scene arrays and placement both ways.
+    fn placement(&self, instance: u32) -> (&SceneView<'_>, Transform, Transform) {
+        let (scene, to_world, to_local) = self.world.placement(instance).expect("a hit's instance is live");
+        (&self.views[scene as usize], to_world, to_local)
+    }
+}
+
+impl Stage for WorldStage<'_> {
+    type Hit = WorldHit;
+
+    #[inline]
+    fn hit(h: &WorldHit) -> Hit {
+        h.hit
+    }
+
+    #[inline]
+    fn instance(h: &WorldHit) -> u32 {
+        h.instance
+    }
+
+    fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<WorldHit>> {
+        self.world.intersect_batch(rays)
+    }
+
+    fn intersect(&self, ray: &Ray) -> Option<WorldHit> {
+        self.world.intersect(ray)
+    }
+
+    fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
+        self.world.occluded_batch(rays)
+    }
+
+    fn view(&self, instance: u32) -> &SceneView<'_> {
+        self.placement(instance).0
+    }
+
+    fn triangle(&self, instance: u32, prim: StoredIndex) -> [[f32; 3]; 3] {
+        let (view, to_world, _) = self.placement(instance);
+        view.triangle(prim).map(|v| to_world.point(v.map(f64::from)).map(|c| c as f32))
+    }
+
+    fn mirrored(&self, instance: u32) -> bool {
+        self.placement(instance).1.determinant() < 0.0
+    }
+
+    fn corner_normals(&self, instance: u32, prim: StoredIndex) -> Option<[[f32; 3]; 3]> {
+        let (view, _, to_local) = self.placement(instance);
+        let corners = view.corner_normals(prim)?;
+        Some(corners.map(|n| carry(&to_local, n, true).normalize_or_zero().to_array()))
+    }
+
+    fn corner_tangents(&self, instance: u32, prim: StoredIndex) -> Option<[[f32; 4]; 3]> {
+        let (view, to_world, _) = self.placement(instance);
+        let corners = view.corner_tangents(prim)?;
+        // A mirror turns the frame's handedness: the bitangent's sign with it.
+        let flip = if to_world.determinant() < 0.0 { -1.0 } else { 1.0 };
+        Some(corners.map(|t| {
+            let v = carry(&to_world, [t[0], t[1], t[2]], false);
+            [v.x, v.y, v.z, t[3] * flip]
+        }))
+    }
+
+    fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    fn emitters(&self) -> Emitters {
+        Emitters::of_world(self)
+    }
+
+    fn culls(&self) -> bool {
+        self.views.iter().any(|v| super::effects::culls(v.shading))
+    }
+}
