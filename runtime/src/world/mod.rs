@@ -31,7 +31,9 @@
 //! ([`World::crossings`]) and their counts ([`World::count_crossings`]),
 //! inside/outside ([`World::contains`]: inside some closed instance), and closest
 //! points ([`World::closest_point`]: each instance searched in its own space, for
-//! placements that scale distances evenly).
+//! placements that scale distances evenly). The effects renderer draws a world
+//! ([`crate::render::effects::render_effects_world`]): each instance's materials,
+//! textures and lights, placed.
 //!
 //! ```
 //! use std::sync::Arc;
