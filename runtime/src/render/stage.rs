@@ -120,7 +120,8 @@ impl Stage for SceneStage<'_> {
 
 /// A world of instances: rays traced through it, each hit's corners carried to the
 /// world in `f64` (rounded once), normals by the inverse transpose, tangents by the
-/// linear part; each instance's punctual lights placed with it.
+/// linear part; each instance's punctual lights placed with it (positions,
+/// directions, and ranges scaled; intensities as they are).
 pub(crate) struct WorldStage<'a> {
     pub world: &'a World,
     /// The world's scenes' arrays, by scene index.
@@ -136,10 +137,14 @@ impl<'a> WorldStage<'a> {
         let mut lights = Vec::new();
         for (id, scene) in world.placed_scenes() {
             let Some((_, to_world, _)) = world.placement(id) else { continue };
+            // A range scales with the placement (by its longest axis where it stretches).
+            let r = &to_world.rows;
+            let scale = (0..3).map(|j| (0..3).map(|i| r[i][j] * r[i][j]).sum::<f64>().sqrt()).fold(0.0, f64::max);
             for l in &views[scene as usize].shading.lights {
                 let position = to_world.point(l.position.map(f64::from)).map(|c| c as f32);
                 let direction = carry(&to_world, l.direction, false).normalize_or_zero().to_array();
-                lights.push(Light { position, direction, ..l.clone() });
+                let range = (f64::from(l.range) * scale) as f32;
+                lights.push(Light { position, direction, range, ..l.clone() });
             }
         }
         WorldStage { world, views, lights }
