@@ -149,3 +149,29 @@ fn cameras_keep_their_gltf_numbers() {
         mesh.cameras.iter().enumerate().map(|(i, c)| (c.number(i), c.name.as_str(), c.position[2])).collect();
     assert_eq!(numbered, [(2, "near", 5.0), (0, "far", 9.0)]);
 }
+
+/// In a world, a mirroring placement keeps its scene's front (as glTF's mirrored nodes
+/// do): a single-sided quad placed by `x -> -x` (its corners then run the other way
+/// round) is still seen from its front and passed from its back, as placed plainly.
+#[test]
+fn a_mirrored_instance_keeps_its_front_in_a_world() {
+    use octrace_runtime::render::effects::render_effects_world;
+    use octrace_runtime::world::{Transform, World};
+    let mut mesh = Mesh::default();
+    add(&mut mesh, quad(0.0), Material { double_sided: false, ..diffuse("quad", 0.8) });
+    let scene = std::sync::Arc::new(scene_of(&mesh));
+    let options = RenderOptions { environment: Environment::Off, ..RenderOptions::for_scene(scene.shading()) };
+    for placement in [Transform::IDENTITY, Transform::scaling([-1.0, 1.0, 1.0])] {
+        let mut world = World::new();
+        world.add(&scene, placement).unwrap();
+        world.commit();
+        let seen = |eye: [f64; 3], target: [f64; 3]| {
+            render_effects_world(&world, &camera(eye, target, 16), &options, &|_| {}).0.at(8, 8).x
+        };
+        let mirrored = placement != Transform::IDENTITY;
+        let front = seen([0.0, 0.0, 3.0], [0.0, 0.0, 0.0]);
+        assert!((front - 0.8 * 0.95).abs() < 0.01, "mirrored {mirrored}: the front {front}");
+        let back = seen([0.0, 0.0, -1.0], [0.0, 0.0, 1.0]);
+        assert!(back < 0.1, "mirrored {mirrored}: the back {back}");
+    }
+}
