@@ -596,3 +596,63 @@ fn the_edge_census_counted_from_the_file_is_the_bakes() {
         assert_eq!(surface.parts, stored, "{name}");
     }
 }
+
+/// `EXT_mesh_gpu_instancing` places the node's mesh once an instance (issue 51: it was
+/// warned about and dropped, so SimpleInstancing's 125 cubes baked as one): each
+/// instance's translation, rotation and scale in the node's space, the node's own
+/// transform after them; a mirroring scale keeps glTF's front. Bad attributes are
+/// refused naming the node; the instances count against `max_instances`.
+#[test]
+fn gpu_instancing_places_every_instance() {
+    let mut b = octrace_tests::gltf::GltfBuffer::default();
+    let p = b.positions(&[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    let t = b.vec3(&[[0.0; 3], [10.0, 0.0, 0.0], [0.0, 20.0, 0.0]]);
+    // The identity, a quarter turn about z, the identity.
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let r = b.vec4(&[[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, h, h], [0.0, 0.0, 0.0, 1.0]]);
+    let s = b.vec3(&[[1.0; 3], [1.0; 3], [-2.0, 2.0, 2.0]]);
+    let short = b.vec3(&[[0.0; 3], [1.0; 3]]);
+    let file = |attributes: &str, extra: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"extensionsUsed":["EXT_mesh_gpu_instancing"],
+            "scenes":[{{"nodes":[0]}}],
+            "nodes":[{{"mesh":0,"translation":[0,0,5]{extra},
+                "extensions":{{"EXT_mesh_gpu_instancing":{{"attributes":{{{attributes}}}}}}}}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p}}}}}]}}],{}}}"#,
+            b.members()
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("instanced.gltf");
+    let all = format!(r#""TRANSLATION":{t},"ROTATION":{r},"SCALE":{s}"#);
+    std::fs::write(&path, file(&all, "")).unwrap();
+    let mesh = Mesh::load(&path).unwrap();
+    assert!(mesh.warnings.iter().all(|w| !w.contains("EXT_mesh_gpu_instancing")), "{:?}", mesh.warnings);
+    let close = |a: [f32; 3], b: [f32; 3]| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-6);
+    let expect = [
+        [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]],
+        [[10.0, 0.0, 5.0], [10.0, 1.0, 5.0], [9.0, 0.0, 5.0]],
+        // Mirrored by x -> -2x: glTF's front kept, the last two corners swapped.
+        [[0.0, 20.0, 5.0], [0.0, 22.0, 5.0], [-2.0, 20.0, 5.0]],
+    ];
+    assert_eq!(mesh.triangles.len(), 3);
+    for (got, want) in mesh.triangles.iter().zip(&expect) {
+        assert!((0..3).all(|k| close(got[k], want[k])), "{got:?} against {want:?}");
+    }
+    // A translation alone; a count that differs, a wrong type: refused by name.
+    std::fs::write(&path, file(&format!(r#""TRANSLATION":{t}"#), "")).unwrap();
+    assert_eq!(Mesh::load(&path).unwrap().triangles.len(), 3);
+    for (attributes, says) in [
+        (format!(r#""TRANSLATION":{t},"SCALE":{short}"#), "SCALE: 2 instances, another attribute has Some(3)"),
+        (format!(r#""ROTATION":{t}"#), "expected float VEC4"),
+        (r#""TRANSLATION":99"#.to_string(), "TRANSLATION: 99 names no accessor"),
+    ] {
+        std::fs::write(&path, file(&attributes, "")).unwrap();
+        let err = Mesh::load(&path).unwrap_err().to_string();
+        assert!(err.contains("node 0 EXT_mesh_gpu_instancing") && err.contains(says), "{err}");
+    }
+    std::fs::write(&path, file(&all, "")).unwrap();
+    let options = octrace_bake::LoadOptions { max_instances: 2, ..Default::default() };
+    let err = Mesh::load_with(&path, &options).unwrap_err().to_string();
+    assert!(err.contains("EXT_mesh_gpu_instancing's instances counted each"), "{err}");
+}

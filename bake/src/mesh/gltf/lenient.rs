@@ -9,7 +9,8 @@ use serde_json::Value;
 use crate::error::{Error, Result};
 
 /// The extensions octrace honours: a file that requires only these loads.
-pub(super) const HONOURED_EXTENSIONS: [&str; 6] = [
+pub(super) const HONOURED_EXTENSIONS: [&str; 7] = [
+    "EXT_mesh_gpu_instancing",
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",

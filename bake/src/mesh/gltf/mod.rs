@@ -125,6 +125,19 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
             option: "--max-instances, LoadOptions::max_instances",
         },
     })?;
+    // EXT_mesh_gpu_instancing: a node's placements once an instance.
+    let placed: Vec<u64> =
+        document.nodes().map(|n| placed[n.index()].saturating_mul(scene::gpu_instances(&document, &n))).collect();
+    let instances = placed.iter().fold(0u64, |a, &p| a.saturating_add(p));
+    if instances > options.max_instances {
+        return Err(Error::Budget {
+            path: path.into(),
+            what: "node placements (EXT_mesh_gpu_instancing's instances counted each)".into(),
+            needed: instances,
+            limit: options.max_instances,
+            option: "--max-instances, LoadOptions::max_instances",
+        });
+    }
     let triangles = instanced_triangles(&document, &placed);
     if triangles > options.max_triangles {
         return Err(Error::Budget {
@@ -154,8 +167,16 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
         mesh.materials.push(m);
         uv_maps.push(uv);
     }
-    let mut loader =
-        Loader { path, buffers: &buffers, input_bytes, mesh, uv_maps, skipped: None, default_material: None };
+    let mut loader = Loader {
+        path,
+        document: &document,
+        buffers: &buffers,
+        input_bytes,
+        mesh,
+        uv_maps,
+        skipped: None,
+        default_material: None,
+    };
     for node in scene.nodes() {
         loader.node(&node, DMat4::IDENTITY, 0)?;
     }
@@ -169,6 +190,7 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
 
 struct Loader<'a> {
     path: &'a Path,
+    document: &'a gltf::Document,
     buffers: &'a [Buffer<'a>],
     /// Bytes of the document and its buffers: what bounds the elements an accessor
     /// without a buffer view may declare.

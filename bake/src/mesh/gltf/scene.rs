@@ -80,6 +80,22 @@ pub(super) fn placements(
     Ok(count)
 }
 
+/// The instances `EXT_mesh_gpu_instancing` asks of a node that has a mesh: its
+/// attributes' accessor count (1 without the extension; the attributes are checked
+/// when the node is placed).
+pub(super) fn gpu_instances(document: &gltf::Document, node: &gltf::Node<'_>) -> u64 {
+    let Some(attributes) =
+        node.extension_value(GPU_INSTANCING).and_then(|e| e.get("attributes")).and_then(serde_json::Value::as_object)
+    else {
+        return 1;
+    };
+    let counts = attributes.values().filter_map(|v| v.as_u64()).filter_map(|i| document.accessors().nth(i as usize));
+    counts.map(|a| a.count() as u64).max().unwrap_or(1)
+}
+
+/// glTF's extension placing a mesh many times from one node.
+pub(super) const GPU_INSTANCING: &str = "EXT_mesh_gpu_instancing";
+
 /// The triangles a primitive makes, from its accessors' counts (a list's indices or
 /// positions over 3; a strip's or fan's less 2; other modes none).
 fn primitive_triangles(p: &gltf::Primitive<'_>) -> u64 {
@@ -204,6 +220,12 @@ impl Loader<'_> {
         }
         let local = node.transform().matrix().map(|c| c.map(f64::from));
         let world = parent * DMat4::from_cols_array_2d(&local);
+        // EXT_mesh_gpu_instancing: the mesh placed once an instance, each instance's
+        // TRS in the node's space.
+        let placements = match node.extension_value(GPU_INSTANCING) {
+            Some(e) if node.mesh().is_some() => self.gpu_instances(node.index(), e)?,
+            _ => vec![DMat4::IDENTITY],
+        };
         if let Some(light) = node.light() {
             self.light(&light, &world, node.index())?;
         }
@@ -211,9 +233,9 @@ impl Loader<'_> {
             self.camera(&camera, &world, node.index());
         }
         if let Some(mesh) = node.mesh() {
-            for prim in mesh.primitives() {
+            for (instance, prim) in placements.iter().flat_map(|p| mesh.primitives().map(move |prim| (p, prim))) {
                 let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
-                self.primitive(&prim, &world, element)?;
+                self.primitive(&prim, &(world * *instance), element)?;
                 let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
                 let source = octrace_format::PartSource::Gltf {
                     node: node.index() as u32,
@@ -236,6 +258,70 @@ impl Loader<'_> {
             self.node(&child, world, depth + 1)?;
         }
         Ok(())
+    }
+
+    /// The instances' transforms of `EXT_mesh_gpu_instancing` on node `node`: its
+    /// `TRANSLATION`, `ROTATION` (a unit quaternion, `x y z w`) and `SCALE` attributes,
+    /// float accessors of one count, each instance `T * R * S`.
+    fn gpu_instances(&self, node: usize, extension: &serde_json::Value) -> Result<Vec<DMat4>> {
+        use glam::{DQuat, DVec3};
+        let fail = |message: String| Error::Parse {
+            path: self.path.into(),
+            element: format!("node {node} {GPU_INSTANCING}"),
+            message,
+        };
+        let attributes = extension
+            .get("attributes")
+            .and_then(serde_json::Value::as_object)
+            .ok_or_else(|| fail("has no \"attributes\" object".into()))?;
+        let mut count = None;
+        let mut read = |name: &str, width: usize| -> Result<Option<Vec<[f64; 4]>>> {
+            let Some(index) = attributes.get(name) else { return Ok(None) };
+            let accessor = index
+                .as_u64()
+                .and_then(|i| self.document.accessors().nth(i as usize))
+                .ok_or_else(|| fail(format!("{name}: {index} names no accessor")))?;
+            let dimensions =
+                if width == 3 { gltf::accessor::Dimensions::Vec3 } else { gltf::accessor::Dimensions::Vec4 };
+            if accessor.data_type() != gltf::accessor::DataType::F32 || accessor.dimensions() != dimensions {
+                return Err(fail(format!(
+                    "{name}: accessor {} is {:?} {:?}, expected float VEC{width} (quantized instances are not read)",
+                    accessor.index(),
+                    accessor.data_type(),
+                    accessor.dimensions()
+                )));
+            }
+            self.check_accessor(&accessor).map_err(|e| fail(format!("{name}: accessor {}: {e}", accessor.index())))?;
+            if *count.get_or_insert(accessor.count()) != accessor.count() {
+                return Err(fail(format!("{name}: {} instances, another attribute has {count:?}", accessor.count())));
+            }
+            let get = |b: gltf::Buffer<'_>| self.buffers.get(b.index()).map(|d| &d[..]);
+            let values: Vec<[f64; 4]> = if width == 3 {
+                let it = gltf::accessor::Iter::<[f32; 3]>::new(accessor.clone(), get)
+                    .ok_or_else(|| fail(format!("{name}: accessor {} cannot be read", accessor.index())))?;
+                it.map(|v| [f64::from(v[0]), f64::from(v[1]), f64::from(v[2]), 0.0]).collect()
+            } else {
+                let it = gltf::accessor::Iter::<[f32; 4]>::new(accessor.clone(), get)
+                    .ok_or_else(|| fail(format!("{name}: accessor {} cannot be read", accessor.index())))?;
+                it.map(|v| v.map(f64::from)).collect()
+            };
+            Ok(Some(values))
+        };
+        let translation = read("TRANSLATION", 3)?;
+        let rotation = read("ROTATION", 4)?;
+        let scale = read("SCALE", 3)?;
+        let n = count.ok_or_else(|| fail("names none of TRANSLATION, ROTATION, SCALE".into()))?;
+        let mut out = Vec::with_capacity(n);
+        for i in 0..n {
+            let t = translation.as_ref().map_or(DVec3::ZERO, |v| DVec3::new(v[i][0], v[i][1], v[i][2]));
+            let r = rotation.as_ref().map_or(DQuat::IDENTITY, |v| DQuat::from_xyzw(v[i][0], v[i][1], v[i][2], v[i][3]));
+            let s = scale.as_ref().map_or(DVec3::ONE, |v| DVec3::new(v[i][0], v[i][1], v[i][2]));
+            if !(t.is_finite() && r.is_finite() && s.is_finite()) || (r.length() - 1.0).abs() > 1e-3 {
+                return Err(fail(format!("instance {i}: not finite, or its rotation is not a unit quaternion")));
+            }
+            out.push(DMat4::from_scale_rotation_translation(s, r.normalize(), t));
+        }
+        Ok(out)
     }
 
     /// A `KHR_lights_punctual` light placed by `world`: at its origin, shining along
