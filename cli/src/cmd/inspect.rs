@@ -343,20 +343,22 @@ fn texture_uses(materials: &[octrace_format::Material], index: u32) -> String {
 fn world(args: &Args) -> anyhow::Result<()> {
     let (world, scenes) = crate::world_file::open_world(&args.file)?;
     let mut triangles = 0u64;
-    let mut used = std::collections::BTreeMap::new();
+    // Each scene's instances, by the scene's address (its name after).
+    let mut by_scene = std::collections::HashMap::new();
     let ids: Vec<u32> = (0..u32::MAX).take_while(|&id| world.instance(id).is_some()).collect();
     for &id in &ids {
         if let Some((scene, _)) = world.instance(id) {
             triangles += scene.view().triangle_count() as u64;
-            let name = scenes.iter().find(|(_, s)| std::sync::Arc::ptr_eq(s, scene)).map(|(n, _)| n.clone());
-            *used.entry(name.unwrap_or_default()).or_insert(0u64) += 1;
+            *by_scene.entry(std::sync::Arc::as_ptr(scene)).or_insert(0u64) += 1;
         }
     }
+    let used: std::collections::BTreeMap<&String, u64> =
+        scenes.iter().map(|(name, s)| (name, by_scene.get(&std::sync::Arc::as_ptr(s)).copied().unwrap_or(0))).collect();
     let scene_rows: Vec<serde_json::Value> = scenes
         .iter()
         .map(|(name, s)| {
             serde_json::json!({
-                "name": name, "triangles": s.view().triangle_count(), "instances": used.get(name).copied().unwrap_or(0),
+                "name": name, "triangles": s.view().triangle_count(), "instances": used[name],
             })
         })
         .collect();
@@ -374,12 +376,12 @@ fn world(args: &Args) -> anyhow::Result<()> {
             crate::output::thousands(triangles),
             crate::output::thousands(world.bytes() as u64)
         );
-        for row in &scene_rows {
+        for (name, scene) in &scenes {
             text += &format!(
                 "  {:<16} {:>12} triangles, {:>8} instances\n",
-                row["name"].as_str().unwrap_or(""),
-                row["triangles"],
-                row["instances"]
+                name,
+                crate::output::thousands(scene.view().triangle_count() as u64),
+                crate::output::thousands(used[name])
             );
         }
         crate::out!("{}", text.trim_end());
