@@ -350,13 +350,59 @@ impl Scene {
     }
 }
 
-/// `compute_closest_points`' arrays.
-struct Closest {
-    points: Vec<f32>,
-    geometry: Vec<u32>,
-    primitive: Vec<u32>,
-    uvs: Vec<f32>,
-    normals: Vec<f32>,
+/// One found point's answer in `compute_closest_points`' arrays.
+pub(crate) struct ClosestRow {
+    pub point: [f32; 3],
+    pub geometry: u32,
+    pub primitive: u32,
+    pub uv: [f32; 2],
+    pub normal: [f32; 3],
+}
+
+/// `compute_closest_points`' dict (Open3D's keys) of each point's answer in `near`
+/// (`row` of a found one; NaN and `INVALID_ID` for none), arrays of the points' leading
+/// `shape`: a scene's and a world's.
+pub(crate) fn closest_dict<'py, T: Sync>(
+    py: Python<'py>,
+    near: &[Option<T>],
+    shape: &[usize],
+    row: impl Fn(&T) -> ClosestRow + Sync,
+) -> PyResult<Bound<'py, PyDict>> {
+    let n = near.len();
+    let mut points = zeros(3 * n, "points")?;
+    let mut geometry = zeros(n, "geometry_ids")?;
+    let mut primitive = zeros(n, "primitive_ids")?;
+    let mut uvs = zeros(2 * n, "primitive_uvs")?;
+    let mut normals = zeros(3 * n, "primitive_normals")?;
+    let arrays = points
+        .par_chunks_mut(3)
+        .zip(&mut geometry)
+        .zip(&mut primitive)
+        .zip(uvs.par_chunks_mut(2))
+        .zip(normals.par_chunks_mut(3))
+        .zip(near);
+    arrays.for_each(|(((((point, g), p), uv), normal), near)| match near.as_ref().map(&row) {
+        Some(r) => {
+            point.copy_from_slice(&r.point);
+            *g = r.geometry;
+            *p = r.primitive;
+            uv.copy_from_slice(&r.uv);
+            normal.copy_from_slice(&r.normal);
+        }
+        None => {
+            point.fill(f32::NAN);
+            *g = INVALID_ID;
+            *p = INVALID_ID;
+        }
+    });
+    let d = PyDict::new(py);
+    let at = |k: &[usize]| [shape, k].concat();
+    d.set_item("points", array(py, points, at(&[3]))?)?;
+    d.set_item("geometry_ids", array(py, geometry, at(&[]))?)?;
+    d.set_item("primitive_ids", array(py, primitive, at(&[]))?)?;
+    d.set_item("primitive_uvs", array(py, uvs, at(&[2]))?)?;
+    d.set_item("primitive_normals", array(py, normals, at(&[3]))?)?;
+    Ok(d)
 }
 
 /// `nsamples` for a vote, checked: odd, at most [`MAX_VOTES`].
@@ -410,49 +456,16 @@ impl Scene {
         nthreads: Threads,
         max_distance: f32,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let py = query_points.py();
         let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
-        let n = near.len();
-        let mut out = Closest {
-            points: zeros(3 * n, "points")?,
-            geometry: zeros(n, "geometry_ids")?,
-            primitive: zeros(n, "primitive_ids")?,
-            uvs: zeros(2 * n, "primitive_uvs")?,
-            normals: zeros(3 * n, "primitive_normals")?,
-        };
         let view = self.inner.view();
         let shading = self.inner.shading();
-        let arrays = out
-            .points
-            .par_chunks_mut(3)
-            .zip(&mut out.geometry)
-            .zip(&mut out.primitive)
-            .zip(out.uvs.par_chunks_mut(2))
-            .zip(out.normals.par_chunks_mut(3))
-            .zip(&near);
-        arrays.for_each(|(((((point, g), p), uv), normal), near)| match near {
-            Some(c) => {
-                point.copy_from_slice(&c.point);
-                *g = geometry_id(shading, c.triangle);
-                *p = c.triangle;
-                uv.copy_from_slice(&[c.u, c.v]);
-                let tri = view.triangle(StoredIndex(c.prim));
-                normal.copy_from_slice(&octrace_runtime::spawn::face_normal(&tri).to_array());
-            }
-            None => {
-                point.fill(f32::NAN);
-                *g = INVALID_ID;
-                *p = INVALID_ID;
-            }
-        });
-        let d = PyDict::new(py);
-        let at = |k: &[usize]| [shape.as_slice(), k].concat();
-        d.set_item("points", array(py, out.points, at(&[3]))?)?;
-        d.set_item("geometry_ids", array(py, out.geometry, at(&[]))?)?;
-        d.set_item("primitive_ids", array(py, out.primitive, at(&[]))?)?;
-        d.set_item("primitive_uvs", array(py, out.uvs, at(&[2]))?)?;
-        d.set_item("primitive_normals", array(py, out.normals, at(&[3]))?)?;
-        Ok(d)
+        closest_dict(query_points.py(), &near, &shape, |c| ClosestRow {
+            point: c.point,
+            geometry: geometry_id(shading, c.triangle),
+            primitive: c.triangle,
+            uv: [c.u, c.v],
+            normal: octrace_runtime::spawn::face_normal(&view.triangle(StoredIndex(c.prim))).to_array(),
+        })
     }
 
     /// `compute_distance`.

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::arrays::{array, numpy_of, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
 use crate::errors::{collected, runtime_error, zeros};
-use crate::queries::band;
+use crate::queries::{band, closest_dict, ClosestRow};
 use crate::scene::Scene;
 
 /// Baked scenes placed by transforms and traced as one: each ``Scene`` opened once and
@@ -412,43 +412,14 @@ impl World {
         nthreads: Threads,
         max_distance: f32,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let py = query_points.py();
         let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
-        let n = near.len();
-        let mut points = zeros(3 * n, "points")?;
-        let mut geometry = zeros(n, "geometry_ids")?;
-        let mut primitive = zeros(n, "primitive_ids")?;
-        let mut uvs = zeros(2 * n, "primitive_uvs")?;
-        let mut normals = zeros(3 * n, "primitive_normals")?;
-        let arrays = points
-            .par_chunks_mut(3)
-            .zip(&mut geometry)
-            .zip(&mut primitive)
-            .zip(uvs.par_chunks_mut(2))
-            .zip(normals.par_chunks_mut(3))
-            .zip(&near);
-        arrays.for_each(|(((((point, g), p), uv), normal), near)| match near {
-            Some(c) => {
-                point.copy_from_slice(&c.closest.point);
-                *g = c.instance;
-                *p = c.closest.triangle;
-                uv.copy_from_slice(&[c.closest.u, c.closest.v]);
-                normal.copy_from_slice(&self.placed_normal(c));
-            }
-            None => {
-                point.fill(f32::NAN);
-                *g = INVALID_ID;
-                *p = INVALID_ID;
-            }
-        });
-        let d = PyDict::new(py);
-        let at = |k: &[usize]| [shape.as_slice(), k].concat();
-        d.set_item("points", array(py, points, at(&[3]))?)?;
-        d.set_item("geometry_ids", array(py, geometry, at(&[]))?)?;
-        d.set_item("primitive_ids", array(py, primitive, at(&[]))?)?;
-        d.set_item("primitive_uvs", array(py, uvs, at(&[2]))?)?;
-        d.set_item("primitive_normals", array(py, normals, at(&[3]))?)?;
-        Ok(d)
+        closest_dict(query_points.py(), &near, &shape, |c| ClosestRow {
+            point: c.closest.point,
+            geometry: c.instance,
+            primitive: c.closest.triangle,
+            uv: [c.closest.u, c.closest.v],
+            normal: self.placed_normal(c),
+        })
     }
 
     /// The distance from each query point to the world's surface (Open3D's
@@ -487,21 +458,16 @@ impl World {
         nthreads: Threads,
         max_distance: f32,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (near, shape) = self.closest(query_points, nthreads, max_distance)?;
-        let input = Floats::new(query_points, "query_points", 3)?;
-        let values = input.values();
         let world = &self.inner;
-        let signed = query_points.py().detach(|| {
-            on_threads(nthreads, || -> PyResult<_> {
-                let inside = world.contains_batch(to_points(values)?);
-                collected(
-                    near.len(),
-                    "signed distances",
-                    near.iter().zip(inside).map(|(c, inside)| {
-                        octrace_runtime::cpu::signed(c.map_or(f32::INFINITY, |c| c.closest.distance), inside)
-                    }),
-                )
-            })?
+        let (signed, shape) = self.closest_then(query_points, nthreads, max_distance, |points, near| {
+            let inside = world.contains_batch(points);
+            collected(
+                near.len(),
+                "signed distances",
+                near.iter().zip(inside).map(|(c, inside)| {
+                    octrace_runtime::cpu::signed(c.map_or(f32::INFINITY, |c| c.closest.distance), inside)
+                }),
+            )
         })?;
         array(query_points.py(), signed, shape)
     }
@@ -520,19 +486,33 @@ impl World {
         nthreads: Threads,
         max_distance: f32,
     ) -> PyResult<(Vec<Option<WorldClosest>>, Vec<usize>)> {
+        self.closest_then(query_points, nthreads, max_distance, |_, near| Ok(near))
+    }
+
+    /// [`World::closest`], then `then` of the points and their closest points, on the
+    /// same threads (the points read once).
+    fn closest_then<R: Send>(
+        &self,
+        query_points: &Bound<'_, PyAny>,
+        nthreads: Threads,
+        max_distance: f32,
+        then: impl FnOnce(&[[f32; 3]], Vec<Option<WorldClosest>>) -> PyResult<R> + Send,
+    ) -> PyResult<(R, Vec<usize>)> {
         let max_distance = band(max_distance)?;
         let input = Floats::new(query_points, "query_points", 3)?;
         let values = input.values();
         let world = &self.inner;
-        let near = query_points.py().detach(|| {
+        let out = query_points.py().detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                world.closest_points_batch(to_points(values)?, max_distance).map_err(|e| match e {
+                let points = to_points(values)?;
+                let near = world.closest_points_batch(points, max_distance).map_err(|e| match e {
                     e @ octrace_runtime::Error::Stretched { .. } => PyValueError::new_err(e.to_string()),
                     e => runtime_error(e),
-                })
+                })?;
+                then(points, near)
             })?
         })?;
-        Ok((near, input.shape(&[])))
+        Ok((out, input.shape(&[])))
     }
 
     /// The unit normal of the placed triangle a closest point lies on (its corners

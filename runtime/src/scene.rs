@@ -430,7 +430,7 @@ impl Scene {
     /// distance compared): a band around the surface, whose far points are answered
     /// `None` sooner.
     pub fn closest_point_within(&self, p: [f32; 3], max_distance: f32) -> Option<ClosestPoint> {
-        self.shared_tracer().closest_point(self.surface_bounds().ok()?, p, max_distance)
+        self.closest_point_checked(p, max_distance).ok().flatten()
     }
 
     /// [`Scene::closest_point_within`], its search tree's allocation failure said.

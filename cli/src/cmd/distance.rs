@@ -100,11 +100,7 @@ fn record(near: &Option<ClosestPoint>, distance: f32) -> [u32; 7] {
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.points])?;
-    anyhow::ensure!(
-        args.max_distance >= 0.0,
-        "--max-distance must be a distance, not negative or NaN: {}",
-        args.max_distance
-    );
+    check_max_distance(args.max_distance)?;
     if let Some(k) = args.vote {
         anyhow::ensure!(k % 2 == 1 && k <= 99, "--vote must be odd, from 1 to 99 (a majority of K rays): {k}");
     }
@@ -212,11 +208,7 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
         args.scene.display()
     );
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.points])?;
-    anyhow::ensure!(
-        args.max_distance >= 0.0,
-        "--max-distance must be a distance, not negative or NaN: {}",
-        args.max_distance
-    );
+    check_max_distance(args.max_distance)?;
     let to_stdout = crate::output::is_stdout(&args.out);
     let (world, scenes) = crate::world_file::open_world(&args.scene)?;
     let points = read_points(&args.points)?;
@@ -270,6 +262,12 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
             counted(threads as u64, "thread")
         );
     }
+    Ok(())
+}
+
+/// `--max-distance` is a distance: not negative, not NaN.
+fn check_max_distance(d: f32) -> anyhow::Result<()> {
+    anyhow::ensure!(d >= 0.0, "--max-distance must be a distance, not negative or NaN: {d}");
     Ok(())
 }
 

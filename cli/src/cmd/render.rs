@@ -170,6 +170,19 @@ pub(crate) fn effect_set(scene: EffectSet, spec: Option<&str>) -> anyhow::Result
     Ok((set, notes))
 }
 
+/// The render's options from `args`, for what calls for the effects `in_scene`
+/// ([`effect_set`]'s notes with them).
+fn render_options(args: &Args, in_scene: EffectSet) -> anyhow::Result<(RenderOptions, Vec<String>)> {
+    let (effects, notes) = effect_set(in_scene, args.effects.as_deref())?;
+    let options = RenderOptions {
+        effects,
+        max_depth: args.max_depth,
+        soft_samples: args.soft_samples.max(1),
+        environment: args.environment,
+    };
+    Ok((options, notes))
+}
+
 /// The most pixels a render may have: 8192 x 8192. A render holds about 50 bytes a
 /// pixel (radiance, the image, the rays of a wave), so this bounds it near 3.4 GB.
 pub(crate) const MAX_PIXELS: u64 = 8192 * 8192;
@@ -215,17 +228,12 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let camera = camera(&scene, &args)?;
     // A scene camera's aspect ratio sets the height: checked again.
     check_size(camera.width, camera.height)?;
-    let (effects, notes) = effect_set(EffectSet::of(scene.shading()), args.effects.as_deref())?;
+    let (options, notes) = render_options(&args, EffectSet::of(scene.shading()))?;
     anyhow::ensure!(args.effects.is_none() || args.mode == Mode::Shaded, "--effects applies to --mode shaded");
     for n in &notes {
         eprintln!("effects: {n}");
     }
-    let options = RenderOptions {
-        effects,
-        max_depth: args.max_depth,
-        soft_samples: args.soft_samples.max(1),
-        environment: args.environment,
-    };
+    let effects = options.effects;
     let gpu = if args.gpu {
         let gpu = octrace_runtime::gpu::GpuContext::new()?;
         let tracer = octrace_runtime::gpu::GpuTracer::new(&gpu.device, &gpu.queue, &scene)?;
@@ -348,16 +356,11 @@ fn run_world(args: &Args, to_stdout: bool) -> anyhow::Result<()> {
     check_size(camera.width, camera.height)?;
     let all =
         scenes.values().fold(EffectSet::NONE, |set, s| EffectSet::of(s.shading()).iter().fold(set, EffectSet::with));
-    let (effects, notes) = effect_set(all, args.effects.as_deref())?;
+    let (options, notes) = render_options(args, all)?;
     for n in &notes {
         eprintln!("effects: {n}");
     }
-    let options = RenderOptions {
-        effects,
-        max_depth: args.max_depth,
-        soft_samples: args.soft_samples.max(1),
-        environment: args.environment,
-    };
+    let effects = options.effects;
     let t = Instant::now();
     let bar = RowsBar::new(camera.height);
     let (radiance, counts) = render_effects_world(&world, &camera, &options, &|rows| bar.set(rows));
