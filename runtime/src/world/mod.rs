@@ -53,6 +53,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+#[cfg(feature = "gpu")]
+mod gpu;
+mod rounds;
 mod top;
 mod transform;
 
@@ -62,6 +65,8 @@ use std::sync::Arc;
 use glam::Vec3;
 use rayon::prelude::*;
 
+#[cfg(feature = "gpu")]
+pub use gpu::GpuWorld;
 pub use transform::Transform;
 
 use crate::cpu::{ClosestPoint, Crossing, CrossingCount};
@@ -70,6 +75,7 @@ use crate::ray::{Hit, Ray};
 use crate::surface::HitSurface;
 use crate::Scene;
 use octrace_format::StoredIndex;
+use rounds::{Boxes, OnCpu};
 use top::{Aabb, Top};
 
 /// A crossing of a world's triangles ([`World::crossings`]): the instance, and the
@@ -89,10 +95,6 @@ const FIRST_BOXES: usize = 8;
 
 /// Where only whether there is a hit counts.
 const NO_HIT: Hit = Hit { t: 0.0, triangle: u32::MAX, u: 0.0, v: 0.0, leaf: 0, prim: StoredIndex(u32::MAX) };
-
-/// Groups of fewer rays than this (a round's rays for one instance) are walked one at
-/// a time: the batch walk's set-up does not pay for them.
-const SMALL_GROUP: usize = 8;
 
 /// The rays [`World::intersect_batch`] takes on one thread at a time.
 pub const PIECE: usize = 4096;
@@ -571,7 +573,7 @@ impl World {
     /// more boxes is finished by the one-ray walk within that reach.
     pub fn intersect_batch(&self, rays: &[Ray]) -> Vec<Option<WorldHit>> {
         let mut out = vec![None; rays.len()];
-        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece::<false>(rays, out));
+        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece(false, rays, out));
         out
     }
 
@@ -579,117 +581,16 @@ impl World {
     /// [`World::intersect_batch`], each ray done at its first blocker.
     pub fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool> {
         let mut out = vec![None; rays.len()];
-        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece::<true>(rays, out));
+        out.par_chunks_mut(PIECE).zip(rays.par_chunks(PIECE)).for_each(|(out, rays)| self.piece(true, rays, out));
         out.iter().map(Option::is_some).collect()
     }
 
-    /// [`World::intersect_batch`] (or, `ANY`, a blocker for [`World::occluded_batch`])
+    /// [`World::intersect_batch`] (or, `any`, a blocker for [`World::occluded_batch`])
     /// on this thread, for one piece.
-    fn piece<const ANY: bool>(&self, rays: &[Ray], out: &mut [Option<WorldHit>]) {
-        // Each ray's first boxes in the walk's order (at most `FIRST_BOXES`), nearest
-        // first: `boxes[first[i]..first[i + 1]]`; `more[i]` where the walk had more.
-        let mut boxes: Vec<(f32, u32)> = Vec::new();
-        let mut first = Vec::with_capacity(rays.len() + 1);
-        let mut more = vec![false; rays.len()];
-        first.push(0u32);
-        for (ray, more) in rays.iter().zip(&mut more) {
-            let start = boxes.len();
-            if ray.is_traceable() {
-                self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, near, _| {
-                    *more = boxes.len() - start == FIRST_BOXES;
-                    if !*more {
-                        boxes.push((near, id));
-                    }
-                    *more
-                });
-            }
-            boxes[start..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            first.push(boxes.len() as u32);
-        }
-        self.rounds::<ANY>(rays, &boxes, &first, out);
-        // The rays whose walks enter more boxes: the one-ray walk within the nearest
-        // hit so far, the instances already asked skipped.
-        for (i, ray) in rays.iter().enumerate() {
-            if !more[i] || ANY && out[i].is_some() {
-                continue;
-            }
-            let asked: Vec<u32> = boxes[first[i] as usize..first[i + 1] as usize].iter().map(|b| b.1).collect();
-            out[i] = if ANY {
-                self.occluded_from(ray, &asked).then_some(WorldHit { instance: u32::MAX, hit: NO_HIT })
-            } else {
-                self.intersect_from(ray, out[i], &asked)
-            };
-        }
-    }
-
-    /// [`World::piece`]'s rounds over each ray's boxes (`boxes[first[i]..first[i +
-    /// 1]]`, nearest first).
-    fn rounds<const ANY: bool>(&self, rays: &[Ray], boxes: &[(f32, u32)], first: &[u32], out: &mut [Option<WorldHit>]) {
-        let mut round = 0u32;
-        let mut todo: Vec<(u32, u32)> = Vec::new(); // (instance, ray)
-        let (mut carried_rays, mut hits) = (Vec::new(), Vec::new());
-        loop {
-            todo.clear();
-            for (i, ray) in rays.iter().enumerate() {
-                let at = first[i] + round;
-                if at >= first[i + 1] {
-                    continue;
-                }
-                let (near, id) = boxes[at as usize];
-                if ANY && out[i].is_some() {
-                    continue;
-                }
-                let reach = out[i].map_or(ray.tmax, |h: WorldHit| h.hit.t);
-                // The walk's own test: a box entered past the best hit is skipped.
-                if near <= reach + reach.abs() * 4.0 * f32::EPSILON {
-                    todo.push((id, i as u32));
-                }
-            }
-            if todo.is_empty() && (0..rays.len()).all(|i| first[i] + round >= first[i + 1]) {
-                return;
-            }
-            todo.sort_unstable();
-            for group in todo.chunk_by(|a, b| a.0 == b.0) {
-                let id = group[0].0;
-                let Some(p) = &self.placed[id as usize] else { continue };
-                carried_rays.clear();
-                carried_rays.extend(group.iter().map(|&(_, i)| {
-                    let ray = &rays[i as usize];
-                    carried(p, ray, out[i as usize].map_or(ray.tmax, |h| h.hit.t))
-                }));
-                let local: Vec<Ray> = carried_rays.iter().map(|c: &Carried| c.ray).collect();
-                hits.clear();
-                hits.resize(local.len(), None);
-                let scene = &self.scenes[p.scene as usize];
-                if local.len() < SMALL_GROUP {
-                    // Too few for the batch walk's set-up to pay: one at a time.
-                    for (ray, hit) in local.iter().zip(hits.iter_mut()) {
-                        *hit = if ANY { scene.shared_occluder(ray) } else { scene.intersect(ray) };
-                    }
-                } else if ANY {
-                    scene.tracer().occluder_batch(&local, &mut hits);
-                } else {
-                    scene.tracer().intersect_batch(&local, &mut hits);
-                }
-                for ((&(_, i), hit), c) in group.iter().zip(&hits).zip(&carried_rays) {
-                    let ray = &rays[i as usize];
-                    let reach = out[i as usize].map_or(ray.tmax, |h| h.hit.t);
-                    let raw = *hit;
-                    let mut hit = raw.and_then(|h| c.back(h, reach));
-                    if ANY && hit.is_none() && raw.is_some() {
-                        // The blocker found lies in the carried ray's margin past
-                        // `tmax`: the nearest decides, as in `occluded`.
-                        hit = scene.intersect(&c.ray).and_then(|h| c.back(h, reach));
-                    }
-                    let Some(hit) = hit else { continue };
-                    let this = WorldHit { instance: id, hit };
-                    if this.beats(out[i as usize]) {
-                        out[i as usize] = Some(this);
-                    }
-                }
-            }
-            round += 1;
-        }
+    fn piece(&self, any: bool, rays: &[Ray], out: &mut [Option<WorldHit>]) {
+        let boxes = Boxes::of(self, rays, FIRST_BOXES);
+        let Ok(()) = self.rounds(any, rays, &boxes, out, &mut OnCpu);
+        self.finish_all(any, rays, &boxes, out);
     }
 
     /// The surface at `hit` in world space: the point carried by the instance's

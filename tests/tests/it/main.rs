@@ -14,6 +14,7 @@ mod gltf_lenient;
 mod gpu;
 mod gpu_crossings;
 mod gpu_stream;
+mod gpu_world;
 mod hard_cases;
 mod hostile;
 mod images;

@@ -1,0 +1,209 @@
+//! A world's nearest and any hits with the instances' walks on the GPU.
+//!
+//! The host walks the top level and carries each ray into the instances it enters
+//! (in `f64`, as [`World::intersect`] does: `f64` is not an arithmetic every
+//! adapter has, and the carried rays must be the CPU's bit for bit); the GPU walks
+//! each instance's octree, a scene's rays of every instance in one batch a round.
+//! The answers are [`World::intersect_batch`]'s and [`World::occluded_batch`]'s, bit
+//! for bit (instance, triangle, part, distance, barycentrics; the leaf a walk found a
+//! hit in may differ, as for a scene's [`GpuTracer`]): each scene's GPU tracer runs
+//! its CPU tracer's triangle test (the exact one, unless the scene has fans).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use super::rounds::{Boxes, Walker};
+use super::{World, WorldHit};
+use crate::gpu::{GpuError, GpuOptions, GpuResult, GpuTracer};
+use crate::ray::{Hit, Ray};
+use crate::Scene;
+
+/// The rays a round of the GPU's takes at most: their boxes, carried rays and hits
+/// take about 100 bytes a ray plus 8 a box.
+const PIECE: usize = 1 << 18;
+
+/// The boxes a ray's rounds take at most on the GPU; a ray whose walk enters more is
+/// finished on the CPU (by the one-ray walk, within its nearest hit).
+const GPU_BOXES: usize = 64;
+
+/// A scene's tracer on the device, and the scene it borrows.
+struct OnDevice {
+    /// Borrows `_scene`'s value, which lives on the heap behind the `Arc`: it neither
+    /// moves nor drops while this struct lives, and this field, declared first, is
+    /// dropped first.
+    tracer: GpuTracer<'static>,
+    _scene: Arc<Scene>,
+}
+
+/// The scenes of worlds uploaded to a GPU, each once, and the batch queries of a
+/// [`World`] on it ([`GpuWorld::intersect`], [`GpuWorld::occluded`]).
+///
+/// A world's scenes are uploaded on first use and kept, so that a world whose
+/// instances move between frames (`set_transform`, `commit`) is traced again with
+/// nothing uploaded but the rays.
+///
+/// # Example
+/// ```no_run
+/// use std::sync::Arc;
+/// use octrace_runtime::gpu::GpuContext;
+/// use octrace_runtime::world::{GpuWorld, Transform, World};
+/// use octrace_runtime::{glam::Vec3, Ray, Scene};
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let bunny = Arc::new(Scene::open("bunny.oct")?);
+/// let mut world = World::new();
+/// for k in 0..10 {
+///     world.add(&bunny, Transform::translation([0.3 * f64::from(k), 0.0, 0.0]))?;
+/// }
+/// world.commit();
+/// let gpu = GpuContext::new()?;
+/// let mut on_gpu = GpuWorld::new(&gpu.device, &gpu.queue);
+/// let rays = [Ray::new(Vec3::new(0.0, 0.1, 1.0), Vec3::NEG_Z)];
+/// let hits = on_gpu.intersect(&world, &rays)?;
+/// let cpu = world.intersect_batch(&rays);
+/// assert_eq!(hits[0].map(|h| (h.instance, h.hit.t)), cpu[0].map(|h| (h.instance, h.hit.t)));
+/// # Ok(()) }
+/// ```
+pub struct GpuWorld {
+    device: crate::gpu::wgpu::Device,
+    queue: crate::gpu::wgpu::Queue,
+    on_device: Vec<OnDevice>,
+    /// Each uploaded scene's index in `on_device`, by its address.
+    by_scene: HashMap<usize, usize>,
+}
+
+impl std::fmt::Debug for GpuWorld {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuWorld").field("scenes", &self.on_device.len()).finish()
+    }
+}
+
+impl GpuWorld {
+    /// Nothing uploaded yet, on `device`.
+    pub fn new(device: &crate::gpu::wgpu::Device, queue: &crate::gpu::wgpu::Queue) -> GpuWorld {
+        GpuWorld { device: device.clone(), queue: queue.clone(), on_device: Vec::new(), by_scene: HashMap::new() }
+    }
+
+    /// Uploads the scenes of `world`'s committed instances not yet on the device.
+    ///
+    /// # Errors
+    /// As [`GpuTracer::with_options`]: a scene too large for the device, or whose
+    /// triangle test the adapter cannot run (the exact test without `f64`).
+    pub fn upload(&mut self, world: &World) -> GpuResult<()> {
+        for (_, index) in world.placed_scenes() {
+            let scene = &world.scenes()[index as usize];
+            let key = Arc::as_ptr(scene) as usize;
+            if self.by_scene.contains_key(&key) {
+                continue;
+            }
+            let options = GpuOptions { triangle_test: scene.tracer().triangle_test(), ..GpuOptions::default() };
+            // SAFETY: the reference is to the value the `Arc` kept in `_scene` owns; it
+            // is neither moved nor dropped before `tracer`, which the struct drops
+            // first, and the tracers are lent out only while `self` is borrowed.
+            let borrowed: &'static Scene = unsafe { &*Arc::as_ptr(scene) };
+            let tracer = GpuTracer::with_options(&self.device, &self.queue, borrowed, options)?;
+            self.by_scene.insert(key, self.on_device.len());
+            self.on_device.push(OnDevice { tracer, _scene: Arc::clone(scene) });
+        }
+        Ok(())
+    }
+
+    /// The scenes on the device.
+    pub fn scenes(&self) -> usize {
+        self.on_device.len()
+    }
+
+    /// Forgets the scenes no committed instance of `world` places (their memory on
+    /// the device is freed).
+    pub fn retain(&mut self, world: &World) {
+        let live: std::collections::HashSet<usize> =
+            world.placed_scenes().map(|(_, i)| Arc::as_ptr(&world.scenes()[i as usize]) as usize).collect();
+        let kept: Vec<OnDevice> =
+            self.on_device.drain(..).filter(|d| live.contains(&(Arc::as_ptr(&d._scene) as usize))).collect();
+        self.by_scene = kept.iter().enumerate().map(|(i, d)| (Arc::as_ptr(&d._scene) as usize, i)).collect();
+        self.on_device = kept;
+    }
+
+    /// [`World::intersect_batch`] with the instances' walks on the GPU: the same
+    /// answers, bit for bit (the leaf aside, see the module's text). Uploads the world's scenes not yet on the device.
+    ///
+    /// # Errors
+    /// As [`GpuWorld::upload`]; [`GpuError::Device`] if the device is lost.
+    pub fn intersect(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<Option<WorldHit>>> {
+        self.batch(world, false, rays)
+    }
+
+    /// [`World::occluded_batch`] with the instances' walks on the GPU: the same
+    /// answers.
+    ///
+    /// # Errors
+    /// As [`GpuWorld::intersect`].
+    pub fn occluded(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<bool>> {
+        Ok(self.batch(world, true, rays)?.iter().map(Option::is_some).collect())
+    }
+
+    fn batch(&mut self, world: &World, any: bool, rays: &[Ray]) -> GpuResult<Vec<Option<WorldHit>>> {
+        self.upload(world)?;
+        let mut out =
+            octrace_format::memory::try_vec(rays.len(), "hits").map_err(|e| GpuError::Memory(crate::Error::from(e)))?;
+        for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
+            // The top level's walks on all cores, a few thousand rays a task.
+            let mut boxes = Boxes::default();
+            let parts: Vec<Boxes> = rays.par_chunks(4096).map(|r| Boxes::of(world, r, GPU_BOXES)).collect();
+            for part in parts {
+                boxes.append(part);
+            }
+            let mut walker = OnGpu { gpu: self, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new() };
+            world.rounds(any, rays, &boxes, out, &mut walker)?;
+            out.par_iter_mut().enumerate().filter(|(i, _)| boxes.more(*i)).for_each(|(i, o)| {
+                world.finish(any, &rays[i], boxes.of_ray(i), o);
+            });
+        }
+        Ok(out)
+    }
+}
+
+/// A round's walks on the GPU: the jobs split by scene, each scene's carried rays of
+/// every instance traced in one batch.
+struct OnGpu<'g> {
+    gpu: &'g GpuWorld,
+    /// Scratch: each job's tracer, a scene's rays, their jobs.
+    by_scene: Vec<u32>,
+    rays: Vec<Ray>,
+    at: Vec<u32>,
+}
+
+impl Walker for OnGpu<'_> {
+    type Error = GpuError;
+
+    fn walk(
+        &mut self,
+        world: &World,
+        any: bool,
+        jobs: &[(u32, u32)],
+        local: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> GpuResult<()> {
+        self.by_scene.clear();
+        for &(id, _) in jobs {
+            let (scene, _, _) = world.placement(id).expect("a job is a committed instance's");
+            let key = Arc::as_ptr(&world.scenes()[scene as usize]) as usize;
+            self.by_scene.push(self.gpu.by_scene[&key] as u32);
+        }
+        for (d, on_device) in self.gpu.on_device.iter().enumerate() {
+            self.at.clear();
+            self.at.extend((0..jobs.len() as u32).filter(|&k| self.by_scene[k as usize] == d as u32));
+            if self.at.is_empty() {
+                continue;
+            }
+            self.rays.clear();
+            self.rays.extend(self.at.iter().map(|&k| local[k as usize]));
+            let found = on_device.tracer.trace_timed(&self.rays, any)?.0;
+            for (&k, hit) in self.at.iter().zip(found) {
+                hits[k as usize] = hit;
+            }
+        }
+        Ok(())
+    }
+}
