@@ -1845,6 +1845,16 @@ fn trace_and_inspect_take_a_scene_description() {
         fails_saying(d, &["inspect", "bad.json"], says);
     }
     fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--all-hits"], "take a .oct");
+    fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--counts", "--gpu"], "on the CPU");
+    // On the GPU: the same files.
+    let test = "trace_and_inspect_take_a_scene_description";
+    if on_gpu(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "gpu_hits.bin", "--gpu"], test).is_some() {
+        assert_eq!(std::fs::read(d.join("gpu_hits.bin")).unwrap(), hits);
+        let args = ["trace", "world.json", "--rays", "rays.bin", "-o", "gpu_occluded.bin", "--occluded", "--gpu"];
+        let text = on_gpu(d, &args, test).expect("a GPU");
+        assert!(text.contains("instances' walks on the GPU"), "{text}");
+        assert_eq!(std::fs::read(d.join("gpu_occluded.bin")).unwrap(), occluded);
+    }
     // Past the instances' budget: refused before any is placed.
     let many = format!(
         r#"{{"scenes": {{"cube": "props/cube.oct"}}, "instances": [{}]}}"#,

@@ -43,7 +43,9 @@ Paths are relative to the description's folder; a transform is 3 or 4 rows of 4
 (nested or flat; the last row 0 0 0 1), local to world, the identity where absent.
 Its hits are 12 bytes a ray: f32 `t`, u32 instance (its index in \"instances\"), u32
 triangle of that instance's scene (a miss: `t = tmax`, both 0xFFFFFFFF); with
---occluded, 4 bytes a ray, u32 1 or 0; with --counts, as above.
+--occluded, 4 bytes a ray, u32 1 or 0; with --counts, as above. With --gpu, the
+nearest hits and --occluded walk the instances' octrees on the GPU (the top level
+and the rays' carrying on the CPU): the same files as the CPU's.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
@@ -194,12 +196,18 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 
 /// `trace` of a scene description (a world of instances, `crate::world_file`): nearest
 /// hits (12 bytes a ray: `t`, instance, triangle), `--occluded` (4 bytes: 1 or 0) or
-/// `--counts` (as for a scene).
+/// `--counts` (as for a scene); with `--gpu`, the nearest hits and `--occluded` with
+/// the instances' walks on the GPU (`GpuWorld`: the CPU's answers).
 pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
-        !(args.gpu || args.all_hits || args.length_inside),
-        "{}: a scene description is traced for nearest hits, --occluded and --counts (--all-hits, \
-         --length-inside and --gpu take a .oct)",
+        !(args.all_hits || args.length_inside),
+        "{}: a scene description is traced for nearest hits, --occluded and --counts (--all-hits and \
+         --length-inside take a .oct)",
+        args.scene.display()
+    );
+    anyhow::ensure!(
+        !(args.gpu && args.counts),
+        "{}: --gpu traces a scene description's nearest hits and --occluded (its --counts run on the CPU)",
         args.scene.display()
     );
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.rays])?;
@@ -207,35 +215,59 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     let (world, _scenes) = crate::world_file::open_world(&args.scene)?;
     let rays: Vec<Ray> = octrace_format::read_records(&args.rays, MAX_RAYS, "ray")
         .with_context(|| format!("cannot read {}", args.rays.display()))?;
-    let (out, n, seconds) = crate::with_threads(args.threads, || {
+    // On the GPU: the scenes uploaded before the clock starts.
+    let mut gpu = match args.gpu {
+        true => {
+            let context = octrace_runtime::gpu::GpuContext::new()?;
+            let mut on_gpu = octrace_runtime::world::GpuWorld::new(&context.device, &context.queue);
+            on_gpu.upload(&world)?;
+            Some((on_gpu, context.describe()))
+        }
+        false => None,
+    };
+    let (answers, seconds) = crate::with_threads(args.threads, || {
         let t = Instant::now();
-        let mut out = Vec::new();
-        let n;
-        if args.counts {
-            let counts = world.count_crossings_batch(&rays);
-            n = counts.iter().filter(|c| c.total > 0).count();
+        let answers = if args.counts {
+            Ok(Answers::Counts(world.count_crossings_batch(&rays)))
+        } else {
+            match (&mut gpu, args.occluded) {
+                (Some((on_gpu, _)), true) => on_gpu.occluded(&world, &rays).map(Answers::Occluded),
+                (Some((on_gpu, _)), false) => on_gpu.intersect(&world, &rays).map(Answers::Hits),
+                (None, true) => Ok(Answers::Occluded(world.occluded_batch(&rays))),
+                (None, false) => Ok(Answers::Hits(world.intersect_batch(&rays))),
+            }
+        };
+        (answers, t.elapsed().as_secs_f64())
+    })?;
+    let mut out = Vec::new();
+    let n = match answers? {
+        Answers::Counts(counts) => {
             for c in &counts {
                 out.extend_from_slice(&c.total.to_le_bytes());
                 out.extend_from_slice(&c.entries.to_le_bytes());
             }
-        } else if args.occluded {
-            let occluded = world.occluded_batch(&rays);
-            n = occluded.iter().filter(|&&o| o).count();
+            counts.iter().filter(|c| c.total > 0).count()
+        }
+        Answers::Occluded(occluded) => {
             for &o in &occluded {
                 out.extend_from_slice(&u32::from(o).to_le_bytes());
             }
-        } else {
-            let hits = world.intersect_batch(&rays);
-            n = hits.iter().flatten().count();
+            occluded.iter().filter(|&&o| o).count()
+        }
+        Answers::Hits(hits) => {
             for (h, r) in hits.iter().zip(&rays) {
                 let (t, instance, triangle) = h.map_or((r.tmax, MISS, MISS), |h| (h.hit.t, h.instance, h.hit.triangle));
                 out.extend_from_slice(&t.to_le_bytes());
                 out.extend_from_slice(&instance.to_le_bytes());
                 out.extend_from_slice(&triangle.to_le_bytes());
             }
+            hits.iter().flatten().count()
         }
-        (out, n, t.elapsed().as_secs_f64())
-    })?;
+    };
+    let on = match &gpu {
+        Some((_, adapter)) => format!("the world's answers, instances' walks on the GPU, {adapter}"),
+        None => "the world's answers".to_string(),
+    };
     crate::output::write_data(&args.out, &[&out])?;
     let rate = rays.len() as f64 / seconds.max(1e-9) / 1e6;
     let what = if args.counts {
@@ -248,18 +280,26 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     if args.json {
         let j = serde_json::json!({
             "rays": rays.len(), what: n, "instances": world.len(), "seconds": seconds, "mrays_per_s": rate,
+            "on": on,
         });
         crate::report!(to_stdout, "{j}");
     } else {
         crate::report!(
             to_stdout,
-            "{} rays, {} {what}, {} instances, {rate:.2} Mrays/s (the world's answers and their writing)",
+            "{} rays, {} {what}, {} instances, {rate:.2} Mrays/s ({on})",
             thousands(rays.len() as u64),
             thousands(n as u64),
             thousands(world.len() as u64)
         );
     }
     Ok(())
+}
+
+/// A world's answers, as `trace` of a scene description writes them.
+enum Answers {
+    Hits(Vec<Option<octrace_runtime::world::WorldHit>>),
+    Occluded(Vec<bool>),
+    Counts(Vec<octrace_runtime::cpu::CrossingCount>),
 }
 
 /// Traces on all cores (or `--threads`); the hits and the seconds of tracing alone.

@@ -74,7 +74,9 @@ pub(crate) struct Args {
     /// (1.2 of its extents apart, each turned about y) and traced as a world of
     /// instances (`octrace_runtime::world`), the standard camera's rays of the
     /// world's box on one thread; the world's add and commit times; Embree 3's
-    /// instances of the scene beside it in a build with the `embree` feature.
+    /// instances of the scene beside it in a build with the `embree` feature; with
+    /// --gpu, the world traced with the instances' walks on the GPU beside the CPU's
+    /// batch on all cores, and whether every answer is the CPU's.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub instances: Option<u32>,
     /// Print JSON instead of text.

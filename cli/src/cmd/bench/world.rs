@@ -1,6 +1,7 @@
 //! `octrace bench --instances N`: the scene placed N times in a lattice, traced as a
 //! world of instances (`octrace_runtime::world`), beside Embree 3's instances of it
-//! (the `embree` feature), on the standard camera's rays of the world's box.
+//! (the `embree` feature), on the standard camera's rays of the world's box; with
+//! `--gpu`, the world on the GPU (`GpuWorld`) beside the CPU's batch on all cores.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -89,6 +90,7 @@ pub(super) fn run(loaded: Loaded, n: usize, args: &Args) -> anyhow::Result<()> {
             }));
         }
     }
+    let gpu = if args.gpu { Some(on_gpu(&world, &rays, args.runs)?) } else { None };
     #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
     let mut report = json!({
         "instances": n,
@@ -103,6 +105,9 @@ pub(super) fn run(loaded: Loaded, n: usize, args: &Args) -> anyhow::Result<()> {
         "octrace_batch": Spread::of(batch.clone()),
         "octrace_one_ray": Spread::of(single.clone()),
     });
+    if let Some(g) = gpu {
+        report["gpu"] = g;
+    }
     #[cfg(feature = "embree")]
     if let Some(e) = &embree {
         let best: Vec<f64> = embree_one.iter().zip(&embree_packets).map(|(a, b)| a.max(*b)).collect();
@@ -144,6 +149,16 @@ pub(super) fn run(loaded: Loaded, n: usize, args: &Args) -> anyhow::Result<()> {
     );
     println!("  octrace world, batch      {}  ({} hits)", s(&report["octrace_batch"]), thousands(octrace_hits as u64));
     println!("  octrace world, one ray    {}", s(&report["octrace_one_ray"]));
+    if let Some(g) = report.get("gpu") {
+        println!("on the GPU ({}), all cores for the host's part:", g["adapter"].as_str().unwrap_or("?"));
+        println!(
+            "  octrace world, GPU         {}  (the CPU's answers: {}; scenes uploaded in {:.1} ms)",
+            s(&g["world"]),
+            if g["same_as_cpu"].as_bool() == Some(true) { "yes" } else { "NO" },
+            g["upload_ms"].as_f64().unwrap_or(0.0)
+        );
+        println!("  octrace world, CPU batch   {}  (all cores)", s(&g["cpu_all_cores"]));
+    }
     if let Some(e) = report.get("embree") {
         println!(
             "  Embree 3 instances, one ray   {}  ({} hits; built in {:.2} ms)",
@@ -159,6 +174,41 @@ pub(super) fn run(loaded: Loaded, n: usize, args: &Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The world on the GPU (`GpuWorld`): the scenes' upload, Mrays/s of `runs` batches
+/// beside the CPU's batch on all cores in the same runs, and whether every answer is
+/// the CPU's (the leaf a walk found a hit in aside).
+fn on_gpu(world: &World, rays: &[octrace_runtime::Ray], runs: usize) -> anyhow::Result<serde_json::Value> {
+    let context = octrace_runtime::gpu::GpuContext::new()?;
+    let mut gpu = octrace_runtime::world::GpuWorld::new(&context.device, &context.queue);
+    let t = Instant::now();
+    gpu.upload(world)?;
+    let upload = t.elapsed();
+    let (mut on_gpu, mut on_cpu) = (Vec::new(), Vec::new());
+    let (mut gpu_hits, mut cpu_hits) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let mut failed = None;
+        on_gpu.push(mrays_of(rays.len(), &mut || match gpu.intersect(world, rays) {
+            Ok(h) => gpu_hits = h,
+            Err(e) => failed = Some(e),
+        }));
+        if let Some(e) = failed {
+            return Err(e.into());
+        }
+        on_cpu.push(mrays_of(rays.len(), &mut || cpu_hits = world.intersect_batch(rays)));
+    }
+    let key = |h: &Option<octrace_runtime::world::WorldHit>| {
+        h.map(|h| (h.instance, h.hit.triangle, h.hit.t.to_bits(), h.hit.u.to_bits(), h.hit.v.to_bits()))
+    };
+    let same = gpu_hits.iter().zip(&cpu_hits).all(|(g, c)| key(g) == key(c));
+    Ok(json!({
+        "adapter": context.describe(),
+        "upload_ms": upload.as_secs_f64() * 1e3,
+        "world": Spread::of(on_gpu),
+        "cpu_all_cores": Spread::of(on_cpu),
+        "same_as_cpu": same,
+    }))
 }
 
 /// Embree's one-ray calls: how many hit.
