@@ -146,8 +146,11 @@ class Scene:
 
 class World:
     """Scenes placed by transforms (4x4 or 3x4, local to world) and traced as one;
-    edits are seen after ``commit()``. ``geometry_ids`` are the instances' ids."""
-    def __init__(self) -> None: ...
+    edits are seen after ``commit()``. ``geometry_ids`` are the instances' ids.
+    ``device="gpu"``: the nearest and any hits with the instances' walks on the GPU."""
+    def __init__(self, *, device: str = "cpu") -> None: ...
+    @property
+    def device(self) -> str: ...
     def add(self, scene: Union[Scene, _Path], transform: Optional[npt.ArrayLike] = None) -> int: ...
     def add_triangles(
         self,

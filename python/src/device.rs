@@ -158,7 +158,7 @@ pub(crate) mod gpu {
 
     /// The process's device, opened on first use and shared by its scenes; opened again
     /// in a forked child (a Vulkan device does not survive `fork`).
-    fn context() -> PyResult<Arc<GpuContext>> {
+    pub(crate) fn context() -> PyResult<Arc<GpuContext>> {
         static CONTEXT: Mutex<Option<(u32, Arc<GpuContext>)>> = Mutex::new(None);
         let mut held = CONTEXT.lock().unwrap_or_else(|e| e.into_inner());
         let pid = std::process::id();
@@ -175,6 +175,42 @@ pub(crate) mod gpu {
         let context = Arc::new(GpuContext::new().map_err(error)?);
         *held = Some((pid, context.clone()));
         Ok(context)
+    }
+
+    /// A world's scenes on the process's GPU (`GpuWorld`), made in this process (a
+    /// forked child makes its own on first use).
+    pub(crate) struct WorldOnGpu {
+        held: Mutex<Option<(u32, octrace_runtime::world::GpuWorld, Arc<GpuContext>)>>,
+    }
+
+    impl WorldOnGpu {
+        /// Nothing uploaded yet; the device opened now, so that a world that cannot
+        /// have it is refused when made.
+        pub(crate) fn new() -> PyResult<WorldOnGpu> {
+            let context = context()?;
+            let world = octrace_runtime::world::GpuWorld::new(&context.device, &context.queue);
+            Ok(WorldOnGpu { held: Mutex::new(Some((std::process::id(), world, context))) })
+        }
+
+        /// `f` with this process's `GpuWorld`.
+        pub(crate) fn with<R>(
+            &self,
+            f: impl FnOnce(&mut octrace_runtime::world::GpuWorld) -> Result<R, Failure>,
+        ) -> PyResult<R> {
+            let mut held = self.held.lock().unwrap_or_else(|e| e.into_inner());
+            let pid = std::process::id();
+            if held.as_ref().is_none_or(|h| h.0 != pid) {
+                // Inherited through fork: the parent's driver state, forgotten.
+                if let Some(inherited) = held.take() {
+                    std::mem::forget(inherited);
+                }
+                let context = context()?;
+                let world = octrace_runtime::world::GpuWorld::new(&context.device, &context.queue);
+                *held = Some((pid, world, context));
+            }
+            let (_, world, _) = held.as_mut().expect("made above");
+            f(world).map_err(error)
+        }
     }
 
     /// A scene's GPU tracer, which borrows the scene it holds.

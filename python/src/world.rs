@@ -12,6 +12,7 @@ use pyo3::types::PyDict;
 use rayon::prelude::*;
 
 use crate::arrays::{array, numpy_of, on_threads, to_points, to_rays, Floats, Threads, INVALID_ID};
+use crate::device::Device;
 use crate::errors::{collected, runtime_error, zeros};
 use crate::queries::{band, closest_dict, ClosestRow};
 use crate::scene::Scene;
@@ -47,6 +48,11 @@ pub(crate) struct World {
     inner: octrace_runtime::world::World,
     /// The files added by path, each opened once (by absolute path).
     files: HashMap<PathBuf, Arc<octrace_runtime::Scene>>,
+    /// Where the nearest and any hits run.
+    device: Device,
+    /// The world's scenes on the GPU, where `device` is `Gpu`.
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::device::gpu::WorldOnGpu>,
 }
 
 /// A 4x4 (last row `0 0 0 1`) or 3x4 placement from anything numpy reads.
@@ -100,9 +106,48 @@ fn placement_error(e: octrace_runtime::Error) -> PyErr {
 #[pymethods]
 impl World {
     /// An empty world.
+    ///
+    /// Args:
+    ///     device: where the nearest and any hits (``cast_rays``, ``test_occlusions``)
+    ///         run: ``"cpu"``, or ``"gpu"`` (a module built with the GPU,
+    ///         ``HAS_GPU``; a Vulkan adapter with 64-bit floats): the instances'
+    ///         octrees walked on the GPU, the top level and the carrying of rays into
+    ///         the instances on the CPU, with the CPU's answers bit for bit. Each
+    ///         scene goes to the GPU once, on the first query after it is placed;
+    ///         moving instances uploads nothing. The other queries run on the CPU.
+    ///
+    /// Raises:
+    ///     ValueError: an unknown device.
+    ///     GpuError: ``device="gpu"`` and no GPU can serve it.
     #[new]
-    fn new() -> World {
-        World { inner: octrace_runtime::world::World::new(), files: HashMap::new() }
+    #[pyo3(signature = (*, device="cpu"))]
+    fn new(device: &str) -> PyResult<World> {
+        let device = Device::parse(device)?;
+        #[cfg(feature = "gpu")]
+        let gpu = match device {
+            Device::Gpu => Some(crate::device::gpu::WorldOnGpu::new()?),
+            Device::Cpu => None,
+        };
+        #[cfg(not(feature = "gpu"))]
+        if device == Device::Gpu {
+            return Err(crate::errors::GpuError::new_err(
+                "this octrace module was built without the GPU: reinstall it with the gpu feature, \
+                 MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (the README, \"On a GPU\")",
+            ));
+        }
+        Ok(World {
+            inner: octrace_runtime::world::World::new(),
+            files: HashMap::new(),
+            device,
+            #[cfg(feature = "gpu")]
+            gpu,
+        })
+    }
+
+    /// Where the nearest and any hits run: ``"cpu"`` or ``"gpu"``.
+    #[getter]
+    fn device(&self) -> &'static str {
+        self.device.name()
     }
 
     /// Places ``scene`` by ``transform`` (a 4x4 matrix whose last row is ``0 0 0 1``,
@@ -202,7 +247,7 @@ impl World {
         let (t, geometry, primitive, uvs, normals) = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let rays = to_rays(values, 0.0, f32::INFINITY)?;
-                let hits = world.intersect_batch(&rays);
+                let hits = self.nearest(&rays)?;
                 let (mut t, mut g, mut p) = (zeros(n, "t_hit")?, zeros(n, "geometry_ids")?, zeros(n, "primitive_ids")?);
                 let (mut uv, mut normal) = (zeros(2 * n, "primitive_uvs")?, zeros(3 * n, "primitive_normals")?);
                 t.par_iter_mut()
@@ -252,10 +297,8 @@ impl World {
         let py = rays.py();
         let input = Floats::new(rays, "rays", 6)?;
         let values = input.values();
-        let world = &self.inner;
-        let occluded = py.detach(|| {
-            on_threads(nthreads, || -> PyResult<_> { Ok(world.occluded_batch(&to_rays(values, tnear, tfar)?)) })?
-        })?;
+        let occluded =
+            py.detach(|| on_threads(nthreads, || -> PyResult<_> { self.any(&to_rays(values, tnear, tfar)?) })?)?;
         array(py, occluded, input.shape(&[]))
     }
 
@@ -473,11 +516,30 @@ impl World {
     }
 
     fn __repr__(&self) -> String {
-        format!("octrace.World({} instances)", self.inner.len())
+        let on = if self.device == Device::Gpu { ", on the gpu" } else { "" };
+        format!("octrace.World({} instances{on})", self.inner.len())
     }
 }
 
 impl World {
+    /// The nearest hit of each ray, on the world's device.
+    fn nearest(&self, rays: &[octrace_runtime::Ray]) -> PyResult<Vec<Option<octrace_runtime::world::WorldHit>>> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return gpu.with(|g| g.intersect(&self.inner, rays));
+        }
+        Ok(self.inner.intersect_batch(rays))
+    }
+
+    /// Whether anything lies on each ray, on the world's device.
+    fn any(&self, rays: &[octrace_runtime::Ray]) -> PyResult<Vec<bool>> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return gpu.with(|g| g.occluded(&self.inner, rays));
+        }
+        Ok(self.inner.occluded_batch(rays))
+    }
+
     /// Each query point's closest point of the world (`None` past `max_distance`),
     /// and the points' leading shape.
     fn closest(

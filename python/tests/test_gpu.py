@@ -238,3 +238,43 @@ def test_a_scene_with_fans_answers_as_the_cpu_module():
     rays = np.concatenate([targets - 3 * dirs, dirs], 1).astype(np.float32)
     same_dicts(gpu.cast_rays(rays), cpu.cast_rays(rays), "fans: cast_rays")
     same_dicts(gpu.list_intersections(rays), cpu.list_intersections(rays), "fans: lists")
+
+
+def test_a_world_on_the_gpu_answers_as_on_the_cpu(bunny_oct):
+    """`World(device="gpu")`: the instances' walks on the GPU, the CPU's answers bit for
+    bit, through moves and a scene added after the first query."""
+    gpu = on_gpu(lambda: octrace.World(device="gpu"))
+    cpu = octrace.World()
+    assert gpu.device == "gpu" and "on the gpu" in repr(gpu)
+    rng = np.random.default_rng(11)
+    bunny = octrace.Scene(bunny_oct)
+    ids = []
+    for k in range(24):
+        m = np.eye(4)
+        m[:3, 3] = [0.25 * (k % 6), 0.2 * (k // 6), 0.0]
+        ids.append(gpu.add(bunny, m))
+        cpu.add(bunny, m)
+    gpu.commit()
+    cpu.commit()
+    o = rng.uniform([-0.3, -0.2, 1.0], [1.5, 0.9, 1.2], (4096, 3))
+    target = rng.uniform([-0.2, 0.0, -0.1], [1.4, 0.8, 0.1], (4096, 3))
+    rays = np.hstack([o, target - o]).astype(np.float32)
+
+    def same(what):
+        same_dicts(gpu.cast_rays(rays), cpu.cast_rays(rays), what)
+        same_bits(gpu.test_occlusions(rays, tfar=0.9), cpu.test_occlusions(rays, tfar=0.9), what)
+
+    same("24 bunnies")
+    assert np.isfinite(gpu.cast_rays(rays)["t_hit"]).sum() > 1000
+    for w in (gpu, cpu):
+        for k in ids[::3]:
+            m = w.transform(k)
+            m[2, 3] -= 0.3
+            w.set_transform(k, m)
+        w.add_triangles(*cube_arrays(0.3, 0.5))
+        w.commit()
+    same("moved, and a cube")
+    # The other queries run on the CPU, with the same answers.
+    same_bits(gpu.count_intersections(rays), cpu.count_intersections(rays), "counts")
+    with pytest.raises(ValueError, match="device"):
+        octrace.World(device="TPU:0")

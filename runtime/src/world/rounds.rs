@@ -45,6 +45,7 @@ impl Boxes {
         b
     }
 
+    #[cfg(feature = "gpu")]
     /// `self` followed by `next` (the boxes of the rays after `self`'s).
     pub(super) fn append(&mut self, next: Boxes) {
         if self.first.is_empty() {
