@@ -363,7 +363,8 @@ fn run_world(args: &Args, to_stdout: bool) -> anyhow::Result<()> {
     let effects = options.effects;
     let t = Instant::now();
     let bar = RowsBar::new(camera.height);
-    let (radiance, counts) = render_effects_world(&world, &camera, &options, &|rows| bar.set(rows));
+    let (radiance, counts) = render_effects_world(&world, &camera, &options, &|rows| bar.set(rows))
+        .map_err(|e| anyhow::anyhow!("cannot render {}: {e}", args.scene.display()))?;
     bar.finish();
     let secs = t.elapsed().as_secs_f64();
     crate::output::write_data(&args.output, &[&radiance.to_image().png_bytes()?])?;

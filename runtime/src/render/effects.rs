@@ -399,6 +399,11 @@ pub fn render_effects(
 /// the environment or the headlight as a scene is. The same effects as a scene
 /// (`options`).
 ///
+/// # Errors
+/// [`crate::Error::Budget`] where the instances' placed lights and emissive triangles
+/// (each instance's copies of its scene's) would take more than 1 GiB;
+/// [`crate::Error::Alloc`] where their memory cannot be had.
+///
 /// # Example
 /// ```
 /// use std::sync::Arc;
@@ -412,7 +417,7 @@ pub fn render_effects(
 /// world.add(&ball, Transform::translation([1.5, 0.0, 0.0]))?;
 /// world.commit();
 /// let camera = Camera::standard_sized(&Frame::from_bounds([-2.5, -1.0, -1.0], [2.5, 1.0, 1.0]), 32, 16);
-/// let (radiance, counts) = render_effects_world(&world, &camera, &RenderOptions::for_scene(ball.shading()), &|_| {});
+/// let (radiance, counts) = render_effects_world(&world, &camera, &RenderOptions::for_scene(ball.shading()), &|_| {})?;
 /// assert_eq!(counts.get(RayKind::Primary), 32 * 16);
 /// radiance.to_image();
 /// # Ok::<(), Box<dyn std::error::Error>>(())
@@ -422,8 +427,8 @@ pub fn render_effects_world(
     camera: &Camera,
     options: &RenderOptions,
     progress: &(dyn Fn(u32) + Sync),
-) -> (Radiance, RayCounts) {
-    render_stage(&WorldStage::new(world), camera, options, progress)
+) -> crate::Result<(Radiance, RayCounts)> {
+    Ok(render_stage(&WorldStage::new(world)?, camera, options, progress))
 }
 
 /// The effects render of `stage`, tiles on all cores.

@@ -232,7 +232,7 @@ impl Emitters {
     /// found once a scene), placed, their powers from the placed triangles' areas.
     pub(crate) fn of_world(stage: &super::stage::WorldStage<'_>) -> Emitters {
         use super::stage::Stage;
-        let own: Vec<Emitters> = stage.views.iter().map(Emitters::of).collect();
+        let own = &stage.own_emitters;
         let mut e =
             Emitters { triangles: Vec::new(), instances: Vec::new(), cumulative: Vec::new(), untextured: false };
         let mut total = 0.0f64;
@@ -270,6 +270,11 @@ impl Emitters {
     /// Whether the scene has area lights.
     pub(crate) fn is_empty(&self) -> bool {
         self.triangles.is_empty()
+    }
+
+    /// The emissive triangles.
+    pub(crate) fn len(&self) -> usize {
+        self.triangles.len()
     }
 
     /// Total power (area times strength).

@@ -6,6 +6,7 @@ use glam::Vec3;
 use octrace_format::{Light, SceneView, StoredIndex};
 
 use super::lighting::Emitters;
+use crate::error::{Error, Result};
 use crate::world::{Transform, World, WorldHit};
 use crate::{Hit, Ray, Tracer};
 
@@ -126,15 +127,47 @@ pub(crate) struct WorldStage<'a> {
     pub world: &'a World,
     /// The world's scenes' arrays, by scene index.
     pub views: Vec<SceneView<'a>>,
+    /// Each scene's own emissive triangles, by scene index.
+    pub own_emitters: Vec<Emitters>,
     /// The instances' lights, placed.
     lights: Vec<Light>,
 }
 
+/// The most memory a world's placed lights and emissive triangles may take (each
+/// instance's copies of its scene's): 1 GiB.
+pub(crate) const WORLD_LIGHTS_BUDGET: u64 = 1 << 30;
+
+/// Bytes an emissive triangle of a world takes in [`Emitters`].
+const EMITTER_BYTES: u64 = (std::mem::size_of::<(u32, Vec3)>() + 2 * std::mem::size_of::<u32>()) as u64;
+
 impl<'a> WorldStage<'a> {
     /// The stage of `world`.
-    pub fn new(world: &'a World) -> WorldStage<'a> {
+    ///
+    /// # Errors
+    /// [`Error::Budget`] where the instances' placed lights and emissive triangles
+    /// would take more than [`WORLD_LIGHTS_BUDGET`] (a scene with many lights placed
+    /// many times); [`Error::Alloc`] where their memory cannot be had.
+    pub fn new(world: &'a World) -> Result<WorldStage<'a>> {
         let views: Vec<SceneView<'a>> = world.scenes().iter().map(|s| s.view()).collect();
-        let mut lights = Vec::new();
+        let own_emitters: Vec<Emitters> = views.iter().map(Emitters::of).collect();
+        // What the placed copies take, counted before any is made.
+        let (mut lights_count, mut bytes) = (0u64, 0u64);
+        for (_, scene) in world.placed_scenes() {
+            let own = &views[scene as usize].shading.lights;
+            lights_count += own.len() as u64;
+            bytes += own.iter().map(|l| (std::mem::size_of::<Light>() + l.name.len()) as u64).sum::<u64>();
+            bytes += own_emitters[scene as usize].len() as u64 * EMITTER_BYTES;
+        }
+        if bytes > WORLD_LIGHTS_BUDGET {
+            return Err(Error::Budget {
+                what: "world's placed lights and emissive triangles",
+                needed: bytes,
+                limit: WORLD_LIGHTS_BUDGET,
+                advice: "each instance of a scene with lights or emissive triangles places its own copies: \
+                         place fewer instances of those scenes, or render without them",
+            });
+        }
+        let mut lights = octrace_format::memory::try_with_capacity(lights_count as usize, "placed lights")?;
         for (id, scene) in world.placed_scenes() {
             let Some((_, to_world, _)) = world.placement(id) else { continue };
             // A range scales with the placement (by its longest axis where it stretches).
@@ -147,7 +180,7 @@ impl<'a> WorldStage<'a> {
                 lights.push(Light { position, direction, range, ..l.clone() });
             }
         }
-        WorldStage { world, views, lights }
+        Ok(WorldStage { world, views, own_emitters, lights })
     }
 }
 

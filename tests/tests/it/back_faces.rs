@@ -166,7 +166,7 @@ fn a_mirrored_instance_keeps_its_front_in_a_world() {
         world.add(&scene, placement).unwrap();
         world.commit();
         let seen = |eye: [f64; 3], target: [f64; 3]| {
-            render_effects_world(&world, &camera(eye, target, 16), &options, &|_| {}).0.at(8, 8).x
+            render_effects_world(&world, &camera(eye, target, 16), &options, &|_| {}).expect("renders").0.at(8, 8).x
         };
         let mirrored = placement != Transform::IDENTITY;
         let front = seen([0.0, 0.0, 3.0], [0.0, 0.0, 0.0]);

@@ -490,7 +490,7 @@ fn a_world_renders_as_its_scenes_placed() {
     let mut world = World::new();
     world.add(&fx, Transform::IDENTITY).expect("placed");
     world.commit();
-    let (placed, placed_rays) = render_effects_world(&world, &camera, &options, &|_| {});
+    let (placed, placed_rays) = render_effects_world(&world, &camera, &options, &|_| {}).expect("renders");
     // The world walks each scene with its own (exact) triangle test, the scene's
     // render the watertight one: the same surfaces, barycentrics within ulps, and now
     // and then a ray within ulps of an edge on the other triangle (5 of these pixels).
@@ -505,7 +505,8 @@ fn a_world_renders_as_its_scenes_placed() {
     // Moved by (40, 0, -8), and the camera with it.
     world.set_transform(0, Transform::translation([40.0, 0.0, -8.0])).expect("live");
     world.commit();
-    let (moved, _) = render_effects_world(&world, &at([40.0, 2.0, -2.0], [40.0, 0.0, -8.0]), &options, &|_| {});
+    let (moved, _) =
+        render_effects_world(&world, &at([40.0, 2.0, -2.0], [40.0, 0.0, -8.0]), &options, &|_| {}).expect("renders");
     let (a, b) = (moved.to_image(), alone.to_image());
     let same = a.rgb.iter().zip(&b.rgb).filter(|(x, y)| x == y).count();
     assert!(same * 100 >= a.rgb.len() * 95, "{same} of {} bytes the same", a.rgb.len());
@@ -513,7 +514,46 @@ fn a_world_renders_as_its_scenes_placed() {
     // A mirrored copy beside it: the image changes, and stays finite.
     world.add(&fx, Transform::scaling([-1.0, 1.0, 1.0]).then(&Transform::translation([46.0, 0.0, -8.0]))).expect("ok");
     world.commit();
-    let (two, _) = render_effects_world(&world, &at([43.0, 4.0, 4.0], [43.0, 0.0, -8.0]), &options, &|_| {});
+    let (two, _) =
+        render_effects_world(&world, &at([43.0, 4.0, 4.0], [43.0, 0.0, -8.0]), &options, &|_| {}).expect("renders");
     assert!(two.pixels.iter().all(|p| p.is_finite()));
     assert_ne!(two.to_image().rgb, moved.to_image().rgb);
+}
+
+/// A scene with many lights placed many times: each instance places its own copies,
+/// and past the budget the render is refused by name before any is made.
+#[test]
+fn a_world_of_many_lit_instances_is_refused_past_the_lights_budget() {
+    use octrace_runtime::raysets::Camera;
+    use octrace_runtime::render::effects::{render_effects_world, RenderOptions};
+    let mut mesh = procedural::cube([-1.0; 3], [1.0; 3], 1);
+    let light = octrace_format::Light {
+        name: "a lamp with a long name ".repeat(40),
+        kind: octrace_format::LightKind::Point,
+        color: [1.0; 3],
+        intensity: 1.0,
+        position: [0.0, 3.0, 0.0],
+        direction: [0.0, -1.0, 0.0],
+        range: f32::INFINITY,
+        inner_cone: 0.0,
+        outer_cone: 0.7,
+    };
+    mesh.lights = vec![light; 1000];
+    let lit = scene(&mesh);
+    let options = RenderOptions::for_scene(lit.shading());
+    let camera = Camera::look_at([0.0, 2.0, 6.0].into(), [0.0; 3].into(), 50.0, 8, 6);
+    let mut world = World::new();
+    world.add(&lit, Transform::IDENTITY).expect("placed");
+    world.commit();
+    render_effects_world(&world, &camera, &options, &|_| {}).expect("one instance's lights fit");
+    for k in 1..1200 {
+        world.add(&lit, Transform::translation([3.0 * f64::from(k), 0.0, 0.0])).expect("placed");
+    }
+    world.commit();
+    match render_effects_world(&world, &camera, &options, &|_| {}) {
+        Err(Error::Budget { what, needed, limit, .. }) => {
+            assert!(what.contains("lights") && needed > limit, "{what}: {needed} > {limit}");
+        }
+        other => panic!("expected the lights' budget, got {:?}", other.map(|(_, c)| c)),
+    }
 }
