@@ -147,7 +147,7 @@ class Scene:
 class World:
     """Scenes placed by transforms (4x4 or 3x4, local to world) and traced as one;
     edits are seen after ``commit()``. ``geometry_ids`` are the instances' ids.
-    ``device="gpu"``: the nearest and any hits with the instances' walks on the GPU."""
+    ``device="gpu"``: the ray queries with the instances' walks on the GPU."""
     def __init__(self, *, device: str = "cpu") -> None: ...
     @property
     def device(self) -> str: ...

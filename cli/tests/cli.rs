@@ -1845,7 +1845,6 @@ fn trace_and_inspect_take_a_scene_description() {
         fails_saying(d, &["inspect", "bad.json"], says);
     }
     fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--all-hits"], "take a .oct");
-    fails_saying(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "x.bin", "--counts", "--gpu"], "on the CPU");
     // On the GPU: the same files.
     let test = "trace_and_inspect_take_a_scene_description";
     if on_gpu(d, &["trace", "world.json", "--rays", "rays.bin", "-o", "gpu_hits.bin", "--gpu"], test).is_some() {
@@ -1854,6 +1853,9 @@ fn trace_and_inspect_take_a_scene_description() {
         let text = on_gpu(d, &args, test).expect("a GPU");
         assert!(text.contains("instances' walks on the GPU"), "{text}");
         assert_eq!(std::fs::read(d.join("gpu_occluded.bin")).unwrap(), occluded);
+        let args = ["trace", "world.json", "--rays", "rays.bin", "-o", "gpu_counts.bin", "--counts", "--gpu"];
+        on_gpu(d, &args, test).expect("a GPU");
+        assert_eq!(std::fs::read(d.join("gpu_counts.bin")).unwrap(), counts);
     }
     // Past the instances' budget: refused before any is placed.
     let many = format!(

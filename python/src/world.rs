@@ -48,7 +48,7 @@ pub(crate) struct World {
     inner: octrace_runtime::world::World,
     /// The files added by path, each opened once (by absolute path).
     files: HashMap<PathBuf, Arc<octrace_runtime::Scene>>,
-    /// Where the nearest and any hits run.
+    /// Where the ray queries run.
     device: Device,
     /// The world's scenes on the GPU, where `device` is `Gpu`.
     #[cfg(feature = "gpu")]
@@ -108,13 +108,14 @@ impl World {
     /// An empty world.
     ///
     /// Args:
-    ///     device: where the nearest and any hits (``cast_rays``, ``test_occlusions``)
-    ///         run: ``"cpu"``, or ``"gpu"`` (a module built with the GPU,
-    ///         ``HAS_GPU``; a Vulkan adapter with 64-bit floats): the instances'
-    ///         octrees walked on the GPU, the top level and the carrying of rays into
-    ///         the instances on the CPU, with the CPU's answers bit for bit. Each
-    ///         scene goes to the GPU once, on the first query after it is placed;
-    ///         moving instances uploads nothing. The other queries run on the CPU.
+    ///     device: where the ray queries (``cast_rays``, ``test_occlusions``,
+    ///         ``count_intersections``, ``list_intersections``) run: ``"cpu"``, or
+    ///         ``"gpu"`` (a module built with the GPU, ``HAS_GPU``; a Vulkan adapter
+    ///         with 64-bit floats): the instances' octrees walked on the GPU, the
+    ///         top level and the carrying of rays into the instances on the CPU,
+    ///         with the CPU's answers bit for bit. Each scene goes to the GPU once,
+    ///         on the first query after it is placed; moving instances uploads
+    ///         nothing. The point queries run on the CPU.
     ///
     /// Raises:
     ///     ValueError: an unknown device.
@@ -144,7 +145,7 @@ impl World {
         })
     }
 
-    /// Where the nearest and any hits run: ``"cpu"`` or ``"gpu"``.
+    /// Where the ray queries run: ``"cpu"`` or ``"gpu"``.
     #[getter]
     fn device(&self) -> &'static str {
         self.device.name()
@@ -309,10 +310,9 @@ impl World {
         let py = rays.py();
         let input = Floats::new(rays, "rays", 6)?;
         let values = input.values();
-        let world = &self.inner;
         let counts = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
-                let counts = world.count_crossings_batch(&to_rays(values, 0.0, f32::INFINITY)?);
+                let counts = self.counts(&to_rays(values, 0.0, f32::INFINITY)?)?;
                 Ok(counts.iter().map(|c| c.total.min(i32::MAX as u32) as i32).collect::<Vec<i32>>())
             })?
         })?;
@@ -346,21 +346,14 @@ impl World {
         let values = input.values();
         let budget = max_memory.unwrap_or_else(|| octrace_format::memory::share(4));
         let keep = max_hits.unwrap_or(usize::MAX);
-        let world = &self.inner;
         let lists = py.detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let rays = to_rays(values, 0.0, f32::INFINITY)?;
                 let mut lists: Vec<Vec<octrace_runtime::world::WorldCrossing>> = Vec::new();
                 let mut bytes = 0u64;
                 for piece in rays.chunks(4096) {
-                    let found: Vec<_> = piece
-                        .par_iter()
-                        .map(|r| {
-                            let mut c = world.crossings(r);
-                            c.truncate(keep);
-                            c
-                        })
-                        .collect();
+                    let mut found = self.lists(piece)?;
+                    found.par_iter_mut().for_each(|c| c.truncate(keep));
                     bytes += found.iter().map(|c| c.len() as u64).sum::<u64>() * 24;
                     if bytes > budget {
                         return Err(pyo3::exceptions::PyMemoryError::new_err(format!(
@@ -529,6 +522,24 @@ impl World {
             return gpu.with(|g| g.intersect(&self.inner, rays));
         }
         Ok(self.inner.intersect_batch(rays))
+    }
+
+    /// Each ray's crossings counted, on the world's device.
+    fn counts(&self, rays: &[octrace_runtime::Ray]) -> PyResult<Vec<octrace_runtime::cpu::CrossingCount>> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return gpu.with(|g| g.count_crossings(&self.inner, rays));
+        }
+        Ok(self.inner.count_crossings_batch(rays))
+    }
+
+    /// Each ray's crossings in order, on the world's device.
+    fn lists(&self, rays: &[octrace_runtime::Ray]) -> PyResult<Vec<Vec<octrace_runtime::world::WorldCrossing>>> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return gpu.with(|g| g.crossings(&self.inner, rays));
+        }
+        Ok(rays.par_iter().map(|r| self.inner.crossings(r)).collect())
     }
 
     /// Whether anything lies on each ray, on the world's device.

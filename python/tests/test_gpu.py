@@ -242,7 +242,8 @@ def test_a_scene_with_fans_answers_as_the_cpu_module():
 
 def test_a_world_on_the_gpu_answers_as_on_the_cpu(bunny_oct):
     """`World(device="gpu")`: the instances' walks on the GPU, the CPU's answers bit for
-    bit, through moves and a scene added after the first query."""
+    bit (hits, occlusion, crossings counted and listed), through moves and a scene added
+    after the first query."""
     gpu = on_gpu(lambda: octrace.World(device="gpu"))
     cpu = octrace.World()
     assert gpu.device == "gpu" and "on the gpu" in repr(gpu)
@@ -274,7 +275,10 @@ def test_a_world_on_the_gpu_answers_as_on_the_cpu(bunny_oct):
         w.add_triangles(*cube_arrays(0.3, 0.5))
         w.commit()
     same("moved, and a cube")
-    # The other queries run on the CPU, with the same answers.
+    # From farther, through the crowd: crossings counted and listed.
+    rays[:, :3] = rays[:, :3] * 4.0 - np.float32([0, 0, 3])
     same_bits(gpu.count_intersections(rays), cpu.count_intersections(rays), "counts")
+    assert gpu.count_intersections(rays).max() >= 4
+    same_dicts(gpu.list_intersections(rays, max_hits=5), cpu.list_intersections(rays, max_hits=5), "lists")
     with pytest.raises(ValueError, match="device"):
         octrace.World(device="TPU:0")

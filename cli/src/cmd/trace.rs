@@ -44,8 +44,8 @@ Paths are relative to the description's folder; a transform is 3 or 4 rows of 4
 Its hits are 12 bytes a ray: f32 `t`, u32 instance (its index in \"instances\"), u32
 triangle of that instance's scene (a miss: `t = tmax`, both 0xFFFFFFFF); with
 --occluded, 4 bytes a ray, u32 1 or 0; with --counts, as above. With --gpu, the
-nearest hits and --occluded walk the instances' octrees on the GPU (the top level
-and the rays' carrying on the CPU): the same files as the CPU's.
+instances' octrees are walked on the GPU (the top level and the rays' carrying on
+the CPU): the same files as the CPU's.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
@@ -196,18 +196,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 
 /// `trace` of a scene description (a world of instances, `crate::world_file`): nearest
 /// hits (12 bytes a ray: `t`, instance, triangle), `--occluded` (4 bytes: 1 or 0) or
-/// `--counts` (as for a scene); with `--gpu`, the nearest hits and `--occluded` with
-/// the instances' walks on the GPU (`GpuWorld`: the CPU's answers).
+/// `--counts` (as for a scene); with `--gpu`, each with the instances' walks on the
+/// GPU (`GpuWorld`: the CPU's answers).
 pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
         !(args.all_hits || args.length_inside),
         "{}: a scene description is traced for nearest hits, --occluded and --counts (--all-hits and \
          --length-inside take a .oct)",
-        args.scene.display()
-    );
-    anyhow::ensure!(
-        !(args.gpu && args.counts),
-        "{}: --gpu traces a scene description's nearest hits and --occluded (its --counts run on the CPU)",
         args.scene.display()
     );
     crate::output::refuse_overwriting(&args.out, "-o", &[&args.scene, &args.rays])?;
@@ -227,15 +222,13 @@ pub(crate) fn run_world(args: Args) -> anyhow::Result<()> {
     };
     let (answers, seconds) = crate::with_threads(args.threads, || {
         let t = Instant::now();
-        let answers = if args.counts {
-            Ok(Answers::Counts(world.count_crossings_batch(&rays)))
-        } else {
-            match (&mut gpu, args.occluded) {
-                (Some((on_gpu, _)), true) => on_gpu.occluded(&world, &rays).map(Answers::Occluded),
-                (Some((on_gpu, _)), false) => on_gpu.intersect(&world, &rays).map(Answers::Hits),
-                (None, true) => Ok(Answers::Occluded(world.occluded_batch(&rays))),
-                (None, false) => Ok(Answers::Hits(world.intersect_batch(&rays))),
-            }
+        let answers = match (&mut gpu, args.counts, args.occluded) {
+            (Some((on_gpu, _)), true, _) => on_gpu.count_crossings(&world, &rays).map(Answers::Counts),
+            (Some((on_gpu, _)), false, true) => on_gpu.occluded(&world, &rays).map(Answers::Occluded),
+            (Some((on_gpu, _)), false, false) => on_gpu.intersect(&world, &rays).map(Answers::Hits),
+            (None, true, _) => Ok(Answers::Counts(world.count_crossings_batch(&rays))),
+            (None, false, true) => Ok(Answers::Occluded(world.occluded_batch(&rays))),
+            (None, false, false) => Ok(Answers::Hits(world.intersect_batch(&rays))),
         };
         (answers, t.elapsed().as_secs_f64())
     })?;

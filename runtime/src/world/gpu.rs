@@ -1,4 +1,5 @@
-//! A world's nearest and any hits with the instances' walks on the GPU.
+//! A world's nearest and any hits, crossing counts and lists with the instances'
+//! walks on the GPU.
 //!
 //! The host walks the top level and carries each ray into the instances it enters
 //! (in `f64`, as [`World::intersect`] does: `f64` is not an arithmetic every
@@ -15,7 +16,8 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::rounds::{Boxes, Walker};
-use super::{World, WorldHit};
+use super::{carried, Carried, Placed, World, WorldCrossing, WorldHit};
+use crate::cpu::{Crossing, CrossingCount};
 use crate::gpu::{GpuError, GpuOptions, GpuResult, GpuTracer};
 use crate::ray::{Hit, Ray};
 use crate::Scene;
@@ -143,17 +145,69 @@ impl GpuWorld {
         Ok(self.batch(world, true, rays)?.iter().map(Option::is_some).collect())
     }
 
+    /// [`World::count_crossings_batch`] with the instances' walks on the GPU: the same
+    /// counts. Each ray's crossings of the instances its first 64 boxes hold are
+    /// counted on the GPU (listed there, where a moved origin's reach has a margin past
+    /// a finite `tmax`), those of further instances on the CPU.
+    ///
+    /// # Errors
+    /// As [`GpuWorld::intersect`].
+    pub fn count_crossings(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<CrossingCount>> {
+        self.upload(world)?;
+        let mut out: Vec<CrossingCount> = answers(rays.len())?;
+        for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
+            let boxes = boxes_of(world, rays);
+            self.along(world, rays, &boxes, false, |i, _, p, local, found| {
+                let c = match found {
+                    Found::Count(c) => c,
+                    Found::List(list) => local.count_of_list(rays[i].tmax, list),
+                };
+                let c = p.placed_count(c);
+                out[i].total += c.total;
+                out[i].entries += c.entries;
+            })?;
+            out.par_iter_mut().enumerate().filter(|(i, _)| boxes.more(*i)).for_each(|(i, o)| {
+                let rest = world.count_crossings_from(&rays[i], &asked(&boxes, i));
+                o.total += rest.total;
+                o.entries += rest.entries;
+            });
+        }
+        Ok(out)
+    }
+
+    /// [`World::crossings`] of each ray with the instances' walks on the GPU: the same
+    /// lists, in order. Each ray's crossings of the instances its first 64 boxes hold
+    /// are listed on the GPU, those of further instances on the CPU.
+    ///
+    /// # Errors
+    /// As [`GpuWorld::intersect`]; [`GpuError::Memory`] where the lists' memory
+    /// cannot be had.
+    pub fn crossings(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<Vec<WorldCrossing>>> {
+        self.upload(world)?;
+        let mut out: Vec<Vec<WorldCrossing>> = answers(rays.len())?;
+        for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
+            let boxes = boxes_of(world, rays);
+            self.along(world, rays, &boxes, true, |i, id, p, local, found| {
+                if let Found::List(list) = found {
+                    p.placed_crossings(id, local, rays[i].tmax, list, &mut out[i]);
+                }
+            })?;
+            out.par_iter_mut().enumerate().for_each(|(i, o)| {
+                if boxes.more(i) {
+                    world.crossings_from(&rays[i], &asked(&boxes, i), o);
+                }
+                // Stable: an instance's own crossings keep their order.
+                o.sort_by(|a, b| a.crossing.t.total_cmp(&b.crossing.t).then(a.instance.cmp(&b.instance)));
+            });
+        }
+        Ok(out)
+    }
+
     fn batch(&mut self, world: &World, any: bool, rays: &[Ray]) -> GpuResult<Vec<Option<WorldHit>>> {
         self.upload(world)?;
-        let mut out =
-            octrace_format::memory::try_vec(rays.len(), "hits").map_err(|e| GpuError::Memory(crate::Error::from(e)))?;
+        let mut out = answers(rays.len())?;
         for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
-            // The top level's walks on all cores, a few thousand rays a task.
-            let mut boxes = Boxes::default();
-            let parts: Vec<Boxes> = rays.par_chunks(4096).map(|r| Boxes::of(world, r, GPU_BOXES)).collect();
-            for part in parts {
-                boxes.append(part);
-            }
+            let boxes = boxes_of(world, rays);
             let mut walker = OnGpu { gpu: self, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new() };
             world.rounds(any, rays, &boxes, out, &mut walker)?;
             out.par_iter_mut().enumerate().filter(|(i, _)| boxes.more(*i)).for_each(|(i, o)| {
@@ -162,6 +216,87 @@ impl GpuWorld {
         }
         Ok(out)
     }
+
+    /// Each ray of `rays` carried (over its whole `[tmin, tmax]`) into every instance
+    /// of its `boxes`, a box a round, and walked on the GPU by the instance's scene:
+    /// its crossings counted, or listed (every ray with `list`, else where a moved
+    /// origin's reach has a margin past a finite `tmax`); `visit(ray, instance,
+    /// placement, carried ray, found)` for each.
+    fn along(
+        &self,
+        world: &World,
+        rays: &[Ray],
+        boxes: &Boxes,
+        list: bool,
+        mut visit: impl FnMut(usize, u32, &Placed, &Carried, Found<'_>),
+    ) -> GpuResult<()> {
+        let mut jobs: Vec<(u32, u32)> = Vec::new();
+        for round in 0.. {
+            jobs.clear();
+            jobs.extend((0..rays.len()).filter_map(|i| boxes.of_ray(i).get(round).map(|b| (b.1, i as u32))));
+            if jobs.is_empty() {
+                return Ok(());
+            }
+            let placed: Vec<&Placed> =
+                jobs.iter().map(|&(id, _)| world.placed[id as usize].as_ref().expect("a committed instance")).collect();
+            let local: Vec<Carried> = jobs
+                .iter()
+                .zip(&placed)
+                .map(|(&(_, i), p)| carried(p, &rays[i as usize], rays[i as usize].tmax))
+                .collect();
+            // Each job's tracer.
+            let device: Vec<usize> = placed
+                .iter()
+                .map(|p| self.by_scene[&(Arc::as_ptr(&world.scenes()[p.scene as usize]) as usize)])
+                .collect();
+            for (d, on_device) in self.on_device.iter().enumerate() {
+                let (listed, counted): (Vec<usize>, Vec<usize>) = (0..jobs.len())
+                    .filter(|&k| device[k] == d)
+                    .partition(|&k| list || local[k].counted_by_list(rays[jobs[k].1 as usize].tmax));
+                let carried_rays = |ks: &[usize]| ks.iter().map(|&k| local[k].ray).collect::<Vec<Ray>>();
+                if !counted.is_empty() {
+                    let counts = on_device.tracer.count_crossings(&carried_rays(&counted))?;
+                    for (&k, c) in counted.iter().zip(counts) {
+                        visit(jobs[k].1 as usize, jobs[k].0, placed[k], &local[k], Found::Count(c));
+                    }
+                }
+                if !listed.is_empty() {
+                    let lists = on_device.tracer.crossings(&carried_rays(&listed))?;
+                    for (n, &k) in listed.iter().enumerate() {
+                        visit(jobs[k].1 as usize, jobs[k].0, placed[k], &local[k], Found::List(lists.of(n)));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the GPU found along a carried ray: its crossings counted, or listed.
+enum Found<'a> {
+    Count(CrossingCount),
+    List(&'a [Crossing]),
+}
+
+/// `n` answers, their memory asked of the allocator first.
+fn answers<T: Clone + Default>(n: usize) -> GpuResult<Vec<T>> {
+    octrace_format::memory::try_vec(n, "answers").map_err(|e| GpuError::Memory(crate::Error::from(e)))
+}
+
+/// Each ray's first [`GPU_BOXES`] boxes: the top level's walks on all cores, a few
+/// thousand rays a task.
+fn boxes_of(world: &World, rays: &[Ray]) -> Boxes {
+    let mut boxes = Boxes::default();
+    let parts: Vec<Boxes> = rays.par_chunks(4096).map(|r| Boxes::of(world, r, GPU_BOXES)).collect();
+    for part in parts {
+        boxes.append(part);
+    }
+    boxes
+}
+
+/// The instances of ray `i`'s boxes.
+fn asked(boxes: &Boxes, i: usize) -> Vec<u32> {
+    boxes.of_ray(i).iter().map(|b| b.1).collect()
 }
 
 /// A round's walks on the GPU: the jobs split by scene, each scene's carried rays of

@@ -391,51 +391,54 @@ impl World {
     /// its own: nothing is merged across them.
     pub fn crossings(&self, ray: &Ray) -> Vec<WorldCrossing> {
         let mut out = Vec::new();
-        if !ray.is_traceable() {
-            return out;
-        }
-        self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, _| {
-            let Some(p) = &self.placed[id as usize] else { return false };
-            let local = carried(p, ray, ray.tmax);
-            let mirrored = p.to_world.determinant() < 0.0;
-            for c in self.scenes[p.scene as usize].crossings(&local.ray) {
-                let Some(t) = local.back_t(c.t, ray.tmax) else { continue };
-                out.push(WorldCrossing { instance: id, crossing: Crossing { t, enters: c.enters != mirrored, ..c } });
-            }
-            false
-        });
+        self.crossings_from(ray, &[], &mut out);
         // Stable: an instance's own crossings keep their order.
         out.sort_by(|a, b| a.crossing.t.total_cmp(&b.crossing.t).then(a.instance.cmp(&b.instance)));
         out
     }
 
+    /// The crossings of `ray` with the instances its walk enters but those `asked`,
+    /// appended to `out` unsorted (each instance's in its own order).
+    pub(crate) fn crossings_from(&self, ray: &Ray, asked: &[u32], out: &mut Vec<WorldCrossing>) {
+        if !ray.is_traceable() {
+            return;
+        }
+        self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, _| {
+            if asked.contains(&id) {
+                return false;
+            }
+            let Some(p) = &self.placed[id as usize] else { return false };
+            let local = carried(p, ray, ray.tmax);
+            p.placed_crossings(id, &local, ray.tmax, &self.scenes[p.scene as usize].crossings(&local.ray), out);
+            false
+        });
+    }
+
     /// How many times `ray` crosses the world's triangles in `[tmin, tmax]`, and how
     /// many of those arrive on a placed triangle's front ([`World::crossings`]).
     pub fn count_crossings(&self, ray: &Ray) -> CrossingCount {
+        self.count_crossings_from(ray, &[])
+    }
+
+    /// [`World::count_crossings`] of the instances but those `asked`.
+    pub(crate) fn count_crossings_from(&self, ray: &Ray, asked: &[u32]) -> CrossingCount {
         let mut count = CrossingCount::default();
         if !ray.is_traceable() {
             return count;
         }
         self.top.walk(ray.origin.to_array(), ray.dir.to_array(), ray.tmin, ray.tmax, |id, _, _| {
+            if asked.contains(&id) {
+                return false;
+            }
             let Some(p) = &self.placed[id as usize] else { return false };
             let local = carried(p, ray, ray.tmax);
             let scene = &self.scenes[p.scene as usize];
-            let mut c = if local.shift == 0.0 || ray.tmax == f32::INFINITY {
-                scene.tracer().count_crossings(&local.ray)
+            let c = if local.counted_by_list(ray.tmax) {
+                local.count_of_list(ray.tmax, &scene.crossings(&local.ray))
             } else {
-                // A moved origin's reach has a margin past `tmax`: counted from the list.
-                let mut c = CrossingCount::default();
-                for x in scene.crossings(&local.ray) {
-                    if local.back_t(x.t, ray.tmax).is_some() {
-                        c.total += 1;
-                        c.entries += u32::from(x.enters);
-                    }
-                }
-                c
+                scene.tracer().count_crossings(&local.ray)
             };
-            if p.to_world.determinant() < 0.0 {
-                c.entries = c.total - c.entries;
-            }
+            let c = p.placed_count(c);
             count.total += c.total;
             count.entries += c.entries;
             false
@@ -667,6 +670,34 @@ impl Placed {
     fn even(&self) -> bool {
         self.stretch[1] <= self.stretch[0] * (1.0 + EVEN)
     }
+
+    /// A count of the carried ray's crossings as the placed triangles' (entries and
+    /// exits swapped by a mirroring placement).
+    #[inline]
+    fn placed_count(&self, mut c: CrossingCount) -> CrossingCount {
+        if self.to_world.determinant() < 0.0 {
+            c.entries = c.total - c.entries;
+        }
+        c
+    }
+
+    /// Instance `id`'s crossings of the world's ray, from its scene's `crossings` of
+    /// the carried ray `local` (those shifted back past `tmax` dropped, sides turned by
+    /// a mirroring placement), appended to `out`.
+    fn placed_crossings(
+        &self,
+        id: u32,
+        local: &Carried,
+        tmax: f32,
+        crossings: &[Crossing],
+        out: &mut Vec<WorldCrossing>,
+    ) {
+        let mirrored = self.to_world.determinant() < 0.0;
+        for c in crossings {
+            let Some(t) = local.back_t(c.t, tmax) else { continue };
+            out.push(WorldCrossing { instance: id, crossing: Crossing { t, enters: c.enters != mirrored, ..*c } });
+        }
+    }
 }
 
 /// A ray carried into an instance's space, and how far along the world's ray its
@@ -686,6 +717,26 @@ impl Carried {
             return Some(hit);
         }
         Some(Hit { t: self.back_t(hit.t, tmax)?, ..hit })
+    }
+
+    /// Whether the carried ray's crossings are counted from its list: a moved origin's
+    /// reach has a margin past a finite `tmax`, whose crossings are dropped.
+    #[inline]
+    fn counted_by_list(&self, tmax: f32) -> bool {
+        self.shift != 0.0 && tmax != f32::INFINITY
+    }
+
+    /// The count of the carried ray's `crossings` that lie within `tmax` once shifted
+    /// back.
+    fn count_of_list(&self, tmax: f32, crossings: &[Crossing]) -> CrossingCount {
+        let mut c = CrossingCount::default();
+        for x in crossings {
+            if self.back_t(x.t, tmax).is_some() {
+                c.total += 1;
+                c.entries += u32::from(x.enters);
+            }
+        }
+        c
     }
 
     /// A distance along the carried ray as one along the world's, or `None` past

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use octrace_bake::procedural::{self, SplitMix};
 use octrace_bake::{bake, BuildParams, Mesh};
 use octrace_runtime::glam::Vec3;
-use octrace_runtime::world::{GpuWorld, Transform, World, WorldHit};
+use octrace_runtime::world::{GpuWorld, Transform, World, WorldCrossing, WorldHit};
 use octrace_runtime::{Ray, Scene};
 use octrace_tests::gpu;
 
@@ -44,7 +44,8 @@ fn rays(rng: &mut SplitMix, n: usize, reach: f32) -> Vec<Ray> {
         .collect()
 }
 
-/// The GPU's nearest and any hits against the CPU's batches, bit for bit: the
+/// The GPU's nearest and any hits, crossing counts and lists against the CPU's,
+/// bit for bit: the
 /// instance, triangle, part, distance and barycentrics (the leaf a walk found the hit
 /// in is the walk's business, and may differ, as for a scene's GPU tracer).
 fn same_as_cpu(on_gpu: &mut GpuWorld, world: &World, rays: &[Ray]) -> usize {
@@ -57,6 +58,19 @@ fn same_as_cpu(on_gpu: &mut GpuWorld, world: &World, rays: &[Ray]) -> usize {
         assert_eq!(key(c), key(g), "ray {i} {:?}: CPU {c:?}, GPU {g:?}", rays[i]);
     }
     assert_eq!(on_gpu.occluded(world, rays).expect("traced on the GPU"), world.occluded_batch(rays));
+    // Crossings, counted and listed in order: the CPU's (floats compared by bits).
+    let counts = on_gpu.count_crossings(world, rays).expect("counted on the GPU");
+    assert_eq!(counts, world.count_crossings_batch(rays));
+    let lists = on_gpu.crossings(world, rays).expect("listed on the GPU");
+    let bits = |c: &WorldCrossing| {
+        let x = c.crossing;
+        (c.instance, x.triangle, x.t.to_bits(), x.u.to_bits(), x.v.to_bits(), x.enters)
+    };
+    for (i, (ray, list)) in rays.iter().zip(&lists).enumerate() {
+        let want: Vec<_> = world.crossings(ray).iter().map(bits).collect();
+        assert_eq!(list.iter().map(bits).collect::<Vec<_>>(), want, "ray {i} {ray:?}: crossings");
+    }
+    assert!(counts.iter().any(|c| c.total >= 2), "rays should cross something twice");
     cpu.iter().flatten().count()
 }
 
@@ -77,7 +91,16 @@ fn a_world_on_the_gpu_answers_as_on_the_cpu() {
     let mut ids: Vec<u32> =
         (0..240).map(|k| world.add(&props[k % 3], placement(&mut rng, reach)).expect("placed")).collect();
     world.commit();
-    let rays = rays(&mut rng, 3000, reach as f32);
+    let mut rays = rays(&mut rng, 3000, reach as f32);
+    // From far away (origins moved to just before the instances' boxes, distances
+    // shifted back), segments ending at a hit, an ulp before and an ulp after it.
+    let far: Vec<Ray> = rays.iter().take(600).map(|r| Ray::new(r.origin * 10.0, -r.origin)).collect();
+    for (ray, hit) in far.iter().zip(world.intersect_batch(&far)) {
+        let Some(h) = hit else { continue };
+        for tmax in [h.hit.t, h.hit.t.next_down(), h.hit.t.next_up()] {
+            rays.push(Ray { tmax, ..*ray });
+        }
+    }
     let mut on_gpu = GpuWorld::new(&gpu.device, &gpu.queue);
     let hits = same_as_cpu(&mut on_gpu, &world, &rays);
     assert!(hits > 1000, "{hits} hits: the rays should meet the crowd");
