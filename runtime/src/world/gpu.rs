@@ -12,6 +12,7 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
@@ -73,6 +74,29 @@ pub struct GpuWorld {
     on_device: Vec<OnDevice>,
     /// Each uploaded scene's index in `on_device`, by its address.
     by_scene: HashMap<usize, usize>,
+    /// The last batch's timings.
+    timings: GpuWorldTimings,
+}
+
+/// Where the time of a [`GpuWorld`] batch went: the host's parts and the GPU's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuWorldTimings {
+    /// Walking the top level for each ray's first boxes (all cores).
+    pub top: Duration,
+    /// The GPU tracers' calls, transfers included, as the host waits for them.
+    pub device: Duration,
+    /// The rays' carrying into the instances, their grouping by scene and the merging
+    /// of the answers, on one thread.
+    pub rounds: Duration,
+    /// The rays whose walks enter more boxes than the rounds take, finished on the
+    /// CPU (all cores).
+    pub finish: Duration,
+    /// The whole call.
+    pub total: Duration,
+    /// Rounds the batch took (a box of each ray a round), over its pieces.
+    pub round_count: u32,
+    /// Rays finished on the CPU.
+    pub finished_on_cpu: u64,
 }
 
 impl std::fmt::Debug for GpuWorld {
@@ -84,7 +108,13 @@ impl std::fmt::Debug for GpuWorld {
 impl GpuWorld {
     /// Nothing uploaded yet, on `device`.
     pub fn new(device: &crate::gpu::wgpu::Device, queue: &crate::gpu::wgpu::Queue) -> GpuWorld {
-        GpuWorld { device: device.clone(), queue: queue.clone(), on_device: Vec::new(), by_scene: HashMap::new() }
+        GpuWorld {
+            device: device.clone(),
+            queue: queue.clone(),
+            on_device: Vec::new(),
+            by_scene: HashMap::new(),
+            timings: GpuWorldTimings::default(),
+        }
     }
 
     /// Uploads the scenes of `world`'s committed instances not yet on the device.
@@ -114,6 +144,12 @@ impl GpuWorld {
     /// The scenes on the device.
     pub fn scenes(&self) -> usize {
         self.on_device.len()
+    }
+
+    /// Where the last batch's time went ([`GpuWorld::intersect`], `occluded`,
+    /// `count_crossings`, `crossings`; the uploads not counted).
+    pub fn timings(&self) -> GpuWorldTimings {
+        self.timings
     }
 
     /// Forgets the scenes no committed instance of `world` places (their memory on
@@ -154,10 +190,12 @@ impl GpuWorld {
     /// As [`GpuWorld::intersect`].
     pub fn count_crossings(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<CrossingCount>> {
         self.upload(world)?;
+        let start = Instant::now();
+        let mut timings = GpuWorldTimings::default();
         let mut out: Vec<CrossingCount> = answers(rays.len())?;
         for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
-            let boxes = boxes_of(world, rays);
-            self.along(world, rays, &boxes, false, |i, _, p, local, found| {
+            let boxes = boxes_of(world, rays, &mut timings);
+            self.along(world, rays, &boxes, false, &mut timings, |i, _, p, local, found| {
                 let c = match found {
                     Found::Count(c) => c,
                     Found::List(list) => local.count_of_list(rays[i].tmax, list),
@@ -166,12 +204,16 @@ impl GpuWorld {
                 out[i].total += c.total;
                 out[i].entries += c.entries;
             })?;
+            let t = Instant::now();
             out.par_iter_mut().enumerate().filter(|(i, _)| boxes.more(*i)).for_each(|(i, o)| {
                 let rest = world.count_crossings_from(&rays[i], &asked(&boxes, i));
                 o.total += rest.total;
                 o.entries += rest.entries;
             });
+            timings.finish += t.elapsed();
+            timings.finished_on_cpu += (0..rays.len()).filter(|&i| boxes.more(i)).count() as u64;
         }
+        self.timings = GpuWorldTimings { total: start.elapsed(), ..timings };
         Ok(out)
     }
 
@@ -184,14 +226,17 @@ impl GpuWorld {
     /// cannot be had.
     pub fn crossings(&mut self, world: &World, rays: &[Ray]) -> GpuResult<Vec<Vec<WorldCrossing>>> {
         self.upload(world)?;
+        let start = Instant::now();
+        let mut timings = GpuWorldTimings::default();
         let mut out: Vec<Vec<WorldCrossing>> = answers(rays.len())?;
         for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
-            let boxes = boxes_of(world, rays);
-            self.along(world, rays, &boxes, true, |i, id, p, local, found| {
+            let boxes = boxes_of(world, rays, &mut timings);
+            self.along(world, rays, &boxes, true, &mut timings, |i, id, p, local, found| {
                 if let Found::List(list) = found {
                     p.placed_crossings(id, local, rays[i].tmax, list, &mut out[i]);
                 }
             })?;
+            let t = Instant::now();
             out.par_iter_mut().enumerate().for_each(|(i, o)| {
                 if boxes.more(i) {
                     world.crossings_from(&rays[i], &asked(&boxes, i), o);
@@ -199,21 +244,37 @@ impl GpuWorld {
                 // Stable: an instance's own crossings keep their order.
                 o.sort_by(|a, b| a.crossing.t.total_cmp(&b.crossing.t).then(a.instance.cmp(&b.instance)));
             });
+            timings.finish += t.elapsed();
+            timings.finished_on_cpu += (0..rays.len()).filter(|&i| boxes.more(i)).count() as u64;
         }
+        self.timings = GpuWorldTimings { total: start.elapsed(), ..timings };
         Ok(out)
     }
 
     fn batch(&mut self, world: &World, any: bool, rays: &[Ray]) -> GpuResult<Vec<Option<WorldHit>>> {
         self.upload(world)?;
+        let start = Instant::now();
+        let mut timings = GpuWorldTimings::default();
         let mut out = answers(rays.len())?;
         for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
-            let boxes = boxes_of(world, rays);
-            let mut walker = OnGpu { gpu: self, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new() };
+            let boxes = boxes_of(world, rays, &mut timings);
+            let mut walker = OnGpu { gpu: self, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new(), timings };
+            let t = Instant::now();
             world.rounds(any, rays, &boxes, out, &mut walker)?;
+            timings = walker.timings;
+            timings.rounds += t.elapsed();
+            let t = Instant::now();
             out.par_iter_mut().enumerate().filter(|(i, _)| boxes.more(*i)).for_each(|(i, o)| {
                 world.finish(any, &rays[i], boxes.of_ray(i), o);
             });
+            timings.finish += t.elapsed();
+            timings.finished_on_cpu += (0..rays.len()).filter(|&i| boxes.more(i)).count() as u64;
         }
+        self.timings = GpuWorldTimings {
+            total: start.elapsed(),
+            rounds: timings.rounds.saturating_sub(timings.device),
+            ..timings
+        };
         Ok(out)
     }
 
@@ -228,15 +289,20 @@ impl GpuWorld {
         rays: &[Ray],
         boxes: &Boxes,
         list: bool,
+        timings: &mut GpuWorldTimings,
         mut visit: impl FnMut(usize, u32, &Placed, &Carried, Found<'_>),
     ) -> GpuResult<()> {
         let mut jobs: Vec<(u32, u32)> = Vec::new();
+        let start = Instant::now();
+        let device_before = timings.device;
         for round in 0.. {
             jobs.clear();
             jobs.extend((0..rays.len()).filter_map(|i| boxes.of_ray(i).get(round).map(|b| (b.1, i as u32))));
             if jobs.is_empty() {
+                timings.rounds += start.elapsed().saturating_sub(timings.device - device_before);
                 return Ok(());
             }
+            timings.round_count += 1;
             let placed: Vec<&Placed> =
                 jobs.iter().map(|&(id, _)| world.placed[id as usize].as_ref().expect("a committed instance")).collect();
             let local: Vec<Carried> = jobs
@@ -255,13 +321,17 @@ impl GpuWorld {
                     .partition(|&k| list || local[k].counted_by_list(rays[jobs[k].1 as usize].tmax));
                 let carried_rays = |ks: &[usize]| ks.iter().map(|&k| local[k].ray).collect::<Vec<Ray>>();
                 if !counted.is_empty() {
+                    let t = Instant::now();
                     let counts = on_device.tracer.count_crossings(&carried_rays(&counted))?;
+                    timings.device += t.elapsed();
                     for (&k, c) in counted.iter().zip(counts) {
                         visit(jobs[k].1 as usize, jobs[k].0, placed[k], &local[k], Found::Count(c));
                     }
                 }
                 if !listed.is_empty() {
+                    let t = Instant::now();
                     let lists = on_device.tracer.crossings(&carried_rays(&listed))?;
+                    timings.device += t.elapsed();
                     for (n, &k) in listed.iter().enumerate() {
                         visit(jobs[k].1 as usize, jobs[k].0, placed[k], &local[k], Found::List(lists.of(n)));
                     }
@@ -285,12 +355,14 @@ fn answers<T: Clone + Default>(n: usize) -> GpuResult<Vec<T>> {
 
 /// Each ray's first [`GPU_BOXES`] boxes: the top level's walks on all cores, a few
 /// thousand rays a task.
-fn boxes_of(world: &World, rays: &[Ray]) -> Boxes {
+fn boxes_of(world: &World, rays: &[Ray], timings: &mut GpuWorldTimings) -> Boxes {
+    let t = Instant::now();
     let mut boxes = Boxes::default();
     let parts: Vec<Boxes> = rays.par_chunks(4096).map(|r| Boxes::of(world, r, GPU_BOXES)).collect();
     for part in parts {
         boxes.append(part);
     }
+    timings.top += t.elapsed();
     boxes
 }
 
@@ -307,6 +379,7 @@ struct OnGpu<'g> {
     by_scene: Vec<u32>,
     rays: Vec<Ray>,
     at: Vec<u32>,
+    timings: GpuWorldTimings,
 }
 
 impl Walker for OnGpu<'_> {
@@ -320,6 +393,7 @@ impl Walker for OnGpu<'_> {
         local: &[Ray],
         hits: &mut [Option<Hit>],
     ) -> GpuResult<()> {
+        self.timings.round_count += 1;
         self.by_scene.clear();
         for &(id, _) in jobs {
             let (scene, _, _) = world.placement(id).expect("a job is a committed instance's");
@@ -334,7 +408,9 @@ impl Walker for OnGpu<'_> {
             }
             self.rays.clear();
             self.rays.extend(self.at.iter().map(|&k| local[k as usize]));
+            let t = Instant::now();
             let found = on_device.tracer.trace_timed(&self.rays, any)?.0;
+            self.timings.device += t.elapsed();
             for (&k, hit) in self.at.iter().zip(found) {
                 hits[k as usize] = hit;
             }

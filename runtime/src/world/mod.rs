@@ -66,7 +66,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 #[cfg(feature = "gpu")]
-pub use gpu::GpuWorld;
+pub use gpu::{GpuWorld, GpuWorldTimings};
 pub use transform::Transform;
 
 use crate::cpu::{ClosestPoint, Crossing, CrossingCount};

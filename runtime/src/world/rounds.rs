@@ -6,7 +6,12 @@
 //! by the one rule of [`WorldHit::beats`].
 
 use super::{carried, Carried, World, WorldHit, NO_HIT};
+use rayon::prelude::*;
+
 use crate::ray::{Hit, Ray};
+
+/// Rounds of this many jobs or more are carried and taken back on all cores.
+const WIDE_ROUND: usize = 1 << 14;
 
 /// Groups of fewer rays than this (a round's rays for one instance) are walked one at
 /// a time on the CPU: the batch walk's set-up does not pay for them.
@@ -155,18 +160,27 @@ impl World {
                 return Ok(());
             }
             jobs.sort_unstable();
-            carried_rays.clear();
-            carried_rays.extend(jobs.iter().map(|&(id, i)| {
+            // Large rounds (the GPU's) carry and take back their rays on all cores; a
+            // CPU piece's are smaller than this, on the thread that has the piece.
+            let wide = jobs.len() >= WIDE_ROUND;
+            let carry = |&(id, i): &(u32, u32)| {
                 let ray = &rays[i as usize];
                 let p = self.placed[id as usize].as_ref().expect("a box is a committed instance's");
                 carried(p, ray, out[i as usize].map_or(ray.tmax, |h| h.hit.t))
-            }));
+            };
+            carried_rays.clear();
+            if wide {
+                carried_rays.par_extend(jobs.par_iter().map(carry));
+            } else {
+                carried_rays.extend(jobs.iter().map(carry));
+            }
             local.clear();
             local.extend(carried_rays.iter().map(|c: &Carried| c.ray));
             hits.clear();
             hits.resize(local.len(), None);
             walker.walk(self, any, &jobs, &local, &mut hits)?;
-            for ((&(id, i), raw), c) in jobs.iter().zip(&hits).zip(&carried_rays) {
+            // Each answer carried back (a ray has one job a round)...
+            let back = |((&(id, i), raw), c): ((&(u32, u32), &Option<Hit>), &Carried)| {
                 let ray = &rays[i as usize];
                 let reach = out[i as usize].map_or(ray.tmax, |h| h.hit.t);
                 let mut hit = raw.and_then(|h| c.back(h, reach));
@@ -176,9 +190,16 @@ impl World {
                     let scene = &self.scenes[self.placed[id as usize].expect("asked").scene as usize];
                     hit = scene.intersect(&c.ray).and_then(|h| c.back(h, reach));
                 }
-                let Some(hit) = hit else { continue };
-                let this = WorldHit { instance: id, hit };
-                if this.beats(out[i as usize]) {
+                hit.map(|hit| WorldHit { instance: id, hit })
+            };
+            let found: Vec<Option<WorldHit>> = if wide {
+                jobs.par_iter().zip(&hits).zip(&carried_rays).map(back).collect()
+            } else {
+                jobs.iter().zip(&hits).zip(&carried_rays).map(back).collect()
+            };
+            // ...then kept where it is the nearer.
+            for (&(_, i), this) in jobs.iter().zip(found) {
+                if let Some(this) = this.filter(|h| h.beats(out[i as usize])) {
                     out[i as usize] = Some(this);
                 }
             }

@@ -162,7 +162,8 @@ fn a_crowded_world_on_the_gpu_answers_as_on_the_cpu() {
     let wall = Transform::scaling([1.0, 4.0, 4.0]).then(&Transform::translation([310.0, 100.0, 0.0]));
     world.add(&props[1], wall).expect("placed");
     world.commit();
-    let mut rays = rays(&mut rng, 2000, reach as f32);
+    // Enough rays for a round of the GPU's to carry its rays on all cores.
+    let mut rays = rays(&mut rng, 20_000, reach as f32);
     let mut row = Vec::new();
     for k in 0..64 {
         let (y, z) = (100.9 + (k % 8) as f32 * 1e-3, 0.9 - (k / 8) as f32 * 1e-3);

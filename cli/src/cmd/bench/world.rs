@@ -158,6 +158,19 @@ pub(super) fn run(loaded: Loaded, n: usize, args: &Args) -> anyhow::Result<()> {
             g["upload_ms"].as_f64().unwrap_or(0.0)
         );
         println!("  octrace world, CPU batch   {}  (all cores)", s(&g["cpu_all_cores"]));
+        let t = &g["last_batch_ms"];
+        let f = |k: &str| t[k].as_f64().unwrap_or(0.0);
+        println!(
+            "  the last GPU batch: {:.1} ms = top level {:.1} + GPU calls {:.1} + carrying and merging {:.1} + \
+             finished on the CPU {:.1} ({} rays); {} rounds",
+            f("total"),
+            f("top_level"),
+            f("device"),
+            f("rounds"),
+            f("finish"),
+            t["finished_on_cpu"],
+            t["round_count"]
+        );
     }
     if let Some(e) = report.get("embree") {
         println!(
@@ -202,9 +215,15 @@ fn on_gpu(world: &World, rays: &[octrace_runtime::Ray], runs: usize) -> anyhow::
         h.map(|h| (h.instance, h.hit.triangle, h.hit.t.to_bits(), h.hit.u.to_bits(), h.hit.v.to_bits()))
     };
     let same = gpu_hits.iter().zip(&cpu_hits).all(|(g, c)| key(g) == key(c));
+    let t = gpu.timings();
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     Ok(json!({
         "adapter": context.describe(),
         "upload_ms": upload.as_secs_f64() * 1e3,
+        "last_batch_ms": {
+            "total": ms(t.total), "top_level": ms(t.top), "device": ms(t.device), "rounds": ms(t.rounds),
+            "finish": ms(t.finish), "round_count": t.round_count, "finished_on_cpu": t.finished_on_cpu,
+        },
         "world": Spread::of(on_gpu),
         "cpu_all_cores": Spread::of(on_cpu),
         "same_as_cpu": same,
