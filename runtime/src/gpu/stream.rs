@@ -121,7 +121,7 @@ impl Answers<'_> {
 
 /// Camera rays made on the device: ray `(column, row)` starts at `origin` with the
 /// direction `(dx (column + 1/2) + dy (row + 1/2)) + d0`, each operation rounded to
-/// `f32` ([`GpuCamera::ray`] is the same arithmetic on the CPU, so the GPU traces the
+/// `f32` ([`GpuCamera::ray_at`] is the same arithmetic on the CPU, so the GPU traces the
 /// CPU's rays bit for bit). Directions are not normalized: for a pinhole camera made
 /// with [`GpuCamera::pinhole`] a hit's distance is its depth along the optical axis,
 /// as Open3D's `create_rays_pinhole` rays give.

@@ -33,7 +33,9 @@
 //! points ([`World::closest_point`]: each instance searched in its own space, for
 //! placements that scale distances evenly). The effects renderer draws a world
 //! ([`crate::render::effects::render_effects_world`]): each instance's materials,
-//! textures and lights, placed.
+//! textures and lights, placed. On the GPU (the `gpu` feature), `GpuWorld` answers
+//! the ray queries with the instances' walks in the kernel, the CPU's answers bit
+//! for bit.
 //!
 //! ```
 //! use std::sync::Arc;
