@@ -141,6 +141,7 @@ impl World {
         let mut round = 0usize;
         let mut jobs: Vec<(u32, u32)> = Vec::new(); // (instance, ray)
         let (mut carried_rays, mut local, mut hits) = (Vec::new(), Vec::new(), Vec::new());
+        let mut found: Vec<Option<WorldHit>> = Vec::new();
         loop {
             jobs.clear();
             let mut left = false;
@@ -192,13 +193,14 @@ impl World {
                 }
                 hit.map(|hit| WorldHit { instance: id, hit })
             };
-            let found: Vec<Option<WorldHit>> = if wide {
-                jobs.par_iter().zip(&hits).zip(&carried_rays).map(back).collect()
+            found.clear();
+            if wide {
+                found.par_extend(jobs.par_iter().zip(&hits).zip(&carried_rays).map(back));
             } else {
-                jobs.iter().zip(&hits).zip(&carried_rays).map(back).collect()
-            };
+                found.extend(jobs.iter().zip(&hits).zip(&carried_rays).map(back));
+            }
             // ...then kept where it is the nearer.
-            for (&(_, i), this) in jobs.iter().zip(found) {
+            for (&(_, i), &this) in jobs.iter().zip(&found) {
                 if let Some(this) = this.filter(|h| h.beats(out[i as usize])) {
                     out[i as usize] = Some(this);
                 }
