@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Qualifies a GPU for octrace in one run: the GPU tests, `bench --gpu` on the bunny and the
-# dragon, and the CPU's answers against the GPU's on the standard ray sets, the dragon's
-# inside/outside of a million points (uniform and near the surface) and renders.
+# dragon, and the CPU's answers against the GPU's on the standard ray sets, a world of
+# 100 bunnies, the dragon's inside/outside of a million points (uniform and near the
+# surface) and renders.
 #
 #   scripts/gpu-check.sh pack [--bundle DIR]
 #       Here, with the Rust toolchain: builds the CLI (release) and the integration test
@@ -212,6 +213,9 @@ run() {
         compare_trace "$s" "$crossing_set" "every hit" --all-hits
     done
 
+    echo "== a world of 100 bunnies: CPU = GPU"
+    compare_world
+
     if [ -e "$work/dragon.oct" ]; then
         echo "== inside/outside: CPU = GPU"
         compare_contains dragon uniform
@@ -255,6 +259,48 @@ bake() {
 }
 
 # Traces one ray set on the CPU and on the GPU and compares the answers.
+# A world of 100 bunnies (a scene description: a lattice, each turned about y) traced
+# on the CPU and with the instances' walks on the GPU (`GpuWorld`): nearest hits,
+# occlusion and crossing counts byte for byte on the bunny's primary set; with the
+# bench, the world's Mrays/s both ways and where the GPU batch's time goes.
+compare_world() {
+    python3 - "$work/world.json" <<'EOF'
+import json, math, sys
+instances = []
+for k in range(100):
+    a = 2.399 * k
+    c, s = math.cos(a), math.sin(a)
+    x, y, z = k % 5, k // 5 % 5, k // 25
+    instances.append({"scene": "bunny", "transform": [[c, 0, s, 0.2 * x], [0, 1, 0, 0.2 * y], [-s, 0, c, 0.2 * z]]})
+json.dump({"scenes": {"bunny": "bunny.oct"}, "instances": instances}, open(sys.argv[1], "w"))
+EOF
+    local rays="$work/bunny-primary.rays"
+    [ -e "$rays" ] || "$octrace" rays "$work/bunny.oct" --set primary -o "$rays" >/dev/null
+    local what flag
+    for what in nearest occluded counts; do
+        flag=()
+        [ "$what" = occluded ] && flag=(--occluded)
+        [ "$what" = counts ] && flag=(--counts)
+        if ! timeout "$step_timeout" "$octrace" trace "$work/world.json" --rays "$rays" -o "$work/world-$what.cpu" "${flag[@]}" >"$work/world-$what.cpu.txt" 2>"$work/world.err" ||
+            ! timeout "$step_timeout" "$octrace" trace "$work/world.json" --rays "$rays" -o "$work/world-$what.gpu" --gpu "${flag[@]}" >"$work/world-$what.gpu.txt" 2>>"$work/world.err"; then
+            record "world $what" "failed" "$(tail -n 3 "$work/world.err" | tr '\n' ' ')"
+        elif cmp -s "$work/world-$what.cpu" "$work/world-$what.gpu"; then
+            record "world $what" "same" "CPU: $(tr '\n' ' ' <"$work/world-$what.cpu.txt")/ GPU: $(tr '\n' ' ' <"$work/world-$what.gpu.txt")"
+        else
+            record "world $what" "differs" "the files differ: $(cmp "$work/world-$what.cpu" "$work/world-$what.gpu" 2>&1 | head -n 1)"
+        fi
+    done
+    if [ "$bench" -eq 1 ]; then
+        if timeout "$step_timeout" "$octrace" bench "$work/bunny.oct" --instances 100 --gpu --no-peer --runs 5 >"$work/world-bench.txt" 2>"$work/world.err"; then
+            local verdict=same
+            grep -q "the CPU's answers: yes" "$work/world-bench.txt" || verdict=differs
+            record "world bench" "$verdict" "$(grep -E "GPU|batch" "$work/world-bench.txt" | tr -s ' ' | tr '\n' ';')"
+        else
+            record "world bench" "failed" "$(tail -n 3 "$work/world.err" | tr '\n' ' ')"
+        fi
+    fi
+}
+
 compare_trace() {
     local scene=$1 set=$2 what=$3
     shift 3

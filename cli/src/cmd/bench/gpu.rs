@@ -198,7 +198,7 @@ pub(super) fn measure(
             differ,
         });
     }
-    let camera = camera_figures(scene, &tracer, frame, runs, repeat)?;
+    let camera = camera_figures(&tracer, frame, runs, repeat)?;
     Ok(GpuReport {
         adapter: gpu.describe(),
         exact_edges: tracer.uses_f64(),
@@ -220,7 +220,6 @@ pub(super) fn measure(
 /// The primary set's view made on the device (`repeat` times the pixels: a taller
 /// image), traced to distance and triangle, and to distance alone.
 fn camera_figures(
-    scene: &Scene,
     tracer: &GpuTracer<'_>,
     frame: &octrace_runtime::raysets::Frame,
     runs: usize,
@@ -243,10 +242,12 @@ fn camera_figures(
         device.extend(t.kernel_device.map(mrays));
         b.push(mrays(tracer.trace_camera_into(&camera, false, Answers::Distance(&mut distance))?.total));
     }
-    // The CPU's answers for the same rays made on the host (the first frame's rows).
+    // The CPU's answers for the same rays made on the host (the first frame's rows),
+    // with the GPU tracer's triangle test.
     let m = (standard.width * standard.height) as usize;
     let rays: Vec<Ray> = (0..m).map(|i| camera.ray_at(i)).collect();
-    let cpu = scene.intersect_batch(&rays);
+    let mut cpu = vec![None; m];
+    tracer.cpu_tracer().par_intersect_batch(&rays, &mut cpu);
     let differ = cpu
         .iter()
         .enumerate()
