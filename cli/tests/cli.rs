@@ -1903,11 +1903,21 @@ fn contains_and_distance_take_a_scene_description() {
     assert_eq!(record(3), (2.0, [6.0, 1.0, 2.0], 1));
     fails_saying(d, &["distance", "world.json", "--points", "points.bin", "-o", "x.bin", "--check"], "take a .oct");
     fails_saying(d, &["contains", "world.json", "--points", "points.bin", "-o", "x.bin", "--vote", "3"], "take a .oct");
-    // A stretched placement: distances through it are refused, naming the instance.
+    // A stretched placement (x in [5, 6], y in [0, 3], z in [0, 1]): its placed
+    // triangles measured in the world.
     let stretched = r#"{"scenes": {"cube": "cube.oct"}, "instances": [
         {"scene": "cube"}, {"scene": "cube", "transform": [[1, 0, 0, 5], [0, 3, 0, 0], [0, 0, 1, 0]]}]}"#;
     std::fs::write(d.join("stretched.json"), stretched).unwrap();
-    fails_saying(d, &["distance", "stretched.json", "--points", "points.bin", "-o", "x.bin"], "instance 1 scales them");
+    ok(d, &["distance", "stretched.json", "--points", "points.bin", "-o", "near.bin"]);
+    let near = std::fs::read(d.join("near.bin")).unwrap();
+    let record = |i: usize| {
+        let word = |k: usize| u32::from_le_bytes(near[32 * i + 4 * k..32 * i + 4 * k + 4].try_into().unwrap());
+        let f = |k: usize| f32::from_bits(word(k));
+        (f(0), [f(1), f(2), f(3)], word(4))
+    };
+    assert_eq!(record(3), (3.0, [6.0, 1.0, 1.0], 1));
+    // Between them, as near the first cube's face as the second's: the lower instance.
+    assert_eq!(record(2), (2.0, [1.0, 0.5, 0.5], 0));
 }
 
 /// `render` takes a scene description: the effects renderer through the world, from

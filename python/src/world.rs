@@ -426,11 +426,12 @@ impl World {
     }
 
     /// The nearest point of the world's surface to each query point (Open3D's
-    /// ``compute_closest_points``), through every instance: each searched in its own
-    /// space by its scene's exact search, the point carried back in double precision
-    /// (``Scene.compute_closest_points``' answers, within the rounding of the carried
-    /// point). Placements must scale distances evenly (rotations, mirrors, uniform
-    /// scales, translations).
+    /// ``compute_closest_points``), through every instance, by its scene's exact
+    /// search: where the placement scales distances evenly (rotations, mirrors,
+    /// uniform scales, translations) in the instance's own space, the point carried
+    /// back in double precision (``Scene.compute_closest_points``' answers, within the
+    /// rounding of the carried point); where it stretches them, over the placed
+    /// triangles themselves (the answers of those triangles baked into one scene).
     ///
     /// Returns:
     ///     ``Scene.compute_closest_points``' dict, with ``geometry_ids`` the
@@ -438,8 +439,8 @@ impl World {
     ///     ``primitive_normals`` the placed triangles' unit normals.
     ///
     /// Raises:
-    ///     ValueError: an instance's placement stretches distances unevenly (named);
-    ///         points not float32 ``(..., 3)`` or NaN; ``max_distance`` NaN or negative.
+    ///     ValueError: points not float32 ``(..., 3)`` or NaN; ``max_distance`` NaN
+    ///         or negative.
     #[pyo3(signature = (query_points, nthreads=0, *, max_distance=f32::INFINITY),
         text_signature = "($self, query_points, nthreads=0, *, max_distance=1e999)")]
     fn compute_closest_points<'py>(
@@ -578,10 +579,7 @@ impl World {
         let out = query_points.py().detach(|| {
             on_threads(nthreads, || -> PyResult<_> {
                 let points = to_points(values)?;
-                let near = world.closest_points_batch(points, max_distance).map_err(|e| match e {
-                    e @ octrace_runtime::Error::Stretched { .. } => PyValueError::new_err(e.to_string()),
-                    e => runtime_error(e),
-                })?;
+                let near = world.closest_points_batch(points, max_distance).map_err(runtime_error)?;
                 then(points, near)
             })?
         })?;

@@ -214,14 +214,21 @@ def test_closest_points_and_distances_through_a_world_are_the_baked_scenes():
     assert np.isinf(world.compute_distance(points, max_distance=0.1)[far]).all()
 
 
-def test_a_stretched_placement_is_named_by_the_distance_calls():
+def test_distances_through_a_stretched_placement_are_the_placed_triangles():
     v, t = cube_arrays(-1.0, 1.0)
     world = octrace.World()
-    world.add_triangles(v, t)
-    stretched = world.add_triangles(v, t, np.diag([1.0, 2.0, 1.0, 1.0]))
-    world.commit()
-    with pytest.raises(ValueError, match=f"instance {stretched} scales them by 1.000000 to 2.000000"):
-        world.compute_distance(np.zeros((1, 3), np.float32))
-    world.remove(stretched)
+    first = world.add_triangles(v, t)
+    m = np.diag([1.0, 2.0, 1.0, 1.0])
+    m[:3, :3] = rotation([1, 2, 3], 0.4) @ m[:3, :3]  # stretched, then turned
+    m[0, 3] = 5.0
+    stretched = world.add_triangles(v, t, m)
     world.commit()
     assert world.compute_distance(np.zeros((1, 3), np.float32))[0] == 1.0
+    baked = octrace.Scene.from_arrays(*placed(v, t, [np.eye(4), m]))
+    rng = np.random.default_rng(8)
+    points = rng.uniform([-3, -4, -3], [8, 4, 3], (2000, 3)).astype(np.float32)
+    got, want = world.compute_closest_points(points), baked.compute_closest_points(points)
+    np.testing.assert_allclose(got["points"], want["points"], rtol=0, atol=1e-5)
+    np.testing.assert_allclose(world.compute_distance(points), baked.compute_distance(points), rtol=1e-6)
+    ids = np.where(want["primitive_ids"] < len(t), first, stretched)
+    assert (got["geometry_ids"] == ids).mean() > 0.99

@@ -43,21 +43,6 @@ pub enum Error {
         /// Why not.
         reason: &'static str,
     },
-    /// A world's closest-point query past an instance whose placement stretches
-    /// distances unevenly (a closest point in its scene is then not the closest in
-    /// the world).
-    #[error(
-        "closest points through a world need placements that scale distances evenly (rotations, mirrors, \
-         uniform scales, translations): instance {instance} scales them by {low:.6} to {high:.6}"
-    )]
-    Stretched {
-        /// The instance's id.
-        instance: u32,
-        /// The least factor its placement scales a length by.
-        low: f64,
-        /// The greatest.
-        high: f64,
-    },
     /// An instance id the world does not hold (never added, or removed).
     #[error("the world holds no instance {id} (never added, or removed)")]
     NoInstance {

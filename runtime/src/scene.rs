@@ -438,6 +438,25 @@ impl Scene {
         Ok(self.shared_tracer().closest_point(self.surface_bounds()?, p, max_distance))
     }
 
+    /// The closest point to `p` (in the world) of this scene's triangles as `to_world`
+    /// places them (each vertex carried in `f64`, rounded to `f32`), within
+    /// `max_distance`: a world's search through a placement that stretches distances
+    /// unevenly (`least` and `slack` as `Tracer::closest_point_placed` takes them).
+    pub(crate) fn closest_point_placed(
+        &self,
+        p: [f32; 3],
+        to_world: &crate::world::Transform,
+        to_local: &crate::world::Transform,
+        least: f64,
+        slack: f64,
+        max_distance: f32,
+    ) -> Result<Option<ClosestPoint>> {
+        let bounds = self.surface_bounds()?;
+        let mut scratch = crate::cpu::ClosestScratch::default();
+        let tracer = self.shared_tracer();
+        Ok(tracer.closest_point_placed(bounds, &mut scratch, p, to_world, to_local, least, slack, max_distance))
+    }
+
     /// [`Scene::closest_point_within`] for many points, on all cores (`f32::INFINITY`
     /// for no limit).
     ///

@@ -37,6 +37,7 @@ pub use bounds::SurfaceBounds;
 use crate::exact::distance::{point_on, squared_distance, Square};
 
 mod bounds;
+mod placed;
 
 /// The point of a scene's surface nearest a query point ([`Tracer::closest_point`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -447,13 +448,25 @@ impl Tracer<'_> {
                 }
             }
         }
-        let mut best = best?;
-        let distance = self.rounded_distance(p, &mut best);
+        self.closest_answer(p, best?, max_distance, |prim| self.view.triangle(StoredIndex(prim)))
+    }
+
+    /// The closest point a search found (`best`, of the triangles `triangle` gives),
+    /// its distance correctly rounded; `None` past `max_distance`.
+    #[inline(always)]
+    fn closest_answer(
+        &self,
+        p: [f32; 3],
+        mut best: Best,
+        max_distance: f32,
+        triangle: impl Fn(u32) -> [[f32; 3]; 3],
+    ) -> Option<ClosestPoint> {
+        let distance = self.rounded_distance(p, &mut best, &triangle);
         if distance > max_distance {
             return None;
         }
         let (q, u, v) = match best.exact {
-            Some(exact) if best.near.thin => point_on(p, self.view.triangle(StoredIndex(best.prim)), exact.feature),
+            Some(exact) if best.near.thin => point_on(p, triangle(best.prim), exact.feature),
             _ => (best.near.q, best.near.u, best.near.v),
         };
         Some(ClosestPoint {
@@ -473,15 +486,23 @@ impl Tracer<'_> {
         for &prim in prims {
             let at = prim as usize * TRIANGLE_FLOATS;
             if let Some(t) = all.get(at..at + TRIANGLE_FLOATS) {
-                self.closest_in_triangle(p, pd, prim, t, best);
+                self.closest_in_triangle(p, pd, prim, t, best, |q| self.view.triangle(StoredIndex(q)));
             }
         }
     }
 
-    /// Measures stored triangle `prim` (its vertices `t`) against the best so far.
+    /// Measures stored triangle `prim` (its vertices `t`, as `triangle` gives them for
+    /// exact arithmetic) against the best so far.
     #[inline(always)]
-    fn closest_in_triangle(&self, p: [f32; 3], pd: [f64; 3], prim: u32, t: &[f32], best: &mut Option<Best>) {
-        let v = &self.view;
+    fn closest_in_triangle(
+        &self,
+        p: [f32; 3],
+        pd: [f64; 3],
+        prim: u32,
+        t: &[f32],
+        best: &mut Option<Best>,
+        triangle: impl Fn(u32) -> [[f32; 3]; 3],
+    ) {
         // The triangle's box is a cheap first look.
         if let Some(b) = best {
             let mut gap2 = 0.0;
@@ -536,8 +557,8 @@ impl Tracer<'_> {
             return;
         }
         // Too close to call in f64: exact arithmetic decides (ties to the lower id).
-        let held = b.exact.unwrap_or_else(|| squared_distance(p, v.triangle(StoredIndex(b.prim))));
-        let this = squared_distance(p, v.triangle(StoredIndex(prim)));
+        let held = b.exact.unwrap_or_else(|| squared_distance(p, triangle(b.prim)));
+        let this = squared_distance(p, triangle(prim));
         let wins = match this.cmp(&held) {
             Ordering::Less => true,
             Ordering::Equal => self.input_id(prim) < self.input_id(b.prim),
@@ -555,7 +576,7 @@ impl Tracer<'_> {
     /// The best triangle's distance, correctly rounded: from `f64` where its error
     /// interval rounds to one `f32` (and the triangle is not thin), else exactly (the
     /// exact value kept in `best`).
-    fn rounded_distance(&self, p: [f32; 3], best: &mut Best) -> f32 {
+    fn rounded_distance(&self, p: [f32; 3], best: &mut Best, triangle: impl Fn(u32) -> [[f32; 3]; 3]) -> f32 {
         if best.exact.is_none() {
             let Near { d2, err, thin, .. } = best.near;
             let lo = ((d2 - err).max(0.0).sqrt() * (1.0 - 4.0 * U)) as f32;
@@ -563,7 +584,7 @@ impl Tracer<'_> {
             if lo == hi && !thin {
                 return lo;
             }
-            best.exact = Some(squared_distance(p, self.view.triangle(StoredIndex(best.prim))));
+            best.exact = Some(squared_distance(p, triangle(best.prim)));
         }
         best.exact.map_or(f32::NAN, |e| e.rounded())
     }

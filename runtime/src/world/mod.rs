@@ -30,8 +30,9 @@
 //! their batches), every crossing in order merged across instances
 //! ([`World::crossings`]) and their counts ([`World::count_crossings`]),
 //! inside/outside ([`World::contains`]: inside some closed instance), and closest
-//! points ([`World::closest_point`]: each instance searched in its own space, for
-//! placements that scale distances evenly). The effects renderer draws a world
+//! points ([`World::closest_point`]: each instance searched in its own space, or
+//! where its placement stretches distances, its placed triangles measured in the
+//! world). The effects renderer draws a world
 //! ([`crate::render::effects::render_effects_world`]): each instance's materials,
 //! textures and lights, placed. On the GPU (the `gpu` feature), `GpuWorld` answers
 //! the ray queries with the instances' walks in the kernel, the CPU's answers bit
@@ -142,6 +143,11 @@ struct Placed {
     bounds: Aabb,
     /// Bounds on the factor the placement scales lengths by (`stretch_of`).
     stretch: [f64; 2],
+    /// A positive lower bound on that factor (the least singular value of the linear
+    /// part), for searches through a stretching placement.
+    least: f64,
+    /// How far rounding a placed vertex to `f32` can move it.
+    slack: f64,
 }
 
 /// A placement scales distances evenly where its least and greatest factors on
@@ -177,8 +183,6 @@ pub struct World {
     top: Top,
     /// Edits since the last commit, in order.
     staged: Vec<(u32, Option<Placed>)>,
-    /// The first committed instance whose placement scales distances unevenly.
-    stretched: Option<u32>,
     /// Each id's scene as the edits leave it (`None`: removed).
     latest: Vec<Option<u32>>,
 }
@@ -273,7 +277,6 @@ impl World {
             let live = (0..self.placed.len() as u32).filter(|&id| self.placed[id as usize].is_some()).collect();
             self.top = Top::build(&self.boxes, live);
         }
-        self.stretched = self.placed.iter().position(|p| p.is_some_and(|p| !p.even())).map(|id| id as u32);
     }
 
     /// The committed instances.
@@ -489,24 +492,25 @@ impl World {
     }
 
     /// The closest point of the world's surface to `p` if it lies at most
-    /// `max_distance` away: instances taken nearest box first, each searched in its
-    /// own space (`p` carried there in `f64`, rounded once) by its scene's exact
-    /// search ([`Scene::closest_point_within`]) within the best distance so far, the
-    /// point carried back to the world in `f64` and its distance measured there
-    /// (rounded once). Of equally near points the lower instance id's. Against the
+    /// `max_distance` away: instances taken nearest box first, each searched within the
+    /// best distance so far by its scene's exact search over its own tree. Where the
+    /// placement scales distances evenly (rotations, mirrors, uniform scales and
+    /// translations), `p` is carried into the instance's space (in `f64`, rounded once),
+    /// searched there ([`Scene::closest_point_within`]), and the point carried back to
+    /// the world in `f64` and its distance measured there (rounded once): against the
     /// same triangles placed and baked into one file, the distance differs by the
     /// rounding of the carried point (`f32` ulps of its local coordinates, times the
     /// placement's scale), and of two triangles as near as that either may answer.
-    /// `None` for a point that is not finite, an empty world, or nothing within
-    /// `max_distance`.
+    /// Where it stretches them unevenly, the search measures the placed triangles
+    /// themselves (each vertex carried in `f64`, rounded to `f32`, as a bake of them
+    /// stores it) from `p` in the world, pruning the tree's nodes by their distance
+    /// times the placement's least scale: the baked file's answer, its distance
+    /// correctly rounded. Of equally near points the lower instance id's. `None` for a
+    /// point that is not finite, an empty world, or nothing within `max_distance`.
     ///
     /// # Errors
-    /// [`Error::Stretched`] where an instance's placement scales distances unevenly
-    /// (a closest point in its space is then not the closest in the world's): the
-    /// placements must be rotations, mirrors, uniform scales and translations.
     /// [`Error::Alloc`] where a scene's search tree cannot be made.
     pub fn closest_point_within(&self, p: [f32; 3], max_distance: f32) -> Result<Option<WorldClosest>> {
-        self.even_placements()?;
         if !p.iter().all(|c| c.is_finite()) || max_distance.is_nan() {
             return Ok(None);
         }
@@ -516,25 +520,33 @@ impl World {
         self.top.nearest(p, f64::from(max_distance), |id, _| {
             let bound = best.map_or(max_distance, |b| b.closest.distance);
             let Some(placed) = &self.placed[id as usize] else { return f64::from(bound) };
-            let local = placed.to_local.point(pw).map(|c| c as f32);
-            // Every point of the instance within `bound` of p in the world lies within
-            // bound / (least scale) of p's carried point, less its rounding.
-            let rounding = local.iter().fold(0.0f64, |m, c| m.max(f64::from(c.abs()))) * f64::from(f32::EPSILON);
-            let reach = (f64::from(bound) / placed.stretch[0] * (1.0 + 1e-5) + 2.0 * rounding) as f32;
-            let found = match self.scenes[placed.scene as usize].closest_point_checked(local, reach.next_up()) {
-                Ok(found) => found,
-                Err(e) => {
-                    failed.get_or_insert(e);
-                    None
-                }
+            let scene = &self.scenes[placed.scene as usize];
+            let found = if placed.even() {
+                // In the instance's space: every point of the instance within `bound`
+                // of p in the world lies within bound / (least scale) of p's carried
+                // point, less its rounding.
+                let local = placed.to_local.point(pw).map(|c| c as f32);
+                let rounding = local.iter().fold(0.0f64, |m, c| m.max(f64::from(c.abs()))) * f64::from(f32::EPSILON);
+                let reach = (f64::from(bound) / placed.stretch[0] * (1.0 + 1e-5) + 2.0 * rounding) as f32;
+                scene.closest_point_checked(local, reach.next_up()).map(|found| {
+                    found.map(|c| {
+                        let at = placed.to_world.point(c.point.map(f64::from));
+                        let distance = (0..3).map(|k| (at[k] - pw[k]).powi(2)).sum::<f64>().sqrt() as f32;
+                        ClosestPoint { distance, point: at.map(|x| x as f32), ..c }
+                    })
+                })
+            } else {
+                // Stretched: the placed triangles measured in the world.
+                scene.closest_point_placed(p, &placed.to_world, &placed.to_local, placed.least, placed.slack, bound)
             };
-            if let Some(c) = found {
-                let at = placed.to_world.point(c.point.map(f64::from));
-                let distance = (0..3).map(|k| (at[k] - pw[k]).powi(2)).sum::<f64>().sqrt() as f32;
-                let nearer = best
-                    .is_none_or(|b| distance < b.closest.distance || distance == b.closest.distance && id < b.instance);
-                if distance <= max_distance && nearer {
-                    let closest = ClosestPoint { distance, point: at.map(|x| x as f32), ..c };
+            let found = found.unwrap_or_else(|e| {
+                failed.get_or_insert(e);
+                None
+            });
+            if let Some(closest) = found {
+                let d = closest.distance;
+                let nearer = best.is_none_or(|b| d < b.closest.distance || d == b.closest.distance && id < b.instance);
+                if d <= max_distance && nearer {
                     best = Some(WorldClosest { instance: id, closest });
                 }
             }
@@ -552,22 +564,12 @@ impl World {
     /// As [`World::closest_point_within`]; [`Error::Alloc`] where the answers' memory
     /// cannot be had.
     pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<Option<WorldClosest>>> {
-        self.even_placements()?;
         let mut out = octrace_format::memory::try_vec(points.len(), "closest points")?;
         out.par_iter_mut().zip(points.par_iter()).with_min_len(64).try_for_each(|(o, p)| {
             *o = self.closest_point_within(*p, max_distance)?;
             Ok::<(), Error>(())
         })?;
         Ok(out)
-    }
-
-    /// [`Error::Stretched`] naming the first committed instance whose placement
-    /// scales distances unevenly.
-    fn even_placements(&self) -> Result<()> {
-        match self.stretched.and_then(|id| self.placed[id as usize].map(|p| (id, p))) {
-            Some((instance, p)) => Err(Error::Stretched { instance, low: p.stretch[0], high: p.stretch[1] }),
-            None => Ok(()),
-        }
     }
 
     /// [`World::intersect`] for many rays, on all cores, with the same answers: in
@@ -663,7 +665,14 @@ impl World {
                 reason: "it places the scene's box beyond f32's range",
             });
         }
-        Ok(Placed { scene, to_world, to_local, bounds, stretch: stretch_of(&to_world) })
+        let stretch = stretch_of(&to_world);
+        // The least singular value is at least 1 / |L⁻¹|_F (the inverse's spectral
+        // norm is at most its Frobenius norm).
+        let inverse = to_local.rows.iter().flat_map(|r| &r[..3]).map(|x| x * x).sum::<f64>().sqrt();
+        let least = stretch[0].max(1.0 / inverse * (1.0 - 1e-9));
+        let coordinate = bounds.lo.iter().chain(&bounds.hi).fold(0.0f64, |m, c| m.max(f64::from(c.abs())));
+        let slack = coordinate * f64::from(f32::EPSILON);
+        Ok(Placed { scene, to_world, to_local, bounds, stretch, least, slack })
     }
 }
 
