@@ -35,7 +35,12 @@ impl Tracer<'_> {
         slack: f64,
         max_distance: f32,
     ) -> Option<ClosestPoint> {
-        if !p.iter().all(|c| c.is_finite()) || max_distance.is_nan() || max_distance < 0.0 || least.is_nan() || least <= 0.0 {
+        if !p.iter().all(|c| c.is_finite())
+            || max_distance.is_nan()
+            || max_distance < 0.0
+            || least.is_nan()
+            || least <= 0.0
+        {
             return None;
         }
         let tree = bounds.tree(&self.view)?;
