@@ -1514,8 +1514,9 @@ fn inspect_reports_overfull_leaves() {
 
 /// `scripts/gpu-check.sh`, the device check, fails and names the comparison when one
 /// GPU answer differs from the CPU's: a wrapper of the CLI flips one bit of the GPU's
-/// hits on the bunny's primary set, and the quick check (lavapipe in CI) reports that
-/// set as differing, every other comparison as the same, and exits 1.
+/// hits on the bunny's primary set (the scene's, and the world of bunnies'), and the
+/// quick check (lavapipe in CI) reports those as differing, every other comparison as
+/// the same, and exits 1.
 #[test]
 fn the_gpu_check_fails_when_a_gpu_answer_differs() {
     use std::os::unix::fs::PermissionsExt;
@@ -1556,10 +1557,18 @@ fn the_gpu_check_fails_when_a_gpu_answer_differs() {
     let line = |name: &str| {
         stdout.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} line: {stdout}")).to_string()
     };
+    // The wrapper flips the GPU's nearest hits of every primary-set trace: the scene's
+    // and the world of 100 bunnies'.
     assert!(line("trace bunny primary nearest ").contains(" differs "), "{stdout}");
-    for name in
-        ["trace bunny shadow occluded", "trace bunny primary counts", "trace bunny primary every hit", "render effects"]
-    {
+    assert!(line("world nearest ").contains(" differs "), "{stdout}");
+    for name in [
+        "trace bunny shadow occluded",
+        "trace bunny primary counts",
+        "trace bunny primary every hit",
+        "world occluded",
+        "world counts",
+        "render effects",
+    ] {
         assert!(line(name).contains(" same "), "{name}: {stdout}");
     }
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
@@ -1571,7 +1580,7 @@ fn the_gpu_check_fails_when_a_gpu_answer_differs() {
         .filter(|c| c["ok"] == false)
         .map(|c| c["name"].as_str().unwrap())
         .collect();
-    assert_eq!(failed, ["trace bunny primary nearest"], "{stdout}");
+    assert_eq!(failed, ["trace bunny primary nearest", "world nearest"], "{stdout}");
 }
 
 /// `bench --gpu` compares the GPU's nearest hits with the CPU's bit for bit where the
