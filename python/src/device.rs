@@ -15,6 +15,15 @@ use rayon::prelude::*;
 use crate::arrays::PIECE;
 use crate::errors::runtime_error;
 
+/// The error for `device="gpu"` in a module built without the GPU.
+#[cfg(not(feature = "gpu"))]
+pub(crate) fn without_gpu() -> PyErr {
+    crate::errors::GpuError::new_err(
+        "this octrace module was built without the GPU: reinstall it with the gpu feature, \
+         MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (the README, \"On a GPU\")",
+    )
+}
+
 /// The devices `Scene(..., device=...)` takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Device {

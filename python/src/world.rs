@@ -131,10 +131,7 @@ impl World {
         };
         #[cfg(not(feature = "gpu"))]
         if device == Device::Gpu {
-            return Err(crate::errors::GpuError::new_err(
-                "this octrace module was built without the GPU: reinstall it with the gpu feature, \
-                 MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python (the README, \"On a GPU\")",
-            ));
+            return Err(crate::device::without_gpu());
         }
         Ok(World {
             inner: octrace_runtime::world::World::new(),

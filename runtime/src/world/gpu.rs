@@ -258,7 +258,9 @@ impl GpuWorld {
         let mut out = answers(rays.len())?;
         for (rays, out) in rays.chunks(PIECE).zip(out.chunks_mut(PIECE)) {
             let boxes = boxes_of(world, rays, &mut timings);
-            let mut walker = OnGpu { gpu: self, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new(), timings };
+            let devices = self.devices(world);
+            let mut walker =
+                OnGpu { gpu: self, devices, by_scene: Vec::new(), rays: Vec::new(), at: Vec::new(), timings };
             let t = Instant::now();
             world.rounds(any, rays, &boxes, out, &mut walker)?;
             timings = walker.timings;
@@ -278,6 +280,16 @@ impl GpuWorld {
         Ok(out)
     }
 
+    /// Each of `world`'s scenes' tracer, its index in `on_device` (`usize::MAX` for a
+    /// scene not uploaded), by the world's scene index.
+    fn devices(&self, world: &World) -> Vec<usize> {
+        world
+            .scenes()
+            .iter()
+            .map(|s| self.by_scene.get(&(Arc::as_ptr(s) as usize)).copied().unwrap_or(usize::MAX))
+            .collect()
+    }
+
     /// Each ray of `rays` carried (over its whole `[tmin, tmax]`) into every instance
     /// of its `boxes`, a box a round, and walked on the GPU by the instance's scene:
     /// its crossings counted, or listed (every ray with `list`, else where a moved
@@ -293,6 +305,7 @@ impl GpuWorld {
         mut visit: impl FnMut(usize, u32, &Placed, &Carried, Found<'_>),
     ) -> GpuResult<()> {
         let mut jobs: Vec<(u32, u32)> = Vec::new();
+        let devices = self.devices(world);
         let start = Instant::now();
         let device_before = timings.device;
         for round in 0.. {
@@ -311,10 +324,7 @@ impl GpuWorld {
                 .map(|(&(_, i), p)| carried(p, &rays[i as usize], rays[i as usize].tmax))
                 .collect();
             // Each job's tracer.
-            let device: Vec<usize> = placed
-                .iter()
-                .map(|p| self.by_scene[&(Arc::as_ptr(&world.scenes()[p.scene as usize]) as usize)])
-                .collect();
+            let device: Vec<usize> = placed.iter().map(|p| devices[p.scene as usize]).collect();
             for (d, on_device) in self.on_device.iter().enumerate() {
                 let (listed, counted): (Vec<usize>, Vec<usize>) = (0..jobs.len())
                     .filter(|&k| device[k] == d)
@@ -375,6 +385,8 @@ fn asked(boxes: &Boxes, i: usize) -> Vec<u32> {
 /// every instance traced in one batch.
 struct OnGpu<'g> {
     gpu: &'g GpuWorld,
+    /// Each world scene's tracer ([`GpuWorld::devices`]).
+    devices: Vec<usize>,
     /// Scratch: each job's tracer, a scene's rays, their jobs.
     by_scene: Vec<u32>,
     rays: Vec<Ray>,
@@ -397,8 +409,7 @@ impl Walker for OnGpu<'_> {
         self.by_scene.clear();
         for &(id, _) in jobs {
             let (scene, _, _) = world.placement(id).expect("a job is a committed instance's");
-            let key = Arc::as_ptr(&world.scenes()[scene as usize]) as usize;
-            self.by_scene.push(self.gpu.by_scene[&key] as u32);
+            self.by_scene.push(self.devices[scene as usize] as u32);
         }
         for (d, on_device) in self.gpu.on_device.iter().enumerate() {
             self.at.clear();

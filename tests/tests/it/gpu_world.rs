@@ -4,44 +4,16 @@
 use std::sync::Arc;
 
 use octrace_bake::procedural::{self, SplitMix};
-use octrace_bake::{bake, BuildParams, Mesh};
+use octrace_bake::Mesh;
 use octrace_runtime::glam::Vec3;
 use octrace_runtime::world::{GpuWorld, Transform, World, WorldCrossing, WorldHit};
 use octrace_runtime::{Ray, Scene};
 use octrace_tests::gpu;
 
+use crate::world::{placement, rays, scene};
+
 fn scenes(meshes: [Mesh; 3]) -> Vec<Arc<Scene>> {
-    meshes.map(|m| Arc::new(Scene::from_baked(bake(&m, &BuildParams::auto()).expect("bakes")).expect("opens"))).into()
-}
-
-/// A rotation, a scale per axis (mirrored now and then), a translation within `reach`.
-fn placement(rng: &mut SplitMix, reach: f64) -> Transform {
-    let mut u = || rng.unit() as f64;
-    let axis = [u() - 0.5, u() - 0.5, u() - 0.5];
-    let angle = std::f64::consts::TAU * u();
-    let mut scale = [0.4 + 1.6 * u(), 0.4 + 1.6 * u(), 0.4 + 1.6 * u()];
-    if u() < 0.2 {
-        scale[0] = -scale[0];
-    }
-    let at = [reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0), reach * (2.0 * u() - 1.0)];
-    Transform::scaling(scale).then(&Transform::rotation(axis, angle)).then(&Transform::translation(at))
-}
-
-/// Rays from all around, half aimed through the middle; a fifth of them segments.
-fn rays(rng: &mut SplitMix, n: usize, reach: f32) -> Vec<Ray> {
-    (0..n)
-        .map(|i| {
-            let mut u = || rng.unit();
-            let o = Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0) * reach * 1.3;
-            let target = if i % 2 == 0 {
-                Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0) * reach * 0.3
-            } else {
-                o + Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5)
-            };
-            let tmax = if i % 5 == 0 { reach * u() } else { f32::INFINITY };
-            Ray::segment(o, target - o, 0.0, tmax)
-        })
-        .collect()
+    meshes.map(|m| scene(&m)).into()
 }
 
 /// The GPU's nearest and any hits, crossing counts and lists against the CPU's,

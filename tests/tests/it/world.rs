@@ -10,7 +10,7 @@ use octrace_runtime::reference::{Agreement, Reference};
 use octrace_runtime::world::{Transform, World};
 use octrace_runtime::{Error, Ray, Scene};
 
-fn scene(mesh: &Mesh) -> Arc<Scene> {
+pub(crate) fn scene(mesh: &Mesh) -> Arc<Scene> {
     Arc::new(Scene::from_baked(bake(mesh, &BuildParams::auto()).expect("bakes")).expect("opens"))
 }
 
@@ -31,7 +31,7 @@ fn props() -> Vec<(Mesh, Arc<Scene>)> {
 
 /// A random placement: a rotation, a scale per axis (mirrored now and then) and a
 /// translation within `reach`.
-fn placement(rng: &mut SplitMix, reach: f64) -> Transform {
+pub(crate) fn placement(rng: &mut SplitMix, reach: f64) -> Transform {
     let mut u = || rng.unit() as f64;
     let axis = [u() - 0.5, u() - 0.5, u() - 0.5];
     let angle = std::f64::consts::TAU * u();
@@ -64,7 +64,7 @@ fn placed_triangles(
     (all, first)
 }
 
-fn rays(rng: &mut SplitMix, n: usize, reach: f32) -> Vec<Ray> {
+pub(crate) fn rays(rng: &mut SplitMix, n: usize, reach: f32) -> Vec<Ray> {
     (0..n)
         .map(|i| {
             let mut u = || rng.unit();
@@ -398,6 +398,21 @@ fn even_placement(rng: &mut SplitMix, reach: f64) -> Transform {
     Transform::scaling([mirror * s, s, s]).then(&Transform::rotation(axis, angle)).then(&Transform::translation(at))
 }
 
+/// `n` points all around (in 1.3 times `reach`), then `n` just off the placed
+/// `triangles` (within 0.01 of a point of one).
+fn points_around(rng: &mut SplitMix, triangles: &[[[f32; 3]; 3]], reach: f64, n: usize) -> Vec<[f32; 3]> {
+    let mut points: Vec<[f32; 3]> =
+        (0..n).map(|_| [0; 3].map(|_| (2.0 * rng.unit() - 1.0) * reach as f32 * 1.3)).collect();
+    for _ in 0..n {
+        let t = triangles[(rng.next_u64() % triangles.len() as u64) as usize].map(Vec3::from_array);
+        let (a, b) = (rng.unit(), rng.unit());
+        let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
+        let off = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.02;
+        points.push((t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + off).to_array());
+    }
+    points
+}
+
 /// Closest points through a world against the brute-force oracle over the placed
 /// triangles: the distance within the rounding of the carried point, the triangle
 /// the oracle's or one as near within that; the batch the one-point call's, bit for
@@ -415,16 +430,7 @@ fn closest_points_agree_with_the_oracle_over_the_placed_triangles() {
     let (triangles, first) = placed_triangles(&world, &props, &ids);
     let global = |instance: u32, triangle: u32| first[instance as usize].expect("live") + triangle;
     let oracle = Reference::in_input_order(triangles.clone());
-    // Points all around, and points just off the placed triangles.
-    let mut points: Vec<[f32; 3]> =
-        (0..300).map(|_| [0; 3].map(|_| (2.0 * rng.unit() - 1.0) * reach as f32 * 1.3)).collect();
-    for _ in 0..300 {
-        let t = triangles[(rng.next_u64() % triangles.len() as u64) as usize].map(Vec3::from_array);
-        let (a, b) = (rng.unit(), rng.unit());
-        let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
-        let off = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.02;
-        points.push((t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + off).to_array());
-    }
+    let points = points_around(&mut rng, &triangles, reach, 300);
     let batch = world.closest_points_batch(&points, f32::INFINITY).expect("searched");
     let mut ties = 0;
     for (i, p) in points.iter().enumerate() {
@@ -573,15 +579,7 @@ fn closest_points_through_stretched_placements_are_the_placed_triangles() {
     let (triangles, first) = placed_triangles(&world, &props, &ids);
     let global = |instance: u32, triangle: u32| first[instance as usize].expect("live") + triangle;
     let oracle = Reference::in_input_order(triangles.clone());
-    let mut points: Vec<[f32; 3]> =
-        (0..200).map(|_| [0; 3].map(|_| (2.0 * rng.unit() - 1.0) * reach as f32 * 1.3)).collect();
-    for _ in 0..200 {
-        let t = triangles[(rng.next_u64() % triangles.len() as u64) as usize].map(Vec3::from_array);
-        let (a, b) = (rng.unit(), rng.unit());
-        let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
-        let off = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.02;
-        points.push((t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + off).to_array());
-    }
+    let points = points_around(&mut rng, &triangles, reach, 200);
     let batch = world.closest_points_batch(&points, f32::INFINITY).expect("searched");
     let (mut stretched, mut ties) = (0, 0);
     for (i, p) in points.iter().enumerate() {
