@@ -30,6 +30,7 @@ pub mod topology;
 
 pub use error::{Error, Result};
 pub use mesh::{
-    LoadOptions, Mesh, MeshFormat, References, DEFAULT_MAX_INSTANCES, DEFAULT_MAX_TRIANGLES, MAX_MESH_COMPRESSION_RATIO,
+    InstancedMesh, LoadOptions, Loaded, Mesh, MeshFormat, Placement, References, DEFAULT_MAX_INSTANCES,
+    DEFAULT_MAX_TRIANGLES, MAX_MESH_COMPRESSION_RATIO,
 };
 pub use octree::{bake, bake_with_progress, BakeStage, BuildParams};

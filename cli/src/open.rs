@@ -70,6 +70,14 @@ pub(crate) fn map_scene(path: &Path, trust: Trust) -> anyhow::Result<Scene> {
     scene.with_context(|| format!("cannot open scene {}", path.display()))
 }
 
+/// Memory-maps an instanced file's scenes, each validated (see [`map_scene`] for why
+/// mapping is sound here), and places its instances.
+#[allow(unsafe_code)]
+pub(crate) fn map_world(path: &Path) -> anyhow::Result<octrace_runtime::world::World> {
+    // SAFETY: as `map_scene`'s: the file is not modified by this process while mapped.
+    unsafe { octrace_runtime::world::World::map(path) }.with_context(|| format!("cannot open {}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

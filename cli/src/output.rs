@@ -92,6 +92,7 @@ pub(crate) fn counted(n: u64, thing: &str) -> String {
     let plural = match thing {
         _ if n == 1 => thing.to_string(),
         "leaf" => "leaves".to_string(),
+        "mesh" => "meshes".to_string(),
         _ => format!("{thing}s"),
     };
     format!("{} {plural}", thousands(n))

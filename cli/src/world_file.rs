@@ -47,13 +47,26 @@ struct Instance {
     transform: Option<serde_json::Value>,
 }
 
-/// Whether `path` names a scene description (`.json`) rather than a baked scene.
+/// Whether `path` names a world rather than one baked scene: a scene description
+/// (`.json`), or an instanced file (a glTF's meshes placed many times, baked once:
+/// `octrace_format::instanced`).
+pub(crate) fn is_world(path: &Path) -> bool {
+    is_description(path) || octrace_format::instanced::is_instanced_file(path).unwrap_or(false)
+}
+
+/// Whether `path` names a scene description (`.json`).
 pub(crate) fn is_description(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"))
 }
 
-/// The world a description places, committed, and its scenes by name.
+/// The world a description or an instanced file places, committed, and its scenes by
+/// name (an instanced file's `scene 0`, `scene 1`, ...).
 pub(crate) fn open_world(path: &Path) -> anyhow::Result<(World, BTreeMap<String, Arc<octrace_runtime::Scene>>)> {
+    if !is_description(path) {
+        let world = crate::open::map_world(path)?;
+        let names = world.scenes().iter().enumerate().map(|(i, s)| (format!("scene {i}"), Arc::clone(s))).collect();
+        return Ok((world, names));
+    }
     let len = std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?.len();
     anyhow::ensure!(
         len <= MAX_BYTES,
@@ -74,8 +87,8 @@ pub(crate) fn open_world(path: &Path) -> anyhow::Result<(World, BTreeMap<String,
     for (name, file) in &d.scenes {
         let file = folder.join(file);
         anyhow::ensure!(
-            !is_description(&file),
-            "{}: scene \"{name}\" is another description ({}): instances of instances are not supported",
+            !is_world(&file),
+            "{}: scene \"{name}\" is a world itself ({}: a description or an instanced file): instances of instances are not supported",
             path.display(),
             file.display()
         );

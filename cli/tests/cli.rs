@@ -1954,3 +1954,55 @@ fn render_takes_a_scene_description() {
     std::fs::write(d.join("empty.json"), r#"{"scenes": {"cube": "cube.oct"}, "instances": []}"#).unwrap();
     fails_saying(d, &["render", "empty.json", "-o", "x.png"], "places no instance");
 }
+
+/// A glTF that places a mesh many times bakes to an instanced file (issue 51): the
+/// sphere stored once (and once mirrored, for the placement that mirrors), within 20
+/// times its GLB; `inspect`, `trace`, `render`, `contains` and `distance` open it as a
+/// world, and its crossing counts are the flat bake's, ray for ray. Standard output and
+/// compression are refused by name, and a description may not place it.
+#[test]
+fn a_gltf_placing_a_mesh_many_times_bakes_to_an_instanced_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let glb = octrace_tests::gltf::placed_spheres(98, false);
+    std::fs::write(d.join("spheres.glb"), &glb).unwrap();
+    let out = octrace(d, &["bake", "spheres.glb", "-o", "spheres.oct"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("2 meshes placed 98 times (21,200 triangles stored for 1,038,800 placed)"), "{said}");
+    let size = std::fs::metadata(d.join("spheres.oct")).unwrap().len();
+    assert!(size <= 20 * glb.len() as u64, "{size} bytes for a GLB of {}", glb.len());
+    ok(d, &["bake", "spheres.glb", "-o", "flat.oct", "--flatten"]);
+    let flat = std::fs::metadata(d.join("flat.oct")).unwrap().len();
+    assert!(flat > 20 * size, "flat {flat}, instanced {size}");
+    let inspected: serde_json::Value =
+        serde_json::from_str(&ok(d, &["inspect", "spheres.oct", "--json"])).expect("json");
+    assert_eq!(inspected["kind"], "instanced");
+    assert_eq!((inspected["instances"].as_u64(), inspected["placed_triangles"].as_u64()), (Some(98), Some(1_038_800)));
+    assert_eq!(inspected["instances_with_material_maps"].as_u64(), Some(97));
+    ok(d, &["rays", "flat.oct", "--set", "primary", "-o", "rays.bin"]);
+    for scene in ["spheres.oct", "flat.oct"] {
+        ok(d, &["trace", scene, "--rays", "rays.bin", "--counts", "-o", &format!("{scene}.counts")]);
+    }
+    let counts = std::fs::read(d.join("spheres.oct.counts")).unwrap();
+    assert!(counts == std::fs::read(d.join("flat.oct.counts")).unwrap(), "the counts differ");
+    assert!(counts.chunks(8).filter(|c| c[0] != 0).count() > 100_000);
+    ok(d, &["render", "spheres.oct", "-o", "spheres.png", "--width", "64", "--height", "32"]);
+    assert!(std::fs::metadata(d.join("spheres.png")).unwrap().len() > 100);
+    ok(d, &["points", "flat.oct", "--count", "200", "-o", "points.bin"]);
+    ok(d, &["contains", "spheres.oct", "--points", "points.bin", "-o", "inside.bin"]);
+    ok(d, &["distance", "spheres.oct", "--points", "points.bin", "-o", "distance.bin"]);
+    for (args, says) in [
+        (&["bake", "spheres.glb", "-o", "-"][..], "not to standard output"),
+        (&["bake", "spheres.glb", "-o", "s.oct.zst", "--compress"][..], "not written compressed"),
+    ] {
+        let out = octrace(d, args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(says) && err.contains("--flatten"), "{args:?}: {err}");
+    }
+    let description = r#"{"scenes": {"s": "spheres.oct"}, "instances": [{"scene": "s"}]}"#;
+    std::fs::write(d.join("world.json"), description).unwrap();
+    let out = octrace(d, &["inspect", "world.json"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("is a world itself"), "{err}");
+}

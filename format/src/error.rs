@@ -71,6 +71,21 @@ pub enum Error {
         /// The file.
         path: PathBuf,
     },
+    /// The file is an instanced file ([`crate::instanced`]): scenes placed many times,
+    /// which opens as a world of instances, not as one scene.
+    #[error(
+        "an instanced file (meshes placed many times, each stored once): open it as a world (Rust: \
+         World::open; Python: octrace.World.open; the CLI's trace, render, contains, distance and inspect \
+         open it so), or bake with --flatten for one scene"
+    )]
+    Instanced,
+    /// An instanced file was asked for ([`crate::instanced::InstancedFile::read`]) and
+    /// the file is one baked scene.
+    #[error(
+        "one baked scene, not an instanced file: open it as a scene (Rust: Scene::open; Python: octrace.Scene), \
+         and place it in a world with World::add"
+    )]
+    NotInstanced,
     /// The contents break a rule of the format (an address out of range, a link to a
     /// cell that is not adjacent, ...).
     #[error("corrupt scene: {0}")]

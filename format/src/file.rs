@@ -155,6 +155,21 @@ impl SceneFile {
         Self::validated(Storage::Mapped(map), header)
     }
 
+    /// Memory-maps `len` bytes at `offset` (a multiple of the page, checked by the
+    /// caller: an instanced file's embedded scene), validated completely or with the
+    /// trusted path's checks.
+    ///
+    /// # Safety
+    /// As [`SceneFile::map`].
+    pub(crate) unsafe fn map_range(path: &Path, offset: u64, len: u64, validate: bool) -> Result<Self> {
+        let (map, header) = map_range_of(path, offset, len)?;
+        if validate {
+            Self::validated(Storage::Mapped(map), header)
+        } else {
+            Self::structured(Storage::Mapped(map), header)
+        }
+    }
+
     /// Memory-maps the file and checks its header, its section table and the archive's
     /// structure (rkyv's bytecheck: every pointer and length inside the file, a few
     /// microseconds for a 60 MB file), but neither the checksums nor the format's
@@ -365,6 +380,18 @@ fn map_file(path: &Path) -> Result<(memmap2::Mmap, Header)> {
     // SAFETY: the callers are `unsafe fn`s whose contract forbids changing the file
     // while it is mapped; the map is read-only.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
+    let header = Header::decode(&map[..map.len().min(HEADER_LEN)], map.len() as u64)?;
+    Ok((map, header))
+}
+
+/// Maps `len` bytes of the file at `offset` (a multiple of the page: an embedded
+/// scene of an instanced file) and decodes its header.
+fn map_range_of(path: &Path, offset: u64, len: u64) -> Result<(memmap2::Mmap, Header)> {
+    let file = open_regular(path)?;
+    let len = usize::try_from(len).map_err(|_| Error::corrupt("scene larger than this machine's address space"))?;
+    // SAFETY: as `map_file`'s: the callers' contract forbids changing the file.
+    let map =
+        unsafe { memmap2::MmapOptions::new().offset(offset).len(len).map(&file) }.map_err(|e| Error::io(path, e))?;
     let header = Header::decode(&map[..map.len().min(HEADER_LEN)], map.len() as u64)?;
     Ok((map, header))
 }

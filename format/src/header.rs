@@ -182,6 +182,9 @@ impl Header {
     }
 
     fn decode_with(bytes: &[u8], file_len: Option<u64>) -> Result<Self> {
+        if crate::instanced::is_instanced(bytes) {
+            return Err(Error::Instanced);
+        }
         if bytes.len() < 8 || bytes[..8] != MAGIC {
             let mut found = [0u8; 8];
             let n = bytes.len().min(8);

@@ -31,6 +31,7 @@ mod file;
 mod header;
 pub mod image;
 mod input;
+pub mod instanced;
 pub mod layout;
 pub mod memory;
 mod scene;

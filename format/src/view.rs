@@ -128,6 +128,28 @@ impl<'a> SceneView<'a> {
         self.shading.materials.get(id as usize)
     }
 
+    /// The material of stored triangle `index` drawn through `map` (an instance's
+    /// material map, [`crate::instanced::InstanceRecord::materials`]: entry `k`
+    /// replaces material `k`; an empty map, or one without an entry, keeps it).
+    ///
+    /// # Example
+    /// ```
+    /// use octrace_format::{Material, StoredIndex};
+    /// let mut scene = octrace_format::testing::single_leaf_scene();
+    /// scene.shading.materials = vec![Material { name: "red".into(), ..Material::default() },
+    ///                                Material { name: "blue".into(), ..Material::default() }];
+    /// scene.material_ids = vec![0];
+    /// let view = scene.view();
+    /// assert_eq!(view.material_mapped(StoredIndex(0), &[]).unwrap().name, "red");
+    /// assert_eq!(view.material_mapped(StoredIndex(0), &[1]).unwrap().name, "blue");
+    /// ```
+    #[inline]
+    pub fn material_mapped(&self, index: StoredIndex, map: &[u32]) -> Option<&'a crate::Material> {
+        let id = *self.material_ids.get(index.0 as usize)?;
+        let id = map.get(id as usize).copied().unwrap_or(id);
+        self.shading.materials.get(id as usize)
+    }
+
     /// The shading normals of stored triangle `index`'s corners, when the scene has them.
     pub fn corner_normals(&self, index: StoredIndex) -> Option<[[f32; 3]; 3]> {
         Some(corners(self.normals.get(index.0 as usize * TRIANGLE_FLOATS..)?.get(..TRIANGLE_FLOATS)?))

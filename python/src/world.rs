@@ -142,6 +142,36 @@ impl World {
         })
     }
 
+    /// The world an instanced file places: what ``octrace bake`` writes for a glTF
+    /// that places a mesh many times (each such mesh stored once, each placement an
+    /// instance, with the materials it draws). Every scene of the file is read and
+    /// validated as ``octrace.Scene(path)`` reads one; the instances are committed,
+    /// and may be moved, removed and added to as any world's.
+    ///
+    /// Example::
+    ///
+    ///     world = octrace.World.open("spheres.oct")   # octrace bake spheres.glb -o spheres.oct
+    ///     ans = world.cast_rays(rays)
+    ///
+    /// Args:
+    ///     path: the instanced file (``str`` or ``os.PathLike``).
+    ///     device: as the constructor's.
+    ///
+    /// Raises:
+    ///     OSError, FormatError: the file cannot be read, or is not a valid instanced
+    ///         file (an ordinary ``.oct`` is opened by ``octrace.Scene``).
+    ///     ValueError: an instance's transform or material map is invalid.
+    #[staticmethod]
+    #[pyo3(signature = (path, *, device="cpu"))]
+    fn open(py: Python<'_>, path: PathBuf, device: &str) -> PyResult<World> {
+        let mut world = World::new(device)?;
+        world.inner = py.detach(|| octrace_runtime::world::World::open(&path)).map_err(|e| match e {
+            octrace_runtime::Error::Format(_) => crate::errors::open_error(e, &path),
+            e => placement_error(e),
+        })?;
+        Ok(world)
+    }
+
     /// Where the ray queries run: ``"cpu"`` or ``"gpu"``.
     #[getter]
     fn device(&self) -> &'static str {

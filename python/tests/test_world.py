@@ -232,3 +232,82 @@ def test_distances_through_a_stretched_placement_are_the_placed_triangles():
     np.testing.assert_allclose(world.compute_distance(points), baked.compute_distance(points), rtol=1e-6)
     ids = np.where(want["primitive_ids"] < len(t), first, stretched)
     assert (got["geometry_ids"] == ids).mean() > 0.99
+
+
+def spheres_glb(path, count=30):
+    """A glTF-Binary file like Khronos' MetalRoughSpheresNoTextures: `count` meshes
+    sharing one sphere's accessors (2,400 triangles), each its own material, placed on a
+    grid (node 1 mirrored)."""
+    import json
+    import struct
+
+    segments, rings = 40, 31
+    verts = []
+    for r in range(rings + 1):
+        th = np.pi * r / rings
+        for s in range(segments + 1):
+            ph = 2 * np.pi * s / segments
+            verts.append((np.sin(th) * np.cos(ph), np.cos(th), np.sin(th) * np.sin(ph)))
+    idx = []
+    for r in range(rings):
+        for s in range(segments):
+            a = r * (segments + 1) + s
+            b = a + segments + 1
+            if r > 0:
+                idx += [a, a + 1, b]
+            if r < rings - 1:
+                idx += [a + 1, b + 1, b]
+    positions = np.asarray(verts, np.float32).tobytes()
+    indices = np.asarray(idx, np.uint16).tobytes()
+    indices += b"\0" * (-len(indices) % 4)
+    blob = positions + indices
+    nodes = [{"mesh": k, "translation": [2.5 * (k % 6), 2.5 * (k // 6), 0]} for k in range(count)]
+    nodes[1]["scale"] = [-1, 1, 1]
+    doc = {
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": list(range(count))}],
+        "nodes": nodes,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": k}]}
+                   for k in range(count)],
+        "materials": [{"name": f"sphere {k}", "pbrMetallicRoughness": {"metallicFactor": (k % 6) / 5}}
+                      for k in range(count)],
+        "buffers": [{"byteLength": len(blob)}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": 2 * len(idx)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(verts), "type": "VEC3",
+                       "min": [-1, -1, -1], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5123, "count": len(idx), "type": "SCALAR"}],
+    }
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    total = 12 + 8 + len(text) + 8 + len(blob)
+    path.write_bytes(struct.pack("<5I", 0x46546C67, 2, total, len(text), 0x4E4F534A) + text
+                     + struct.pack("<2I", len(blob), 0x004E4942) + blob)
+
+
+def test_an_instanced_bake_opens_as_a_world_answering_as_its_flat_bake(tmp_path, cli):
+    """A glTF placing one mesh many times bakes to an instanced file (issue 51), which
+    `World.open` opens: its hits, counts and occupancy are the flat bake's, and each
+    instance names the material it draws."""
+    spheres_glb(tmp_path / "spheres.glb")
+    cli("bake", tmp_path / "spheres.glb", "-o", tmp_path / "spheres.oct")
+    cli("bake", tmp_path / "spheres.glb", "-o", tmp_path / "flat.oct", "--flatten")
+    with pytest.raises(octrace.FormatError, match="instanced file"):
+        octrace.Scene(tmp_path / "spheres.oct")
+    world = octrace.World.open(tmp_path / "spheres.oct")
+    assert len(world) == 30
+    flat = octrace.Scene(tmp_path / "flat.oct")
+    rng = np.random.default_rng(51)
+    origins = rng.uniform([-3, -3, -6], [15, 13, 6], (5000, 3))
+    targets = rng.uniform([-1, -1, -1], [13.5, 11, 1], (5000, 3))
+    r = np.hstack([origins, targets - origins]).astype(np.float32)
+    w, f = world.cast_rays(r), flat.cast_rays(r)
+    hit = np.isfinite(f["t_hit"])
+    assert hit.sum() > 1000
+    np.testing.assert_array_equal(np.isfinite(w["t_hit"]), hit)
+    np.testing.assert_allclose(w["t_hit"][hit], f["t_hit"][hit], rtol=1e-5, atol=1e-5)
+    np.testing.assert_array_equal(world.count_intersections(r), flat.count_intersections(r))
+    with pytest.raises(ValueError):
+        octrace.World.open(tmp_path / "spheres.oct", device="tpu")
+    with pytest.raises(octrace.FormatError, match="not an instanced file"):
+        octrace.World.open(tmp_path / "flat.oct")

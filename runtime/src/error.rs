@@ -49,6 +49,17 @@ pub enum Error {
         /// The id asked for.
         id: u32,
     },
+    /// A material map that names a material its scene does not have
+    /// ([`crate::world::World::add_with_materials`]).
+    #[error("material map entry {entry} names material {material}; the scene has {materials}")]
+    MaterialMap {
+        /// The entry (the scene's material it replaces).
+        entry: usize,
+        /// The material it names.
+        material: u32,
+        /// How many materials the scene has.
+        materials: usize,
+    },
     /// An image could not be written.
     #[error("{path}: cannot write image: {message}")]
     Image {

@@ -141,6 +141,11 @@ impl Scene {
         Ok(Scene::with(Source::Baked(Box::new(scene))))
     }
 
+    /// A scene over an opened file (an instanced file's embedded scene).
+    pub(crate) fn from_scene_file(file: SceneFile) -> Scene {
+        Scene::with(Source::File(Box::new(file)))
+    }
+
     fn with(source: Source) -> Scene {
         let inner = Inner {
             source,

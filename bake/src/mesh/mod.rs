@@ -69,6 +69,59 @@ pub struct Mesh {
     pub sources: Vec<PathBuf>,
 }
 
+/// A scene loaded with its repeated meshes kept once ([`Mesh::load_instanced`]): the
+/// meshes to bake, each into a scene of its own, and their placements. Bakes to an
+/// instanced file (`octrace_format::instanced`), which opens as a world of instances.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InstancedMesh {
+    /// The meshes: first the geometry the scene places once (world space, with its
+    /// lights and cameras) where there is any, then each geometry placed more than
+    /// once, in its own space.
+    pub meshes: Vec<Mesh>,
+    /// Every placement of a mesh.
+    pub placements: Vec<Placement>,
+    /// Things skipped while loading, one line each (the meshes' own are moved here).
+    pub warnings: Vec<String>,
+    /// The files read besides the mesh file itself (as [`Mesh::sources`]).
+    pub sources: Vec<PathBuf>,
+}
+
+/// One placement of an [`InstancedMesh`]'s mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Placement {
+    /// The mesh placed (its index in [`InstancedMesh::meshes`]).
+    pub mesh: u32,
+    /// Local to world: 3 rows of 4.
+    pub rows: [[f64; 4]; 3],
+    /// The material this placement draws in place of each of the mesh's (entry `k`
+    /// replaces material `k`; past the end, its own): placements of one geometry with
+    /// different materials.
+    pub materials: Vec<u32>,
+}
+
+/// A loaded scene: one mesh, or meshes placed many times.
+#[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::large_enum_variant)] // one a load: a box would only burden the match
+pub enum Loaded {
+    /// One mesh, every placement's triangles in it.
+    One(Mesh),
+    /// Meshes placed more than once, kept once.
+    Instanced(InstancedMesh),
+}
+
+impl InstancedMesh {
+    /// The triangles the placements make (each mesh's times its placements): what
+    /// a flat bake would store.
+    pub fn placed_triangles(&self) -> u64 {
+        self.placements.iter().map(|p| self.meshes[p.mesh as usize].triangles.len() as u64).sum()
+    }
+
+    /// The triangles stored (each mesh's once).
+    pub fn stored_triangles(&self) -> u64 {
+        self.meshes.iter().map(|m| m.triangles.len() as u64).sum()
+    }
+}
+
 impl Mesh {
     /// The textures and texel arrays as a baked scene stores them: the texels of the
     /// textures kept whole first, then (without their texels) the textures kept
@@ -419,6 +472,69 @@ impl Mesh {
         Mesh::from_bytes_with(&bytes, format, path, base.as_deref(), options)
     }
 
+    /// [`Mesh::load_with`], the meshes a glTF scene places more than once (by several
+    /// nodes, by `EXT_mesh_gpu_instancing`, or meshes that share a geometry's
+    /// accessors) kept once as instances ([`Loaded::Instanced`]); a scene that places
+    /// no mesh twice, and an OBJ, load as one mesh ([`Loaded::One`]).
+    ///
+    /// # Errors
+    /// As [`Mesh::load`].
+    ///
+    /// # Example
+    /// ```no_run
+    /// use octrace_bake::{Loaded, LoadOptions, Mesh};
+    /// match Mesh::load_instanced("spheres.glb", &LoadOptions::default())? {
+    ///     Loaded::One(mesh) => println!("{} triangles", mesh.triangles.len()),
+    ///     Loaded::Instanced(i) => println!("{} meshes placed {} times", i.meshes.len(), i.placements.len()),
+    /// }
+    /// # Ok::<(), octrace_bake::Error>(())
+    /// ```
+    pub fn load_instanced(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Loaded> {
+        let path = path.as_ref();
+        match MeshFormat::from_path(path) {
+            Some((MeshFormat::Gltf, zst)) if !path.is_dir() => {
+                let unreadable = |source| Error::Unreadable { path: path.into(), source };
+                let raw = octrace_format::read_regular_file(path, options.max_file_bytes).map_err(unreadable)?;
+                let bytes = if zst { decompress(&raw, options.max_file_bytes).map_err(unreadable)? } else { raw };
+                let base = path.parent().map(Path::to_path_buf);
+                Mesh::from_bytes_instanced(&bytes, MeshFormat::Gltf, path, base.as_deref(), options)
+            }
+            _ => Mesh::load_with(path, options).map(Loaded::One),
+        }
+    }
+
+    /// [`Mesh::from_bytes_with`], as [`Mesh::load_instanced`].
+    ///
+    /// # Errors
+    /// As [`Mesh::load`].
+    pub fn from_bytes_instanced(
+        bytes: &[u8],
+        format: MeshFormat,
+        name: &Path,
+        base: Option<&Path>,
+        options: &LoadOptions,
+    ) -> Result<Loaded> {
+        match format {
+            MeshFormat::Obj => Mesh::from_bytes_with(bytes, format, name, base, options).map(Loaded::One),
+            MeshFormat::Gltf => match gltf::parse_instanced(bytes, name, base, options)? {
+                Loaded::One(mesh) => mesh.checked(name, options).map(Loaded::One),
+                Loaded::Instanced(i) if i.meshes.is_empty() => Err(Error::EmptyScene { path: name.into() }),
+                Loaded::Instanced(mut i) => {
+                    for mesh in &mut i.meshes {
+                        mesh.check_bakeable(name)?;
+                    }
+                    // One mesh placed once as it is is a mesh.
+                    if i.placements.len() == 1 && i.placements[0].rows == IDENTITY_ROWS && i.meshes.len() == 1 {
+                        let mut mesh = i.meshes.remove(0);
+                        mesh.warnings = i.warnings;
+                        return Ok(Loaded::One(mesh));
+                    }
+                    Ok(Loaded::Instanced(i))
+                }
+            },
+        }
+    }
+
     /// A plain OBJ file's mesh, read (and decompressed) a block at a time, or `None`
     /// for an OBJ that is not plain. Its size is not limited (it is never held whole:
     /// what it costs follows its triangles, which are counted against
@@ -494,6 +610,9 @@ impl Mesh {
         mesh.checked(name, options)
     }
 }
+
+/// The identity's rows.
+const IDENTITY_ROWS: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
 
 /// Checks that every coordinate of `v` is finite.
 pub(crate) fn check_finite(v: [f32; 3], path: &Path, element: impl FnOnce() -> String) -> Result<()> {

@@ -39,8 +39,8 @@ decide, are counted apart. The oracle is much slower than the octree.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene, or a scene description (.json: baked scenes placed by
-    /// transforms, as `trace` takes; inside any closed instance).
+    /// The .oct scene, or a world as `trace` takes (a scene description or an
+    /// instanced file; inside any closed instance).
     pub scene: PathBuf,
     /// Input points (12 bytes each).
     #[arg(long)]

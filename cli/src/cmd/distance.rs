@@ -46,8 +46,8 @@ approximate). The oracle is much slower: a few thousand points for a large mesh.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene, or a scene description (.json: baked scenes placed by
-    /// transforms, as `trace` takes; see below).
+    /// The .oct scene, or a world as `trace` takes (a scene description or an
+    /// instanced file; see below).
     pub scene: PathBuf,
     /// Input points (12 bytes each).
     #[arg(long)]

@@ -11,7 +11,8 @@ use crate::output::{counted, mb, thousands};
 #[derive(clap::Args, Debug)]
 #[command(after_long_help = mapped_scene_help!())]
 pub(crate) struct Args {
-    /// The .oct file, or a scene description (.json: `octrace trace --help`).
+    /// The .oct file, or a world: a scene description (.json: `octrace trace --help`)
+    /// or an instanced file (what `bake` writes for a glTF placing a mesh many times).
     pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -19,7 +20,7 @@ pub(crate) struct Args {
 }
 
 pub(crate) fn run(args: Args) -> anyhow::Result<()> {
-    if crate::world_file::is_description(&args.file) {
+    if crate::world_file::is_world(&args.file) {
         return world(&args);
     }
     let scene = crate::open::open_scene(&args.file)?;
@@ -339,9 +340,17 @@ fn texture_uses(materials: &[octrace_format::Material], index: u32) -> String {
     }
 }
 
-/// `inspect` of a scene description: its scenes and instances, validated.
+/// `inspect` of a world (a scene description, or an instanced file): its scenes and
+/// instances, validated.
 fn world(args: &Args) -> anyhow::Result<()> {
     let (world, scenes) = crate::world_file::open_world(&args.file)?;
+    let (kind, what) = if crate::world_file::is_description(&args.file) {
+        ("description", "a scene description".to_string())
+    } else {
+        let bytes = std::fs::metadata(&args.file)?.len();
+        ("instanced", format!("an instanced file of {}", crate::output::mb(bytes)))
+    };
+    let mapped = (0..world.len() as u32).filter(|&id| world.materials(id).is_some_and(|m| !m.is_empty())).count();
     let mut triangles = 0u64;
     // Each scene's instances, by the scene's address (its name after).
     let mut by_scene = std::collections::HashMap::new();
@@ -364,18 +373,23 @@ fn world(args: &Args) -> anyhow::Result<()> {
         .collect();
     if args.json {
         let j = serde_json::json!({
-            "instances": world.len(), "placed_triangles": triangles, "world_bytes": world.bytes(), "scenes": scene_rows,
+            "kind": kind, "instances": world.len(), "placed_triangles": triangles, "world_bytes": world.bytes(),
+            "instances_with_material_maps": mapped, "scenes": scene_rows,
         });
         crate::out!("{}", serde_json::to_string_pretty(&j)?);
     } else {
         let mut text = format!(
-            "{}: a scene description, {} of {}, {} triangles placed; the world takes {} bytes beside its scenes\n",
+            "{}: {what}, {} of {}, {} triangles placed; the world takes {} bytes beside its scenes\n",
             crate::show(&args.file),
             crate::output::counted(world.len() as u64, "instance"),
             crate::output::counted(scenes.len() as u64, "scene"),
             crate::output::thousands(triangles),
             crate::output::thousands(world.bytes() as u64)
         );
+        if mapped > 0 {
+            let n = crate::output::counted(mapped as u64, "instance");
+            text += &format!("  {n} with a material map (drawing other materials than its scene's own)\n");
+        }
         for (name, scene) in &scenes {
             text += &format!(
                 "  {:<16} {:>12} triangles, {:>8} instances\n",

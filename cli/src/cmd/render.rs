@@ -33,9 +33,9 @@ refraction, alpha); --json prints the same as JSON.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene, or a scene description (.json: baked scenes placed by
-    /// transforms, as `trace` takes), rendered shaded on the CPU from the standard
-    /// camera of its box or --eye/--target.
+    /// The .oct scene, or a world as `trace` takes (a scene description or an
+    /// instanced file), rendered shaded on the CPU from the standard camera of its box
+    /// or --eye/--target.
     pub scene: PathBuf,
     /// The PNG to write; `-` writes it to standard output (the summary then goes to
     /// standard error). Never the scene itself.
@@ -218,7 +218,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if let Some(fov) = args.fov {
         anyhow::ensure!(fov > 0.0 && fov < 180.0, "--fov must be between 0 and 180 degrees");
     }
-    if crate::world_file::is_description(&args.scene) {
+    if crate::world_file::is_world(&args.scene) {
         return run_world(&args, to_stdout);
     }
     let scene = crate::open::open_scene(&args.scene)?;

@@ -49,8 +49,9 @@ the CPU): the same files as the CPU's.
 
 ", mapped_scene_help!()))]
 pub(crate) struct Args {
-    /// The .oct scene, or a scene description (.json: baked scenes placed by
-    /// transforms, traced as one world; see below).
+    /// The .oct scene, or a world: a scene description (.json: baked scenes placed by
+    /// transforms, traced as one world; see below) or an instanced file (what `bake`
+    /// writes for a glTF that places a mesh many times).
     pub scene: PathBuf,
     /// Input rays (32 bytes each; a regular file of at most 2^32 rays, 128 GiB).
     #[arg(long)]

@@ -653,7 +653,7 @@ impl<'a, S: Stage> Context<'a, S> {
     }
 
     fn material(&self, instance: u32, prim: StoredIndex) -> &'a Material {
-        self.view(instance).material(prim).unwrap_or(&PLAIN)
+        self.stage.material(instance, prim).unwrap_or(&PLAIN)
     }
 
     /// The material at `hit`, its base colour taken where the hit is (times its

@@ -206,13 +206,19 @@ impl Emitters {
     /// its emission comes through a texture, whose texels are not all black
     /// ([`EmissiveTriangles`]; the bake counts them the same way).
     pub(crate) fn of(view: &SceneView<'_>) -> Emitters {
+        Emitters::of_mapped(view, &[])
+    }
+
+    /// [`Emitters::of`] with the materials drawn through `map` (an instance's
+    /// material map).
+    pub(crate) fn of_mapped(view: &SceneView<'_>, map: &[u32]) -> Emitters {
         let mut triangles = Vec::new();
         let mut cumulative = Vec::new();
         let mut total = 0.0f64;
         let mut untextured = false;
         let mut emissive = EmissiveTriangles::new(&view.shading.textures, view.texels.get());
         for prim in 0..view.triangle_count() as u32 {
-            let Some(m) = view.material(StoredIndex(prim)) else { continue };
+            let Some(m) = view.material_mapped(StoredIndex(prim), map) else { continue };
             if !emissive.emits(m, view.corner_uvs_in(StoredIndex(prim), m.uv_channel(1)).unwrap_or_default()) {
                 continue;
             }
@@ -236,8 +242,8 @@ impl Emitters {
         let mut e =
             Emitters { triangles: Vec::new(), instances: Vec::new(), cumulative: Vec::new(), untextured: false };
         let mut total = 0.0f64;
-        for (instance, scene) in stage.world.placed_scenes() {
-            let of_scene = &own[scene as usize];
+        for (instance, _) in stage.world.placed_scenes() {
+            let of_scene = &own[stage.look[instance as usize] as usize];
             e.untextured |= of_scene.untextured;
             for &(prim, emitted) in &of_scene.triangles {
                 let area = area(&stage.triangle(instance, StoredIndex(prim)));

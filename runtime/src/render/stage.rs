@@ -3,7 +3,7 @@
 //! its own scene's).
 
 use glam::Vec3;
-use octrace_format::{Light, SceneView, StoredIndex};
+use octrace_format::{Light, Material, SceneView, StoredIndex};
 
 use super::lighting::Emitters;
 use crate::error::{Error, Result};
@@ -29,6 +29,9 @@ pub(crate) trait Stage: Sync {
     fn occluded_batch(&self, rays: &[Ray]) -> Vec<bool>;
     /// The arrays of instance `instance`'s scene.
     fn view(&self, instance: u32) -> &SceneView<'_>;
+    /// The material `instance` draws stored triangle `prim` with (its scene's, through
+    /// the instance's material map in a world).
+    fn material(&self, instance: u32, prim: StoredIndex) -> Option<&Material>;
     /// Stored triangle `prim` of `instance`, its corners in the stage's space.
     fn triangle(&self, instance: u32, prim: StoredIndex) -> [[f32; 3]; 3];
     /// Whether `instance`'s placement mirrors (its triangles' corners then turn the
@@ -87,6 +90,11 @@ impl Stage for SceneStage<'_> {
     }
 
     #[inline]
+    fn material(&self, _: u32, prim: StoredIndex) -> Option<&Material> {
+        self.view.material(prim)
+    }
+
+    #[inline]
     fn triangle(&self, _: u32, prim: StoredIndex) -> [[f32; 3]; 3] {
         self.view.triangle(prim)
     }
@@ -127,8 +135,10 @@ pub(crate) struct WorldStage<'a> {
     pub world: &'a World,
     /// The world's scenes' arrays, by scene index.
     pub views: Vec<SceneView<'a>>,
-    /// Each scene's own emissive triangles, by scene index.
+    /// The emissive triangles of each look (a scene drawn through a material map).
     pub own_emitters: Vec<Emitters>,
+    /// Each instance's look (its index in `own_emitters`), by instance id.
+    pub look: Vec<u32>,
     /// The instances' lights, placed.
     lights: Vec<Light>,
 }
@@ -149,14 +159,31 @@ impl<'a> WorldStage<'a> {
     /// many times); [`Error::Alloc`] where their memory cannot be had.
     pub fn new(world: &'a World) -> Result<WorldStage<'a>> {
         let views: Vec<SceneView<'a>> = world.scenes().iter().map(|s| s.view()).collect();
-        let own_emitters: Vec<Emitters> = views.iter().map(Emitters::of).collect();
+        // Each distinct look (a scene drawn through one material map) finds its
+        // emissive triangles once.
+        let mut looks: std::collections::HashMap<(u32, &[u32]), u32> = Default::default();
+        let mut own_emitters = Vec::new();
+        let mut look = Vec::new();
+        for (id, scene) in world.placed_scenes() {
+            let map = world.materials(id).unwrap_or(&[]);
+            let index = *looks.entry((scene, map)).or_insert_with(|| {
+                own_emitters.push(Emitters::of_mapped(&views[scene as usize], map));
+                own_emitters.len() as u32 - 1
+            });
+            if look.len() <= id as usize {
+                look.resize(id as usize + 1, 0);
+            }
+            look[id as usize] = index;
+        }
         // What the placed copies take, counted before any is made.
         let (mut lights_count, mut bytes) = (0u64, 0u64);
         for (_, scene) in world.placed_scenes() {
             let own = &views[scene as usize].shading.lights;
             lights_count += own.len() as u64;
             bytes += own.iter().map(|l| (std::mem::size_of::<Light>() + l.name.len()) as u64).sum::<u64>();
-            bytes += own_emitters[scene as usize].len() as u64 * EMITTER_BYTES;
+        }
+        for (id, _) in world.placed_scenes() {
+            bytes += own_emitters[look[id as usize] as usize].len() as u64 * EMITTER_BYTES;
         }
         if bytes > WORLD_LIGHTS_BUDGET {
             return Err(Error::Budget {
@@ -180,7 +207,7 @@ impl<'a> WorldStage<'a> {
                 lights.push(Light { position, direction, range, ..l.clone() });
             }
         }
-        Ok(WorldStage { world, views, own_emitters, lights })
+        Ok(WorldStage { world, views, own_emitters, look, lights })
     }
 }
 
@@ -232,6 +259,11 @@ impl Stage for WorldStage<'_> {
 
     fn view(&self, instance: u32) -> &SceneView<'_> {
         self.placement(instance).0
+    }
+
+    fn material(&self, instance: u32, prim: StoredIndex) -> Option<&Material> {
+        let view = self.placement(instance).0;
+        view.material_mapped(prim, self.world.materials(instance).unwrap_or(&[]))
     }
 
     fn triangle(&self, instance: u32, prim: StoredIndex) -> [[f32; 3]; 3] {

@@ -38,6 +38,10 @@
 //! the ray queries with the instances' walks in the kernel, the CPU's answers bit
 //! for bit.
 //!
+//! [`World::open`] opens an instanced file (`octrace_format::instanced`: a glTF's
+//! meshes placed many times, each baked once): its scenes, and its instances with
+//! the materials each draws ([`World::add_with_materials`]).
+//!
 //! ```
 //! use std::sync::Arc;
 //! use octrace_bake::{bake, procedural, BuildParams};
@@ -56,6 +60,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod file;
 #[cfg(feature = "gpu")]
 mod gpu;
 mod rounds;
@@ -185,6 +190,8 @@ pub struct World {
     staged: Vec<(u32, Option<Placed>)>,
     /// Each id's scene as the edits leave it (`None`: removed).
     latest: Vec<Option<u32>>,
+    /// Each id's material map ([`World::add_with_materials`]), where it has one.
+    maps: Vec<Option<Arc<[u32]>>>,
 }
 
 impl std::fmt::Debug for World {
@@ -210,6 +217,39 @@ impl World {
     /// [`Error::Transform`] where the transform cannot be inverted in `f64` or places
     /// the scene's box beyond `f32`'s range.
     pub fn add(&mut self, scene: &Arc<Scene>, transform: Transform) -> Result<u32> {
+        self.add_with_materials(scene, transform, &[])
+    }
+
+    /// [`World::add`] with a material map: the instance draws material `materials[k]`
+    /// of its scene wherever the scene has material `k` (an entry past the map's end
+    /// keeps its own). An instanced file's placements of one mesh with different
+    /// materials are such instances. The map changes what the renderer draws and the
+    /// material [`World::surface`] names; no geometric query reads it.
+    ///
+    /// # Errors
+    /// As [`World::add`]; [`Error::MaterialMap`] where an entry names a material the
+    /// scene does not have.
+    ///
+    /// # Example
+    /// ```
+    /// use std::sync::Arc;
+    /// use octrace_runtime::world::{Transform, World};
+    /// let mut scene = octrace_format::testing::single_leaf_scene();
+    /// scene.shading.materials = vec![Default::default(), Default::default()];
+    /// scene.material_ids = vec![0];
+    /// let scene = Arc::new(octrace_runtime::Scene::from_baked(scene)?);
+    /// let mut world = World::new();
+    /// let blue = world.add_with_materials(&scene, Transform::IDENTITY, &[1])?;
+    /// world.commit();
+    /// assert_eq!(world.materials(blue), Some(&[1u32][..]));
+    /// assert!(world.add_with_materials(&scene, Transform::IDENTITY, &[2]).is_err());
+    /// # Ok::<(), octrace_runtime::Error>(())
+    /// ```
+    pub fn add_with_materials(&mut self, scene: &Arc<Scene>, transform: Transform, materials: &[u32]) -> Result<u32> {
+        let count = scene.view().shading.materials.len();
+        if let Some((entry, &material)) = materials.iter().enumerate().find(|(_, &m)| m as usize >= count) {
+            return Err(Error::MaterialMap { entry, material, materials: count });
+        }
         let key = Arc::as_ptr(scene) as usize;
         let index = match self.scene_ids.get(&key) {
             Some(&i) => i,
@@ -226,6 +266,7 @@ impl World {
             reason: "a world holds at most 2^32 - 1 instances",
         })?;
         self.latest.push(Some(index));
+        self.maps.push((!materials.is_empty()).then(|| materials.into()));
         self.staged.push((id, Some(placed)));
         Ok(id)
     }
@@ -295,6 +336,13 @@ impl World {
         Some((&self.scenes[p.scene as usize], p.to_world))
     }
 
+    /// Instance `id`'s material map ([`World::add_with_materials`]; empty where it has
+    /// none), or `None` where the world holds no such instance (as committed).
+    pub fn materials(&self, id: u32) -> Option<&[u32]> {
+        self.placed.get(id as usize)?.as_ref()?;
+        Some(self.maps.get(id as usize)?.as_deref().unwrap_or(&[]))
+    }
+
     /// The box of the committed instances' world boxes (each rounded outward), or
     /// `None` for an empty world.
     pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
@@ -311,8 +359,8 @@ impl World {
         Some((p.scene, p.to_world, p.to_local))
     }
 
-    /// The scenes the world has held (by index, as [`World::placed_scenes`] names them).
-    pub(crate) fn scenes(&self) -> &[Arc<Scene>] {
+    /// The scenes the world has held, each once (instances of one scene share it).
+    pub fn scenes(&self) -> &[Arc<Scene>] {
         &self.scenes
     }
 
@@ -326,6 +374,7 @@ impl World {
         self.placed.len() * (std::mem::size_of::<Option<Placed>>() + std::mem::size_of::<Aabb>())
             + self.top.bytes()
             + self.latest.len() * std::mem::size_of::<Option<u32>>()
+            + self.maps.len() * std::mem::size_of::<Option<Arc<[u32]>>>()
     }
 
     /// The nearest hit of `ray` in `[tmin, tmax]` (see the module's text).
@@ -609,6 +658,9 @@ impl World {
     pub fn surface(&self, hit: &WorldHit) -> Option<HitSurface> {
         let p = self.placed.get(hit.instance as usize).copied().flatten()?;
         let mut s = self.scenes[p.scene as usize].surface(&hit.hit);
+        if let Some(map) = &self.maps[hit.instance as usize] {
+            s.material = s.material.map(|m| map.get(m as usize).copied().unwrap_or(m));
+        }
         let wide = |v: Vec3| v.to_array().map(f64::from);
         let point = p.to_world.point(wide(s.point));
         let e = wide(s.point_error);

@@ -19,6 +19,7 @@ mod hard_cases;
 mod hostile;
 mod images;
 mod inside;
+mod instanced;
 mod materials;
 mod mesh;
 mod raysets;

@@ -2,6 +2,7 @@
 //! transforms applied; triangle lists, strips and fans; other modes skipped.
 
 mod buffers;
+mod instances;
 mod lenient;
 mod material;
 mod primitive;
@@ -14,7 +15,7 @@ use std::path::Path;
 use glam::DMat4;
 
 use super::refs::LoadOptions;
-use super::Mesh;
+use super::{Loaded, Mesh};
 use crate::error::{Error, Result};
 use buffers::load_buffers;
 use material::UvMap;
@@ -24,11 +25,30 @@ use scene::{instanced_triangles, placements, Placements};
 pub(super) type Buffer<'a> = Cow<'a, [u8]>;
 
 pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+    match parse_guarded(bytes, path, base, options, false)? {
+        Loaded::One(mesh) => Ok(mesh),
+        Loaded::Instanced(_) => unreachable!("a flat parse makes one mesh"),
+    }
+}
+
+/// [`parse`], the meshes the scene places more than once kept once, as instances
+/// ([`Loaded::Instanced`]), where it places any.
+pub(super) fn parse_instanced(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Loaded> {
+    parse_guarded(bytes, path, base, options, true)
+}
+
+fn parse_guarded(
+    bytes: &[u8],
+    path: &Path,
+    base: Option<&Path>,
+    options: &LoadOptions,
+    instancing: bool,
+) -> Result<Loaded> {
     // The gltf crate (gltf-json 1.4) indexes arrays with unchecked indices while it
     // validates, and panics on some malformed files (a POSITION accessor index out of
     // range, found by fuzzing). A panic there is a malformed file, not a bug of ours:
     // it becomes a parse error.
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_unguarded(bytes, path, base, options)))
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_unguarded(bytes, path, base, options, instancing)))
         .unwrap_or_else(|_| {
             Err(Error::Parse {
                 path: path.into(),
@@ -38,7 +58,13 @@ pub(super) fn parse(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Lo
         })
 }
 
-fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &LoadOptions) -> Result<Mesh> {
+fn parse_unguarded(
+    bytes: &[u8],
+    path: &Path,
+    base: Option<&Path>,
+    options: &LoadOptions,
+    instancing: bool,
+) -> Result<Loaded> {
     let parse_error = |element: &str, e: gltf::Error| Error::Parse {
         path: path.into(),
         element: element.into(),
@@ -148,48 +174,59 @@ fn parse_unguarded(bytes: &[u8], path: &Path, base: Option<&Path>, options: &Loa
             option: "--max-triangles, LoadOptions::max_triangles",
         });
     }
-    if let Some(repeated) = scene::repeated_geometry(&document, &placed) {
-        warnings.push(format!("{}: {repeated}", path.display()));
-    }
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.len()).sum::<usize>();
-    let mut mesh = Mesh { sources, warnings, ..Mesh::default() };
-    let mut materials = material::Materials {
-        path,
-        base,
-        options,
-        buffers: &buffers,
-        loaded: Default::default(),
-        kept: Default::default(),
+    let flat = " (bake without --flatten, or load with Mesh::load_instanced, to keep such meshes once, as instances)";
+    let groups = match instancing.then(|| instances::groups(&document, &placed)) {
+        Some(Ok(groups)) => Some(groups),
+        Some(Err(why)) => {
+            let why = why.map_or(String::new(), |w| format!(" ({w})"));
+            if let Some(repeated) = scene::repeated_geometry(&document, &placed, &why) {
+                warnings.push(format!("{}: {repeated}", path.display()));
+            }
+            None
+        }
+        None => {
+            if let Some(repeated) = scene::repeated_geometry(&document, &placed, flat) {
+                warnings.push(format!("{}: {repeated}", path.display()));
+            }
+            None
+        }
     };
-    let mut uv_maps = Vec::new();
-    for m in document.materials() {
-        let (m, uv) = materials.material(&m, &mut mesh)?;
-        mesh.materials.push(m);
-        uv_maps.push(uv);
-    }
+    let mesh = Mesh { sources, warnings, ..Mesh::default() };
     let mut loader = Loader {
         path,
+        options,
+        base,
         document: &document,
         buffers: &buffers,
         input_bytes,
         mesh,
-        uv_maps,
+        uv_maps: Vec::new(),
         skipped: None,
         default_material: None,
+        grouped: groups,
     };
+    let used = loader.grouped.as_ref().map(|g| g.used_by_rest(&document));
+    loader.load_materials(used.as_deref())?;
     for node in scene.nodes() {
         loader.node(&node, DMat4::IDENTITY, 0)?;
     }
-    if loader.mesh.triangles.is_empty() {
+    if loader.mesh.triangles.is_empty() && loader.grouped.is_none() {
         if let Some((element, mode)) = loader.skipped {
             return Err(Error::UnsupportedMode { path: path.into(), element, mode });
         }
     }
-    Ok(loader.mesh)
+    match loader.grouped.take() {
+        None => Ok(Loaded::One(loader.mesh)),
+        Some(grouped) => loader.instanced(grouped),
+    }
 }
 
-struct Loader<'a> {
+pub(super) struct Loader<'a> {
     path: &'a Path,
+    options: &'a LoadOptions,
+    /// The folder external buffers and images are read from.
+    base: Option<&'a Path>,
     document: &'a gltf::Document,
     buffers: &'a [Buffer<'a>],
     /// Bytes of the document and its buffers: what bounds the elements an accessor
@@ -204,6 +241,8 @@ struct Loader<'a> {
     skipped: Option<(String, String)>,
     /// Index of glTF's default material, once a primitive without one needed it.
     default_material: Option<u32>,
+    /// The meshes placed more than once, kept apart while the scene is walked.
+    grouped: Option<instances::Grouped>,
 }
 
 /// A `f64` vector rounded to `f32`.

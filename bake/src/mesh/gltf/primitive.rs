@@ -102,7 +102,7 @@ impl Loader<'_> {
     }
 
     /// The material index of a primitive: its glTF material, or glTF's default one.
-    fn material_of(&mut self, prim: &gltf::Primitive<'_>) -> u32 {
+    pub(super) fn material_of(&mut self, prim: &gltf::Primitive<'_>) -> u32 {
         match prim.material().index() {
             Some(i) if i < self.mesh.materials.len() => i as u32,
             _ => *self.default_material.get_or_insert_with(|| {

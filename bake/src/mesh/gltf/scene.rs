@@ -98,7 +98,7 @@ pub(super) const GPU_INSTANCING: &str = "EXT_mesh_gpu_instancing";
 
 /// The triangles a primitive makes, from its accessors' counts (a list's indices or
 /// positions over 3; a strip's or fan's less 2; other modes none).
-fn primitive_triangles(p: &gltf::Primitive<'_>) -> u64 {
+pub(super) fn primitive_triangles(p: &gltf::Primitive<'_>) -> u64 {
     use gltf::mesh::Mode;
     let vertices = p.indices().or_else(|| p.get(&gltf::Semantic::Positions)).map_or(0, |a| a.count() as u64);
     match p.mode() {
@@ -130,9 +130,10 @@ pub(super) const REPEATED_MIN_TRIANGLES: u64 = 4096;
 
 /// A warning when the scene's placements store its distinct geometry
 /// [`REPEATED_FACTOR`] times over or more (and [`REPEATED_MIN_TRIANGLES`] more): each placement of a mesh (and each mesh
-/// that shares another's accessors) is baked whole, one triangle each time. Names the
-/// geometry repeated most, by the triangles its copies add.
-pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Option<String> {
+/// that shares another's accessors) is baked whole, one triangle each time (`why`
+/// says why, or how not to). Names the geometry repeated most, by the triangles its
+/// copies add.
+pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64], why: &str) -> Option<String> {
     use std::collections::BTreeMap;
     let mut geometry: BTreeMap<GeometryKey, Geometry> = BTreeMap::new();
     for node in document.nodes() {
@@ -182,8 +183,8 @@ pub(super) fn repeated_geometry(document: &gltf::Document, placed: &[u64]) -> Op
         })
         .collect();
     Some(format!(
-        "the scene stores its {} triangles of distinct geometry as {} ({:.1}x): each placement is baked whole \
-         (instances, which would store a mesh once, are not baked yet); repeated most: {}",
+        "the scene stores its {} triangles of distinct geometry as {} ({:.1}x): each placement is baked \
+         whole{why}; repeated most: {}",
         thousands(distinct),
         thousands(stored),
         stored as f64 / distinct as f64,
@@ -231,6 +232,21 @@ impl Loader<'_> {
         }
         if let Some(camera) = node.camera() {
             self.camera(&camera, &world, node.index());
+        }
+        if let Some(grouped) = self.grouped.as_mut() {
+            if let Some(group) = node.mesh().and_then(|m| grouped.group_of_mesh[m.index()]) {
+                let mesh = node.mesh().map_or(0, |m| m.index());
+                grouped.placements.extend(placements.iter().map(|p| super::instances::Placed {
+                    group,
+                    mesh,
+                    node: node.index(),
+                    world: world * *p,
+                }));
+                for child in node.children() {
+                    self.node(&child, world, depth + 1)?;
+                }
+                return Ok(());
+            }
         }
         if let Some(mesh) = node.mesh() {
             for (instance, prim) in placements.iter().flat_map(|p| mesh.primitives().map(move |prim| (p, prim))) {

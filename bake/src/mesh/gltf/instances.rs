@@ -1,0 +1,282 @@
+//! A scene's repeated meshes kept once: the meshes the default scene places more than
+//! once (by several nodes, by `EXT_mesh_gpu_instancing`, or as meshes that share one
+//! geometry's accessors) are grouped by their geometry, each group loaded once in its
+//! own space, and every placement becomes an instance with a transform and a
+//! material map ([`super::super::InstancedMesh`]).
+//!
+//! Two meshes share a group where their primitives read the same accessors in the
+//! same mode, their materials fall into the same pattern (primitives that share a
+//! material in one share one in the other), and any textured material is the same
+//! one (what a primitive stores, its texture coordinates' channels and its tangents,
+//! follows its material's textures). Untextured materials may differ: a placement
+//! draws its own through its instance's material map.
+
+use std::collections::HashMap;
+
+use glam::DMat4;
+
+use super::super::{InstancedMesh, Loaded, Mesh, Placement};
+use super::Loader;
+use crate::error::Result;
+
+/// The meshes kept once, and their placements as the scene is walked.
+pub(in crate::mesh) struct Grouped {
+    /// Each glTF mesh's group, for the meshes kept once.
+    pub group_of_mesh: Vec<Option<u32>>,
+    /// Each group's mesh whose primitives are loaded.
+    pub representative: Vec<usize>,
+    /// Each placement of a grouped mesh, in the walk's order.
+    pub placements: Vec<Placed>,
+}
+
+/// A placement of a grouped mesh met in the walk.
+pub(in crate::mesh) struct Placed {
+    pub group: u32,
+    pub mesh: usize,
+    pub node: usize,
+    /// Local to world.
+    pub world: DMat4,
+}
+
+impl Placed {
+    fn determinant(&self) -> f64 {
+        glam::DMat3::from_mat4(self.world).determinant()
+    }
+}
+
+/// What a primitive's stored triangles follow: its attributes' accessors, its
+/// indices' accessor and mode, its material where that is textured, and the first
+/// primitive of its mesh with its material.
+type PrimitiveKey = (Vec<(String, usize)>, Option<usize>, u32, Option<usize>, usize);
+
+/// Whether material `index` reads a texture (any `"index"` in its JSON: the core
+/// slots and every extension's).
+fn textured(document: &gltf::Document, index: usize) -> bool {
+    let json = document.as_json();
+    json.materials.get(index).and_then(|m| serde_json::to_string(m).ok()).is_some_and(|text| text.contains("\"index\""))
+}
+
+fn mesh_key(document: &gltf::Document, mesh: &gltf::Mesh<'_>) -> Vec<PrimitiveKey> {
+    let materials: Vec<Option<usize>> = mesh.primitives().map(|p| p.material().index()).collect();
+    mesh.primitives()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut attributes: Vec<(String, usize)> =
+                p.attributes().map(|(semantic, a)| (semantic.to_string(), a.index())).collect();
+            attributes.sort();
+            let material = materials[i];
+            let texture = material.filter(|&m| textured(document, m));
+            let first = materials.iter().position(|&m| m == material).unwrap_or(i);
+            (attributes, p.indices().map(|a| a.index()), p.mode().as_gl_enum(), texture, first)
+        })
+        .collect()
+}
+
+/// The groups of meshes the scene places more than once (`placed`: each node's
+/// placements) where their copies would add [`super::scene::REPEATED_MIN_TRIANGLES`]
+/// or more; `Err(None)` where there are none, `Err(why)` where it places lights or
+/// cameras but no mesh once (they would have no scene of their own to go with: such
+/// a scene is baked whole).
+pub(super) fn groups(document: &gltf::Document, placed: &[u64]) -> Result<Grouped, Option<&'static str>> {
+    let mut times = vec![0u64; document.meshes().len()];
+    for node in document.nodes() {
+        if let Some(mesh) = node.mesh() {
+            times[mesh.index()] = times[mesh.index()].saturating_add(placed[node.index()]);
+        }
+    }
+    let mut by_key: HashMap<Vec<PrimitiveKey>, usize> = HashMap::new();
+    let mut keyed: Vec<Option<usize>> = vec![None; times.len()];
+    let mut total: Vec<u64> = Vec::new();
+    let mut first: Vec<usize> = Vec::new();
+    let mut triangles: Vec<u64> = Vec::new();
+    for mesh in document.meshes().filter(|m| times[m.index()] > 0) {
+        let key = mesh_key(document, &mesh);
+        let k = *by_key.entry(key).or_insert_with(|| {
+            total.push(0);
+            first.push(mesh.index());
+            triangles.push(mesh.primitives().map(|p| super::scene::primitive_triangles(&p)).sum());
+            total.len() - 1
+        });
+        total[k] = total[k].saturating_add(times[mesh.index()]);
+        keyed[mesh.index()] = Some(k);
+    }
+    // The keys placed more than once, whose copies would add at least
+    // REPEATED_MIN_TRIANGLES, become groups, numbered in order (a few repeated
+    // triangles are cheaper baked whole than as a scene of their own).
+    let mut number = vec![None; total.len()];
+    let mut representative = Vec::new();
+    for (k, &t) in total.iter().enumerate() {
+        if t > 1 && triangles[k].saturating_mul(t - 1) >= super::scene::REPEATED_MIN_TRIANGLES {
+            number[k] = Some(representative.len() as u32);
+            representative.push(first[k]);
+        }
+    }
+    if representative.is_empty() {
+        return Err(None);
+    }
+    let group_of_mesh: Vec<Option<u32>> = keyed.iter().map(|k| k.and_then(|k| number[k])).collect();
+    let once = (0..times.len()).any(|m| times[m] > 0 && group_of_mesh[m].is_none());
+    let lit = document.nodes().any(|n| placed[n.index()] > 0 && (n.light().is_some() || n.camera().is_some()));
+    if lit && !once {
+        return Err(Some(
+            "its lights or cameras have no mesh placed once to go with, so it is baked as one scene (an \
+             instance's lights would be placed with every copy)",
+        ));
+    }
+    Ok(Grouped { group_of_mesh, representative, placements: Vec::new() })
+}
+
+impl Grouped {
+    /// The materials the meshes placed once use (by glTF index).
+    pub fn used_by_rest(&self, document: &gltf::Document) -> Vec<bool> {
+        let mut used = vec![false; document.materials().len()];
+        for mesh in document.meshes().filter(|m| self.group_of_mesh[m.index()].is_none()) {
+            for i in mesh.primitives().filter_map(|p| p.material().index()) {
+                used[i] = true;
+            }
+        }
+        used
+    }
+}
+
+/// Rows of `m`'s top three (local to world).
+fn rows(m: &DMat4) -> [[f64; 4]; 3] {
+    let c = m.to_cols_array_2d();
+    std::array::from_fn(|i| std::array::from_fn(|j| c[j][i]))
+}
+
+impl<'a> Loader<'a> {
+    /// The materials of the document into the mesh, in glTF order, with their
+    /// textures where `used` says so (all when `None`); the others a placeholder
+    /// named as they are (no triangle of this mesh draws them).
+    pub(super) fn load_materials(&mut self, used: Option<&[bool]>) -> Result<()> {
+        let mut materials = super::material::Materials {
+            path: self.path,
+            base: self.base,
+            options: self.options,
+            buffers: self.buffers,
+            loaded: Default::default(),
+            kept: Default::default(),
+        };
+        for m in self.document.materials() {
+            let index = m.index().unwrap_or(0);
+            if used.is_none_or(|u| u.get(index).copied().unwrap_or(false)) {
+                let (m, uv) = materials.material(&m, &mut self.mesh)?;
+                self.mesh.materials.push(m);
+                self.uv_maps.push(uv);
+            } else {
+                let name = m.name().map_or_else(|| format!("material {index}"), str::to_string);
+                self.mesh.materials.push(octrace_format::Material { name, double_sided: true, ..Default::default() });
+                self.uv_maps.push(Vec::new());
+            }
+        }
+        Ok(())
+    }
+
+    /// The loaded scene as instances: the meshes placed once (with the lights and
+    /// cameras) as the first mesh, placed as they are, where there are any; each
+    /// group's representative mesh loaded in its own space (and once more mirrored,
+    /// where some placements mirror), placed once for each of its placements with the
+    /// materials they draw, in the order the scene places them.
+    pub(super) fn instanced(self, grouped: Grouped) -> Result<Loaded> {
+        let Loader { path, options, base, document, buffers, input_bytes, mesh: mut rest, .. } = self;
+        let mut out = InstancedMesh::default();
+        let mut warnings = std::mem::take(&mut rest.warnings);
+        out.sources = std::mem::take(&mut rest.sources);
+        if !rest.triangles.is_empty() {
+            out.meshes.push(rest);
+            out.placements.push(Placement { mesh: 0, rows: rows(&DMat4::IDENTITY), materials: Vec::new() });
+        }
+        let mut walked: Vec<(usize, Placement)> = Vec::with_capacity(grouped.placements.len());
+        for (group, &representative) in grouped.representative.iter().enumerate() {
+            let group = group as u32;
+            let mut all: Vec<(usize, &Placed)> = Vec::new();
+            for (walk, p) in grouped.placements.iter().enumerate().filter(|(_, p)| p.group == group) {
+                let det = p.determinant();
+                if det == 0.0 || !det.is_finite() {
+                    warnings.push(format!(
+                        "{}: node {}: mesh {} placed by a singular transform (it flattens the mesh): left out",
+                        path.display(),
+                        p.node,
+                        p.mesh
+                    ));
+                    continue;
+                }
+                all.push((walk, p));
+            }
+            // The mirroring placements place a mirrored copy (x negated, exactly; its
+            // winding turned as the loader turns a mirroring node's) by their transform
+            // times the mirror, which does not mirror: glTF's front stays the stored
+            // winding's, as in a flat bake.
+            for mirrored in [false, true] {
+                let placements: Vec<(usize, &Placed)> =
+                    all.iter().copied().filter(|(_, p)| (p.determinant() < 0.0) == mirrored).collect();
+                let local =
+                    if mirrored { DMat4::from_scale(glam::DVec3::new(-1.0, 1.0, 1.0)) } else { DMat4::IDENTITY };
+                let Some(first_node) = placements.first().map(|(_, p)| p.node) else { continue };
+                let mut used = vec![false; document.materials().len()];
+                for (_, p) in &placements {
+                    let Some(mesh) = document.meshes().nth(p.mesh) else { continue };
+                    for i in mesh.primitives().filter_map(|p| p.material().index()) {
+                        used[i] = true;
+                    }
+                }
+                let mut sub = Loader {
+                    path,
+                    options,
+                    base,
+                    document,
+                    buffers,
+                    input_bytes,
+                    mesh: Mesh::default(),
+                    uv_maps: Vec::new(),
+                    skipped: None,
+                    default_material: None,
+                    grouped: None,
+                };
+                sub.load_materials(Some(&used))?;
+                let Some(mesh) = document.meshes().nth(representative) else { continue };
+                for prim in mesh.primitives() {
+                    let element = format!("mesh {} primitive {}", mesh.index(), prim.index());
+                    sub.primitive(&prim, &local, element)?;
+                    let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
+                    let source = octrace_format::PartSource::Gltf {
+                        node: first_node as u32,
+                        mesh: mesh.index() as u32,
+                        primitive: prim.index() as u32,
+                    };
+                    sub.mesh.end_part(source, || {
+                        format!("mesh {}{}, primitive {}", mesh.index(), quoted(mesh.name()), prim.index())
+                    });
+                }
+                warnings.append(&mut sub.mesh.warnings);
+                if sub.mesh.triangles.is_empty() {
+                    continue;
+                }
+                let own: Vec<u32> = mesh.primitives().map(|p| sub.material_of(&p)).collect();
+                let index = out.meshes.len() as u32;
+                for &(walk, p) in &placements {
+                    let Some(placed) = document.meshes().nth(p.mesh) else { continue };
+                    let mut map: Vec<u32> = Vec::new();
+                    for (k, p) in own.iter().zip(placed.primitives()) {
+                        let j = sub.material_of(&p);
+                        if j != *k {
+                            if map.len() <= *k as usize {
+                                map.extend(map.len() as u32..=*k);
+                            }
+                            map[*k as usize] = j;
+                        }
+                    }
+                    let placement = Placement { mesh: index, rows: rows(&(p.world * local)), materials: map };
+                    walked.push((walk, placement));
+                }
+                out.meshes.push(sub.mesh);
+            }
+        }
+        // The instances in the order the scene places them.
+        walked.sort_by_key(|(walk, _)| *walk);
+        out.placements.extend(walked.into_iter().map(|(_, p)| p));
+        out.warnings = warnings;
+        Ok(Loaded::Instanced(out))
+    }
+}
