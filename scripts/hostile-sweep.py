@@ -6,7 +6,8 @@ errors, signals and hangs (issue 46's acceptance: 0 signals, 0 hangs).
                              [--memory MIB] [--python] [--json FILE]
 
 Scenes: a cube (OBJ), the repository's textured leaf (glTF with PNG textures) and
-extensions sample, baked by `octrace bake`. Each gets N mutations (a byte set to a
+extensions sample, and an instanced file (a GLB placing one sphere three times), baked
+by `octrace bake`. Each gets N mutations (a byte set to a
 random value, a run of bytes zeroed or set to 0xFF, a 32-bit word set to a size-like
 value, the file cut short or grown), each run through `inspect`, `inspect --json`,
 `trace` (the standard incoherent set's first 256 rays, nearest and every hit),
@@ -31,9 +32,11 @@ Only the Python standard library (and numpy with the module, for --python) is us
 
 import argparse
 import json
+import math
 import os
 import random
 import resource
+import struct
 import subprocess
 import sys
 import tempfile
@@ -144,6 +147,43 @@ sys.exit(3 if "PanicException" in failures or "SystemError" in failures else 0)
 """
 
 
+def repeated_glb(path):
+    """A GLB whose one mesh (a 2,400-triangle sphere) three nodes place (one mirrored):
+    `octrace bake` writes it as an instanced file."""
+
+    segments, rings = 40, 31
+    verts = [(math.sin(math.pi * r / rings) * math.cos(2 * math.pi * s / segments), math.cos(math.pi * r / rings),
+              math.sin(math.pi * r / rings) * math.sin(2 * math.pi * s / segments))
+             for r in range(rings + 1) for s in range(segments + 1)]
+    idx = []
+    for r in range(rings):
+        for s in range(segments):
+            a = r * (segments + 1) + s
+            b = a + segments + 1
+            idx += ([a, a + 1, b] if r > 0 else []) + ([a + 1, b + 1, b] if r < rings - 1 else [])
+    positions = b"".join(struct.pack("<3f", *v) for v in verts)
+    indices = struct.pack(f"<{len(idx)}H", *idx)
+    indices += b"\0" * (-len(indices) % 4)
+    blob = positions + indices
+    doc = {
+        "asset": {"version": "2.0"}, "scenes": [{"nodes": [0, 1, 2]}],
+        "nodes": [{"mesh": 0}, {"mesh": 0, "translation": [3, 0, 0]},
+                  {"mesh": 0, "translation": [6, 0, 0], "scale": [-1, 1, 1]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": len(blob)}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": 2 * len(idx)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(verts), "type": "VEC3",
+                       "min": [-1, -1, -1], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5123, "count": len(idx), "type": "SCALAR"}],
+    }
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    total = 12 + 8 + len(text) + 8 + len(blob)
+    path.write_bytes(struct.pack("<5I", 0x46546C67, 2, total, len(text), 0x4E4F534A) + text
+                     + struct.pack("<2I", len(blob), 0x004E4942) + blob)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--octrace", default=str(ROOT / "target" / "release" / "octrace"))
@@ -171,8 +211,10 @@ def main():
             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
             "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 7 3\nf 4 8 7\nf 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\n"
         )
+        repeated_glb(d / "repeated.glb")
         inputs = {
             "cube": d / "cube.obj",
+            "instanced": d / "repeated.glb",
             "leaf": ROOT / "tests" / "data" / "textured" / "leaf.gltf",
             "extensions": ROOT / "tests" / "data" / "extensions.gltf",
         }

@@ -228,3 +228,54 @@ fn broken_instanced_files_are_refused_by_name() {
         let _ = World::open(&path).map(|w| w.len());
     }
 }
+
+/// `EXT_mesh_gpu_instancing`'s instances of a mesh worth keeping once are instances
+/// of one scene: each its translation, rotation and scale, the node's transform after
+/// them, as the flat load places them (a mirroring one through the mirrored copy).
+#[test]
+fn gpu_instancing_bakes_each_instance_as_an_instance() {
+    let mut b = octrace_tests::gltf::GltfBuffer::default();
+    // A strip of 3,000 triangles.
+    let n = 1_500;
+    let positions: Vec<[f32; 3]> =
+        (0..=n).flat_map(|k| [[k as f32 * 0.01, 0.0, 0.0], [k as f32 * 0.01, 1.0, 0.3]]).collect();
+    let indices: Vec<u16> =
+        (0..n as u16).flat_map(|k| [2 * k, 2 * k + 2, 2 * k + 1, 2 * k + 1, 2 * k + 2, 2 * k + 3]).collect();
+    let p = b.positions(&positions);
+    let i = b.indices(&indices);
+    let t = b.vec3(&[[0.0; 3], [20.0, 0.0, 0.0], [0.0, 20.0, 0.0]]);
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let r = b.vec4(&[[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, h, h], [0.0, 0.0, 0.0, 1.0]]);
+    let s = b.vec3(&[[1.0; 3], [1.0; 3], [-2.0, 2.0, 2.0]]);
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"extensionsUsed":["EXT_mesh_gpu_instancing"],
+        "scenes":[{{"nodes":[0]}}],
+        "nodes":[{{"mesh":0,"translation":[0,0,5],
+            "extensions":{{"EXT_mesh_gpu_instancing":{{"attributes":{{"TRANSLATION":{t},"ROTATION":{r},"SCALE":{s}}}}}}}}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p}}},"indices":{i}}}]}}],{}}}"#,
+        b.members_glb()
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("strips.glb");
+    std::fs::write(&path, b.glb(&json)).unwrap();
+    let i = instanced(&path);
+    assert_eq!((i.meshes.len(), i.placements.len()), (2, 3), "the strip, and its mirrored copy");
+    // Each placed triangle where the flat load puts it (within the rounding of f32).
+    let flat = Mesh::load(&path).unwrap();
+    let mut k = 0;
+    for p in &i.placements {
+        let t = Transform::from_rows(p.rows);
+        for tri in &i.meshes[p.mesh as usize].triangles {
+            let placed = tri.map(|v| t.point(v.map(f64::from)));
+            let want = flat.triangles[k];
+            k += 1;
+            for (a, b) in placed.iter().zip(&want) {
+                assert!(
+                    (0..3).all(|c| (a[c] - f64::from(b[c])).abs() < 1e-5),
+                    "triangle {k}: {placed:?} against {want:?}"
+                );
+            }
+        }
+    }
+    assert_eq!(k, flat.triangles.len());
+}
