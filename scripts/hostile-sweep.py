@@ -150,7 +150,6 @@ sys.exit(3 if "PanicException" in failures or "SystemError" in failures else 0)
 def repeated_glb(path):
     """A GLB whose one mesh (a 2,400-triangle sphere) three nodes place (one mirrored):
     `octrace bake` writes it as an instanced file."""
-
     segments, rings = 40, 31
     verts = [(math.sin(math.pi * r / rings) * math.cos(2 * math.pi * s / segments), math.cos(math.pi * r / rings),
               math.sin(math.pi * r / rings) * math.sin(2 * math.pi * s / segments))
