@@ -2,20 +2,22 @@
 //! nodes share a mesh (or that places one by `EXT_mesh_gpu_instancing`) bakes each
 //! distinct geometry once, as an ordinary baked scene embedded whole in the file,
 //! and its placements as an instance table: the embedded scene, a transform (3 rows
-//! of 4, local to world, `f64`), and which of that scene's materials the instance
-//! draws in place of each.
+//! of 4, local to world, `f64`), and the material map it draws with (which of that
+//! scene's materials it draws in place of each), maps shared by the instances that
+//! draw alike.
 //!
-//! The layout (little-endian), after which `format/FORMAT.md` has the details:
+//! The layout (little-endian; `format/FORMAT.md`, "Instanced files"):
 //!
 //! | bytes | what |
 //! |---|---|
 //! | 0..8 | [`INSTANCED_MAGIC`] |
 //! | 8..12 | [`INSTANCED_VERSION`] |
-//! | 12..16, 16..20, 20..24 | scenes, instances, material-map words |
-//! | 24..32, 32..40 | the table's length and its xxh3-64 |
-//! | 40..48 | the file's length |
-//! | 48..64 | zero |
-//! | 64.. | the table: each scene's `(offset, length)` (`u64` each); each instance's scene (`u32`), material-map length (`u32`) and 12 `f64` rows; then the maps' `u32` words |
+//! | 12..16, 16..20, 20..24, 24..28 | scenes, instances, material maps, their words |
+//! | 28..32 | zero |
+//! | 32..40, 40..48 | the table's length and its xxh3-64 |
+//! | 48..56 | the file's length |
+//! | 56..64 | zero |
+//! | 64.. | the table: each scene's `(offset, length)` (`u64` each); each map's length (`u32`), then the maps' words (`u32`); each instance's scene and map (`u32` each, the map `u32::MAX` for none) and 12 `f64` rows |
 //! | then | each scene, a whole `.oct` file at a multiple of [`SCENE_ALIGN`] (so each maps on its own, zero-copy, and validates as a file) |
 //!
 //! Opening one as a scene ([`crate::SceneFile`]) fails with [`Error::Instanced`];
@@ -28,9 +30,10 @@
 //! let dir = tempfile::tempdir().unwrap();
 //! let path = dir.path().join("two.oct");
 //! let shift = |x: f64| [[1.0, 0.0, 0.0, x], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-//! let instances = [InstanceRecord { scene: 0, rows: shift(0.0), materials: vec![] },
-//!                  InstanceRecord { scene: 0, rows: shift(2.0), materials: vec![] }];
-//! InstancedFile::write(&path, &[scene.to_file_bytes(0)?], &instances)?;
+//! let instances = vec![InstanceRecord { scene: 0, rows: shift(0.0), map: None },
+//!                      InstanceRecord { scene: 0, rows: shift(2.0), map: None }];
+//! let table = InstancedFile { scenes: vec![], maps: vec![], instances };
+//! table.write(&path, &[scene.to_file_bytes(0)?])?;
 //! let table = InstancedFile::read(&path)?;
 //! assert_eq!((table.scenes.len(), table.instances.len()), (1, 2));
 //! let first = table.read_scene(&path, 0)?; // validated, as SceneFile::read
@@ -52,12 +55,16 @@ pub const INSTANCED_VERSION: u32 = 1;
 pub const SCENE_ALIGN: u64 = 4096;
 /// Length of the fixed header.
 const HEAD_LEN: usize = 64;
-/// Bytes of an instance's record in the table (its map's words not counted).
+/// Bytes of an instance's record in the table.
 const INSTANCE_LEN: usize = 8 + 12 * 8;
+/// No material map: an instance's map field.
+const NO_MAP: u32 = u32::MAX;
 /// The most embedded scenes a file may hold.
 pub const MAX_SCENES: u32 = 1 << 16;
 /// The most instances a file may place (a world takes some 300 bytes an instance).
 pub const MAX_INSTANCES: u32 = 1 << 22;
+/// The most material maps a file may hold, and words in them all (16 MiB).
+pub const MAX_MAP_WORDS: u32 = 1 << 22;
 
 /// One placement of an embedded scene.
 #[derive(Clone, Debug, PartialEq)]
@@ -66,17 +73,21 @@ pub struct InstanceRecord {
     pub scene: u32,
     /// Local to world: 3 rows of 4 (the last row of the matrix is `0 0 0 1`).
     pub rows: [[f64; 4]; 3],
-    /// The material each of the scene's materials is drawn as: entry `k` replaces
-    /// material `k` (an index into the scene's own materials); empty, or shorter than
-    /// the scene's materials, leaves the rest as they are.
-    pub materials: Vec<u32>,
+    /// The material map it draws with (its index in [`InstancedFile::maps`]), if any.
+    pub map: Option<u32>,
 }
 
-/// An instanced file's table: where its scenes lie and its instances.
-#[derive(Clone, Debug, PartialEq)]
+/// An instanced file's table: where its scenes lie, its material maps and its
+/// instances.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct InstancedFile {
-    /// Each embedded scene's `(offset, length)` in the file.
+    /// Each embedded scene's `(offset, length)` in the file (set by
+    /// [`InstancedFile::write`]).
     pub scenes: Vec<(u64, u64)>,
+    /// The material maps: entry `k` of a map replaces material `k` of the scene an
+    /// instance drawing with it places (an index into that scene's own materials); a
+    /// material past the map's end is drawn as it is.
+    pub maps: Vec<Vec<u32>>,
     /// The instances, in order.
     pub instances: Vec<InstanceRecord>,
 }
@@ -109,28 +120,41 @@ fn corrupt(what: impl std::fmt::Display) -> Error {
 }
 
 impl InstancedFile {
-    /// Writes an instanced file atomically (as [`crate::write_atomically`]): the
-    /// scenes are whole `.oct` files ([`crate::BakedScene::to_file_bytes`]).
+    /// Writes the instances and maps with `scenes` as an instanced file, atomically
+    /// (as [`crate::write_atomically`]): the scenes are whole `.oct` files
+    /// ([`crate::BakedScene::to_file_bytes`]); `self.scenes` is not read.
     ///
     /// # Errors
-    /// [`Error::Corrupt`] for an instance naming no scene, a transform not finite, or
-    /// counts past [`MAX_SCENES`] or [`MAX_INSTANCES`]; [`Error::Write`] naming `path`.
-    pub fn write(path: impl AsRef<Path>, scenes: &[Vec<u8>], instances: &[InstanceRecord]) -> Result<()> {
+    /// [`Error::Corrupt`] for an instance naming no scene or map, a transform not
+    /// finite, or counts past [`MAX_SCENES`], [`MAX_INSTANCES`] or [`MAX_MAP_WORDS`];
+    /// [`Error::Write`] naming `path`.
+    pub fn write(&self, path: impl AsRef<Path>, scenes: &[Vec<u8>]) -> Result<()> {
         let path = path.as_ref();
-        if scenes.is_empty() || scenes.len() > MAX_SCENES as usize || instances.len() > MAX_INSTANCES as usize {
+        let (maps, instances) = (&self.maps, &self.instances);
+        let map_words: usize = maps.iter().map(Vec::len).sum();
+        if scenes.is_empty()
+            || scenes.len() > MAX_SCENES as usize
+            || instances.len() > MAX_INSTANCES as usize
+            || maps.len() + map_words > MAX_MAP_WORDS as usize
+        {
             return Err(corrupt(format!(
-                "{} scenes and {} instances (1 to {MAX_SCENES} scenes, at most {MAX_INSTANCES} instances)",
+                "{} scenes, {} instances, {} maps of {map_words} words (1 to {MAX_SCENES} scenes, at most \
+                 {MAX_INSTANCES} instances and {MAX_MAP_WORDS} maps and words)",
                 scenes.len(),
-                instances.len()
+                instances.len(),
+                maps.len()
             )));
         }
         for (i, instance) in instances.iter().enumerate() {
-            if instance.scene as usize >= scenes.len() || !instance.rows.iter().flatten().all(|x| x.is_finite()) {
-                return Err(corrupt(format!("instance {i} names no scene, or its transform is not finite")));
+            let finite = instance.rows.iter().flatten().all(|x| x.is_finite());
+            if instance.scene as usize >= scenes.len()
+                || instance.map.is_some_and(|m| m as usize >= maps.len())
+                || !finite
+            {
+                return Err(corrupt(format!("instance {i} names no scene or map, or its transform is not finite")));
             }
         }
-        let map_words: usize = instances.iter().map(|i| i.materials.len()).sum();
-        let table_len = 16 * scenes.len() + INSTANCE_LEN * instances.len() + 4 * map_words;
+        let table_len = 16 * scenes.len() + 4 * maps.len() + 4 * map_words + INSTANCE_LEN * instances.len();
         let align = |x: u64| x.div_ceil(SCENE_ALIGN) * SCENE_ALIGN;
         let mut offsets = Vec::with_capacity(scenes.len());
         let mut at = align((HEAD_LEN + table_len) as u64);
@@ -144,19 +168,23 @@ impl InstancedFile {
             table.extend_from_slice(&o.to_le_bytes());
             table.extend_from_slice(&l.to_le_bytes());
         }
+        for m in maps {
+            table.extend_from_slice(&(m.len() as u32).to_le_bytes());
+        }
+        for w in maps.iter().flatten() {
+            table.extend_from_slice(&w.to_le_bytes());
+        }
         for i in instances {
             table.extend_from_slice(&i.scene.to_le_bytes());
-            table.extend_from_slice(&(i.materials.len() as u32).to_le_bytes());
+            table.extend_from_slice(&i.map.unwrap_or(NO_MAP).to_le_bytes());
             for x in i.rows.iter().flatten() {
                 table.extend_from_slice(&x.to_le_bytes());
             }
         }
-        for m in instances.iter().flat_map(|i| &i.materials) {
-            table.extend_from_slice(&m.to_le_bytes());
-        }
         let mut head = Vec::with_capacity(HEAD_LEN);
         head.extend_from_slice(&INSTANCED_MAGIC);
-        for n in [INSTANCED_VERSION, scenes.len() as u32, instances.len() as u32, map_words as u32] {
+        let counts = [INSTANCED_VERSION, scenes.len() as u32, instances.len() as u32, maps.len() as u32];
+        for n in counts.into_iter().chain([map_words as u32, 0]) {
             head.extend_from_slice(&n.to_le_bytes());
         }
         for n in [table_len as u64, xxhash_rust::xxh3::xxh3_64(&table), file_len] {
@@ -253,9 +281,9 @@ fn in_scene(index: usize, e: Error) -> Error {
     }
 }
 
-/// The head's counts (scenes, instances, map words), the table's length and checksum,
-/// and the file's length, checked against the file's real length `len`.
-fn decode_head(head: &[u8], len: u64) -> Result<([u32; 3], usize, u64, u64)> {
+/// The head's counts (scenes, instances, maps, map words), the table's length and
+/// checksum, and the file's length, checked against the file's real length `len`.
+fn decode_head(head: &[u8], len: u64) -> Result<([u32; 4], usize, u64, u64)> {
     if head.starts_with(&crate::MAGIC) {
         return Err(Error::NotInstanced);
     }
@@ -275,18 +303,23 @@ fn decode_head(head: &[u8], len: u64) -> Result<([u32; 3], usize, u64, u64)> {
         let v = |n: u32| crate::Version { major: n.min(u32::from(u16::MAX)) as u16, minor: 0 };
         return Err(Error::UnsupportedVersion { found: v(version), supported: v(INSTANCED_VERSION) });
     }
-    let counts = [word(12), word(16), word(20)];
-    let (table_len, sum, file_len) = (long(24), long(32), long(40));
-    if head[48..HEAD_LEN].iter().any(|&b| b != 0) {
+    let counts = [word(12), word(16), word(20), word(24)];
+    let (table_len, sum, file_len) = (long(32), long(40), long(48));
+    if word(28) != 0 || head[56..HEAD_LEN].iter().any(|&b| b != 0) {
         return Err(corrupt("reserved header bytes are not zero"));
     }
-    if counts[0] == 0 || counts[0] > MAX_SCENES || counts[1] > MAX_INSTANCES {
+    let [scenes, instances, maps, words] = counts.map(u64::from);
+    if scenes == 0
+        || scenes > u64::from(MAX_SCENES)
+        || instances > u64::from(MAX_INSTANCES)
+        || maps + words > u64::from(MAX_MAP_WORDS)
+    {
         return Err(corrupt(format!(
-            "{} scenes and {} instances (1 to {MAX_SCENES} scenes, at most {MAX_INSTANCES} instances)",
-            counts[0], counts[1]
+            "{scenes} scenes, {instances} instances, {maps} maps of {words} words (1 to {MAX_SCENES} scenes, at \
+             most {MAX_INSTANCES} instances and {MAX_MAP_WORDS} maps and words)"
         )));
     }
-    let expected = 16 * u64::from(counts[0]) + INSTANCE_LEN as u64 * u64::from(counts[1]) + 4 * u64::from(counts[2]);
+    let expected = 16 * scenes + 4 * maps + 4 * words + INSTANCE_LEN as u64 * instances;
     if table_len != expected {
         return Err(corrupt(format!("a table of {table_len} bytes, where its counts make {expected}")));
     }
@@ -310,7 +343,7 @@ fn decode_head(head: &[u8], len: u64) -> Result<([u32; 3], usize, u64, u64)> {
 
 fn decode_table(
     table: &[u8],
-    [scenes, instances, map_words]: [u32; 3],
+    [scenes, instances, maps, words]: [u32; 4],
     sum: u64,
     file_len: u64,
 ) -> Result<InstancedFile> {
@@ -339,28 +372,27 @@ fn decode_table(
         }
         ranges.push((offset, len));
     }
+    let lens: Vec<u64> = (0..maps).map(|_| u64::from(u32_of(take(4)))).collect();
+    if lens.iter().sum::<u64>() != u64::from(words) {
+        return Err(corrupt(format!("the material maps' lengths do not add up to the {words} words stored")));
+    }
+    let maps_read: Vec<Vec<u32>> =
+        lens.iter().map(|&n| take(4 * n as usize).chunks_exact(4).map(u32_of).collect()).collect();
     let mut records = Vec::with_capacity(instances as usize);
-    let mut lens = Vec::with_capacity(instances as usize);
     for i in 0..instances {
-        let (scene, map_len) = (u32_of(take(4)), u32_of(take(4)));
-        let rows: [[f64; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| 0.0));
-        let mut rows = rows;
+        let (scene, map) = (u32_of(take(4)), u32_of(take(4)));
+        let mut rows = [[0.0f64; 4]; 3];
         for x in rows.iter_mut().flatten() {
             *x = f64::from_le_bytes(take(8).try_into().expect("eight bytes"));
         }
-        if scene >= scenes || !rows.iter().flatten().all(|x| x.is_finite()) {
+        let map = (map != NO_MAP).then_some(map);
+        if scene >= scenes || map.is_some_and(|m| m >= maps) || !rows.iter().flatten().all(|x| x.is_finite()) {
             return Err(corrupt(format!(
-                "instance {i} names scene {scene} of {scenes}, or its transform is not finite"
+                "instance {i} names scene {scene} of {scenes} or map {map:?} of {maps}, or its transform is not \
+                 finite"
             )));
         }
-        records.push(InstanceRecord { scene, rows, materials: Vec::new() });
-        lens.push(map_len as u64);
+        records.push(InstanceRecord { scene, rows, map });
     }
-    if lens.iter().sum::<u64>() != u64::from(map_words) {
-        return Err(corrupt(format!("the instances' material maps do not add up to the {map_words} words stored")));
-    }
-    for (record, &n) in records.iter_mut().zip(&lens) {
-        record.materials = take(4 * n as usize).chunks_exact(4).map(u32_of).collect();
-    }
-    Ok(InstancedFile { scenes: ranges, instances: records })
+    Ok(InstancedFile { scenes: ranges, maps: maps_read, instances: records })
 }

@@ -129,7 +129,7 @@ impl<'a> SceneView<'a> {
     }
 
     /// The material of stored triangle `index` drawn through `map` (an instance's
-    /// material map, [`crate::instanced::InstanceRecord::materials`]: entry `k`
+    /// material map, [`crate::instanced::InstancedFile::maps`]: entry `k`
     /// replaces material `k`; an empty map, or one without an entry, keeps it).
     ///
     /// # Example

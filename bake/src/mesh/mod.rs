@@ -80,6 +80,9 @@ pub struct InstancedMesh {
     pub meshes: Vec<Mesh>,
     /// Every placement of a mesh.
     pub placements: Vec<Placement>,
+    /// The material maps the placements draw with, each once: entry `k` of a map
+    /// replaces material `k` of the mesh (past the end, its own).
+    pub maps: Vec<Vec<u32>>,
     /// Things skipped while loading, one line each (the meshes' own are moved here).
     pub warnings: Vec<String>,
     /// The files read besides the mesh file itself (as [`Mesh::sources`]).
@@ -93,10 +96,10 @@ pub struct Placement {
     pub mesh: u32,
     /// Local to world: 3 rows of 4.
     pub rows: [[f64; 4]; 3],
-    /// The material this placement draws in place of each of the mesh's (entry `k`
-    /// replaces material `k`; past the end, its own): placements of one geometry with
+    /// The material map it draws with (its index in [`InstancedMesh::maps`]), where it
+    /// draws other materials than the mesh's own: placements of one geometry with
     /// different materials.
-    pub materials: Vec<u32>,
+    pub map: Option<u32>,
 }
 
 /// A loaded scene: one mesh, or meshes placed many times.

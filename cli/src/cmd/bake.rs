@@ -226,12 +226,10 @@ fn bake_instanced(
         files.push(scene.to_file_bytes(time_us)?);
     }
     progress.stage("writing");
-    let records: Vec<InstanceRecord> = instanced
-        .placements
-        .iter()
-        .map(|p| InstanceRecord { scene: p.mesh, rows: p.rows, materials: p.materials.clone() })
-        .collect();
-    InstancedFile::write(&args.output, &files, &records)?;
+    let instances: Vec<InstanceRecord> =
+        instanced.placements.iter().map(|p| InstanceRecord { scene: p.mesh, rows: p.rows, map: p.map }).collect();
+    let table = InstancedFile { scenes: Vec::new(), maps: std::mem::take(&mut instanced.maps), instances };
+    table.write(&args.output, &files)?;
     let bytes = std::fs::metadata(&args.output).map(|m| m.len()).unwrap_or(0);
     progress.finish();
     crate::report!(
@@ -240,7 +238,7 @@ fn bake_instanced(
          (instanced)",
         crate::show(&args.input),
         counted(instanced.meshes.len() as u64, "mesh"),
-        counted(records.len() as u64, "time"),
+        counted(table.instances.len() as u64, "time"),
         thousands(stored),
         thousands(placed),
         counted(leaves, "leaf"),

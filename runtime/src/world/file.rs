@@ -30,8 +30,9 @@ impl World {
     /// let dir = tempfile::tempdir()?;
     /// let path = dir.path().join("two.oct");
     /// let shift = |x: f64| [[1.0, 0.0, 0.0, x], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-    /// let at = |x| InstanceRecord { scene: 0, rows: shift(x), materials: vec![] };
-    /// InstancedFile::write(&path, &[scene.to_file_bytes(0)?], &[at(0.0), at(2.0)])?;
+    /// let at = |x| InstanceRecord { scene: 0, rows: shift(x), map: None };
+    /// let table = InstancedFile { instances: vec![at(0.0), at(2.0)], ..Default::default() };
+    /// table.write(&path, &[scene.to_file_bytes(0)?])?;
     /// let world = World::open(&path)?;
     /// assert_eq!(world.len(), 2);
     /// # Ok::<(), Box<dyn std::error::Error>>(())
@@ -72,14 +73,24 @@ impl World {
         World::placing(&table, |i| unsafe { table.map_scene_unchecked(path, i) })
     }
 
-    /// The world `table` places, its scenes opened by `open`.
+    /// The world `table` places, its scenes opened by `open`: each map made once and
+    /// shared by the instances drawing with it, and checked once against each scene
+    /// it is used with.
     fn placing(table: &InstancedFile, open: impl Fn(usize) -> octrace_format::Result<SceneFile>) -> Result<World> {
         let scenes: Vec<Arc<Scene>> =
             (0..table.scenes.len()).map(|i| Ok(Arc::new(Scene::from_scene_file(open(i)?)))).collect::<Result<_>>()?;
+        let maps: Vec<Arc<[u32]>> = table.maps.iter().map(|m| Arc::from(m.as_slice())).collect();
+        let mut checked = std::collections::HashSet::new();
         let mut world = World::new();
         for instance in &table.instances {
-            let transform = Transform::from_rows(instance.rows);
-            world.add_with_materials(&scenes[instance.scene as usize], transform, &instance.materials)?;
+            let scene = &scenes[instance.scene as usize];
+            let map = instance.map.map(|m| &maps[m as usize]).filter(|m| !m.is_empty());
+            if let Some(map) = map {
+                if checked.insert((instance.scene, instance.map)) {
+                    super::check_map(scene, map)?;
+                }
+            }
+            world.insert(scene, Transform::from_rows(instance.rows), map.cloned())?;
         }
         world.commit();
         Ok(world)

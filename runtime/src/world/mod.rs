@@ -175,6 +175,15 @@ fn stretch_of(t: &Transform) -> [f64; 2] {
     [lo.max(0.0).sqrt(), hi.sqrt()]
 }
 
+/// Checks that every entry of `map` names a material of `scene`.
+fn check_map(scene: &Scene, map: &[u32]) -> Result<()> {
+    let count = scene.view().shading.materials.len();
+    match map.iter().enumerate().find(|(_, &m)| m as usize >= count) {
+        Some((entry, &material)) => Err(Error::MaterialMap { entry, material, materials: count }),
+        None => Ok(()),
+    }
+}
+
 /// Baked scenes placed by transforms and traced as one (see the module's text).
 #[derive(Default)]
 pub struct World {
@@ -217,14 +226,15 @@ impl World {
     /// [`Error::Transform`] where the transform cannot be inverted in `f64` or places
     /// the scene's box beyond `f32`'s range.
     pub fn add(&mut self, scene: &Arc<Scene>, transform: Transform) -> Result<u32> {
-        self.add_with_materials(scene, transform, &[])
+        self.insert(scene, transform, None)
     }
 
     /// [`World::add`] with a material map: the instance draws material `materials[k]`
     /// of its scene wherever the scene has material `k` (an entry past the map's end
     /// keeps its own). An instanced file's placements of one mesh with different
-    /// materials are such instances. The map changes what the renderer draws and the
-    /// material [`World::surface`] names; no geometric query reads it.
+    /// materials are such instances. Instances given the same `Arc` share it. The map
+    /// changes what the renderer draws and the material [`World::surface`] names; no
+    /// geometric query reads it.
     ///
     /// # Errors
     /// As [`World::add`]; [`Error::MaterialMap`] where an entry names a material the
@@ -239,17 +249,24 @@ impl World {
     /// scene.material_ids = vec![0];
     /// let scene = Arc::new(octrace_runtime::Scene::from_baked(scene)?);
     /// let mut world = World::new();
-    /// let blue = world.add_with_materials(&scene, Transform::IDENTITY, &[1])?;
+    /// let blue = world.add_with_materials(&scene, Transform::IDENTITY, &Arc::from([1]))?;
     /// world.commit();
     /// assert_eq!(world.materials(blue), Some(&[1u32][..]));
-    /// assert!(world.add_with_materials(&scene, Transform::IDENTITY, &[2]).is_err());
+    /// assert!(world.add_with_materials(&scene, Transform::IDENTITY, &Arc::from([2])).is_err());
     /// # Ok::<(), octrace_runtime::Error>(())
     /// ```
-    pub fn add_with_materials(&mut self, scene: &Arc<Scene>, transform: Transform, materials: &[u32]) -> Result<u32> {
-        let count = scene.view().shading.materials.len();
-        if let Some((entry, &material)) = materials.iter().enumerate().find(|(_, &m)| m as usize >= count) {
-            return Err(Error::MaterialMap { entry, material, materials: count });
-        }
+    pub fn add_with_materials(
+        &mut self,
+        scene: &Arc<Scene>,
+        transform: Transform,
+        materials: &Arc<[u32]>,
+    ) -> Result<u32> {
+        check_map(scene, materials)?;
+        self.insert(scene, transform, (!materials.is_empty()).then(|| Arc::clone(materials)))
+    }
+
+    /// Places `scene` with `map` (checked against it by the caller).
+    fn insert(&mut self, scene: &Arc<Scene>, transform: Transform, map: Option<Arc<[u32]>>) -> Result<u32> {
         let key = Arc::as_ptr(scene) as usize;
         let index = match self.scene_ids.get(&key) {
             Some(&i) => i,
@@ -266,7 +283,7 @@ impl World {
             reason: "a world holds at most 2^32 - 1 instances",
         })?;
         self.latest.push(Some(index));
-        self.maps.push((!materials.is_empty()).then(|| materials.into()));
+        self.maps.push(map);
         self.staged.push((id, Some(placed)));
         Ok(id)
     }

@@ -26,12 +26,10 @@ fn write_instanced(i: &InstancedMesh, path: &Path) {
         .iter()
         .map(|m| bake(m, &BuildParams::auto()).expect("bakes").to_file_bytes(0).expect("serializes"))
         .collect();
-    let records: Vec<InstanceRecord> = i
-        .placements
-        .iter()
-        .map(|p| InstanceRecord { scene: p.mesh, rows: p.rows, materials: p.materials.clone() })
-        .collect();
-    InstancedFile::write(path, &files, &records).expect("writes");
+    let instances: Vec<InstanceRecord> =
+        i.placements.iter().map(|p| InstanceRecord { scene: p.mesh, rows: p.rows, map: p.map }).collect();
+    let table = InstancedFile { scenes: Vec::new(), maps: i.maps.clone(), instances };
+    table.write(path, &files).expect("writes");
 }
 
 /// A MetalRoughSpheresNoTextures-like GLB (98 meshes sharing one sphere's accessors,
@@ -54,13 +52,19 @@ fn a_mesh_placed_many_times_bakes_once_within_twenty_times_its_glb() {
     assert_eq!(i.placements.len(), 99);
     assert_eq!((i.stored_triangles(), i.placed_triangles()), (21_202, 98 * 10_600 + 2));
     // The floor as it is; sphere k draws material k of the sphere's scene, which
-    // holds every material its placements draw (named as in the file).
-    assert_eq!((i.placements[0].mesh, i.placements[0].materials.as_slice()), (0, &[][..]));
+    // holds every material its placements draw (named as in the file) and no other,
+    // the first placement's first; the mirrored copy's scene, its one placement's
+    // material alone. Each map is stored once (the first placements draw their own).
+    assert_eq!((i.placements[0].mesh, i.placements[0].map), (0, None));
+    assert_eq!((i.meshes[1].materials.len(), i.meshes[2].materials.len()), (97, 1));
+    assert_eq!(i.maps.len(), 96);
     for (k, p) in i.placements[1..].iter().enumerate() {
         assert_eq!(p.mesh, if k == 1 { 2 } else { 1 }, "placement {k}");
         let sphere = &i.meshes[p.mesh as usize];
         let own = sphere.material_ids[0] as usize;
-        let drawn = p.materials.get(own).map_or(own, |&m| m as usize);
+        assert_eq!(own, 0);
+        let map = p.map.map_or(&[][..], |m| i.maps[m as usize].as_slice());
+        let drawn = map.get(own).map_or(own, |&m| m as usize);
         assert_eq!(sphere.materials[drawn].name, format!("sphere {k}"), "placement {k}");
     }
     let oct = dir.path().join("spheres.oct");
@@ -172,8 +176,10 @@ fn broken_instanced_files_are_refused_by_name() {
     let path = dir.path().join("w.oct");
     let scene = octrace_format::testing::single_leaf_scene().to_file_bytes(0).unwrap();
     let identity = Transform::IDENTITY.rows;
-    let record = |scene: u32, rows, materials: Vec<u32>| InstanceRecord { scene, rows, materials };
-    InstancedFile::write(&path, std::slice::from_ref(&scene), &[record(0, identity, vec![])]).unwrap();
+    let record = |scene: u32, rows, map: Option<u32>| InstanceRecord { scene, rows, map };
+    let table =
+        |maps: Vec<Vec<u32>>, instances: Vec<InstanceRecord>| InstancedFile { scenes: Vec::new(), maps, instances };
+    table(vec![], vec![record(0, identity, None)]).write(&path, std::slice::from_ref(&scene)).unwrap();
     let good = std::fs::read(&path).unwrap();
     assert_eq!(World::open(&path).expect("opens").len(), 1);
     let refused = |bytes: &[u8], says: &str| {
@@ -192,21 +198,26 @@ fn broken_instanced_files_are_refused_by_name() {
     let mut version = good.clone();
     version[8] = 9;
     refused(&version, "unsupported format version 9");
-    // Instances the writer refuses, written by hand through a patched table.
-    assert!(InstancedFile::write(&path, std::slice::from_ref(&scene), &[record(1, identity, vec![])]).is_err());
-    let write = |records: &[InstanceRecord]| {
-        InstancedFile::write(&path, std::slice::from_ref(&scene), records).unwrap();
+    // Instances the writer refuses: a scene or a map that is not there.
+    let one = std::slice::from_ref(&scene);
+    assert!(table(vec![], vec![record(1, identity, None)]).write(&path, one).is_err());
+    assert!(table(vec![], vec![record(0, identity, Some(0))]).write(&path, one).is_err());
+    let write = |t: InstancedFile| {
+        t.write(&path, one).unwrap();
         std::fs::read(&path).unwrap()
     };
-    refused(&write(&[record(0, identity, vec![3])]), "material map entry 0 names material 3; the scene has 0");
+    refused(
+        &write(table(vec![vec![3]], vec![record(0, identity, Some(0))])),
+        "material map entry 0 names material 3; the scene has 0",
+    );
     let flat = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]];
-    refused(&write(&[record(0, flat, vec![])]), "singular");
+    refused(&write(table(vec![], vec![record(0, flat, None)])), "singular");
     // The scene's offset moved past the file's end (checksum recomputed).
     let mut out = good.clone();
-    let table_len = u64::from_le_bytes(out[24..32].try_into().unwrap()) as usize;
+    let table_len = u64::from_le_bytes(out[32..40].try_into().unwrap()) as usize;
     out[64..72].copy_from_slice(&(1u64 << 40).to_le_bytes());
     let sum = xxhash_rust::xxh3::xxh3_64(&out[64..64 + table_len]);
-    out[32..40].copy_from_slice(&sum.to_le_bytes());
+    out[40..48].copy_from_slice(&sum.to_le_bytes());
     refused(&out, "past the file's");
     // A scene byte changed: the scene's own checksum names it.
     let mut scene_byte = good.clone();
@@ -260,6 +271,7 @@ fn gpu_instancing_bakes_each_instance_as_an_instance() {
     std::fs::write(&path, b.glb(&json)).unwrap();
     let i = instanced(&path);
     assert_eq!((i.meshes.len(), i.placements.len()), (2, 3), "the strip, and its mirrored copy");
+    assert!(i.maps.is_empty() && i.placements.iter().all(|p| p.map.is_none()), "one material drawn");
     // Each placed triangle where the flat load puts it (within the rounding of f32).
     let flat = Mesh::load(&path).unwrap();
     let mut k = 0;

@@ -23,8 +23,8 @@ use crate::error::Result;
 pub(in crate::mesh) struct Grouped {
     /// Each glTF mesh's group, for the meshes kept once.
     pub group_of_mesh: Vec<Option<u32>>,
-    /// Each group's mesh whose primitives are loaded.
-    pub representative: Vec<usize>,
+    /// How many groups there are.
+    pub groups: u32,
     /// Each placement of a grouped mesh, in the walk's order.
     pub placements: Vec<Placed>,
 }
@@ -87,13 +87,11 @@ pub(super) fn groups(document: &gltf::Document, placed: &[u64]) -> Result<Groupe
     let mut by_key: HashMap<Vec<PrimitiveKey>, usize> = HashMap::new();
     let mut keyed: Vec<Option<usize>> = vec![None; times.len()];
     let mut total: Vec<u64> = Vec::new();
-    let mut first: Vec<usize> = Vec::new();
     let mut triangles: Vec<u64> = Vec::new();
     for mesh in document.meshes().filter(|m| times[m.index()] > 0) {
         let key = mesh_key(document, &mesh);
         let k = *by_key.entry(key).or_insert_with(|| {
             total.push(0);
-            first.push(mesh.index());
             triangles.push(mesh.primitives().map(|p| super::scene::primitive_triangles(&p)).sum());
             total.len() - 1
         });
@@ -104,14 +102,14 @@ pub(super) fn groups(document: &gltf::Document, placed: &[u64]) -> Result<Groupe
     // REPEATED_MIN_TRIANGLES, become groups, numbered in order (a few repeated
     // triangles are cheaper baked whole than as a scene of their own).
     let mut number = vec![None; total.len()];
-    let mut representative = Vec::new();
+    let mut groups = 0;
     for (k, &t) in total.iter().enumerate() {
         if t > 1 && triangles[k].saturating_mul(t - 1) >= super::scene::REPEATED_MIN_TRIANGLES {
-            number[k] = Some(representative.len() as u32);
-            representative.push(first[k]);
+            number[k] = Some(groups);
+            groups += 1;
         }
     }
-    if representative.is_empty() {
+    if groups == 0 {
         return Err(None);
     }
     let group_of_mesh: Vec<Option<u32>> = keyed.iter().map(|k| k.and_then(|k| number[k])).collect();
@@ -123,7 +121,7 @@ pub(super) fn groups(document: &gltf::Document, placed: &[u64]) -> Result<Groupe
              instance's lights would be placed with every copy)",
         ));
     }
-    Ok(Grouped { group_of_mesh, representative, placements: Vec::new() })
+    Ok(Grouped { group_of_mesh, groups, placements: Vec::new() })
 }
 
 impl Grouped {
@@ -148,7 +146,8 @@ fn rows(m: &DMat4) -> [[f64; 4]; 3] {
 impl<'a> Loader<'a> {
     /// The materials of the document into the mesh, in glTF order, with their
     /// textures where `used` says so (all when `None`); the others a placeholder
-    /// named as they are (no triangle of this mesh draws them).
+    /// named as they are (no triangle of this mesh draws them; a group's scene drops
+    /// them once its primitives are loaded).
     pub(super) fn load_materials(&mut self, used: Option<&[bool]>) -> Result<()> {
         let mut materials = super::material::Materials {
             path: self.path,
@@ -185,11 +184,12 @@ impl<'a> Loader<'a> {
         out.sources = std::mem::take(&mut rest.sources);
         if !rest.triangles.is_empty() {
             out.meshes.push(rest);
-            out.placements.push(Placement { mesh: 0, rows: rows(&DMat4::IDENTITY), materials: Vec::new() });
+            out.placements.push(Placement { mesh: 0, rows: rows(&DMat4::IDENTITY), map: None });
         }
         let mut walked: Vec<(usize, Placement)> = Vec::with_capacity(grouped.placements.len());
-        for (group, &representative) in grouped.representative.iter().enumerate() {
-            let group = group as u32;
+        // The distinct material maps, each stored once.
+        let mut maps: HashMap<Vec<u32>, u32> = HashMap::new();
+        for group in 0..grouped.groups {
             let mut all: Vec<(usize, &Placed)> = Vec::new();
             for (walk, p) in grouped.placements.iter().enumerate().filter(|(_, p)| p.group == group) {
                 let det = p.determinant();
@@ -213,7 +213,9 @@ impl<'a> Loader<'a> {
                     all.iter().copied().filter(|(_, p)| (p.determinant() < 0.0) == mirrored).collect();
                 let local =
                     if mirrored { DMat4::from_scale(glam::DVec3::new(-1.0, 1.0, 1.0)) } else { DMat4::IDENTITY };
-                let Some(first_node) = placements.first().map(|(_, p)| p.node) else { continue };
+                // The first placement's mesh is loaded (the group's meshes share its
+                // geometry).
+                let Some(&(_, first)) = placements.first() else { continue };
                 let mut used = vec![false; document.materials().len()];
                 for (_, p) in &placements {
                     let Some(mesh) = document.meshes().nth(p.mesh) else { continue };
@@ -235,13 +237,13 @@ impl<'a> Loader<'a> {
                     grouped: None,
                 };
                 sub.load_materials(Some(&used))?;
-                let Some(mesh) = document.meshes().nth(representative) else { continue };
+                let Some(mesh) = document.meshes().nth(first.mesh) else { continue };
                 for prim in mesh.primitives() {
                     let element = format!("mesh {} primitive {}", mesh.index(), prim.index());
                     sub.primitive(&prim, &local, element)?;
                     let quoted = |name: Option<&str>| name.map(|n| format!(" '{n}'")).unwrap_or_default();
                     let source = octrace_format::PartSource::Gltf {
-                        node: first_node as u32,
+                        node: first.node as u32,
                         mesh: mesh.index() as u32,
                         primitive: prim.index() as u32,
                     };
@@ -253,22 +255,52 @@ impl<'a> Loader<'a> {
                 if sub.mesh.triangles.is_empty() {
                     continue;
                 }
+                // Each placement's materials, primitive by primitive (glTF indices, or
+                // the default material's).
                 let own: Vec<u32> = mesh.primitives().map(|p| sub.material_of(&p)).collect();
+                let drawn: Vec<Vec<u32>> = placements
+                    .iter()
+                    .map(|(_, p)| match document.meshes().nth(p.mesh) {
+                        Some(placed) => placed.primitives().map(|q| sub.material_of(&q)).collect(),
+                        None => own.clone(),
+                    })
+                    .collect();
+                // The scene keeps the materials its placements draw, the
+                // representative's first (so a map is no longer than its distinct
+                // materials), the others after.
+                let mut order: Vec<u32> = Vec::new();
+                for &m in own.iter().chain(drawn.iter().flatten()) {
+                    if !order.contains(&m) {
+                        order.push(m);
+                    }
+                }
+                let mut new_index = vec![u32::MAX; sub.mesh.materials.len()];
+                for (i, &m) in order.iter().enumerate() {
+                    new_index[m as usize] = i as u32;
+                }
+                sub.mesh.materials = order.iter().map(|&m| sub.mesh.materials[m as usize].clone()).collect();
+                for id in &mut sub.mesh.material_ids {
+                    *id = new_index[*id as usize];
+                }
                 let index = out.meshes.len() as u32;
-                for &(walk, p) in &placements {
-                    let Some(placed) = document.meshes().nth(p.mesh) else { continue };
+                for (&(walk, p), drawn) in placements.iter().zip(&drawn) {
                     let mut map: Vec<u32> = Vec::new();
-                    for (k, p) in own.iter().zip(placed.primitives()) {
-                        let j = sub.material_of(&p);
-                        if j != *k {
-                            if map.len() <= *k as usize {
-                                map.extend(map.len() as u32..=*k);
+                    for (&k, &j) in own.iter().zip(drawn) {
+                        let (k, j) = (new_index[k as usize], new_index[j as usize]);
+                        if j != k {
+                            if map.len() <= k as usize {
+                                map.extend(map.len() as u32..=k);
                             }
-                            map[*k as usize] = j;
+                            map[k as usize] = j;
                         }
                     }
-                    let placement = Placement { mesh: index, rows: rows(&(p.world * local)), materials: map };
-                    walked.push((walk, placement));
+                    let map = (!map.is_empty()).then(|| {
+                        *maps.entry(map).or_insert_with_key(|m| {
+                            out.maps.push(m.clone());
+                            out.maps.len() as u32 - 1
+                        })
+                    });
+                    walked.push((walk, Placement { mesh: index, rows: rows(&(p.world * local)), map }));
                 }
                 out.meshes.push(sub.mesh);
             }
