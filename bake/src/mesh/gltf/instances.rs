@@ -146,8 +146,7 @@ fn rows(m: &DMat4) -> [[f64; 4]; 3] {
 impl<'a> Loader<'a> {
     /// The materials of the document into the mesh, in glTF order, with their
     /// textures where `used` says so (all when `None`); the others a placeholder
-    /// named as they are (no triangle of this mesh draws them; a group's scene drops
-    /// them once its primitives are loaded).
+    /// named as they are (no triangle of this mesh draws them).
     pub(super) fn load_materials(&mut self, used: Option<&[bool]>) -> Result<()> {
         let mut materials = super::material::Materials {
             path: self.path,
@@ -172,6 +171,29 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
+    /// Only the glTF materials `only` into the mesh, in that order, with their
+    /// textures (a group's scene: what its placements draw).
+    fn load_only(&mut self, only: &[usize]) -> Result<()> {
+        let mut materials = super::material::Materials {
+            path: self.path,
+            base: self.base,
+            options: self.options,
+            buffers: self.buffers,
+            loaded: Default::default(),
+            kept: Default::default(),
+        };
+        let mut slots = HashMap::with_capacity(only.len());
+        for &index in only {
+            let Some(m) = self.document.materials().nth(index) else { continue };
+            let (m, uv) = materials.material(&m, &mut self.mesh)?;
+            slots.insert(index, self.mesh.materials.len() as u32);
+            self.mesh.materials.push(m);
+            self.uv_maps.push(uv);
+        }
+        self.slots = Some(slots);
+        Ok(())
+    }
+
     /// The loaded scene as instances: the meshes placed once (with the lights and
     /// cameras) as the first mesh, placed as they are, where there are any; each
     /// group's representative mesh loaded in its own space (and once more mirrored,
@@ -185,13 +207,29 @@ impl<'a> Loader<'a> {
         if !rest.triangles.is_empty() {
             out.meshes.push(rest);
             out.placements.push(Placement { mesh: 0, rows: rows(&DMat4::IDENTITY), map: None });
+        } else if !rest.lights.is_empty() || !rest.cameras.is_empty() {
+            // The meshes placed once made no triangle (points or lines alone).
+            warnings.push(format!(
+                "{}: {} lights and {} cameras left out: no triangle is placed once to go with them (bake with \
+                 --flatten to keep them)",
+                path.display(),
+                rest.lights.len(),
+                rest.cameras.len()
+            ));
         }
         let mut walked: Vec<(usize, Placement)> = Vec::with_capacity(grouped.placements.len());
         // The distinct material maps, each stored once.
         let mut maps: HashMap<Vec<u32>, u32> = HashMap::new();
-        for group in 0..grouped.groups {
-            let mut all: Vec<(usize, &Placed)> = Vec::new();
-            for (walk, p) in grouped.placements.iter().enumerate().filter(|(_, p)| p.group == group) {
+        let meshes: Vec<gltf::Mesh<'_>> = document.meshes().collect();
+        // Each group's placements (by their place in the walk).
+        let mut by_group: Vec<Vec<usize>> = vec![Vec::new(); grouped.groups as usize];
+        for (walk, p) in grouped.placements.iter().enumerate() {
+            by_group[p.group as usize].push(walk);
+        }
+        for walks in &by_group {
+            let mut all: Vec<(usize, &Placed)> = Vec::with_capacity(walks.len());
+            for &walk in walks {
+                let p = &grouped.placements[walk];
                 let det = p.determinant();
                 if det == 0.0 || !det.is_finite() {
                     warnings.push(format!(
@@ -216,13 +254,13 @@ impl<'a> Loader<'a> {
                 // The first placement's mesh is loaded (the group's meshes share its
                 // geometry).
                 let Some(&(_, first)) = placements.first() else { continue };
-                let mut used = vec![false; document.materials().len()];
-                for (_, p) in &placements {
-                    let Some(mesh) = document.meshes().nth(p.mesh) else { continue };
-                    for i in mesh.primitives().filter_map(|p| p.material().index()) {
-                        used[i] = true;
-                    }
-                }
+                let mut used: Vec<usize> = placements
+                    .iter()
+                    .filter_map(|(_, p)| meshes.get(p.mesh))
+                    .flat_map(|m| m.primitives().filter_map(|q| q.material().index()))
+                    .collect();
+                used.sort_unstable();
+                used.dedup();
                 let mut sub = Loader {
                     path,
                     options,
@@ -235,9 +273,10 @@ impl<'a> Loader<'a> {
                     skipped: None,
                     default_material: None,
                     grouped: None,
+                    slots: None,
                 };
-                sub.load_materials(Some(&used))?;
-                let Some(mesh) = document.meshes().nth(first.mesh) else { continue };
+                sub.load_only(&used)?;
+                let Some(mesh) = meshes.get(first.mesh) else { continue };
                 for prim in mesh.primitives() {
                     let element = format!("mesh {} primitive {}", mesh.index(), prim.index());
                     sub.primitive(&prim, &local, element)?;
@@ -260,7 +299,7 @@ impl<'a> Loader<'a> {
                 let own: Vec<u32> = mesh.primitives().map(|p| sub.material_of(&p)).collect();
                 let drawn: Vec<Vec<u32>> = placements
                     .iter()
-                    .map(|(_, p)| match document.meshes().nth(p.mesh) {
+                    .map(|(_, p)| match meshes.get(p.mesh) {
                         Some(placed) => placed.primitives().map(|q| sub.material_of(&q)).collect(),
                         None => own.clone(),
                     })
@@ -268,15 +307,13 @@ impl<'a> Loader<'a> {
                 // The scene keeps the materials its placements draw, the
                 // representative's first (so a map is no longer than its distinct
                 // materials), the others after.
+                let mut new_index = vec![u32::MAX; sub.mesh.materials.len()];
                 let mut order: Vec<u32> = Vec::new();
                 for &m in own.iter().chain(drawn.iter().flatten()) {
-                    if !order.contains(&m) {
+                    if new_index[m as usize] == u32::MAX {
+                        new_index[m as usize] = order.len() as u32;
                         order.push(m);
                     }
-                }
-                let mut new_index = vec![u32::MAX; sub.mesh.materials.len()];
-                for (i, &m) in order.iter().enumerate() {
-                    new_index[m as usize] = i as u32;
                 }
                 sub.mesh.materials = order.iter().map(|&m| sub.mesh.materials[m as usize].clone()).collect();
                 for id in &mut sub.mesh.material_ids {

@@ -205,6 +205,7 @@ fn parse_unguarded(
         skipped: None,
         default_material: None,
         grouped: groups,
+        slots: None,
     };
     let used = loader.grouped.as_ref().map(|g| g.used_by_rest(&document));
     loader.load_materials(used.as_deref())?;
@@ -243,6 +244,19 @@ pub(super) struct Loader<'a> {
     default_material: Option<u32>,
     /// The meshes placed more than once, kept apart while the scene is walked.
     grouped: Option<instances::Grouped>,
+    /// Where each glTF material is in `mesh.materials`, for a mesh that holds only
+    /// some (a group's scene); `None`: each at its glTF index.
+    slots: Option<std::collections::HashMap<usize, u32>>,
+}
+
+impl Loader<'_> {
+    /// Where glTF material `index` is in the mesh's materials, if it is there.
+    fn slot(&self, index: usize) -> Option<u32> {
+        match &self.slots {
+            None => (index < self.mesh.materials.len()).then_some(index as u32),
+            Some(slots) => slots.get(&index).copied(),
+        }
+    }
 }
 
 /// A `f64` vector rounded to `f32`.

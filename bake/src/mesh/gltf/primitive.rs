@@ -103,9 +103,9 @@ impl Loader<'_> {
 
     /// The material index of a primitive: its glTF material, or glTF's default one.
     pub(super) fn material_of(&mut self, prim: &gltf::Primitive<'_>) -> u32 {
-        match prim.material().index() {
-            Some(i) if i < self.mesh.materials.len() => i as u32,
-            _ => *self.default_material.get_or_insert_with(|| {
+        match prim.material().index().and_then(|i| self.slot(i)) {
+            Some(slot) => slot,
+            None => *self.default_material.get_or_insert_with(|| {
                 // glTF's default material is single-sided, as every material is unless
                 // it says otherwise.
                 self.mesh.materials.push(Material { double_sided: false, ..Material::default() });
@@ -205,7 +205,8 @@ impl Loader<'_> {
         let corner: &dyn Fn(usize) -> [u32; 3] = &swapped;
         let normals = self.normals(prim, world, verts.len(), &element);
         // A channel for each distinct set and transform the material's textures read.
-        let maps = prim.material().index().and_then(|i| self.uv_maps.get(i)).cloned();
+        let maps =
+            prim.material().index().and_then(|i| self.slot(i)).and_then(|s| self.uv_maps.get(s as usize)).cloned();
         let maps = maps.unwrap_or_else(|| vec![UvMap { set: 0, transform: None }]);
         let mut channels: Vec<_> = maps.iter().map(|&map| self.uvs(prim, map, verts.len(), &element)).collect();
         let uvs = channels.first_mut().and_then(Option::take);
