@@ -1946,11 +1946,13 @@ fn render_takes_a_scene_description() {
     assert_eq!((json["instances"].as_u64(), json["width"].as_u64()), (Some(2), Some(64)));
     assert_eq!(json["rays"]["primary"].as_u64(), Some(64 * 64));
     assert!(std::fs::read(d.join("w.png")).unwrap().starts_with(b"\x89PNG"));
-    for extra in [&["--gpu"][..], &["--mode", "cells"], &["--camera", "0"]] {
+    for extra in [&["--gpu"][..], &["--mode", "cells"]] {
         let mut args = vec!["render", "world.json", "-o", "x.png", "--width", "16"];
         args.extend_from_slice(extra);
         fails_saying(d, &args, "take a .oct");
     }
+    // The cameras are those of the scenes placed as they are: the cube has none.
+    fails_saying(d, &["render", "world.json", "-o", "x.png", "--camera", "0"], "(its cameras: none)");
     std::fs::write(d.join("empty.json"), r#"{"scenes": {"cube": "cube.oct"}, "instances": []}"#).unwrap();
     fails_saying(d, &["render", "empty.json", "-o", "x.png"], "places no instance");
 }
@@ -1999,6 +2001,16 @@ fn a_gltf_placing_a_mesh_many_times_bakes_to_an_instanced_file() {
         let out = octrace(d, args);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && err.contains(says) && err.contains("--flatten"), "{args:?}: {err}");
+    }
+    // With a floor placed once, a light and a camera (aspect 2): the render takes the
+    // file's camera, as the flat bake's does.
+    std::fs::write(d.join("lit.glb"), octrace_tests::gltf::placed_spheres(30, true)).unwrap();
+    ok(d, &["bake", "lit.glb", "-o", "lit.oct"]);
+    ok(d, &["bake", "lit.glb", "-o", "lit-flat.oct", "--flatten"]);
+    for scene in ["lit.oct", "lit-flat.oct"] {
+        let said: serde_json::Value =
+            serde_json::from_str(&ok(d, &["render", scene, "-o", "lit.png", "--width", "64", "--json"])).unwrap();
+        assert_eq!((said["width"].as_u64(), said["height"].as_u64()), (Some(64), Some(32)), "{scene}");
     }
     let description = r#"{"scenes": {"s": "spheres.oct"}, "instances": [{"scene": "s"}]}"#;
     std::fs::write(d.join("world.json"), description).unwrap();

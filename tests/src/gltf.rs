@@ -136,8 +136,8 @@ impl GltfBuffer {
 /// `count` meshes, each with its own material (metallic and roughness factors in a
 /// grid), placed by `count` nodes on a grid 2.5 apart in `x` and `y`: node 1 mirrored
 /// (scale -1 in `x`), node 2 turned a quarter about `y` and scaled by 1.5. With
-/// `floor`, a square of 2 triangles below them (its own material) placed once, and a
-/// point light above.
+/// `floor`, a square of 2 triangles below them (its own material) placed once, a
+/// point light above, and a camera (aspect 2) looking at them from `z = 30`.
 pub fn placed_spheres(count: usize, floor: bool) -> Vec<u8> {
     let (segments, rings) = (100usize, 54usize);
     let mut positions = Vec::new();
@@ -203,8 +203,10 @@ pub fn placed_spheres(count: usize, floor: bool) -> Vec<u8> {
         materials.push(r#"{"name":"floor","pbrMetallicRoughness":{"baseColorFactor":[0.5,0.5,0.5,1]}}"#.into());
         nodes.push(format!(r#"{{"mesh":{count}}}"#));
         nodes.push(r#"{"translation":[15,10,20],"extensions":{"KHR_lights_punctual":{"light":0}}}"#.into());
+        nodes.push(r#"{"camera":0,"translation":[16,3,30]}"#.into());
         extensions = r#""extensionsUsed":["KHR_lights_punctual"],
-            "extensions":{"KHR_lights_punctual":{"lights":[{"type":"point","intensity":500}]}},"#
+            "extensions":{"KHR_lights_punctual":{"lights":[{"type":"point","intensity":500}]}},
+            "cameras":[{"type":"perspective","perspective":{"yfov":0.8,"aspectRatio":2.0,"znear":0.1}}],"#
             .into();
     }
     let json = format!(

@@ -12,6 +12,7 @@ use octrace_runtime::render::effects::{
     render_effects, render_effects_world, EffectSet, Environment, RayCounts, RayKind, RenderOptions, Sky,
 };
 use octrace_runtime::render::{render, RenderMode};
+use octrace_runtime::world::Transform;
 use octrace_runtime::Scene;
 
 use crate::output::thousands;
@@ -69,7 +70,8 @@ pub(crate) struct Args {
     pub up: Option<DVec3>,
     /// Render through the scene's camera with this number: a glTF file's camera index
     /// (its `cameras[N]`, placed by the first node that does), as `octrace inspect` lists
-    /// them.
+    /// them. A world's cameras are those of its scenes placed as they are (an instanced
+    /// file's: the glTF's). Without it, the first camera, if any.
     #[arg(long, conflicts_with_all = ["eye", "target"])]
     pub camera: Option<usize>,
     /// shaded: materials, lights and effects; normals: normals as colours;
@@ -340,9 +342,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
 /// world's box (or `--eye`, `--target`, ...); the effects those of all its scenes.
 fn run_world(args: &Args, to_stdout: bool) -> anyhow::Result<()> {
     anyhow::ensure!(
-        !args.gpu && args.mode == Mode::Shaded && args.camera.is_none(),
-        "{}: a scene description renders shaded, on the CPU, from the standard camera or --eye/--target \
-         (--gpu, --mode and --camera take a .oct)",
+        !args.gpu && args.mode == Mode::Shaded,
+        "{}: a world renders shaded, on the CPU, from its cameras, the standard camera or --eye/--target \
+         (--gpu and --mode take a .oct)",
         crate::show(&args.scene)
     );
     let (world, scenes) = crate::world_file::open_world(&args.scene)?;
@@ -352,7 +354,18 @@ fn run_world(args: &Args, to_stdout: bool) -> anyhow::Result<()> {
     let (lo, hi) = world.bounds().ok_or_else(|| {
         anyhow::anyhow!("{}: the description places no instance: nothing to render", crate::show(&args.scene))
     })?;
-    let camera = camera_in(&Frame::from_bounds(lo, hi), &[], args)?;
+    // The cameras of the scenes placed as they are (an instanced file's scene of the
+    // meshes placed once, with the glTF's cameras): in the world already.
+    let mut cameras = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for id in 0..world.len() as u32 {
+        if let Some((scene, t)) = world.instance(id) {
+            if t.rows == Transform::IDENTITY.rows && seen.insert(std::sync::Arc::as_ptr(scene)) {
+                cameras.extend(scene.shading().cameras.iter().cloned());
+            }
+        }
+    }
+    let camera = camera_in(&Frame::from_bounds(lo, hi), &cameras, args)?;
     check_size(camera.width, camera.height)?;
     let all =
         scenes.values().fold(EffectSet::NONE, |set, s| EffectSet::of(s.shading()).iter().fold(set, EffectSet::with));

@@ -47,7 +47,7 @@ fn a_mesh_placed_many_times_bakes_once_within_twenty_times_its_glb() {
     // The floor (with the light), the sphere, and the sphere mirrored for the
     // placement that mirrors (so that glTF's front stays the stored winding's).
     assert_eq!(i.meshes.len(), 3);
-    assert_eq!((i.meshes[0].triangles.len(), i.meshes[0].lights.len()), (2, 1));
+    assert_eq!((i.meshes[0].triangles.len(), i.meshes[0].lights.len(), i.meshes[0].cameras.len()), (2, 1, 1));
     assert_eq!((i.meshes[1].triangles.len(), i.meshes[2].triangles.len()), (10_600, 10_600));
     assert_eq!(i.placements.len(), 99);
     assert_eq!((i.stored_triangles(), i.placed_triangles()), (21_202, 98 * 10_600 + 2));

@@ -144,18 +144,24 @@ fn rows(m: &DMat4) -> [[f64; 4]; 3] {
 }
 
 impl<'a> Loader<'a> {
-    /// The materials of the document into the mesh, in glTF order, with their
-    /// textures where `used` says so (all when `None`); the others a placeholder
-    /// named as they are (no triangle of this mesh draws them).
-    pub(super) fn load_materials(&mut self, used: Option<&[bool]>) -> Result<()> {
-        let mut materials = super::material::Materials {
+    /// A loader of the document's materials with nothing loaded yet (each mesh
+    /// keeps its own textures).
+    fn materials_loader(&self) -> super::material::Materials<'a> {
+        super::material::Materials {
             path: self.path,
             base: self.base,
             options: self.options,
             buffers: self.buffers,
             loaded: Default::default(),
             kept: Default::default(),
-        };
+        }
+    }
+
+    /// The materials of the document into the mesh, in glTF order, with their
+    /// textures where `used` says so (all when `None`); the others a placeholder
+    /// named as they are (no triangle of this mesh draws them).
+    pub(super) fn load_materials(&mut self, used: Option<&[bool]>) -> Result<()> {
+        let mut materials = self.materials_loader();
         for m in self.document.materials() {
             let index = m.index().unwrap_or(0);
             if used.is_none_or(|u| u.get(index).copied().unwrap_or(false)) {
@@ -174,14 +180,7 @@ impl<'a> Loader<'a> {
     /// Only the glTF materials `only` into the mesh, in that order, with their
     /// textures (a group's scene: what its placements draw).
     fn load_only(&mut self, only: &[usize]) -> Result<()> {
-        let mut materials = super::material::Materials {
-            path: self.path,
-            base: self.base,
-            options: self.options,
-            buffers: self.buffers,
-            loaded: Default::default(),
-            kept: Default::default(),
-        };
+        let mut materials = self.materials_loader();
         let mut slots = HashMap::with_capacity(only.len());
         for &index in only {
             let Some(m) = self.document.materials().nth(index) else { continue };
