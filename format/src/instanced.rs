@@ -92,6 +92,18 @@ pub struct InstancedFile {
     pub instances: Vec<InstanceRecord>,
 }
 
+/// The material drawn in place of material `material` through material map `map`:
+/// entry `material` where the map has one, else `material` itself.
+///
+/// ```
+/// use octrace_format::instanced::drawn;
+/// assert_eq!((drawn(&[2, 0], 0), drawn(&[2, 0], 1), drawn(&[2, 0], 5), drawn(&[], 3)), (2, 0, 5, 3));
+/// ```
+#[inline]
+pub fn drawn(map: &[u32], material: u32) -> u32 {
+    map.get(material as usize).copied().unwrap_or(material)
+}
+
 /// Whether `bytes` (a file's first bytes) start an instanced file.
 pub fn is_instanced(bytes: &[u8]) -> bool {
     bytes.starts_with(&INSTANCED_MAGIC)

@@ -124,8 +124,7 @@ impl<'a> SceneView<'a> {
     /// The material of stored triangle `index`: its entry in the scene's materials,
     /// or `None` when the scene has no materials.
     pub fn material(&self, index: StoredIndex) -> Option<&'a crate::Material> {
-        let id = *self.material_ids.get(index.0 as usize)?;
-        self.shading.materials.get(id as usize)
+        self.material_mapped(index, &[])
     }
 
     /// The material of stored triangle `index` drawn through `map` (an instance's
@@ -146,8 +145,7 @@ impl<'a> SceneView<'a> {
     #[inline]
     pub fn material_mapped(&self, index: StoredIndex, map: &[u32]) -> Option<&'a crate::Material> {
         let id = *self.material_ids.get(index.0 as usize)?;
-        let id = map.get(id as usize).copied().unwrap_or(id);
-        self.shading.materials.get(id as usize)
+        self.shading.materials.get(crate::instanced::drawn(map, id) as usize)
     }
 
     /// The shading normals of stored triangle `index`'s corners, when the scene has them.

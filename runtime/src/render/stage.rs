@@ -177,12 +177,10 @@ impl<'a> WorldStage<'a> {
         }
         // What the placed copies take, counted before any is made.
         let (mut lights_count, mut bytes) = (0u64, 0u64);
-        for (_, scene) in world.placed_scenes() {
+        for (id, scene) in world.placed_scenes() {
             let own = &views[scene as usize].shading.lights;
             lights_count += own.len() as u64;
             bytes += own.iter().map(|l| (std::mem::size_of::<Light>() + l.name.len()) as u64).sum::<u64>();
-        }
-        for (id, _) in world.placed_scenes() {
             bytes += own_emitters[look[id as usize] as usize].len() as u64 * EMITTER_BYTES;
         }
         if bytes > WORLD_LIGHTS_BUDGET {

@@ -676,7 +676,7 @@ impl World {
         let p = self.placed.get(hit.instance as usize).copied().flatten()?;
         let mut s = self.scenes[p.scene as usize].surface(&hit.hit);
         if let Some(map) = &self.maps[hit.instance as usize] {
-            s.material = s.material.map(|m| map.get(m as usize).copied().unwrap_or(m));
+            s.material = s.material.map(|m| octrace_format::instanced::drawn(map, m));
         }
         let wide = |v: Vec3| v.to_array().map(f64::from);
         let point = p.to_world.point(wide(s.point));

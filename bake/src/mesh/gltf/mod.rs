@@ -175,23 +175,22 @@ fn parse_unguarded(
         });
     }
     let input_bytes = bytes.len() + buffers.iter().map(|b| b.len()).sum::<usize>();
-    let flat = " (bake without --flatten, or load with Mesh::load_instanced, to keep such meshes once, as instances)";
-    let groups = match instancing.then(|| instances::groups(&document, &placed)) {
-        Some(Ok(groups)) => Some(groups),
-        Some(Err(why)) => {
-            let why = why.map_or(String::new(), |w| format!(" ({w})"));
-            if let Some(repeated) = scene::repeated_geometry(&document, &placed, &why) {
-                warnings.push(format!("{}: {repeated}", path.display()));
-            }
-            None
-        }
-        None => {
-            if let Some(repeated) = scene::repeated_geometry(&document, &placed, flat) {
-                warnings.push(format!("{}: {repeated}", path.display()));
-            }
-            None
-        }
+    // Where each placement is baked whole although meshes repeat, the warning says why
+    // (or how not to).
+    let (groups, why) = match instancing.then(|| instances::groups(&document, &placed)) {
+        Some(Ok(groups)) => (Some(groups), None),
+        Some(Err(why)) => (None, Some(why.map_or(String::new(), |w| format!(" ({w})")))),
+        None => (
+            None,
+            Some(
+                " (bake without --flatten, or load with Mesh::load_instanced, to keep such meshes once, as instances)"
+                    .into(),
+            ),
+        ),
     };
+    if let Some(repeated) = why.and_then(|why| scene::repeated_geometry(&document, &placed, &why)) {
+        warnings.push(format!("{}: {repeated}", path.display()));
+    }
     let mesh = Mesh { sources, warnings, ..Mesh::default() };
     let mut loader = Loader {
         path,

@@ -233,22 +233,17 @@ impl Loader<'_> {
         if let Some(camera) = node.camera() {
             self.camera(&camera, &world, node.index());
         }
-        if let Some(grouped) = self.grouped.as_mut() {
-            if let Some(group) = node.mesh().and_then(|m| grouped.group_of_mesh[m.index()]) {
-                let mesh = node.mesh().map_or(0, |m| m.index());
-                grouped.placements.extend(placements.iter().map(|p| super::instances::Placed {
-                    group,
-                    mesh,
-                    node: node.index(),
-                    world: world * *p,
-                }));
-                for child in node.children() {
-                    self.node(&child, world, depth + 1)?;
-                }
-                return Ok(());
-            }
-        }
-        if let Some(mesh) = node.mesh() {
+        // A mesh kept once (an instanced load) is placed, not loaded, here.
+        let kept = node.mesh().and_then(|m| Some((m.index(), self.grouped.as_ref()?.group_of_mesh[m.index()]?)));
+        if let (Some((mesh, group)), Some(grouped)) = (kept, self.grouped.as_mut()) {
+            let node = node.index();
+            grouped.placements.extend(placements.iter().map(|p| super::instances::Placed {
+                group,
+                mesh,
+                node,
+                world: world * *p,
+            }));
+        } else if let Some(mesh) = node.mesh() {
             for (instance, prim) in placements.iter().flat_map(|p| mesh.primitives().map(move |prim| (p, prim))) {
                 let element = format!("node {} mesh {} primitive {}", node.index(), mesh.index(), prim.index());
                 self.primitive(&prim, &(world * *instance), element)?;
