@@ -54,17 +54,37 @@ const ATAN: [f32; 8] = [
 /// the reduction (a quotient, a difference with `pi / 2` or `pi`), with room.
 const ATAN2_ERROR: f32 = 2e-6;
 
+/// `a b + c`: fused where `FUSED` (the batch compiled for x86-64-v3, whose
+/// processors do it in one instruction and one rounding), a product and a sum where a
+/// fused one could be a library call. Either is within the bounds, which count two
+/// roundings a term.
+#[inline(always)]
+fn fma<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FUSED {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+/// `a . b`, [`fma`]'s way.
+#[inline(always)]
+fn dot3<const FUSED: bool>(a: [f32; 3], b: [f32; 3]) -> f32 {
+    fma::<FUSED>(a[0], b[0], fma::<FUSED>(a[1], b[1], a[2] * b[2]))
+}
+
 /// `atan2(y, x)` in `f32` within [`ATAN2_ERROR`], branch-free (eight lanes in one
 /// loop); 0 at the origin.
 #[inline(always)]
-fn atan2(y: f32, x: f32) -> f32 {
+fn atan2<const FUSED: bool>(y: f32, x: f32) -> f32 {
     let (ax, ay) = (x.abs(), y.abs());
     let (lo, hi) = if ay > ax { (ax, ay) } else { (ay, ax) };
     let t = if hi > 0.0 { lo / hi } else { 0.0 };
     let s = t * t;
     // Horner's rule written out: a loop here would keep the lanes' loop scalar.
     let c = &ATAN;
-    let r = ((((((c[7] * s + c[6]) * s + c[5]) * s + c[4]) * s + c[3]) * s + c[2]) * s + c[1]) * s + c[0];
+    let f = fma::<FUSED>;
+    let r = f(f(f(f(f(f(f(c[7], s, c[6]), s, c[5]), s, c[4]), s, c[3]), s, c[2]), s, c[1]), s, c[0]);
     let mut r = r * t;
     r = if ay > ax { std::f32::consts::FRAC_PI_2 - r } else { r };
     r = if x < 0.0 { std::f32::consts::PI - r } else { r };
@@ -83,20 +103,29 @@ fn bit_mask(flags: [bool; LANES]) -> u32 {
     (bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32
 }
 
-/// The lanes' values and bounds summed pairwise in `f32`: three roundings of at most
-/// `eps` each of the lanes' magnitudes, far inside their bounds (a lane's value is at
-/// most some `30 A / R^2`, its rounding term `2048 eps A / R^2`).
-#[inline(always)]
-fn lane_sum(mut values: [f32; LANES], mut bounds: [f32; LANES]) -> Sum {
-    let mut half = LANES / 2;
-    while half > 0 {
-        for l in 0..half {
-            values[l] += values[l + half];
-            bounds[l] += bounds[l + half];
+/// Lanes' values and bounds added up in `f64`, lane by lane (a horizontal sum a
+/// group would sit on the walk's path from one group to the next).
+#[derive(Clone, Copy, Debug, Default)]
+struct Lanes {
+    values: [f64; LANES],
+    bounds: [f64; LANES],
+}
+
+impl Lanes {
+    /// Adds the `f32` lanes: each sum in `f64` is exact to some `1e-16` of itself, far
+    /// inside the lanes' bounds.
+    #[inline(always)]
+    fn add(&mut self, values: [f32; LANES], bounds: [f32; LANES]) {
+        for l in 0..LANES {
+            self.values[l] += values[l] as f64;
+            self.bounds[l] += bounds[l] as f64;
         }
-        half /= 2;
     }
-    Sum { value: values[0] as f64, bound: bounds[0] as f64 * (1.0 + 1e-6) }
+
+    /// The lanes summed.
+    fn total(&self) -> Sum {
+        Sum { value: self.values.iter().sum(), bound: self.bounds.iter().sum() }
+    }
 }
 
 /// Eight triangles of a leaf, `v[vertex][coordinate][lane]`: triangles `first..` of
@@ -121,10 +150,10 @@ impl Block {
         b
     }
 
-    /// The solid angles at `p` of the block's first `count` triangles, summed with
-    /// their bounds, and a mask of those to measure in `f64` instead.
+    /// The solid angles at `p` of the block's first `count` triangles, added with
+    /// their bounds to `sum`, and a mask of those to measure in `f64` instead.
     #[inline(always)]
-    fn solid_angles(&self, p: [f32; 3], count: usize) -> (Sum, u32) {
+    fn solid_angles<const FUSED: bool>(&self, p: [f32; 3], count: usize, sum: &mut Lanes) -> u32 {
         // The vertices from `p`, `d[vertex][coordinate][lane]`.
         let mut d = [[[0.0f32; LANES]; 3]; 3];
         for v in 0..3 {
@@ -139,23 +168,18 @@ impl Block {
             let a = [d[0][0][l], d[0][1][l], d[0][2][l]];
             let b = [d[1][0][l], d[1][1][l], d[1][2][l]];
             let c = [d[2][0][l], d[2][1][l], d[2][2][l]];
-            let la = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-            let lb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
-            let lc = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            let det = a[0] * (b[1] * c[2] - b[2] * c[1])
-                + a[1] * (b[2] * c[0] - b[0] * c[2])
-                + a[2] * (b[0] * c[1] - b[1] * c[0]);
+            let (f, dot) = (fma::<FUSED>, dot3::<FUSED>);
+            let (la, lb, lc) = (dot(a, a).sqrt(), dot(b, b).sqrt(), dot(c, c).sqrt());
+            let cross = [f(b[1], c[2], -(b[2] * c[1])), f(b[2], c[0], -(b[0] * c[2])), f(b[0], c[1], -(b[1] * c[0]))];
+            let det = dot(a, cross);
             let product = la * lb * lc;
-            let ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            let bc = b[0] * c[0] + b[1] * c[1] + b[2] * c[2];
-            let ca = c[0] * a[0] + c[1] * a[1] + c[2] * a[2];
-            let den = product + ab * lc + bc * la + ca * lb;
+            let den = f(dot(a, b), lc, f(dot(b, c), la, f(dot(c, a), lb, product)));
             let (adet, aden) = (det.abs(), den.abs());
             let off = 64.0 * f32::EPSILON * product / if adet > aden { adet } else { aden } + ATAN2_ERROR;
             // Past the limit (or NaN, at a vertex): in f64.
             let fine = off <= EXACT_PAST;
             again[l] = !fine;
-            values[l] = if fine { 2.0 * atan2(det, den) } else { 0.0 };
+            values[l] = if fine { 2.0 * atan2::<FUSED>(det, den) } else { 0.0 };
             bounds[l] = if fine { 2.0 * off } else { 0.0 };
         }
         let live = if count >= LANES { 0xff } else { (1u32 << count) - 1 };
@@ -164,7 +188,8 @@ impl Block {
             values[l] = if l < count { values[l] } else { 0.0 };
             bounds[l] = if l < count { bounds[l] } else { 0.0 };
         }
-        (lane_sum(values, bounds), bit_mask(again) & live)
+        sum.add(values, bounds);
+        bit_mask(again) & live
     }
 }
 
@@ -273,10 +298,14 @@ impl Group {
             && self.quad.iter().flatten().chain(self.cubic.iter().flatten()).copied().all(fine)
     }
 
-    /// The far children's expansions at `p` summed with their bounds, and a mask of
-    /// the near ones (within `beta` times their radius, to be opened).
+    /// The far children's expansions at `p` added with their bounds to `sum`, and a
+    /// mask of the near ones (within `beta` times their radius, to be opened).
+    ///
+    /// The mask is found from squared distances (no square root on the walk's path
+    /// from one group to the next): far is past `beta >= 1` radii and the squared
+    /// distance past the radius's by a margin that keeps `gap` positive.
     #[inline(always)]
-    fn evaluate(&self, p: [f64; 3], beta: f32) -> (Sum, u32) {
+    fn evaluate<const FUSED: bool>(&self, p: [f64; 3], beta: f32, sum: &mut Lanes) -> u32 {
         let mut y = [[0.0f32; LANES]; 3];
         for k in 0..3 {
             for l in 0..LANES {
@@ -284,35 +313,39 @@ impl Group {
             }
         }
         let (mut values, mut bounds, mut far) = ([0.0f32; LANES], [0.0f32; LANES], [false; LANES]);
+        let (f, dot) = (fma::<FUSED>, dot3::<FUSED>);
         for l in 0..LANES {
             let (x, yy, z) = (y[0][l], y[1][l], y[2][l]);
-            let r2 = x * x + yy * yy + z * z;
-            let dist = r2.sqrt();
+            let r2 = dot([x, yy, z], [x, yy, z]);
             let radius = self.radius[l];
             let reach = beta * radius;
-            // The distance's rounding is far inside this margin.
+            // `r2 (1 - 4e-6) > radius^2` leaves `dist (1 - 1e-6) > radius` whatever
+            // the roundings (each some 1e-7).
+            let near = !(r2 > reach * reach && r2 * (1.0 - 4e-6) > radius * radius);
+            let dist = r2.sqrt();
             let gap = dist * (1.0 - 1e-6) - radius;
-            let near = !(r2 > reach * reach && gap > 0.0);
             let inv1 = 1.0 / dist;
             let inv2 = inv1 * inv1;
             let inv3 = inv2 * inv1;
             let inv5 = inv3 * inv2;
             let inv7 = inv5 * inv2;
-            let dipole = (self.n[0][l] * x + self.n[1][l] * yy + self.n[2][l] * z) * inv3;
+            let n = [self.n[0][l], self.n[1][l], self.n[2][l]];
+            let dipole = dot(n, [x, yy, z]) * inv3;
+            // `xx yy zz xy xz yz` as x (xx x + xy y + xz z) + y (yy y + yz z) + zz z z.
             let q = &self.quad;
-            let quad = q[0][l] * x * x
-                + q[1][l] * yy * yy
-                + q[2][l] * z * z
-                + q[3][l] * x * yy
-                + q[4][l] * x * z
-                + q[5][l] * yy * z;
-            let first = self.trace[l] * inv3 - 3.0 * quad * inv5;
+            let quad =
+                f(x, dot([q[0][l], q[3][l], q[4][l]], [x, yy, z]), f(yy, f(q[1][l], yy, q[5][l] * z), q[2][l] * z * z));
+            let first = f(-3.0 * quad, inv5, self.trace[l] * inv3);
+            // `xxx yyy zzz xxy xxz yyx yyz zzx zzy xyz`, by the factor each term
+            // takes first: x (x (xxx x + xxy y + xxz z) + xyz y z) + y y (yyy y + yyx
+            // x + yyz z) + z z (zzz z + zzx x + zzy y).
             let c = &self.cubic;
-            let cubic = x * (c[0][l] * x * x + c[3][l] * x * yy + c[4][l] * x * z + c[9][l] * yy * z)
-                + yy * (c[1][l] * yy * yy + c[5][l] * x * yy + c[6][l] * yy * z)
-                + z * (c[2][l] * z * z + c[7][l] * x * z + c[8][l] * yy * z);
-            let linear = self.linear[0][l] * x + self.linear[1][l] * yy + self.linear[2][l] * z;
-            let second = -1.5 * linear * inv5 + 7.5 * cubic * inv7;
+            let xs = f(x, dot([c[0][l], c[3][l], c[4][l]], [x, yy, z]), c[9][l] * yy * z);
+            let ys = yy * dot([c[1][l], c[5][l], c[6][l]], [yy, x, z]);
+            let zs = z * dot([c[2][l], c[7][l], c[8][l]], [z, x, yy]);
+            let cubic = f(x, xs, f(yy, ys, z * zs));
+            let linear = dot([self.linear[0][l], self.linear[1][l], self.linear[2][l]], [x, yy, z]);
+            let second = f(-1.5 * linear, inv5, 7.5 * cubic * inv7);
             let area = self.area[l];
             let over = 1.0 / gap;
             let ratio = radius * over;
@@ -322,7 +355,8 @@ impl Group {
             values[l] = if near { 0.0 } else { dipole + first + second };
             bounds[l] = if near { 0.0 } else { truncation + rounding };
         }
-        (lane_sum(values, bounds), !bit_mask(far) & self.live as u32)
+        sum.add(values, bounds);
+        !bit_mask(far) & self.live as u32
     }
 }
 
@@ -375,40 +409,85 @@ impl Groups {
         self.groups.len() * std::mem::size_of::<Group>() + self.blocks.len() * std::mem::size_of::<Block>()
     }
 
-    /// Barill's rule at `p` over the root's descendants (the root itself is near):
-    /// the far clusters' expansions and the near leaves' triangles, summed.
+    /// Barill's rule at each of `K` points over the root's descendants (the root
+    /// itself is near): the far clusters' expansions and the near leaves' triangles,
+    /// summed.
+    ///
+    /// The points' walks take turns, a group each: one walk's next group hangs on the
+    /// group before it (the mask that says which children to open, some 60 cycles
+    /// from the group's first load), so the processor works on the other walks'
+    /// groups meanwhile. A walk takes its groups first in, first out (the next group's
+    /// index was written long before), and its answer does not depend on the others'
+    /// (its sums in its own order).
     #[inline(always)]
-    pub(super) fn sum(&self, tree: &WindingTree, stack: &mut Vec<u32>, p: [f64; 3], beta: f32) -> Sum {
-        stack.clear();
-        stack.push(0);
-        let mut sum = Sum::default();
-        let p32 = p.map(|c| c as f32);
-        while let Some(g) = stack.pop() {
-            let group = &self.groups[g as usize];
-            let (far, mut near) = group.evaluate(p, beta);
-            sum.add(far.value, far.bound);
-            while near != 0 {
-                let l = near.trailing_zeros() as usize;
-                near &= near - 1;
-                let child = group.child[l];
-                if child & LEAF_BIT == 0 {
-                    stack.push(child);
-                    continue;
-                }
-                let first = (child & !LEAF_BIT) as usize;
-                let count = group.count[l] as usize;
-                for (k, block) in self.blocks[first..first + count.div_ceil(LANES)].iter().enumerate() {
-                    let (angles, mut exact) = block.solid_angles(p32, count - k * LANES);
-                    sum.add(angles.value, angles.bound);
-                    while exact != 0 {
-                        let t = block.first as usize + exact.trailing_zeros() as usize;
-                        exact &= exact - 1;
-                        sum.value += solid_angle(p, &tree.triangles[t]);
-                    }
+    pub(super) fn sum<const K: usize, const FUSED: bool>(
+        &self,
+        tree: &WindingTree,
+        queues: &mut [Vec<u32>; K],
+        points: [[f64; 3]; K],
+        beta: f32,
+    ) -> [Sum; K] {
+        let (mut lanes, mut exact, mut next) = ([Lanes::default(); K], [0.0; K], [0; K]);
+        for queue in queues.iter_mut() {
+            queue.clear();
+            queue.push(0);
+        }
+        let near = points.map(|p| p.map(|c| c as f32));
+        let mut busy = true;
+        while busy {
+            busy = false;
+            for k in 0..K {
+                let Some(&g) = queues[k].get(next[k]) else { continue };
+                busy = true;
+                next[k] += 1;
+                exact[k] += self.open::<FUSED>(tree, g, &mut queues[k], points[k], near[k], beta, &mut lanes[k]);
+            }
+        }
+        std::array::from_fn(|k| {
+            let mut sum = lanes[k].total();
+            sum.value += exact[k];
+            sum
+        })
+    }
+
+    /// Group `g` at `p` (`p32` rounded): its far children's expansions and its near
+    /// leaves' blocks added to `lanes`, its near nodes' groups queued; the solid angles
+    /// measured in `f64`, summed.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn open<const FUSED: bool>(
+        &self,
+        tree: &WindingTree,
+        g: u32,
+        queue: &mut Vec<u32>,
+        p: [f64; 3],
+        p32: [f32; 3],
+        beta: f32,
+        lanes: &mut Lanes,
+    ) -> f64 {
+        let group = &self.groups[g as usize];
+        let mut near = group.evaluate::<FUSED>(p, beta, lanes);
+        let mut exact = 0.0;
+        while near != 0 {
+            let l = near.trailing_zeros() as usize;
+            near &= near - 1;
+            let child = group.child[l];
+            if child & LEAF_BIT == 0 {
+                queue.push(child);
+                continue;
+            }
+            let first = (child & !LEAF_BIT) as usize;
+            let count = group.count[l] as usize;
+            for (k, block) in self.blocks[first..first + count.div_ceil(LANES)].iter().enumerate() {
+                let mut again = block.solid_angles::<FUSED>(p32, count - k * LANES, lanes);
+                while again != 0 {
+                    let t = block.first as usize + again.trailing_zeros() as usize;
+                    again &= again - 1;
+                    exact += solid_angle(p, &tree.triangles[t]);
                 }
             }
         }
-        sum
+        exact
     }
 }
 
@@ -441,7 +520,9 @@ mod tests {
                 }
                 for _ in 0..50 {
                     let p = wide([offset + 4.0 * unit() - 1.5, 4.0 * unit() - 1.5, 4.0 * unit() - 1.5]);
-                    let (sum, near) = group.evaluate(p, 1.0);
+                    let (mut lanes, mut fused) = (Lanes::default(), Lanes::default());
+                    let near = group.evaluate::<false>(p, 1.0, &mut lanes);
+                    assert_eq!(group.evaluate::<true>(p, 1.0, &mut fused), near);
                     let (mut want, mut rounding) = (0.0, 0.0);
                     for (l, c) in children.iter().enumerate() {
                         if near >> l & 1 == 0 {
@@ -450,8 +531,10 @@ mod tests {
                             rounding += 2048.0 * f32::EPSILON as f64 * c.area / crate::cpu::dot(y, y);
                         }
                     }
-                    assert!((sum.value - want).abs() <= rounding, "{p:?}: {sum:?} against {want}");
-                    assert!(sum.bound >= rounding);
+                    for sum in [lanes.total(), fused.total()] {
+                        assert!((sum.value - want).abs() <= rounding, "{p:?}: {sum:?} against {want}");
+                        assert!(sum.bound >= rounding);
+                    }
                 }
             }
         }
@@ -468,8 +551,9 @@ mod tests {
         cases.extend([(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (1.0, 1.0), (-1.0, -1.0), (0.0, 0.0)]);
         for (y, x) in cases {
             let want = if x == 0.0 && y == 0.0 { 0.0 } else { (y as f64).atan2(x as f64) };
-            let got = atan2(y, x) as f64;
-            assert!((got - want).abs() <= ATAN2_ERROR as f64, "atan2({y}, {x}): {got} against {want}");
+            for got in [atan2::<false>(y, x) as f64, atan2::<true>(y, x) as f64] {
+                assert!((got - want).abs() <= ATAN2_ERROR as f64, "atan2({y}, {x}): {got} against {want}");
+            }
         }
     }
 
@@ -497,13 +581,21 @@ mod tests {
                     _ => [offset + unit() * 3.0 - 1.0, unit() * 3.0 - 1.0, unit() * 3.0 - 1.0],
                 };
                 let count = 1 + k % 8;
-                let (sum, exact) = block.solid_angles(p, count);
-                let want: f64 =
-                    (0..count).filter(|l| exact >> l & 1 == 0).map(|l| solid_angle(wide(p), &triangles[l])).sum();
-                assert!(exact >> count == 0, "{p:?}: a lane past the count flagged");
-                assert!((sum.value - want).abs() <= sum.bound + 1e-12, "{p:?}: {sum:?} against {want}");
-                flagged += exact.count_ones();
-                answered += count as u32 - exact.count_ones();
+                for fused in [false, true] {
+                    let mut lanes = Lanes::default();
+                    let exact = if fused {
+                        block.solid_angles::<true>(p, count, &mut lanes)
+                    } else {
+                        block.solid_angles::<false>(p, count, &mut lanes)
+                    };
+                    let sum = lanes.total();
+                    let want: f64 =
+                        (0..count).filter(|l| exact >> l & 1 == 0).map(|l| solid_angle(wide(p), &triangles[l])).sum();
+                    assert!(exact >> count == 0, "{p:?}: a lane past the count flagged");
+                    assert!((sum.value - want).abs() <= sum.bound + 1e-12, "{p:?}: {sum:?} against {want}");
+                    flagged += exact.count_ones();
+                    answered += count as u32 - exact.count_ones();
+                }
             }
         }
         assert!(flagged > 0 && answered > 2 * flagged, "{flagged} flagged, {answered} answered");

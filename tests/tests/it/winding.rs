@@ -37,6 +37,13 @@ fn check_bounds(name: &str, triangles: &[[[f32; 3]; 3]], pts: &[[f32; 3]], fast_
         worst_fast = worst_fast.max((fast.value - exact).abs());
     }
     assert!(worst_fast <= fast_error, "{name}: Barill's rule off by {worst_fast}");
+    // The batch (on all cores, along a curve, walks taking turns) answers as one point
+    // at a time, bit for bit.
+    let mut batch = vec![Default::default(); pts.len()];
+    tree.winding_numbers(pts, Accuracy::FAST, &mut batch);
+    for (p, got) in pts.iter().zip(&batch) {
+        assert_eq!(*got, tree.winding_number_beta(&mut scratch, *p, 2.0), "{name}: {p:?}");
+    }
 }
 
 #[test]
