@@ -2,7 +2,8 @@
 //! within 1 % of the box's diagonal from the surface, at several tolerances; prints
 //! points a second and, for the first `WINDING_CHECK` points (default 50), the largest
 //! error against the brute-force sum over every triangle, and the largest bound.
-//! `WINDING_ONLY=fast` times Barill's rule at `beta = 2` alone (for a profile).
+//! `WINDING_ONLY=fast` times Barill's rule alone (for a profile), at `beta = WINDING_BETA`
+//! (default 2).
 //!
 //! `cargo run --release -p octrace-runtime --example winding_timing -- scene.oct [points]`
 use std::time::Instant;
@@ -34,8 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 triangles.iter().map(|t| solid_angle(p, t)).sum::<f64>() / (4.0 * std::f64::consts::PI)
             })
             .collect();
+        let first: f64 = std::env::var("WINDING_BETA").map_or(Ok(2.0), |s| s.parse())?;
         let all = [
-            Accuracy::Beta(2.0),
+            Accuracy::Beta(first),
             Accuracy::Beta(3.0),
             Accuracy::Beta(4.0),
             Accuracy::Within(1e-1),

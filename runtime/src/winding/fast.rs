@@ -4,8 +4,12 @@
 //! polynomials in `y = c - p` (the dipole's three, the first correction's trace and
 //! quadratic form, the second's linear and cubic forms), stored lane by lane, so that
 //! a query evaluates all eight children in one vector loop and opens only the near
-//! ones. `y` is taken in `f64` (the centres are kept in `f64`: a scene far from the
-//! origin loses nothing) and rounded once; everything after it is `f32`, which the
+//! ones. The centres are kept as two `f32`s, `c ~ hi + lo` (`lo` the rounded rest,
+//! some 48 bits in all: a scene far from the origin loses nothing), and `y` is
+//! `(hi - p) + lo` for the `f32` point `p`: where `p` is near `hi`, the difference is
+//! exact (Sterbenz), elsewhere it and the sum round once each, so `y` is within a
+//! few `f32` roundings of its own length (as `c - p` in `f64` rounded once, in a
+//! third of the instructions); everything after it is `f32`, which the
 //! bound covers: each term is at most `A / R^2` times a small constant (`|N| <= A`,
 //! `|M| <= A r`, `|T| <= A r^2`, `r < R`), and the arithmetic's rounding is a few
 //! hundred `f32` epsilons of that, far inside the `2048 eps A / R^2` added to the
@@ -196,7 +200,10 @@ impl Block {
 /// The children of one node, coefficient by coefficient (see the module's text).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Group {
-    centre: [[f64; LANES]; 3],
+    /// The centres' `f32` parts, `hi`.
+    centre: [[f32; LANES]; 3],
+    /// What `hi` leaves of each centre, rounded: `lo`.
+    rest: [[f32; LANES]; 3],
     /// Radii rounded up to `f32`.
     radius: [f32; LANES],
     area: [f32; LANES],
@@ -239,6 +246,7 @@ impl Group {
     fn empty() -> Group {
         Group {
             centre: [[0.0; LANES]; 3],
+            rest: [[0.0; LANES]; 3],
             // Never far, never opened.
             radius: [f32::INFINITY; LANES],
             area: [0.0; LANES],
@@ -257,7 +265,9 @@ impl Group {
     fn set(&mut self, l: usize, c: &Cluster) {
         let (m, t) = (&c.m, &c.t);
         for k in 0..3 {
-            self.centre[k][l] = c.centre[k];
+            let hi = c.centre[k] as f32;
+            self.centre[k][l] = hi;
+            self.rest[k][l] = (c.centre[k] - hi as f64) as f32;
             self.n[k][l] = c.n[k] as f32;
         }
         self.radius[l] = up(c.radius);
@@ -305,11 +315,11 @@ impl Group {
     /// from one group to the next): far is past `beta >= 1` radii and the squared
     /// distance past the radius's by a margin that keeps `gap` positive.
     #[inline(always)]
-    fn evaluate<const FUSED: bool>(&self, p: [f64; 3], beta: f32, sum: &mut Lanes) -> u32 {
+    fn evaluate<const FUSED: bool>(&self, p: [f32; 3], beta: f32, sum: &mut Lanes) -> u32 {
         let mut y = [[0.0f32; LANES]; 3];
         for k in 0..3 {
             for l in 0..LANES {
-                y[k][l] = (self.centre[k][l] - p[k]) as f32;
+                y[k][l] = (self.centre[k][l] - p[k]) + self.rest[k][l];
             }
         }
         let (mut values, mut bounds, mut far) = ([0.0f32; LANES], [0.0f32; LANES], [false; LANES]);
@@ -466,7 +476,7 @@ impl Groups {
         lanes: &mut Lanes,
     ) -> f64 {
         let group = &self.groups[g as usize];
-        let mut near = group.evaluate::<FUSED>(p, beta, lanes);
+        let mut near = group.evaluate::<FUSED>(p32, beta, lanes);
         let mut exact = 0.0;
         while near != 0 {
             let l = near.trailing_zeros() as usize;
@@ -519,10 +529,11 @@ mod tests {
                     group.live |= 1 << l;
                 }
                 for _ in 0..50 {
-                    let p = wide([offset + 4.0 * unit() - 1.5, 4.0 * unit() - 1.5, 4.0 * unit() - 1.5]);
+                    let p32 = [offset + 4.0 * unit() - 1.5, 4.0 * unit() - 1.5, 4.0 * unit() - 1.5];
+                    let p = wide(p32);
                     let (mut lanes, mut fused) = (Lanes::default(), Lanes::default());
-                    let near = group.evaluate::<false>(p, 1.0, &mut lanes);
-                    assert_eq!(group.evaluate::<true>(p, 1.0, &mut fused), near);
+                    let near = group.evaluate::<false>(p32, 1.0, &mut lanes);
+                    assert_eq!(group.evaluate::<true>(p32, 1.0, &mut fused), near);
                     let (mut want, mut rounding) = (0.0, 0.0);
                     for (l, c) in children.iter().enumerate() {
                         if near >> l & 1 == 0 {
