@@ -26,7 +26,7 @@
 //! Used where the tree's scale keeps every coefficient a normal `f32`
 //! ([`Groups::of`] says `None` elsewhere, and queries take the `f64` path).
 
-use super::{solid_angle, Cluster, Sum, WindingTree};
+use super::{solid_angle, wide, Cluster, Sum, WindingTree};
 
 /// Lanes a group: a node has at most eight children.
 pub(super) const LANES: usize = 8;
@@ -434,7 +434,7 @@ impl Groups {
         &self,
         tree: &WindingTree,
         queues: &mut [Vec<u32>; K],
-        points: [[f64; 3]; K],
+        points: [[f32; 3]; K],
         beta: f32,
     ) -> [Sum; K] {
         let (mut lanes, mut exact, mut next) = ([Lanes::default(); K], [0.0; K], [0; K]);
@@ -442,7 +442,6 @@ impl Groups {
             queue.clear();
             queue.push(0);
         }
-        let near = points.map(|p| p.map(|c| c as f32));
         let mut busy = true;
         while busy {
             busy = false;
@@ -450,7 +449,7 @@ impl Groups {
                 let Some(&g) = queues[k].get(next[k]) else { continue };
                 busy = true;
                 next[k] += 1;
-                exact[k] += self.open::<FUSED>(tree, g, &mut queues[k], points[k], near[k], beta, &mut lanes[k]);
+                exact[k] += self.open::<FUSED>(tree, g, &mut queues[k], points[k], beta, &mut lanes[k]);
             }
         }
         std::array::from_fn(|k| {
@@ -460,23 +459,21 @@ impl Groups {
         })
     }
 
-    /// Group `g` at `p` (`p32` rounded): its far children's expansions and its near
-    /// leaves' blocks added to `lanes`, its near nodes' groups queued; the solid angles
-    /// measured in `f64`, summed.
+    /// Group `g` at `p`: its far children's expansions and its near leaves' blocks
+    /// added to `lanes`, its near nodes' groups queued; the solid angles measured in
+    /// `f64`, summed.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn open<const FUSED: bool>(
         &self,
         tree: &WindingTree,
         g: u32,
         queue: &mut Vec<u32>,
-        p: [f64; 3],
-        p32: [f32; 3],
+        p: [f32; 3],
         beta: f32,
         lanes: &mut Lanes,
     ) -> f64 {
         let group = &self.groups[g as usize];
-        let mut near = group.evaluate::<FUSED>(p32, beta, lanes);
+        let mut near = group.evaluate::<FUSED>(p, beta, lanes);
         let mut exact = 0.0;
         while near != 0 {
             let l = near.trailing_zeros() as usize;
@@ -489,11 +486,11 @@ impl Groups {
             let first = (child & !LEAF_BIT) as usize;
             let count = group.count[l] as usize;
             for (k, block) in self.blocks[first..first + count.div_ceil(LANES)].iter().enumerate() {
-                let mut again = block.solid_angles::<FUSED>(p32, count - k * LANES, lanes);
+                let mut again = block.solid_angles::<FUSED>(p, count - k * LANES, lanes);
                 while again != 0 {
                     let t = block.first as usize + again.trailing_zeros() as usize;
                     again &= again - 1;
-                    exact += solid_angle(p, &tree.triangles[t]);
+                    exact += solid_angle(wide(p), &tree.triangles[t]);
                 }
             }
         }
@@ -504,7 +501,6 @@ impl Groups {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::winding::wide;
     use octrace_bake::procedural::SplitMix;
 
     /// A lane's `f32` expansion agrees with [`Cluster::far`]'s `f64` one within the

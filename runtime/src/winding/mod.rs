@@ -618,12 +618,14 @@ impl WindingTree {
     }
 
     fn winding_numbers_as_they_come(&self, points: &[[f32; 3]], accuracy: Accuracy, out: &mut [Winding]) {
-        points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| match accuracy {
-            Accuracy::Beta(beta) => self.beta_each(&mut WindingScratch::default(), p, beta, o),
-            Accuracy::Within(_) => {
-                let mut scratch = WindingScratch::default();
-                for (p, o) in p.iter().zip(o) {
-                    *o = self.winding_number_as(&mut scratch, *p, accuracy);
+        points.par_chunks(256).zip(out.par_chunks_mut(256)).for_each(|(p, o)| {
+            let mut scratch = WindingScratch::default();
+            match accuracy {
+                Accuracy::Beta(beta) => self.beta_each(&mut scratch, p, beta, o),
+                Accuracy::Within(_) => {
+                    for (p, o) in p.iter().zip(o) {
+                        *o = self.winding_number_as(&mut scratch, *p, accuracy);
+                    }
                 }
             }
         });
@@ -667,13 +669,13 @@ impl WindingTree {
             return;
         };
         let queues = &mut scratch.queues;
-        let (mut waiting, mut held) = ([(0, [0.0; 3]); PAIR], 0);
+        let (mut waiting, mut held) = ([(0, [0.0f32; 3]); PAIR], 0);
         for (i, p) in points.iter().enumerate() {
             if let Some(w) = self.beta_root(&root, *p, beta) {
                 out[i] = w;
                 continue;
             }
-            waiting[held] = (i, wide(*p));
+            waiting[held] = (i, *p);
             held += 1;
             if held == PAIR {
                 let sums = groups.sum::<PAIR, FUSED>(self, queues, waiting.map(|(_, p)| p), beta as f32);
