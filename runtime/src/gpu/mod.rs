@@ -728,7 +728,13 @@ impl<'s> GpuTracer<'s> {
 
     /// The kernel's source for this scene's bindings.
     fn source(&self) -> String {
-        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges, self.compiler.denormals, self.budget)
+        self.source_with(self.budget)
+    }
+
+    /// [`GpuTracer::source`] with the loops bounded by `budget` (the render kernel's,
+    /// [`Budget::for_render`]).
+    fn source_with(&self, budget: Budget) -> String {
+        shader_source(self.scene_buffers.len(), self.chunk_words, self.f64_edges, self.compiler.denormals, budget)
     }
 
     /// A bind group for the tracing layout with the scene's buffers (and empty rays

@@ -168,7 +168,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let shade = tracer.buffer("octrace shading", 4 * words.len() as u64, U::STORAGE | U::COPY_DST);
         tracer.queue.write_buffer(&shade, 0, bytemuck::cast_slice(&words));
 
-        let source = render_source(&tracer.source(), options.max_depth);
+        let source = render_source(&tracer.source_with(tracer.budget().for_render()), options.max_depth);
         let render_layout = render_layout(device);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("octrace render"),
@@ -186,8 +186,9 @@ impl<'t, 's> GpuRenderer<'t, 's> {
 
     /// Renders through `camera`: the radiance of every pixel and the rays traced per
     /// kind. Where the adapter caps shader loops (lavapipe, `gpu::loop_cap`), a pixel
-    /// whose ray tree needs more loop iterations than the cap is rendered again on the
-    /// CPU, so the image and the counts are whole whatever the adapter.
+    /// whose ray tree needs more loop iterations than the render kernel's budget
+    /// (`device::RENDER_LOOPS`, under the cap) is rendered again on the CPU, so the
+    /// image and the counts are whole whatever the adapter.
     ///
     /// # Errors
     /// [`GpuError::Device`] if the device is lost or a buffer cannot be read.
