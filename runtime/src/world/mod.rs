@@ -624,18 +624,29 @@ impl World {
         }
     }
 
-    /// [`World::closest_point_within`] for many points, on all cores.
+    /// [`World::closest_point_within`] for many points, on all cores. The points are
+    /// taken along a space-filling curve through the world's box (neighbours share
+    /// instances' trees in cache, as the scene's batch does), the answers written
+    /// where their points are.
     ///
     /// # Errors
     /// As [`World::closest_point_within`]; [`Error::Alloc`] where the answers' memory
     /// cannot be had.
     pub fn closest_points_batch(&self, points: &[[f32; 3]], max_distance: f32) -> Result<Vec<Option<WorldClosest>>> {
         let mut out = octrace_format::memory::try_vec(points.len(), "closest points")?;
-        out.par_iter_mut().zip(points.par_iter()).with_min_len(64).try_for_each(|(o, p)| {
-            *o = self.closest_point_within(*p, max_distance)?;
-            Ok::<(), Error>(())
-        })?;
-        Ok(out)
+        let each = |points: &[[f32; 3]], out: &mut [Option<WorldClosest>]| {
+            out.par_iter_mut().zip(points.par_iter()).with_min_len(64).try_for_each(|(o, p)| {
+                *o = self.closest_point_within(*p, max_distance)?;
+                Ok::<(), Error>(())
+            })
+        };
+        let Some((lo, hi)) = self.bounds() else {
+            each(points, &mut out)?;
+            return Ok(out);
+        };
+        let mut done = Ok(());
+        crate::cpu::along_curve(lo.map(f64::from), hi.map(f64::from), points, &mut out, |p, o| done = each(p, o));
+        done.map(|()| out)
     }
 
     /// [`World::intersect`] for many rays, on all cores, with the same answers: in
