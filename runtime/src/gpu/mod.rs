@@ -215,6 +215,11 @@ pub struct GpuTracer<'s> {
     /// The batch path's buffers (`stream`), its chunks, and its kernels by (any hit,
     /// record, camera).
     streams: std::sync::Mutex<Streams>,
+    /// The one-dispatch kernels' buffers (inside/outside, crossing lists), kept between
+    /// calls and grown ([`GpuTracer::dispatch_with`]).
+    kept: std::sync::Mutex<Kept>,
+    /// Buffers made one at a time ([`GpuTracer::buffer`]).
+    made: std::sync::atomic::AtomicU64,
     pipelining: Pipelining,
     pipelines: std::sync::Mutex<std::collections::HashMap<(bool, HitRecord, bool), wgpu::ComputePipeline>>,
     chunk_words: u64,
@@ -372,6 +377,8 @@ impl<'s> GpuTracer<'s> {
             scene_buffers,
             params,
             streams: Default::default(),
+            kept: Default::default(),
+            made: Default::default(),
             pipelining,
             pipelines: Default::default(),
             chunk_words,
@@ -516,10 +523,13 @@ impl<'s> GpuTracer<'s> {
         self.stream(Source::Rays(rays), Kernel::Trace { any: false }, answers, true)
     }
 
-    /// Buffers the batch path has made since the tracer was made: its chunks' buffers
-    /// are kept and reused, made again only when a batch needs larger ones.
+    /// Buffers the tracer has made since it was made (its scene's aside): the batch
+    /// path's and the one-dispatch kernels' (inside/outside, crossing lists) are kept
+    /// and reused, made again only when a call needs larger ones.
     pub fn buffers_created(&self) -> u64 {
         self.streams.lock().unwrap_or_else(|e| e.into_inner()).created()
+            + self.kept.lock().unwrap_or_else(|e| e.into_inner()).created
+            + self.made.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Encodes into `encoder` the tracing of `count` rays that are already on this
@@ -765,8 +775,10 @@ impl<'s> GpuTracer<'s> {
         })
     }
 
-    /// A buffer of `size` bytes (at least 4) for `usage`.
+    /// A buffer of `size` bytes (at least 4) for `usage` (counted in
+    /// [`GpuTracer::buffers_created`]).
     fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.made.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: size.max(4),
@@ -778,7 +790,8 @@ impl<'s> GpuTracer<'s> {
     /// One dispatch of `pipeline` (made with the tracing layout) over `params.ray_count`
     /// items: `inputs` written back to back into the rays binding, each starting on a
     /// vec4 (16 bytes; the gaps are zeros), and `answer_bytes` of the hits binding read
-    /// back (the list and inside/outside kernels').
+    /// back (the list and inside/outside kernels'). The buffers are kept between calls
+    /// ([`Kept`]), the answers cleared first: what a new buffer would hold.
     fn dispatch_with<T: bytemuck::Pod>(
         &self,
         pipeline: &wgpu::ComputePipeline,
@@ -796,16 +809,43 @@ impl<'s> GpuTracer<'s> {
             })
             .collect();
         let input_bytes = inputs.iter().map(|i| (i.len() as u64).next_multiple_of(16)).sum();
-        let input = self.buffer("octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST);
-        let answers = self.buffer("octrace kernel answers", answer_bytes, U::STORAGE | U::COPY_SRC);
+        // One call at a time uses the kept buffers.
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        let kept = &mut *kept;
+        let limits = self.device.limits();
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let mut keep = |slot: &mut Option<wgpu::Buffer>, label: &str, size: u64, usage: U, limit: u64| {
+            kept.created += Kept::grow(&self.device, slot, label, size, usage, limit) as u64;
+            slot.clone().expect("grown")
+        };
+        let input = keep(&mut kept.input, "octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST, binding);
+        let answers_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let answers = keep(&mut kept.answers, "octrace kernel answers", answer_bytes, answers_usage, binding);
+        let params_size = std::mem::size_of::<Params>() as u64;
         let params_buffer =
-            self.buffer("octrace params", std::mem::size_of::<Params>() as u64, U::UNIFORM | U::COPY_DST);
+            keep(&mut kept.params, "octrace params", params_size, U::UNIFORM | U::COPY_DST, params_size);
+        let readback = keep(
+            &mut kept.readback,
+            "octrace readback",
+            answer_bytes,
+            U::MAP_READ | U::COPY_DST,
+            limits.max_buffer_size,
+        );
         self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
         for (bytes, &offset) in inputs.iter().zip(&at) {
             self.queue.write_buffer(&input, offset, bytes);
+            // The gap to the next vec4 zeros, as in a new buffer.
+            let gap = (bytes.len() as u64).next_multiple_of(16) - bytes.len() as u64;
+            if gap > 0 {
+                self.queue.write_buffer(&input, offset + bytes.len() as u64, &[0u8; 16][..gap as usize]);
+            }
         }
         let bind_group = self.bind_group(&params_buffer, &input, &answers);
         let mut encoder = self.device.create_command_encoder(&Default::default());
+        // The answers zeros, as in a new buffer (the last call's are there).
+        if answer_bytes > 0 {
+            encoder.clear_buffer(&answers, 0, Some(answer_bytes));
+        }
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(pipeline);
@@ -813,12 +853,52 @@ impl<'s> GpuTracer<'s> {
             pass.dispatch_workgroups(params.ray_count.div_ceil(self.budget.workgroup), 1, 1);
         }
         self.queue.submit([encoder.finish()]);
-        self.read_back(&answers, answer_bytes)
+        let mut out = Vec::new();
+        device::read_buffer_append(&self.device, &self.queue, &answers, &readback, answer_bytes, &mut out)?;
+        Ok(out)
     }
 
     /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
         read_buffer(&self.device, &self.queue, buffer, bytes)
+    }
+}
+
+/// The buffers [`GpuTracer::dispatch_with`] keeps between calls, and how many it has
+/// made.
+#[derive(Debug, Default)]
+struct Kept {
+    input: Option<wgpu::Buffer>,
+    answers: Option<wgpu::Buffer>,
+    params: Option<wgpu::Buffer>,
+    readback: Option<wgpu::Buffer>,
+    created: u64,
+}
+
+impl Kept {
+    /// Makes `slot` hold at least `size` bytes (at least 4): kept where it does, else
+    /// made anew at the next power of two (at most `limit`, at least `size`), so that
+    /// growing calls make buffers a few times, not every call. Whether it made one.
+    fn grow(
+        device: &wgpu::Device,
+        slot: &mut Option<wgpu::Buffer>,
+        label: &str,
+        size: u64,
+        usage: wgpu::BufferUsages,
+        limit: u64,
+    ) -> bool {
+        let size = size.max(4);
+        if slot.as_ref().is_some_and(|b| b.size() >= size) {
+            return false;
+        }
+        let rounded = size.next_power_of_two().min(limit).max(size);
+        *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: rounded,
+            usage,
+            mapped_at_creation: false,
+        }));
+        true
     }
 }
 

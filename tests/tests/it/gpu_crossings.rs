@@ -166,3 +166,42 @@ fn inside_outside_on_the_gpu_is_the_cpus() {
         assert!(decided[1] * 4 >= points_in_all[1] * 3, "decided {} of {}", decided[1], points_in_all[1]);
     }
 }
+
+/// The one-dispatch kernels (inside/outside, crossing lists) keep their buffers
+/// between calls: calls of every size after the largest make none, and each answers
+/// as a tracer made for it alone would (the last call's answers and inputs are not
+/// read: a smaller call after a larger one is the CPU's too).
+#[test]
+fn one_dispatch_kernels_keep_their_buffers_and_answer_alike() {
+    let Some(gpu) = gpu("one_dispatch_kernels_keep_their_buffers_and_answer_alike") else { return };
+    let solid = procedural::closed_solids().into_iter().next().expect("a solid");
+    let scene = scene_of(&solid.mesh, &BuildParams::auto());
+    let labels = scene.solid().unwrap();
+    let cpu = gpu_default_cpu(&scene);
+    let tracer = GpuTracer::new(&gpu.device, &gpu.queue, &scene).unwrap();
+    let vertices = solid.mesh.triangles.iter().flatten();
+    let lo: [f32; 3] = std::array::from_fn(|k| vertices.clone().map(|v| v[k]).fold(f32::INFINITY, f32::min));
+    let hi: [f32; 3] = std::array::from_fn(|k| vertices.clone().map(|v| v[k]).fold(f32::NEG_INFINITY, f32::max));
+    let mut rng = SplitMix(17);
+    let mut point = || std::array::from_fn(|k| lo[k] + (hi[k] - lo[k]) * (1.2 * rng.unit() - 0.1));
+    let many: Vec<[f32; 3]> = (0..3000).map(|_| point()).collect();
+    let few: Vec<[f32; 3]> = (0..70).map(|_| point()).collect();
+    let rays = random_rays(&solid.mesh, 600, 5);
+    let check = |tracer: &GpuTracer<'_>| {
+        for points in [&many, &few, &many[..1000]] {
+            assert_eq!(tracer.contains(labels, points).unwrap(), scene.contains_batch(points).unwrap());
+        }
+        for rays in [&rays[..], &rays[..40], &rays[..300]] {
+            let (got, want) = (tracer.crossings(rays).unwrap(), cpu.par_crossings_batch(rays, usize::MAX));
+            assert_eq!(got.splits, want.splits);
+            if tracer.uses_f64() {
+                assert!(got.crossings.iter().zip(&want.crossings).all(|(a, b)| bits(a) == bits(b)));
+            }
+        }
+    };
+    check(&tracer);
+    let first = tracer.buffers_created();
+    assert!(first > 0);
+    check(&tracer);
+    assert_eq!(tracer.buffers_created(), first, "buffers made after the largest calls");
+}
