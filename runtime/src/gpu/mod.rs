@@ -218,7 +218,7 @@ pub struct GpuTracer<'s> {
     /// The one-dispatch kernels' buffers (inside/outside, crossing lists), kept between
     /// calls and grown ([`GpuTracer::dispatch_with`]).
     kept: std::sync::Mutex<Kept>,
-    /// Buffers made one at a time ([`GpuTracer::buffer`]).
+    /// Buffers made one at a time ([`GpuTracer::buffer`]; the kept ones among them).
     made: std::sync::atomic::AtomicU64,
     pipelining: Pipelining,
     pipelines: std::sync::Mutex<std::collections::HashMap<(bool, HitRecord, bool), wgpu::ComputePipeline>>,
@@ -528,7 +528,6 @@ impl<'s> GpuTracer<'s> {
     /// and reused, made again only when a call needs larger ones.
     pub fn buffers_created(&self) -> u64 {
         self.streams.lock().unwrap_or_else(|e| e.into_inner()).created()
-            + self.kept.lock().unwrap_or_else(|e| e.into_inner()).created
             + self.made.load(std::sync::atomic::Ordering::Relaxed)
     }
 
@@ -811,20 +810,17 @@ impl<'s> GpuTracer<'s> {
         let input_bytes = inputs.iter().map(|i| (i.len() as u64).next_multiple_of(16)).sum();
         // One call at a time uses the kept buffers.
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
-        let kept = &mut *kept;
         let limits = self.device.limits();
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let mut keep = |slot: &mut Option<wgpu::Buffer>, label: &str, size: u64, usage: U, limit: u64| {
-            kept.created += Kept::grow(&self.device, slot, label, size, usage, limit) as u64;
-            slot.clone().expect("grown")
-        };
-        let input = keep(&mut kept.input, "octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST, binding);
+        let input =
+            self.kept_buffer(&mut kept.input, "octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST, binding);
         let answers_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-        let answers = keep(&mut kept.answers, "octrace kernel answers", answer_bytes, answers_usage, binding);
+        let answers =
+            self.kept_buffer(&mut kept.answers, "octrace kernel answers", answer_bytes, answers_usage, binding);
         let params_size = std::mem::size_of::<Params>() as u64;
         let params_buffer =
-            keep(&mut kept.params, "octrace params", params_size, U::UNIFORM | U::COPY_DST, params_size);
-        let readback = keep(
+            self.kept_buffer(&mut kept.params, "octrace params", params_size, U::UNIFORM | U::COPY_DST, params_size);
+        let readback = self.kept_buffer(
             &mut kept.readback,
             "octrace readback",
             answer_bytes,
@@ -858,48 +854,36 @@ impl<'s> GpuTracer<'s> {
         Ok(out)
     }
 
+    /// `slot`'s buffer where it holds `size` bytes, else a new one ([`GpuTracer::buffer`])
+    /// of the next power of two (at most `limit`, at least `size`) put there, so that
+    /// growing calls make buffers a few times, not every call.
+    fn kept_buffer(
+        &self,
+        slot: &mut Option<wgpu::Buffer>,
+        label: &str,
+        size: u64,
+        usage: wgpu::BufferUsages,
+        limit: u64,
+    ) -> wgpu::Buffer {
+        match slot {
+            Some(b) if b.size() >= size.max(4) => b.clone(),
+            _ => slot.insert(self.buffer(label, size.next_power_of_two().min(limit).max(size), usage)).clone(),
+        }
+    }
+
     /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
     fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
         read_buffer(&self.device, &self.queue, buffer, bytes)
     }
 }
 
-/// The buffers [`GpuTracer::dispatch_with`] keeps between calls, and how many it has
-/// made.
+/// The buffers [`GpuTracer::dispatch_with`] keeps between calls.
 #[derive(Debug, Default)]
 struct Kept {
     input: Option<wgpu::Buffer>,
     answers: Option<wgpu::Buffer>,
     params: Option<wgpu::Buffer>,
     readback: Option<wgpu::Buffer>,
-    created: u64,
-}
-
-impl Kept {
-    /// Makes `slot` hold at least `size` bytes (at least 4): kept where it does, else
-    /// made anew at the next power of two (at most `limit`, at least `size`), so that
-    /// growing calls make buffers a few times, not every call. Whether it made one.
-    fn grow(
-        device: &wgpu::Device,
-        slot: &mut Option<wgpu::Buffer>,
-        label: &str,
-        size: u64,
-        usage: wgpu::BufferUsages,
-        limit: u64,
-    ) -> bool {
-        let size = size.max(4);
-        if slot.as_ref().is_some_and(|b| b.size() >= size) {
-            return false;
-        }
-        let rounded = size.next_power_of_two().min(limit).max(size);
-        *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: rounded,
-            usage,
-            mapped_at_creation: false,
-        }));
-        true
-    }
 }
 
 fn to_hit(h: &HitOut) -> Option<Hit> {
