@@ -48,7 +48,7 @@ pub use stream::{Answers, GpuCamera, GpuNearest, HitRecord};
 pub use wgpu;
 
 use buffers::{bind_group_layout, check_bindings, offsets_of, upload, TRACE_ARRAYS, TRACE_EXTRA_BINDINGS};
-use device::{dispatch_once, read_buffer, timestamp_period, Budget};
+use device::{dispatch_once, timestamp_period, Budget};
 use source::shader_source;
 use stream::{Kernel, Pipelining, Source, Streams};
 
@@ -869,11 +869,6 @@ impl<'s> GpuTracer<'s> {
             Some(b) if b.size() >= size.max(4) => b.clone(),
             _ => slot.insert(self.buffer(label, size.next_power_of_two().min(limit).max(size), usage)).clone(),
         }
-    }
-
-    /// The first `bytes` of `buffer` (made with `COPY_SRC`), read back.
-    fn read_back<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> GpuResult<Vec<T>> {
-        read_buffer(&self.device, &self.queue, buffer, bytes)
     }
 }
 

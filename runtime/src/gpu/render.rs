@@ -117,6 +117,21 @@ pub struct GpuRenderer<'t, 's> {
     params: RenderParams,
     /// The options, for the pixels rendered again on the CPU.
     options: RenderOptions,
+    /// The buffers a render uses, kept between renders (one at a time) and grown.
+    kept: std::sync::Mutex<RenderBuffers>,
+}
+
+/// The buffers [`GpuRenderer::render`] keeps between calls: its uniform block, the
+/// pixels' records and the ray counts, their read-back copies, and the bind group
+/// over them (made again where the pixels' buffer grows).
+#[derive(Debug, Default)]
+struct RenderBuffers {
+    params: Option<wgpu::Buffer>,
+    pixels: Option<wgpu::Buffer>,
+    counts: Option<wgpu::Buffer>,
+    pixels_back: Option<wgpu::Buffer>,
+    counts_back: Option<wgpu::Buffer>,
+    group: Option<wgpu::BindGroup>,
 }
 
 impl<'t, 's> GpuRenderer<'t, 's> {
@@ -181,7 +196,16 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let pipeline =
             tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
         let scene_group = tracer.scene_bind_group();
-        Ok(GpuRenderer { tracer, pipeline, scene_group, render_layout, shade, params, options: *options })
+        Ok(GpuRenderer {
+            tracer,
+            pipeline,
+            scene_group,
+            render_layout,
+            shade,
+            params,
+            options: *options,
+            kept: Default::default(),
+        })
     }
 
     /// Renders through `camera`: the radiance of every pixel and the rays traced per
@@ -201,19 +225,40 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let out_bytes = 4 * PIXEL_WORDS as u64 * u64::from(batch);
         let count_bytes = 4 * 12;
         let params_size = std::mem::size_of::<RenderParams>() as u64;
-        let params_buffer = self.tracer.buffer("octrace render params", params_size, U::UNIFORM | U::COPY_DST);
-        let out = self.tracer.buffer("octrace pixels", out_bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
-        let counts = self.tracer.buffer("octrace ray counts", count_bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("octrace render"),
-            layout: &self.render_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: self.shade.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
-            ],
-        });
+        // One render at a time uses the kept buffers; a larger image grows them.
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        let tracer = self.tracer;
+        let limits = device.limits();
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let storage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let params_buffer = tracer.kept_buffer(
+            &mut kept.params,
+            "octrace render params",
+            params_size,
+            U::UNIFORM | U::COPY_DST,
+            params_size,
+        );
+        let grown = kept.pixels.as_ref().is_none_or(|b| b.size() < out_bytes);
+        let out = tracer.kept_buffer(&mut kept.pixels, "octrace pixels", out_bytes, storage, binding);
+        let counts = tracer.kept_buffer(&mut kept.counts, "octrace ray counts", count_bytes, storage, count_bytes);
+        let map = U::MAP_READ | U::COPY_DST;
+        let out_back =
+            tracer.kept_buffer(&mut kept.pixels_back, "octrace pixels back", out_bytes, map, limits.max_buffer_size);
+        let counts_back =
+            tracer.kept_buffer(&mut kept.counts_back, "octrace ray counts back", count_bytes, map, count_bytes);
+        if grown || kept.group.is_none() {
+            kept.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("octrace render"),
+                layout: &self.render_layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.shade.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
+                ],
+            }));
+        }
+        let group = kept.group.clone().expect("made above");
         let eye = camera.ray(0, 0).origin;
         let mut params =
             RenderParams { eye: [eye.x, eye.y, eye.z, 0.0], width: camera.width, height: camera.height, ..self.params };
@@ -248,7 +293,9 @@ impl<'t, 's> GpuRenderer<'t, 's> {
                 pass.dispatch_workgroups(n.div_ceil(self.tracer.budget().workgroup), 1, 1);
             }
             queue.submit([encoder.finish()]);
-            let words: Vec<u32> = self.tracer.read_back(&out, 4 * PIXEL_WORDS as u64 * u64::from(n))?;
+            let mut words: Vec<u32> = Vec::new();
+            let bytes = 4 * PIXEL_WORDS as u64 * u64::from(n);
+            super::device::read_buffer_append(device, queue, &out, &out_back, bytes, &mut words)?;
             let sum = |w: &[u32], c: usize| u64::from(w[2 * c]) | u64::from(w[2 * c + 1]) << 32;
             for (i, w) in (first..).zip(words.chunks_exact(PIXEL_WORDS)) {
                 pixels.push(LightSum([sum(w, 0), sum(w, 1), sum(w, 2)]).radiance());
@@ -257,7 +304,8 @@ impl<'t, 's> GpuRenderer<'t, 's> {
                     over.push(i);
                 }
             }
-            let c: Vec<u32> = self.tracer.read_back(&counts, count_bytes)?;
+            let mut c: Vec<u32> = Vec::new();
+            super::device::read_buffer_append(device, queue, &counts, &counts_back, count_bytes, &mut c)?;
             for (k, s) in sums.iter_mut().enumerate() {
                 *s += u64::from(c[2 * k]) | u64::from(c[2 * k + 1]) << 32;
             }

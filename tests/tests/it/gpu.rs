@@ -522,6 +522,38 @@ fn same_hits(name: &str, rays: &[Ray], cpu: &[Option<Hit>], gpu: &[Option<Hit>])
     }
 }
 
+/// One renderer renders many frames (an interactive viewer, an animation): its buffers
+/// are made by its first render and kept, grown only for a larger image, and every
+/// frame, larger or smaller than the one before, is the CPU's image with the CPU's rays.
+#[test]
+fn a_renderer_keeps_its_buffers_between_frames() {
+    use octrace_runtime::gpu::GpuRenderer;
+    use octrace_runtime::render::effects::{render_effects, RayKind, RenderOptions};
+    let Some(ctx) = gpu("a_renderer_keeps_its_buffers_between_frames") else { return };
+    let mesh = octrace_bake::procedural::effects_scene();
+    let scene = Scene::from_baked(octrace_bake::bake(&mesh, &Default::default()).unwrap()).unwrap();
+    let options = RenderOptions { soft_samples: 2, ..RenderOptions::for_scene(scene.shading()) };
+    let tracer = GpuTracer::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let renderer = GpuRenderer::new(&tracer, &options).unwrap();
+    let c = &scene.shading().cameras[0];
+    let frame = |w, h| raysets::Camera::from_scene(c, 40.0, w, h);
+    let mut after_largest = None;
+    for (i, (w, h)) in [(48, 36), (96, 72), (32, 24), (96, 72), (64, 48)].into_iter().enumerate() {
+        let camera = frame(w, h);
+        let (g, gc) = renderer.render(&camera).unwrap();
+        let (cpu, cc) = render_effects(&scene, &camera, &options, &|_| {});
+        for kind in RayKind::ALL {
+            assert_eq!(gc.get(kind), cc.get(kind), "frame {i} ({w} x {h}): {} rays", kind.name());
+        }
+        renders_agree(&format!("frame {i} ({w} x {h})"), ctx, &cpu, &g);
+        if i == 1 {
+            after_largest = Some(tracer.buffers_created());
+        } else if let Some(made) = after_largest {
+            assert_eq!(tracer.buffers_created(), made, "buffers made by frame {i} ({w} x {h})");
+        }
+    }
+}
+
 /// The effects scene at the settings users run: every effect on, the default 16
 /// soft-shadow samples (and 32), 256 x 192 (the glass sphere covers about 2,500
 /// pixels). The GPU traces the CPU's rays, kind by kind, exactly as many; the images
