@@ -170,7 +170,7 @@ impl GpuTracer<'_> {
         let records = *offsets.last().unwrap_or(&0) as u64;
         let params = super::Params { ray_count: rays.len() as u32, ..self.params };
         let inputs = [bytemuck::cast_slice(rays), bytemuck::cast_slice(offsets)];
-        self.dispatch_with(&self.crossing_kernels()?[1], params, &inputs, records * RECORD)
+        self.dispatch_with(&self.crossing_kernels()?[1], params, &[], &inputs, records * RECORD)
     }
 
     /// The counting and listing kernels, built on first use.

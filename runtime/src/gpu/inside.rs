@@ -40,18 +40,19 @@ impl GpuTracer<'_> {
     /// # Ok(()) }
     /// ```
     pub fn contains(&self, solid: &Solid, points: &[[f32; 3]]) -> GpuResult<Vec<bool>> {
+        // A byte a leaf: the kernel reads them four to a word, little-endian. They stay
+        // on the device between calls (`dispatch_with`'s head).
         let labels = solid.leaf_labels();
-        let words: Vec<u32> = labels.chunks(4).map(|c| c.iter().rev().fold(0, |w, &b| w << 8 | b as u32)).collect();
-        let label_bytes = (words.len() as u64 * 4).next_multiple_of(16);
+        let label_bytes = (labels.len() as u64).next_multiple_of(16);
         let limits = self.device.limits();
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        // The points rounded up to a vec4 before the labels.
+        // The points after the labels, rounded up to a vec4.
         let room = max_binding.saturating_sub(label_bytes + 16) / POINT;
         let per_dispatch = (self.budget.per_dispatch(RAYS_PER_DISPATCH as u32) as u64).min(room) as usize;
         let mut sides = vec![UNDECIDED; points.len()];
         if per_dispatch >= 64 && labels.len() <= u32::MAX as usize {
             for (part, out) in points.chunks(per_dispatch).zip(sides.chunks_mut(per_dispatch)) {
-                self.side_kernel(part, &words, labels.len() as u32, out)?;
+                self.side_kernel(part, labels, out)?;
             }
         }
         // The scene's own tracer, exact whatever the kernels' test.
@@ -64,17 +65,13 @@ impl GpuTracer<'_> {
             .collect())
     }
 
-    /// The kernel over `points` (one dispatch): each one's side into `out`. The labels
-    /// follow the points in the rays binding.
-    fn side_kernel(&self, points: &[[f32; 3]], labels: &[u32], count: u32, out: &mut [u32]) -> GpuResult<()> {
-        let params = super::Params { ray_count: points.len() as u32, labels: count, ..self.params };
-        let inputs = [bytemuck::cast_slice(points), bytemuck::cast_slice(labels)];
-        out.copy_from_slice(&self.dispatch_with::<u32>(
-            self.side_pipeline()?,
-            params,
-            &inputs,
-            points.len() as u64 * 4,
-        )?);
+    /// The kernel over `points` (one dispatch): each one's side into `out`. The points
+    /// follow the labels in the rays binding.
+    fn side_kernel(&self, points: &[[f32; 3]], labels: &[u8], out: &mut [u32]) -> GpuResult<()> {
+        let params = super::Params { ray_count: points.len() as u32, labels: labels.len() as u32, ..self.params };
+        let inputs = [bytemuck::cast_slice(points)];
+        let pipeline = self.side_pipeline()?;
+        out.copy_from_slice(&self.dispatch_with::<u32>(pipeline, params, labels, &inputs, points.len() as u64 * 4)?);
         Ok(())
     }
 

@@ -143,7 +143,7 @@ struct Params {
     /// `FANS` constant says the same), then padding to the vectors' alignment.
     o_fans: u32,
     fans: u32,
-    /// The leaf labels' count after the points (MODE 3, `inside`), then padding.
+    /// The leaf labels' count before the points (MODE 3, `inside`), then padding.
     labels: u32,
     pad: u32,
     root_lo: [f32; 4],
@@ -787,33 +787,42 @@ impl<'s> GpuTracer<'s> {
     }
 
     /// One dispatch of `pipeline` (made with the tracing layout) over `params.ray_count`
-    /// items: `inputs` written back to back into the rays binding, each starting on a
-    /// vec4 (16 bytes; the gaps are zeros), and `answer_bytes` of the hits binding read
-    /// back (the list and inside/outside kernels'). The buffers are kept between calls
-    /// ([`Kept`]), the answers cleared first: what a new buffer would hold.
+    /// items: `head` and then `inputs` written back to back into the rays binding, each
+    /// starting on a vec4 (16 bytes; the gaps are zeros), and `answer_bytes` of the hits
+    /// binding read back (the list and inside/outside kernels'). The buffers are kept
+    /// between calls ([`Kept`]), the answers cleared first: what a new buffer would
+    /// hold. `head` (what many calls share: the leaf labels) is written only where the
+    /// buffer does not hold it already.
     fn dispatch_with<T: bytemuck::Pod>(
         &self,
         pipeline: &wgpu::ComputePipeline,
         params: Params,
+        head: &[u8],
         inputs: &[&[u8]],
         answer_bytes: u64,
     ) -> GpuResult<Vec<T>> {
         use wgpu::BufferUsages as U;
+        let head_bytes = (head.len() as u64).next_multiple_of(16);
         let at: Vec<u64> = inputs
             .iter()
-            .scan(0u64, |end, input| {
+            .scan(head_bytes, |end, input| {
                 let start = *end;
                 *end += (input.len() as u64).next_multiple_of(16);
                 Some(start)
             })
             .collect();
-        let input_bytes = inputs.iter().map(|i| (i.len() as u64).next_multiple_of(16)).sum();
+        let input_bytes = head_bytes + inputs.iter().map(|i| (i.len() as u64).next_multiple_of(16)).sum::<u64>();
         // One call at a time uses the kept buffers.
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
         let limits = self.device.limits();
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        // A new input buffer (the kept one too small) holds no head.
+        let new_input = kept.input.as_ref().is_none_or(|b| b.size() < input_bytes.max(4));
         let input =
             self.kept_buffer(&mut kept.input, "octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST, binding);
+        if new_input {
+            kept.head.clear();
+        }
         let answers_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let answers =
             self.kept_buffer(&mut kept.answers, "octrace kernel answers", answer_bytes, answers_usage, binding);
@@ -828,13 +837,28 @@ impl<'s> GpuTracer<'s> {
             limits.max_buffer_size,
         );
         self.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-        for (bytes, &offset) in inputs.iter().zip(&at) {
-            self.queue.write_buffer(&input, offset, bytes);
-            // The gap to the next vec4 zeros, as in a new buffer.
-            let gap = (bytes.len() as u64).next_multiple_of(16) - bytes.len() as u64;
-            if gap > 0 {
-                self.queue.write_buffer(&input, offset + bytes.len() as u64, &[0u8; 16][..gap as usize]);
+        let write = |bytes: &[u8], offset: u64| {
+            // Whole vec4s, then the last one's bytes followed by zeros, as in a new
+            // buffer (and copies stay multiples of four bytes).
+            let whole = bytes.len() / 16 * 16;
+            if whole > 0 {
+                self.queue.write_buffer(&input, offset, &bytes[..whole]);
             }
+            if whole < bytes.len() {
+                let mut last = [0u8; 16];
+                last[..bytes.len() - whole].copy_from_slice(&bytes[whole..]);
+                self.queue.write_buffer(&input, offset + whole as u64, &last);
+            }
+        };
+        if kept.head != head {
+            if !head.is_empty() {
+                write(head, 0);
+            }
+            kept.head.clear();
+            kept.head.extend_from_slice(head);
+        }
+        for (bytes, &offset) in inputs.iter().zip(&at) {
+            write(bytes, offset);
         }
         let bind_group = self.bind_group(&params_buffer, &input, &answers);
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -879,6 +903,8 @@ struct Kept {
     answers: Option<wgpu::Buffer>,
     params: Option<wgpu::Buffer>,
     readback: Option<wgpu::Buffer>,
+    /// What `input` holds from its start, written by an earlier call (its `head`).
+    head: Vec<u8>,
 }
 
 fn to_hit(h: &HitOut) -> Option<Hit> {

@@ -48,7 +48,7 @@ struct Params {
     // The fans' words (cpu::FanIndex::gpu_words), and whether there are any.
     o_fans: u32,
     fans: u32,
-    // MODE 3: the leaf labels' count (a byte each, four a word, after the points).
+    // MODE 3: the leaf labels' count (a byte each, four a word, before the points).
     labels: u32,
     pad1: u32,
     // xyz: the root cube's low corner; w: its edge.
@@ -1200,9 +1200,10 @@ const OVER_BUDGET: u32 = 0xFFFFFFFFu;
 // with triangles and no reference point, decisions in doubt) are the host's.
 const UNDECIDED: u32 = 2u;
 
-// Point i of MODE 3: three floats a point in the rays binding, 12 bytes as given.
+// Point i of MODE 3: three floats a point in the rays binding, 12 bytes as given,
+// after the leaf labels (a byte a leaf, to a whole vec4).
 fn point_at(i: u32) -> vec3<f32> {
-    let w = 3u * i;
+    let w = 4u * ((params.labels + 15u) / 16u) + 3u * i;
     return vec3<f32>(rays[w / 4u][w % 4u], rays[(w + 1u) / 4u][(w + 1u) % 4u], rays[(w + 2u) / 4u][(w + 2u) % 4u]);
 }
 // Leaf labels (cpu::inside): from REFERENCED on, REFERENCED + 2 * candidate + inside.
@@ -1221,8 +1222,8 @@ fn side_of(p: vec3<f32>) -> u32 {
     if b >= params.labels {
         return UNDECIDED;
     }
-    // The labels' words follow the points' (three words a point, to a whole vec4).
-    let at = 4u * ((3u * params.ray_count + 3u) / 4u) + b / 4u;
+    // The labels' words come first, four labels a word.
+    let at = b / 4u;
     let label = (bitcast<u32>(rays[at / 4u][at % 4u]) >> (8u * (b % 4u))) & 0xFFu;
     let o = params.o_boxes + 6u * b;
     let lo = vec3<f32>(wordf(o), wordf(o + 1u), wordf(o + 2u));
