@@ -27,7 +27,6 @@ use std::collections::BinaryHeap;
 
 use octrace_format::distance::{Kid, Tree};
 use octrace_format::layout::TRIANGLE_FLOATS;
-use octrace_format::memory::try_with_capacity;
 use octrace_format::StoredIndex;
 
 use super::tracer::Tracer;
@@ -632,45 +631,30 @@ impl Tracer<'_> {
             return;
         };
         let tree = &tree;
-        let runs =
-            |points: &[[f32; 3]], at: &(dyn Fn(usize, usize) -> usize + Sync), out: &mut [Option<ClosestPoint>]| {
-                if parallel {
-                    out.par_chunks_mut(1024)
-                        .enumerate()
-                        .for_each(|(run, o)| self.closest_each(tree, points, |k| at(run * 1024, k), max_distance, o));
-                } else {
-                    self.closest_each(tree, points, |k| at(0, k), max_distance, out);
-                }
-            };
-        match (bounds::curve_order(tree, points), try_with_capacity(points.len(), "closest points in curve order")) {
-            (Some(order), Ok(mut found)) => {
-                found.resize(points.len(), None);
-                runs(points, &|first, k| order[first + k] as usize, &mut found);
-                for (&i, f) in order.iter().zip(found) {
-                    out[i as usize] = f;
-                }
+        // The points gathered along the curve first: each search then reads its point
+        // from the run it walks, not from wherever the caller put it.
+        let b = &tree.root.bounds;
+        let (lo, hi) = ([0, 1, 2].map(|k| b.lo[k][0] as f64), [0, 1, 2].map(|k| b.hi[k][0] as f64));
+        bounds::along_curve(lo, hi, points, out, |points, out| {
+            if parallel {
+                out.par_chunks_mut(1024)
+                    .zip(points.par_chunks(1024))
+                    .for_each(|(o, p)| self.closest_each(tree, p, max_distance, o));
+            } else {
+                self.closest_each(tree, points, max_distance, out);
             }
-            // Too few points to gain, or no memory for the order: as they come.
-            _ => runs(points, &|first, k| first + k, out),
-        }
+        });
     }
 
-    /// `out[k]`: the answer for `points[at(k)]`, on this thread.
-    fn closest_each(
-        &self,
-        tree: &Tree<'_>,
-        points: &[[f32; 3]],
-        at: impl Fn(usize) -> usize,
-        max_distance: f32,
-        out: &mut [Option<ClosestPoint>],
-    ) {
+    /// `out[k]`: the answer for `points[k]`, on this thread.
+    fn closest_each(&self, tree: &Tree<'_>, points: &[[f32; 3]], max_distance: f32, out: &mut [Option<ClosestPoint>]) {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
         if self.uses_x86_64_v3() {
             // SAFETY: the processor has these features (`uses_x86_64_v3` is never true
             // where it does not).
-            return unsafe { self.closest_each_v3(tree, points, at, max_distance, out) };
+            return unsafe { self.closest_each_v3(tree, points, max_distance, out) };
         }
-        self.closest_each_loop(tree, points, at, max_distance, out)
+        self.closest_each_loop(tree, points, max_distance, out)
     }
 
     /// [`Tracer::closest_each`] compiled for x86-64-v3 (AVX2: a node's eight bounds
@@ -684,11 +668,10 @@ impl Tracer<'_> {
         &self,
         tree: &Tree<'_>,
         points: &[[f32; 3]],
-        at: impl Fn(usize) -> usize,
         max_distance: f32,
         out: &mut [Option<ClosestPoint>],
     ) {
-        self.closest_each_loop(tree, points, at, max_distance, out)
+        self.closest_each_loop(tree, points, max_distance, out)
     }
 
     #[inline(always)]
@@ -696,13 +679,11 @@ impl Tracer<'_> {
         &self,
         tree: &Tree<'_>,
         points: &[[f32; 3]],
-        at: impl Fn(usize) -> usize,
         max_distance: f32,
         out: &mut [Option<ClosestPoint>],
     ) {
         let mut scratch = ClosestScratch::default();
-        for (k, o) in out.iter_mut().enumerate() {
-            let Some(&p) = points.get(at(k)) else { continue };
+        for (o, &p) in out.iter_mut().zip(points) {
             *o = self.closest_inline(tree, &mut scratch, p, max_distance);
         }
     }

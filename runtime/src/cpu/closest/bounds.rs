@@ -145,14 +145,6 @@ pub(super) fn prefetch(tree: &Tree<'_>, triangles: &[f32], word: u32) {
     }
 }
 
-/// The indices of `points` in the order of a Morton curve through the surface's
-/// box (points outside it on its faces), or `None` for fewer than 64 points or
-/// where the memory (12 bytes a point) cannot be had.
-pub(super) fn curve_order(tree: &Tree<'_>, points: &[[f32; 3]]) -> Option<Vec<u32>> {
-    let b = &tree.root.bounds;
-    curve_order_in([0, 1, 2].map(|k| b.lo[k][0] as f64), [0, 1, 2].map(|k| b.hi[k][0] as f64), points)
-}
-
 /// The points' indices along a Morton curve through the box `lo..hi` (ten bits an
 /// axis: cells of a thousandth of the box; points outside clamp to its faces), so
 /// that neighbours come one after the other: `None` for fewer than 64 points, an
