@@ -1,7 +1,8 @@
 //! Inside/outside of points on one thread: points uniform in 1.1x the mesh's box, and
 //! points within 1 % of the box's diagonal from the surface; prints the labels' time
 //! and size, then points a second (median of three batches). `CONTAINS_CHECK=k` first
-//! compares `k` points of each kind with the exact oracle (`reference::InsideReference`).
+//! compares `k` points of each kind with the exact oracle (`reference::InsideReference`);
+//! `CONTAINS_ONLY=uniform` (or `near`) times that set alone (for profiles and A/B runs).
 //!
 //! `cargo run --release -p octrace-runtime --example contains_timing -- scene.oct [points]`
 use std::time::Instant;
@@ -44,7 +45,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("against the exact oracle: {wrong} wrong of {}", 2 * k);
     }
     let mut out = vec![false; n];
+    let only = std::env::var("CONTAINS_ONLY").ok();
     for (name, pts) in [("uniform 1.1x box", &uniform), ("within 1% of the surface", &near)] {
+        if only.as_deref().is_some_and(|o| !name.starts_with(if o == "near" { "within" } else { "uniform" })) {
+            continue;
+        }
         let mut rates: Vec<f64> = (0..3)
             .map(|_| {
                 let t = Instant::now();

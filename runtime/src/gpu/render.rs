@@ -17,6 +17,8 @@ use crate::spawn::gamma;
 pub const MAX_GPU_DEPTH: u32 = 31;
 /// Pixels a dispatch renders at most.
 const PIXELS_PER_DISPATCH: u32 = 1 << 20;
+/// Bytes of the ray counts (six 64-bit counts, `ray_counts` in render.wgsl).
+const COUNT_BYTES: u64 = 4 * 12;
 /// Words of a pixel's record in the kernel's `pixel_io` (render.wgsl).
 const PIXEL_WORDS: usize = 8;
 /// Words of a material record (`material` in render.wgsl).
@@ -136,8 +138,10 @@ struct RenderBuffers {
 
 impl<'t, 's> GpuRenderer<'t, 's> {
     /// Uploads what shading needs besides the tracer's arrays (materials, lights,
-    /// emitters, and the file's material ids and normals as they are) and makes the
-    /// pipeline for `options`.
+    /// emitters, and the file's material ids and normals as they are), makes the
+    /// pipeline for `options` and runs it once over no pixels (where a driver compiles
+    /// kernels at their first dispatch, it does so here rather than in the first
+    /// render).
     ///
     /// # Errors
     /// [`GpuError::Unsupported`] for `max_depth` above [`MAX_GPU_DEPTH`];
@@ -196,7 +200,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let pipeline =
             tracer.compiler.pipeline(device, &pipeline_layout, &source, "render", &constants, "octrace render")?;
         let scene_group = tracer.scene_bind_group();
-        Ok(GpuRenderer {
+        let renderer = GpuRenderer {
             tracer,
             pipeline,
             scene_group,
@@ -205,7 +209,9 @@ impl<'t, 's> GpuRenderer<'t, 's> {
             params,
             options: *options,
             kept: Default::default(),
-        })
+        };
+        renderer.warm()?;
+        Ok(renderer)
     }
 
     /// Renders through `camera`: the radiance of every pixel and the rays traced per
@@ -221,44 +227,12 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let queue = &self.tracer.queue;
         let total = camera.width * camera.height;
         let batch = total.clamp(1, self.tracer.budget().per_dispatch(PIXELS_PER_DISPATCH));
-        use wgpu::BufferUsages as U;
         let out_bytes = 4 * PIXEL_WORDS as u64 * u64::from(batch);
-        let count_bytes = 4 * 12;
-        let params_size = std::mem::size_of::<RenderParams>() as u64;
+        let count_bytes = COUNT_BYTES;
         // One render at a time uses the kept buffers; a larger image grows them.
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
-        let tracer = self.tracer;
-        let limits = device.limits();
-        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let storage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-        let params_buffer = tracer.kept_buffer(
-            &mut kept.params,
-            "octrace render params",
-            params_size,
-            U::UNIFORM | U::COPY_DST,
-            params_size,
-        );
-        let grown = kept.pixels.as_ref().is_none_or(|b| b.size() < out_bytes);
-        let out = tracer.kept_buffer(&mut kept.pixels, "octrace pixels", out_bytes, storage, binding);
-        let counts = tracer.kept_buffer(&mut kept.counts, "octrace ray counts", count_bytes, storage, count_bytes);
-        let map = U::MAP_READ | U::COPY_DST;
-        let out_back =
-            tracer.kept_buffer(&mut kept.pixels_back, "octrace pixels back", out_bytes, map, limits.max_buffer_size);
-        let counts_back =
-            tracer.kept_buffer(&mut kept.counts_back, "octrace ray counts back", count_bytes, map, count_bytes);
-        if grown || kept.group.is_none() {
-            kept.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("octrace render"),
-                layout: &self.render_layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.shade.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
-                ],
-            }));
-        }
-        let group = kept.group.clone().expect("made above");
+        let Frame { params: params_buffer, out, counts, out_back, counts_back, group } =
+            self.frame_buffers(&mut kept, out_bytes);
         let eye = camera.ray(0, 0).origin;
         let mut params =
             RenderParams { eye: [eye.x, eye.y, eye.z, 0.0], width: camera.width, height: camera.height, ..self.params };
@@ -323,6 +297,73 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let radiance = Radiance { width: camera.width, height: camera.height, pixels };
         Ok((radiance, counts))
     }
+    /// The kept buffers for `out_bytes` of pixels' records (made or grown where they
+    /// are smaller) and the bind group over them.
+    fn frame_buffers(&self, kept: &mut RenderBuffers, out_bytes: u64) -> Frame {
+        use wgpu::BufferUsages as U;
+        let (tracer, device) = (self.tracer, &self.tracer.device);
+        let params_size = std::mem::size_of::<RenderParams>() as u64;
+        let count_bytes = COUNT_BYTES;
+        let limits = device.limits();
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let storage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let uniform = U::UNIFORM | U::COPY_DST;
+        let params = tracer.kept_buffer(&mut kept.params, "octrace render params", params_size, uniform, params_size);
+        let grown = kept.pixels.as_ref().is_none_or(|b| b.size() < out_bytes);
+        let out = tracer.kept_buffer(&mut kept.pixels, "octrace pixels", out_bytes, storage, binding);
+        let counts = tracer.kept_buffer(&mut kept.counts, "octrace ray counts", count_bytes, storage, count_bytes);
+        let map = U::MAP_READ | U::COPY_DST;
+        let out_back =
+            tracer.kept_buffer(&mut kept.pixels_back, "octrace pixels back", out_bytes, map, limits.max_buffer_size);
+        let counts_back =
+            tracer.kept_buffer(&mut kept.counts_back, "octrace ray counts back", count_bytes, map, count_bytes);
+        if grown || kept.group.is_none() {
+            kept.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("octrace render"),
+                layout: &self.render_layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.shade.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
+                ],
+            }));
+        }
+        let group = kept.group.clone().expect("made above");
+        Frame { params, out, counts, out_back, counts_back, group }
+    }
+
+    /// Runs the kernel once over no pixels: a driver that compiles a kernel at its
+    /// first dispatch (Mesa's lavapipe: some 11 s for the render kernel where its
+    /// shader cache does not hold it) does it here, in [`GpuRenderer::new`], not in
+    /// the first render.
+    fn warm(&self) -> GpuResult<()> {
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        let frame = self.frame_buffers(&mut kept, 4 * PIXEL_WORDS as u64);
+        let params = RenderParams { width: 1, height: 1, first_pixel: 0, pixel_count: 0, ..self.params };
+        let queue = &self.tracer.queue;
+        queue.write_buffer(&frame.params, 0, bytemuck::bytes_of(&params));
+        let mut encoder = self.tracer.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.scene_group, &[]);
+            pass.set_bind_group(1, &frame.group, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
+        queue.submit([encoder.finish()]);
+        super::device::wait(&self.tracer.device)
+    }
+}
+
+/// The buffers of one render ([`GpuRenderer::frame_buffers`]).
+struct Frame {
+    params: wgpu::Buffer,
+    out: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    out_back: wgpu::Buffer,
+    counts_back: wgpu::Buffer,
+    group: wgpu::BindGroup,
 }
 
 /// The pipeline constants for `effects` (`SHADOWS`, ... in render.wgsl).
