@@ -234,22 +234,25 @@ pub(super) fn run_probe(
         layout: &pipeline.get_bind_group_layout(0),
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }],
     });
-    dispatch_once(device, queue, &pipeline, &group);
+    dispatch_once(device, queue, &pipeline, &[&group]);
     read_buffer::<u32>(device, queue, &out, 4 * u64::from(words))
 }
 
-/// Submits one workgroup of `pipeline` with `group` bound (the probes').
+/// Submits one workgroup of `pipeline` with `groups` bound as groups 0, 1, ... (the
+/// probes', and the render kernel's first run: `GpuRenderer::new`).
 pub(super) fn dispatch_once(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     pipeline: &wgpu::ComputePipeline,
-    group: &wgpu::BindGroup,
+    groups: &[&wgpu::BindGroup],
 ) {
     let mut encoder = device.create_command_encoder(&Default::default());
     {
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, group, &[]);
+        for (index, group) in (0..).zip(groups) {
+            pass.set_bind_group(index, *group, &[]);
+        }
         pass.dispatch_workgroups(1, 1, 1);
     }
     queue.submit([encoder.finish()]);

@@ -816,20 +816,18 @@ impl<'s> GpuTracer<'s> {
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
         let limits = self.device.limits();
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        // A new input buffer (the kept one too small) holds no head.
-        let new_input = kept.input.as_ref().is_none_or(|b| b.size() < input_bytes.max(4));
-        let input =
+        let (input, new_input) =
             self.kept_buffer(&mut kept.input, "octrace kernel input", input_bytes, U::STORAGE | U::COPY_DST, binding);
         if new_input {
-            kept.head.clear();
+            kept.head.clear(); // a new buffer holds no head
         }
         let answers_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-        let answers =
+        let (answers, _) =
             self.kept_buffer(&mut kept.answers, "octrace kernel answers", answer_bytes, answers_usage, binding);
         let params_size = std::mem::size_of::<Params>() as u64;
-        let params_buffer =
+        let (params_buffer, _) =
             self.kept_buffer(&mut kept.params, "octrace params", params_size, U::UNIFORM | U::COPY_DST, params_size);
-        let readback = self.kept_buffer(
+        let (readback, _) = self.kept_buffer(
             &mut kept.readback,
             "octrace readback",
             answer_bytes,
@@ -880,7 +878,8 @@ impl<'s> GpuTracer<'s> {
 
     /// `slot`'s buffer where it holds `size` bytes, else a new one ([`GpuTracer::buffer`])
     /// of the next power of two (at most `limit`, at least `size`) put there, so that
-    /// growing calls make buffers a few times, not every call.
+    /// growing calls make buffers a few times, not every call; and whether it is new
+    /// (what it holds, and bind groups over the old one, are then not its).
     fn kept_buffer(
         &self,
         slot: &mut Option<wgpu::Buffer>,
@@ -888,10 +887,10 @@ impl<'s> GpuTracer<'s> {
         size: u64,
         usage: wgpu::BufferUsages,
         limit: u64,
-    ) -> wgpu::Buffer {
+    ) -> (wgpu::Buffer, bool) {
         match slot {
-            Some(b) if b.size() >= size.max(4) => b.clone(),
-            _ => slot.insert(self.buffer(label, size.next_power_of_two().min(limit).max(size), usage)).clone(),
+            Some(b) if b.size() >= size.max(4) => (b.clone(), false),
+            _ => (slot.insert(self.buffer(label, size.next_power_of_two().min(limit).max(size), usage)).clone(), true),
         }
     }
 }

@@ -228,7 +228,6 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let total = camera.width * camera.height;
         let batch = total.clamp(1, self.tracer.budget().per_dispatch(PIXELS_PER_DISPATCH));
         let out_bytes = 4 * PIXEL_WORDS as u64 * u64::from(batch);
-        let count_bytes = COUNT_BYTES;
         // One render at a time uses the kept buffers; a larger image grows them.
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
         let Frame { params: params_buffer, out, counts, out_back, counts_back, group } =
@@ -279,7 +278,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
                 }
             }
             let mut c: Vec<u32> = Vec::new();
-            super::device::read_buffer_append(device, queue, &counts, &counts_back, count_bytes, &mut c)?;
+            super::device::read_buffer_append(device, queue, &counts, &counts_back, COUNT_BYTES, &mut c)?;
             for (k, s) in sums.iter_mut().enumerate() {
                 *s += u64::from(c[2 * k]) | u64::from(c[2 * k + 1]) << 32;
             }
@@ -297,6 +296,7 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let radiance = Radiance { width: camera.width, height: camera.height, pixels };
         Ok((radiance, counts))
     }
+
     /// The kept buffers for `out_bytes` of pixels' records (made or grown where they
     /// are smaller) and the bind group over them.
     fn frame_buffers(&self, kept: &mut RenderBuffers, out_bytes: u64) -> Frame {
@@ -308,16 +308,18 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let storage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let uniform = U::UNIFORM | U::COPY_DST;
-        let params = tracer.kept_buffer(&mut kept.params, "octrace render params", params_size, uniform, params_size);
-        let grown = kept.pixels.as_ref().is_none_or(|b| b.size() < out_bytes);
-        let out = tracer.kept_buffer(&mut kept.pixels, "octrace pixels", out_bytes, storage, binding);
-        let counts = tracer.kept_buffer(&mut kept.counts, "octrace ray counts", count_bytes, storage, count_bytes);
+        let (params, new_params) =
+            tracer.kept_buffer(&mut kept.params, "octrace render params", params_size, uniform, params_size);
+        let (out, new_out) = tracer.kept_buffer(&mut kept.pixels, "octrace pixels", out_bytes, storage, binding);
+        let (counts, new_counts) =
+            tracer.kept_buffer(&mut kept.counts, "octrace ray counts", count_bytes, storage, count_bytes);
         let map = U::MAP_READ | U::COPY_DST;
-        let out_back =
+        let (out_back, _) =
             tracer.kept_buffer(&mut kept.pixels_back, "octrace pixels back", out_bytes, map, limits.max_buffer_size);
-        let counts_back =
+        let (counts_back, _) =
             tracer.kept_buffer(&mut kept.counts_back, "octrace ray counts back", count_bytes, map, count_bytes);
-        if grown || kept.group.is_none() {
+        // The bind group again where a buffer it binds is new.
+        if new_params || new_out || new_counts || kept.group.is_none() {
             kept.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("octrace render"),
                 layout: &self.render_layout,
@@ -341,18 +343,10 @@ impl<'t, 's> GpuRenderer<'t, 's> {
         let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
         let frame = self.frame_buffers(&mut kept, 4 * PIXEL_WORDS as u64);
         let params = RenderParams { width: 1, height: 1, first_pixel: 0, pixel_count: 0, ..self.params };
-        let queue = &self.tracer.queue;
+        let (device, queue) = (&self.tracer.device, &self.tracer.queue);
         queue.write_buffer(&frame.params, 0, bytemuck::bytes_of(&params));
-        let mut encoder = self.tracer.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.scene_group, &[]);
-            pass.set_bind_group(1, &frame.group, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-        }
-        queue.submit([encoder.finish()]);
-        super::device::wait(&self.tracer.device)
+        super::dispatch_once(device, queue, &self.pipeline, &[&self.scene_group, &frame.group]);
+        super::device::wait(device)
     }
 }
 

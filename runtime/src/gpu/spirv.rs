@@ -234,7 +234,7 @@ fn keeps_subnormals(device: &wgpu::Device, queue: &wgpu::Queue) -> GpuResult<boo
         layout: &layout,
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: io.as_entire_binding() }],
     });
-    super::dispatch_once(device, queue, &pipeline, &group);
+    super::dispatch_once(device, queue, &pipeline, &[&group]);
     let out = super::device::read_buffer::<f32>(device, queue, &io, 8)?;
     Ok(out[1] == 2f32.powi(-140))
 }
